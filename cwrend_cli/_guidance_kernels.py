@@ -160,7 +160,10 @@ def _bracketed_root(
     level: float,
     work: np.ndarray,
 ) -> float:
-    """Root of ``f⁽ᵒʳᵈᵉʳ⁾ − level`` in ``[a, b]`` (``ga·gb ≤ 0``): Newton safeguarded by bisection."""
+    """Root of ``f⁽ᵒʳᵈᵉʳ⁾ − level`` in ``[a, b]`` with ``ga·gb ≤ 0``.
+
+    Newton safeguarded by bisection.
+    """
     if ga == 0.0:
         return a
     if gb == 0.0:
@@ -243,7 +246,7 @@ def find_switches(
         if (fa2 < 0.0) != (fb2 < 0.0):
             inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, 2, 0.0, work)
         if inflect > a and inflect < b:
-            fi0, fi1, fi2, _ = _switch_derivs(n, lam0, inflect, work)
+            _, fi1, _, _ = _switch_derivs(n, lam0, inflect, work)
             if (fa1 < 0.0) != (fi1 < 0.0):
                 pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, 1, 0.0, work)
                 n_pieces += 1
@@ -269,10 +272,7 @@ def find_switches(
                 increasing = fv0 > fu0
                 for j in range(n_levels):
                     # visit the lower level first when f increases
-                    if (j == 0) == increasing:
-                        lv = lv0
-                    else:
-                        lv = lv1
+                    lv = lv0 if (j == 0) == increasing else lv1
                     ga = fu0 - lv
                     gb = fv0 - lv
                     if (ga < 0.0) != (gb < 0.0) and count < breaks.shape[0]:
@@ -527,7 +527,19 @@ def newton_ascent(
                 for i in range(6):
                     lam_t[i] = lam[i] + alpha * step[i]
                 value_t, cert_t, _ = dual_evaluate(
-                    n, lam_t, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad_t, hess_t, work
+                    n,
+                    lam_t,
+                    d,
+                    horizon,
+                    eps,
+                    u_max,
+                    gl_x,
+                    gl_w,
+                    n_cells,
+                    True,
+                    grad_t,
+                    hess_t,
+                    work,
                 )
                 rp_t, rv_t = terminal_residual(n, horizon, grad_t, res)
                 if value_t >= value + 1e-4 * alpha * slope:

@@ -1,0 +1,349 @@
+"""Indirect minimum-fuel guidance: control law and the shooting re-solve (SPEC §1, §5).
+
+The typed API over the compiled kernels of :mod:`cwrend_cli._guidance_kernels`.
+One re-solve finds ``λ(0)`` so that the state reaches ``x_f`` at the remaining
+horizon under the smoothed control of Eq. (10) with homotopy parameter ε.
+
+The solver maximises the concave dual function whose gradient is the
+shooting residual (see the kernel module), so a damped Newton ascent is
+globally convergent for feasible problems, and a ray along which the dual
+grows without bound is a certificate that no control with ``‖u‖ ≤ u_max``
+reaches the target (status ``infeasible``).
+
+Fallback chain (``fallback = "chain"``), each step only when the previous one
+fails: warm Newton → adaptive geometric ε-continuation from the warm start →
+the same from the energy-optimal costate → a costate from the multiplier of
+the discretised minimum-fuel SOCP, then Newton. With ``fallback = "none"``
+only the warm attempt is made, as in the authors' implementation.
+
+Units: km, s, km/s, km/s², rad/s.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+
+from cwrend_cli import _guidance_kernels as kern
+from cwrend_cli import feasibility
+from cwrend_cli.dynamics import cw_system, stm
+
+EPS_BANG_BANG = kern.EPS_BANG_BANG
+
+
+class SolveStatus(StrEnum):
+    """Outcome of one re-solve."""
+
+    CONVERGED = "converged"
+    INFEASIBLE = "infeasible"
+    FAILED = "failed"
+
+
+_STATUS = {
+    kern.STATUS_CONVERGED: SolveStatus.CONVERGED,
+    kern.STATUS_INFEASIBLE: SolveStatus.INFEASIBLE,
+    kern.STATUS_FAILED: SolveStatus.FAILED,
+}
+
+
+@dataclass(frozen=True)
+class ShootingProblem:
+    """One re-solve: reach ``xf`` from ``x0`` in ``horizon_s`` at homotopy parameter ``eps``."""
+
+    x0: np.ndarray  # (6,) km, km/s
+    horizon_s: float
+    eps: float
+    mean_motion_rad_s: float
+    u_max_km_s2: float
+    xf: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Numerical settings of the shooting solver."""
+
+    tol_pos_km: float = 1e-9
+    tol_vel_km_s: float = 1e-12
+    max_iter: int = 50
+    quadrature_nodes: int = 12
+    fallback: Literal["chain", "none"] = "chain"
+    success_residual: float = (
+        1e-4  # SPEC §5: a solve succeeds if converged and ‖x(T)−x_f‖ below this
+    )
+    dt_grid_s: float = 1.0  # zero-order-hold grid of the convex checks
+
+    def quadrature(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gauss–Legendre nodes and weights on [−1, 1]."""
+        return _gauss_legendre(self.quadrature_nodes)
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """Outcome of one re-solve; ``costate`` is ``λ(0)`` at the solve time."""
+
+    costate: np.ndarray
+    status: SolveStatus
+    step: str  # fallback step that ended the solve: warm, continuation_warm, ...
+    iterations: int
+    residual_km: float  # ‖x(T) − x_f‖ (6-vector norm, km and km/s as in SPEC §5)
+    wall_time_s: float
+    eps: float
+    horizon_s: float
+
+    @property
+    def converged(self) -> bool:
+        """True when the solver converged (whatever the residual threshold)."""
+        return self.status is SolveStatus.CONVERGED
+
+
+_GL_CACHE: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _gauss_legendre(k: int) -> tuple[np.ndarray, np.ndarray]:
+    if k not in _GL_CACHE:
+        x, w = np.polynomial.legendre.leggauss(k)
+        _GL_CACHE[k] = (np.ascontiguousarray(x), np.ascontiguousarray(w))
+    return _GL_CACHE[k]
+
+
+def n_cells(horizon_s: float) -> int:
+    """Coarse cells of the switching-time search: at most 40 s each, at least 4."""
+    return max(4, int(np.ceil(horizon_s / 40.0)))
+
+
+def control(costate_v: np.ndarray, eps: float, u_max_km_s2: float) -> np.ndarray:
+    """Control acceleration of Eqs. (8)–(10) from the velocity costate ``λ_v`` [km/s²]."""
+    out = np.empty(3)
+    kern.control_from_costate(np.ascontiguousarray(costate_v, dtype=float), eps, u_max_km_s2, out)
+    return out
+
+
+def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
+    """``λ(0)`` of the unbounded energy-optimal problem (SPEC §2), in closed form.
+
+    With ``u = −Bᵀλ`` the state–costate system is linear,
+    ``d/dt [x; λ] = [[A, −BBᵀ], [0, −Aᵀ]] [x; λ]``; its 12×12 matrix exponential
+    over the horizon gives ``x(T) = E₁₁ x₀ + E₁₂ λ(0)``, solved for ``λ(0)``.
+    """
+    a, b = cw_system(problem.mean_motion_rad_s)
+    z = np.zeros((12, 12))
+    z[:6, :6] = a
+    z[:6, 6:] = -b @ b.T
+    z[6:, 6:] = -a.T
+    e = scipy.linalg.expm(z * problem.horizon_s)
+    return np.linalg.solve(e[:6, 6:], problem.xf - e[:6, :6] @ problem.x0)
+
+
+def _newton(
+    problem: ShootingProblem, eps: float, guess: np.ndarray, settings: SolverSettings
+) -> tuple[SolveStatus, np.ndarray, int, float]:
+    gl_x, gl_w = settings.quadrature()
+    out = np.empty(6)
+    status, iters, rp, rv = kern.newton_ascent(
+        problem.mean_motion_rad_s,
+        np.ascontiguousarray(problem.x0, dtype=float),
+        np.ascontiguousarray(problem.xf, dtype=float),
+        float(problem.horizon_s),
+        float(eps),
+        problem.u_max_km_s2,
+        np.ascontiguousarray(guess, dtype=float),
+        gl_x,
+        gl_w,
+        n_cells(problem.horizon_s),
+        settings.tol_pos_km,
+        settings.tol_vel_km_s,
+        settings.max_iter,
+        out,
+    )
+    return _STATUS[status], out, iters, float(np.hypot(rp, rv))
+
+
+def _continuation(
+    problem: ShootingProblem, guess: np.ndarray, settings: SolverSettings
+) -> tuple[SolveStatus, np.ndarray, int, float]:
+    """Adaptive geometric ε-continuation from ε = 1 down to ``problem.eps``.
+
+    The ratio between successive ε starts at 0.1, is shrunk towards 1 after a
+    failed step and relaxed after a success. Below 1e-4 the next step is the
+    target itself (ε = 0 for bang-bang).
+    """
+    target = problem.eps
+    lam = guess
+    eps = max(1.0, target)
+    status, lam_try, total, res = _newton(problem, eps, lam, settings)
+    if status is not SolveStatus.CONVERGED:
+        return status, lam_try, total, res
+    lam = lam_try
+    ratio = 0.1
+    for _ in range(60):
+        if eps <= target:
+            return SolveStatus.CONVERGED, lam, total, res
+        nxt = eps * ratio
+        if nxt < max(target, 1e-4):
+            nxt = target
+        status, lam_try, iters, res_try = _newton(problem, nxt, lam, settings)
+        total += iters
+        if status is SolveStatus.INFEASIBLE:
+            return status, lam_try, total, res_try
+        if status is SolveStatus.CONVERGED:
+            eps, lam, res = nxt, lam_try, res_try
+            ratio = max(ratio * ratio, 0.01)
+        else:
+            ratio = np.sqrt(ratio)
+            if ratio > 0.99:
+                break
+    return SolveStatus.FAILED, lam, total, res
+
+
+def _multiplier_guess(problem: ShootingProblem, settings: SolverSettings) -> np.ndarray | None:
+    g = feasibility.grid_problem(
+        problem.mean_motion_rad_s,
+        problem.x0,
+        problem.xf,
+        problem.horizon_s,
+        settings.dt_grid_s,
+        problem.u_max_km_s2,
+    )
+    return feasibility.min_fuel_costate(g, problem.mean_motion_rad_s)
+
+
+def solve(
+    problem: ShootingProblem, guess: np.ndarray, settings: SolverSettings | None = None
+) -> SolveResult:
+    """Solve one shooting problem from the warm start ``guess`` (SPEC §5).
+
+    Returns the costate with status ``converged``, ``infeasible`` (a
+    certificate that no bounded control reaches ``x_f``) or ``failed``; on
+    anything but ``converged`` the returned costate is the caller's guess.
+    """
+    settings = settings or SolverSettings()
+    start = time.perf_counter()
+    guess = np.asarray(guess, dtype=float)
+    total = 0
+
+    def done(status: SolveStatus, lam: np.ndarray, step: str, res: float) -> SolveResult:
+        keep = lam if status is SolveStatus.CONVERGED else guess
+        return SolveResult(
+            costate=keep,
+            status=status,
+            step=step,
+            iterations=total,
+            residual_km=res,
+            wall_time_s=time.perf_counter() - start,
+            eps=problem.eps,
+            horizon_s=problem.horizon_s,
+        )
+
+    status, lam, iters, res = _newton(problem, problem.eps, guess, settings)
+    total += iters
+    if status is not SolveStatus.FAILED or settings.fallback == "none":
+        return done(status, lam, "warm", res)
+    first_res = res
+    starts: list[tuple[str, np.ndarray | None]] = [
+        ("continuation_warm", guess),
+        ("continuation_energy", None),
+    ]
+    for step, start_guess in starts:
+        if start_guess is None:
+            start_guess = energy_optimal_costate(problem)
+        status, lam, iters, res = _continuation(problem, start_guess, settings)
+        total += iters
+        if status is not SolveStatus.FAILED:
+            return done(status, lam, step, res)
+    mult = _multiplier_guess(problem, settings)
+    if mult is not None:
+        for sign in (1.0, -1.0):
+            status, lam, iters, res = _newton(problem, problem.eps, sign * mult, settings)
+            total += iters
+            if status is not SolveStatus.FAILED:
+                return done(status, lam, "socp_multiplier", res)
+    # Every step failed without a certificate: the grid's minimum peak thrust decides.
+    return done(classify_failure(problem, settings), guess, "zoh_peak_thrust", first_res)
+
+
+def terminal_state(problem: ShootingProblem, costate: np.ndarray, nodes: int = 12) -> np.ndarray:
+    """``x(T)`` reached from ``x0`` under the control law with ``λ(0) = costate``."""
+    gl_x, gl_w = _gauss_legendre(nodes)
+    d = -np.asarray(problem.x0, dtype=float)  # with x_f = 0: G = ∫W u + x₀
+    grad = np.empty(6)
+    hess = np.empty((6, 6))
+    work = np.empty((9, kern.MAX_BREAKS))
+    kern.dual_evaluate(
+        problem.mean_motion_rad_s,
+        np.ascontiguousarray(costate, dtype=float),
+        d,
+        float(problem.horizon_s),
+        float(problem.eps),
+        problem.u_max_km_s2,
+        gl_x,
+        gl_w,
+        n_cells(problem.horizon_s),
+        False,
+        grad,
+        hess,
+        work,
+    )
+    return stm(problem.mean_motion_rad_s, problem.horizon_s) @ grad
+
+
+def shooting_jacobian(problem: ShootingProblem, costate: np.ndarray, nodes: int = 12) -> np.ndarray:
+    """Analytic ``∂x(T)/∂λ(0)`` (6×6), including the ε = 0 jump terms."""
+    gl_x, gl_w = _gauss_legendre(nodes)
+    grad = np.empty(6)
+    hess = np.empty((6, 6))
+    work = np.empty((9, kern.MAX_BREAKS))
+    kern.dual_evaluate(
+        problem.mean_motion_rad_s,
+        np.ascontiguousarray(costate, dtype=float),
+        -np.asarray(problem.x0, dtype=float),
+        float(problem.horizon_s),
+        float(problem.eps),
+        problem.u_max_km_s2,
+        gl_x,
+        gl_w,
+        n_cells(problem.horizon_s),
+        True,
+        grad,
+        hess,
+        work,
+    )
+    return stm(problem.mean_motion_rad_s, problem.horizon_s) @ hess
+
+
+def switching_times(
+    problem: ShootingProblem, costate: np.ndarray, t0: float = 0.0, t1: float | None = None
+) -> np.ndarray:
+    """Times in ``(t0, t1)`` where ``‖λ_v‖`` crosses ``1 ± ε`` (1 at ε = 0) [s]."""
+    t1 = problem.horizon_s if t1 is None else t1
+    breaks = np.empty(kern.MAX_BREAKS)
+    work = np.empty((9, kern.MAX_BREAKS))
+    count = kern.find_switches(
+        problem.mean_motion_rad_s,
+        np.ascontiguousarray(costate, dtype=float),
+        float(t0),
+        float(t1),
+        float(problem.eps),
+        n_cells(t1 - t0),
+        breaks,
+        work,
+    )
+    return breaks[:count].copy()
+
+
+def classify_failure(problem: ShootingProblem, settings: SolverSettings) -> SolveStatus:
+    """``infeasible`` if the ZOH grid's minimum peak thrust exceeds ``u_max``, else ``failed``."""
+    g = feasibility.grid_problem(
+        problem.mean_motion_rad_s,
+        problem.x0,
+        problem.xf,
+        problem.horizon_s,
+        settings.dt_grid_s,
+        problem.u_max_km_s2,
+    )
+    peak = feasibility.min_peak_thrust(g)
+    return SolveStatus.INFEASIBLE if peak > problem.u_max_km_s2 else SolveStatus.FAILED

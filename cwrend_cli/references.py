@@ -1,0 +1,121 @@
+"""Open-loop energy- and fuel-optimal references (SPEC §2; paper Table 1 results).
+
+Energy-optimal: unbounded ``min ∫½‖u‖²`` solved in closed form. Fuel-optimal:
+ε-continuation 1.0, 0.9, …, 0.0 of the shooting problem, each solve
+warm-started from the previous one, the first from the energy costate.
+Δv is the trapezoid of ‖u‖ sampled on the 1 s grid t = 0 … T (SPEC §2);
+the miss is that of the continuous plan, ``‖r(T) − r_f‖``.
+Units: km, s, km/s, km/s².
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from cwrend_cli import guidance
+from cwrend_cli.dynamics import costate_stm, cw_system
+
+#: ε sequence of the fuel-optimal continuation (SPEC §2).
+FUEL_CONTINUATION = tuple(round(1.0 - 0.1 * i, 1) for i in range(11))
+
+
+@dataclass(frozen=True)
+class OpenLoopResult:
+    """One open-loop reference sampled on the simulation grid."""
+
+    name: str  # "energy" or "fuel"
+    costate: np.ndarray  # λ(0)
+    t_s: np.ndarray  # (N+1,)
+    x: np.ndarray  # (N+1, 6) state of the continuous plan at the grid times
+    u: np.ndarray  # (N+1, 3) control sampled at the grid times
+    delta_v_km_s: float
+    miss_km: float
+    solves: tuple[guidance.SolveResult, ...] = ()
+
+
+def delta_v(t_s: np.ndarray, u: np.ndarray) -> float:
+    """Δv [km/s]: trapezoid of ‖u‖ over the grid (SPEC §2)."""
+    return float(np.trapezoid(np.linalg.norm(u, axis=1), t_s))
+
+
+def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLoopResult:
+    """Energy-optimal reference: ``u = −Bᵀλ`` with ``λ(0)`` in closed form."""
+    lam0 = guidance.energy_optimal_costate(problem)
+    n = problem.mean_motion_rad_s
+    a, b = cw_system(n)
+    z = np.zeros((12, 12))
+    z[:6, :6] = a
+    z[:6, 6:] = -b @ b.T
+    z[6:, 6:] = -a.T
+    x = np.empty((t_s.size, 6))
+    u = np.empty((t_s.size, 3))
+    for i, t in enumerate(t_s):
+        e = scipy.linalg.expm(z * t)
+        x[i] = e[:6, :6] @ problem.x0 + e[:6, 6:] @ lam0
+        u[i] = -(costate_stm(n, t) @ lam0)[3:]
+    miss = float(np.linalg.norm(x[-1, :3] - problem.xf[:3]))
+    return OpenLoopResult("energy", lam0, t_s, x, u, delta_v(t_s, u), miss)
+
+
+def plan_samples(
+    problem: guidance.ShootingProblem, lam0: np.ndarray, t_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """State and control of the plan ``λ(0) = lam0`` at the times ``t_s`` (from t = 0)."""
+    n = problem.mean_motion_rad_s
+    x = np.empty((t_s.size, 6))
+    u = np.empty((t_s.size, 3))
+    for i, t in enumerate(t_s):
+        lam_t = costate_stm(n, t) @ lam0
+        u[i] = guidance.control(lam_t[3:], problem.eps, problem.u_max_km_s2)
+        if t == 0.0:
+            x[i] = problem.x0
+        else:
+            sub = guidance.ShootingProblem(
+                problem.x0, float(t), problem.eps, n, problem.u_max_km_s2, problem.xf
+            )
+            x[i] = guidance.terminal_state(sub, lam0)
+    return x, u
+
+
+def fuel_optimal(
+    problem: guidance.ShootingProblem,
+    t_s: np.ndarray,
+    settings: guidance.SolverSettings | None = None,
+) -> OpenLoopResult:
+    """Fuel-optimal reference by ε-continuation ``FUEL_CONTINUATION`` from the energy costate.
+
+    ``problem.eps`` is ignored; the result is the ε = 0 (bang-bang) plan.
+    Raises RuntimeError if a continuation step does not converge.
+    """
+    lam = guidance.energy_optimal_costate(problem)
+    solves = []
+    for eps in FUEL_CONTINUATION:
+        step = guidance.ShootingProblem(
+            problem.x0,
+            problem.horizon_s,
+            eps,
+            problem.mean_motion_rad_s,
+            problem.u_max_km_s2,
+            problem.xf,
+        )
+        result = guidance.solve(step, lam, settings)
+        if not result.converged:
+            raise RuntimeError(
+                f"fuel-optimal continuation failed at eps = {eps}: {result.status.value}"
+            )
+        solves.append(result)
+        lam = result.costate
+    final = guidance.ShootingProblem(
+        problem.x0,
+        problem.horizon_s,
+        0.0,
+        problem.mean_motion_rad_s,
+        problem.u_max_km_s2,
+        problem.xf,
+    )
+    x, u = plan_samples(final, lam, t_s)
+    miss = float(np.linalg.norm(x[-1, :3] - problem.xf[:3]))
+    return OpenLoopResult("fuel", lam, t_s, x, u, delta_v(t_s, u), miss, tuple(solves))

@@ -1,0 +1,117 @@
+"""Measurement noise: degradation windows and standard-normal streams (SPEC §3, §6).
+
+The truth is measured as ``y = H x + chol(R_true) n + b`` where ``n`` is one
+standard-normal 3-vector per step, shared by every architecture of a seed
+(fair comparison, SPEC §6), and ``R_true = r_scale · R_nominal`` and the bias
+``b`` come from the degradation window active at the step's start time.
+Units: km, km², s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from cwrend_cli.errors import InputDataError
+
+NOISE_COLUMNS = ("n1", "n2", "n3")
+
+
+class Window(Protocol):
+    """A degradation window (``config.DegradationWindow`` satisfies it)."""
+
+    start_s: float
+    end_s: float
+    r_scale: float
+    bias_km: tuple[float, float, float]
+
+
+def active_windows(times_s: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
+    """Index of the window active at each time (−1 for none).
+
+    A window is active on ``start_s ≤ t ≤ end_s``; where windows overlap the
+    later one in the list applies (so the paper's ``[250, 325)`` then
+    ``[325, 400]`` is written as two windows sharing t = 325).
+    """
+    idx = np.full(times_s.shape, -1, dtype=np.int64)
+    for i, w in enumerate(windows):
+        idx[(times_s >= w.start_s) & (times_s <= w.end_s)] = i
+    return idx
+
+
+def measurement_noise(
+    standard_normal: np.ndarray,
+    times_s: np.ndarray,
+    r_nominal: np.ndarray,
+    windows: Sequence[Window],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noise added to each measurement (N, 3) [km] and the active window index (N,).
+
+    Row k uses the window at ``times_s[k]`` (the step's start, SPEC §5):
+    ``v_k = chol(r_scale R_nominal) n_k + bias``.
+    """
+    active = active_windows(times_s, windows)
+    chol_nominal = np.linalg.cholesky(r_nominal)
+    scale = np.ones(times_s.shape)
+    bias = np.zeros((times_s.shape[0], 3))
+    for i, w in enumerate(windows):
+        mask = active == i
+        scale[mask] = w.r_scale
+        bias[mask] = np.asarray(w.bias_km, dtype=float)
+    # chol(c R) = √c chol(R)
+    noise = np.sqrt(scale)[:, None] * (standard_normal @ chol_nominal.T) + bias
+    return noise, active
+
+
+def standard_normal_stream(seed: np.random.SeedSequence | int, n_steps: int) -> np.ndarray:
+    """One standard-normal realisation (n_steps, 3) from a ``SeedSequence``-keyed PCG64 stream."""
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return np.random.Generator(np.random.PCG64(seq)).standard_normal((n_steps, 3))
+
+
+def load_noise_file(path: str | Path, n_steps: int) -> np.ndarray:
+    """Read an external standard-normal realisation (CSV or Parquet, columns n1, n2, n3).
+
+    Raises :class:`InputDataError` naming the file and the problem when the
+    file is unreadable, lacks a column, has the wrong number of rows (one per
+    step is required) or holds a non-finite value.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            frame = pd.read_parquet(path)
+        else:
+            frame = pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputDataError(f"noise.file = {str(path)!r}: file not found") from None
+    except Exception as exc:  # pandas/pyarrow raise many types for unreadable files
+        raise InputDataError(f"noise.file = {str(path)!r}: cannot be read ({exc})") from None
+    missing = [c for c in NOISE_COLUMNS if c not in frame.columns]
+    if missing:
+        raise InputDataError(
+            f"noise.file = {str(path)!r}: missing column(s) {', '.join(missing)}; "
+            f"expected columns n1, n2, n3 (found: {', '.join(map(str, frame.columns))})"
+        )
+    if len(frame) != n_steps:
+        raise InputDataError(
+            f"noise.file = {str(path)!r}: has {len(frame)} rows, expected {n_steps} "
+            "(one row per step, horizon_s / dt_s)"
+        )
+    try:
+        values = frame[list(NOISE_COLUMNS)].to_numpy(dtype=float)
+    except (TypeError, ValueError):
+        raise InputDataError(
+            f"noise.file = {str(path)!r}: columns n1, n2, n3 must be numeric"
+        ) from None
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise InputDataError(
+            f"noise.file = {str(path)!r}: non-finite value in row {row} (all values must be finite)"
+        )
+    return np.ascontiguousarray(values)
