@@ -1,0 +1,894 @@
+"""The cwrend configuration: one pydantic model, validated once at the boundary.
+
+A run is described by a TOML file whose tables mirror :class:`CwrendConfig`
+(``[scenario]``, ``[estimator]``, ``[schedule]``, ``[guidance]``, ``[solver]``,
+``[degradation]``, ``[noise]``, ``[output]``). Every field has a default equal to
+the paper's scenario (Candan & Servadio, AAS 26-893, Table 1; SPEC §6), so an
+empty file is the paper scenario. The file is read by :func:`load_config`,
+``--set key=value`` overrides are applied, and the result is validated into
+frozen model objects that the rest of the package receives; nothing downstream
+re-reads or re-validates raw dictionaries.
+
+Units everywhere (SPEC): km, s, km/s, km/s²; covariances in the matching
+squared units. Field names carry their unit (``horizon_s``, ``u_max_km_s2``).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import re
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Annotated, Any, Literal, Self, get_args, get_origin
+
+import numpy as np
+import tomli_w
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+from cwrend_cli.errors import ConfigError
+
+__all__ = [
+    "ARCHITECTURES",
+    "Architecture",
+    "CwrendConfig",
+    "DegradationConfig",
+    "DegradationWindow",
+    "EstimatorConfig",
+    "GuidanceConfig",
+    "NoiseConfig",
+    "OutputConfig",
+    "ScenarioConfig",
+    "ScheduleConfig",
+    "SolverConfig",
+    "config_from_dict",
+    "config_hash",
+    "format_validation_error",
+    "load_config",
+    "parse_arch",
+    "parse_override",
+    "resolved_dict",
+    "set_dotted",
+    "to_json",
+    "to_toml",
+]
+
+# Numbers are strict: a TOML string "1e-3" or a boolean is not silently turned
+# into a float (ints are still accepted and stored as floats).
+Float = Annotated[float, Strict()]
+Int = Annotated[int, Strict()]
+Vec3 = tuple[Float, Float, Float]
+Vec6 = tuple[Float, Float, Float, Float, Float, Float]
+# A covariance as given: n diagonal entries, or a full n×n matrix (rows).
+Covariance = tuple[Float, ...] | tuple[tuple[Float, ...], ...]
+
+# Tolerance for "a whole multiple of dt" (SPEC: integer number of 1 s steps).
+_MULTIPLE_TOL = 1e-9
+_SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+_NOISE_SUFFIXES = (".csv", ".parquet", ".pq")
+
+
+class _FrozenModel(BaseModel):
+    """Base of every config model: unknown keys rejected, immutable, finite floats."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+# ---------------------------------------------------------------------------
+# Errors raised from validators. Model-level rules report the field they are
+# about (possibly several), so the message names ``schedule.eps_min`` rather
+# than just ``schedule``.
+# ---------------------------------------------------------------------------
+
+_RULES_ERROR = "cwrend_rules"
+
+
+def _rules_error(problems: Sequence[tuple[str, Any, str]]) -> PydanticCustomError:
+    """Build one validation error carrying ``(field, value, message)`` problems.
+
+    ``field`` is a dotted path relative to the model raising the error.
+    """
+    summary = "; ".join(f"{f} = {_fmt_value(v)}: {m}" for f, v, m in problems)
+    return PydanticCustomError(
+        _RULES_ERROR,
+        "{summary}",
+        {"summary": summary, "problems": tuple((f, _fmt_value(v), m) for f, v, m in problems)},
+    )
+
+
+def _fmt_num(x: float) -> str:
+    """Shortest faithful text for a number (``1`` rather than ``1.0``)."""
+    if isinstance(x, float) and x.is_integer() and abs(x) < 1e15:
+        return str(int(x))
+    return repr(x)
+
+
+def _fmt_value(value: Any, limit: int = 80) -> str:
+    """Render an offending value compactly, TOML/JSON style, truncated to ``limit``."""
+    if isinstance(value, float):
+        text = _fmt_num(value)
+    else:
+        try:
+            text = json.dumps(value, default=repr, allow_nan=True)
+        except (TypeError, ValueError):
+            text = repr(value)
+    if len(text) > limit:
+        text = text[: limit - 3] + "..."
+    return text
+
+
+def _is_whole_multiple(value: float, step: float) -> bool:
+    """True when ``value / step`` is an integer within :data:`_MULTIPLE_TOL`."""
+    ratio = value / step
+    return abs(ratio - round(ratio)) < _MULTIPLE_TOL
+
+
+def _check_length(value: Any, n: int) -> Any:
+    """Before-validator for fixed-length vectors: a clear message for a wrong length."""
+    if isinstance(value, (list, tuple)) and len(value) != n:
+        raise ValueError(f"must have {n} entries (got {len(value)})")
+    return value
+
+
+# ---------------------------------------------------------------------------
+# Sections
+# ---------------------------------------------------------------------------
+
+
+class ScenarioConfig(_FrozenModel):
+    """Rendezvous geometry and timing (SPEC §1, §6; paper Table 1)."""
+
+    mean_motion_rad_s: Float = Field(
+        0.00104218449, gt=0, description="CW mean motion n of the target orbit [rad/s]"
+    )
+    horizon_s: Float = Field(800.0, gt=0, description="rendezvous horizon T [s]")
+    dt_s: Float = Field(1.0, gt=0, description="simulation / filter / control-hold step Δt [s]")
+    x0: Vec6 = Field(
+        (0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0),
+        description="initial relative state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
+    )
+    xf: Vec6 = Field(
+        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        description="target terminal state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
+    )
+    u_max_km_s2: Float = Field(8e-4, gt=0, description="maximum control acceleration [km/s²]")
+
+    @field_validator("x0", "xf", mode="before")
+    @classmethod
+    def _six_entries(cls, value: Any) -> Any:
+        return _check_length(value, 6)
+
+    @model_validator(mode="after")
+    def _horizon_on_grid(self) -> Self:
+        if not _is_whole_multiple(self.horizon_s, self.dt_s):
+            raise _rules_error(
+                [
+                    (
+                        "horizon_s",
+                        self.horizon_s,
+                        f"must be a whole multiple of dt_s ({_fmt_num(self.dt_s)})",
+                    )
+                ]
+            )
+        return self
+
+    @property
+    def n_steps(self) -> int:
+        """Number of steps N = T/Δt (the grid is t_k = k Δt, k = 0..N)."""
+        return round(self.horizon_s / self.dt_s)
+
+
+def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple[float, ...], ...]:
+    """Check a covariance given as n diagonal entries or an n×n matrix.
+
+    Returns the canonical stored form: the diagonal tuple when the matrix is
+    diagonal, otherwise the full matrix as a tuple of row tuples, so that two
+    spellings of the same matrix validate (and hash) identically.
+    """
+    shape_msg = f"must have {n} entries (diagonal) or be a {n}x{n} matrix"
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(shape_msg)
+    rows_are_seq = [isinstance(r, (list, tuple)) for r in value]
+    if value and all(rows_are_seq):
+        if len(value) != n or any(len(r) != n for r in value):
+            raise ValueError(shape_msg)
+        entries = [e for r in value for e in r]
+    elif not any(rows_are_seq):
+        if len(value) != n:
+            raise ValueError(shape_msg)
+        entries = list(value)
+    else:
+        raise ValueError(shape_msg)
+    for e in entries:
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not math.isfinite(e):
+            raise ValueError("entries must be finite numbers")
+
+    if not any(rows_are_seq):
+        diag = tuple(float(e) for e in value)
+        if any(d <= 0.0 for d in diag):
+            raise ValueError("must be positive definite (diagonal entries must be > 0)")
+        return diag
+
+    mat = np.array(value, dtype=np.float64)
+    scale = float(np.max(np.abs(mat)))
+    if float(np.max(np.abs(mat - mat.T))) > 1e-12 * scale:
+        raise ValueError("must be symmetric")
+    try:
+        # Cholesky succeeds exactly when the symmetric matrix is positive definite.
+        np.linalg.cholesky(mat)
+    except np.linalg.LinAlgError:
+        raise ValueError("must be positive definite") from None
+    off_diagonal = mat - np.diag(np.diag(mat))
+    if not np.any(off_diagonal):
+        return tuple(float(d) for d in np.diag(mat))
+    return tuple(tuple(float(e) for e in row) for row in mat)
+
+
+def _covariance_matrix(value: tuple[float, ...] | tuple[tuple[float, ...], ...]) -> np.ndarray:
+    """A fresh float64 matrix from the stored (diagonal or full) covariance."""
+    arr = np.array(value, dtype=np.float64)
+    return np.diag(arr) if arr.ndim == 1 else arr
+
+
+class EstimatorConfig(_FrozenModel):
+    """Kalman filter covariances (SPEC §3, §6).
+
+    Each covariance is given either as its diagonal (a list of n positive
+    numbers) or as a full symmetric positive-definite n×n matrix.
+    """
+
+    r_nominal_km2: Covariance = Field(
+        (1e-6, 1e-6, 1e-6),
+        description="nominal measurement covariance R (3, or 3x3) [km²]; 1e-6 is a 1 m σ",
+    )
+    q_process: Covariance = Field(
+        (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14),
+        description="discrete process-noise covariance Q (6, or 6x6) [km², km²/s²]",
+    )
+    p0: Covariance = Field(
+        (1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10),
+        description="initial estimate covariance P0 (6, or 6x6) [km², km²/s²]",
+    )
+
+    @field_validator("r_nominal_km2", mode="before")
+    @classmethod
+    def _check_r(cls, value: Any) -> Any:
+        return _normalise_covariance(value, 3)
+
+    @field_validator("q_process", "p0", mode="before")
+    @classmethod
+    def _check_q_p0(cls, value: Any) -> Any:
+        return _normalise_covariance(value, 6)
+
+    def r_nominal_matrix(self) -> np.ndarray:
+        """R_nominal as a new 3×3 float64 array [km²]."""
+        return _covariance_matrix(self.r_nominal_km2)
+
+    def q_matrix(self) -> np.ndarray:
+        """Q as a new 6×6 float64 array [km², km²/s²]."""
+        return _covariance_matrix(self.q_process)
+
+    def p0_matrix(self) -> np.ndarray:
+        """P0 as a new 6×6 float64 array [km², km²/s²]."""
+        return _covariance_matrix(self.p0)
+
+
+class ScheduleConfig(_FrozenModel):
+    """Innovation-adaptive homotopy schedule (SPEC §4; paper Table 1).
+
+    Score ``s = min(max(NIS - nis_offset, 0) + kappa_mtf ρ, score_max)``, low-pass
+    ``s̄_k = score_lowpass s̄_{k-1} + (1 - score_lowpass) s_k``, target
+    ``ε* = eps_min + (eps_max - eps_min)(1 - exp(-beta s̄))`` (``eps_min`` when
+    ``s̄ < deadband``; clipped at ``eps_saturation`` if set), applied
+    ``ε_k = (1 - alpha_eps) ε_{k-1} + alpha_eps ε*``.
+    """
+
+    beta: Float = Field(0.25, gt=0, description="score-to-homotopy sensitivity β [1/score]")
+    nis_offset: Float = Field(
+        3.0,
+        ge=0,
+        description="NIS offset m subtracted before scoring [-] (paper: measurement dimension)",
+    )
+    score_lowpass: Float = Field(
+        0.85, ge=0, lt=1, description="score low-pass coefficient ρ_s, in [0, 1) [-]"
+    )
+    kappa_mtf: Float = Field(
+        12.0, ge=0, description="weight κ_MTF of the MTF ratio in the score [-]"
+    )
+    score_max: Float = Field(50.0, gt=0, description="cap on the instantaneous score [-]")
+    eps_min: Float = Field(0.0, ge=0, description="lower end ε_min of the homotopy map [-]")
+    eps_max: Float = Field(
+        1.0, gt=0, description="upper end ε_max of the map; adaptive runs start here [-]"
+    )
+    alpha_eps: Float = Field(
+        0.10, gt=0, le=1, description="blending factor α_ε of the applied ε, in (0, 1] [-]"
+    )
+    deadband: Float = Field(
+        0.0,
+        ge=0,
+        description="filtered score below which ε* = eps_min; 0 disables it [-]",
+    )
+    eps_saturation: Float | None = Field(
+        None,
+        description="upper clip of ε*, within [eps_min, eps_max]; unset disables it [-]",
+    )
+    eps_fixed: Float = Field(
+        0.0, ge=0, description="ε held by the fixed architectures (paper: 0, bang-bang) [-]"
+    )
+
+    @model_validator(mode="after")
+    def _eps_ordering(self) -> Self:
+        problems: list[tuple[str, Any, str]] = []
+        if self.eps_min > self.eps_max:
+            problems.append(
+                ("eps_min", self.eps_min, f"must be <= eps_max ({_fmt_num(self.eps_max)})")
+            )
+        sat = self.eps_saturation
+        if sat is not None and not (self.eps_min <= sat <= self.eps_max):
+            problems.append(
+                (
+                    "eps_saturation",
+                    sat,
+                    f"must lie in [eps_min, eps_max] = "
+                    f"[{_fmt_num(self.eps_min)}, {_fmt_num(self.eps_max)}]",
+                )
+            )
+        if problems:
+            raise _rules_error(problems)
+        return self
+
+
+class GuidanceConfig(_FrozenModel):
+    """Receding-horizon re-solve settings (SPEC §5).
+
+    ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
+    remaining horizon T - t_{k+1}; ``"reference"`` reproduces the authors' code
+    (T - t_k, then the solved costate propagated one step). ``hold`` chooses
+    how the plan's control is held over a step: sampled at its start (authors)
+    or averaged over the step.
+    """
+
+    t_resolve_s: Float = Field(10.0, gt=0, description="re-solve interval [s]")
+    t_min_rem_s: Float = Field(
+        20.0, ge=0, description="no re-solve once the remaining horizon is <= this [s]"
+    )
+    resolve_timing: Literal["correct", "reference"] = Field(
+        "correct", description="re-solve timing: 'correct' or the authors' 'reference'"
+    )
+    hold: Literal["sample", "mean"] = Field(
+        "sample", description="control hold over a step: 'sample' (start) or 'mean' (average)"
+    )
+
+
+class SolverConfig(_FrozenModel):
+    """Shooting solver settings (SPEC §1, §5)."""
+
+    fallback: Literal["chain", "none"] = Field(
+        "chain", description="on failure of the primary solver: try the fallback chain or not"
+    )
+    on_infeasible: Literal["keep", "min_miss"] = Field(
+        "keep",
+        description="when the convex check says x_f is unreachable: keep the propagated "
+        "costate, or steer to the minimum-miss solution",
+    )
+    success_residual: Float = Field(
+        1e-4, gt=0, description="a solve succeeds when ||x(T) - x_f|| is below this [km, km/s]"
+    )
+    tol_pos_km: Float = Field(1e-9, gt=0, description="solver tolerance on position [km]")
+    tol_vel_km_s: Float = Field(1e-12, gt=0, description="solver tolerance on velocity [km/s]")
+    max_iter: Int = Field(50, ge=1, description="maximum solver iterations per solve [-]")
+    quadrature_nodes: Int = Field(
+        12, ge=4, le=64, description="quadrature nodes per step for the control integral [-]"
+    )
+
+
+class DegradationWindow(_FrozenModel):
+    """One sensor-degradation interval (SPEC §6).
+
+    The window is active when ``start_s <= t <= end_s`` (both ends included).
+    While active, the true measurement covariance is ``r_scale * R_nominal``
+    and ``bias_km`` is added to each measurement. Where windows overlap, the
+    later one in the list applies, so the paper's windows [250, 325] and
+    [325, 400] give the second one at t = 325 s. Outside every window the true
+    covariance is R_nominal and there is no bias.
+    """
+
+    start_s: Float = Field(ge=0, description="window start time (inclusive) [s]")
+    end_s: Float = Field(description="window end time (inclusive), >= start_s [s]")
+    r_scale: Float = Field(
+        1.0, gt=0, description="true measurement covariance = r_scale * R_nominal [-]"
+    )
+    bias_km: Vec3 = Field((0.0, 0.0, 0.0), description="measurement bias added while active [km]")
+
+    @field_validator("bias_km", mode="before")
+    @classmethod
+    def _three_entries(cls, value: Any) -> Any:
+        return _check_length(value, 3)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Self:
+        if self.end_s < self.start_s:
+            raise _rules_error(
+                [("end_s", self.end_s, f"must be >= start_s ({_fmt_num(self.start_s)})")]
+            )
+        return self
+
+
+_PAPER_WINDOWS = (
+    DegradationWindow(start_s=250.0, end_s=325.0, r_scale=300.0),
+    DegradationWindow(start_s=325.0, end_s=400.0, r_scale=300.0, bias_km=(0.010, -0.008, 0.012)),
+)
+
+
+class DegradationConfig(_FrozenModel):
+    """Measurement degradation schedule (SPEC §6); an empty list means none."""
+
+    windows: tuple[DegradationWindow, ...] = Field(
+        _PAPER_WINDOWS,
+        description="degradation windows; later entries win where they overlap",
+    )
+
+
+class NoiseConfig(_FrozenModel):
+    """Measurement-noise realisation (SPEC §6).
+
+    Either drawn from ``seed`` or read from ``file``: a CSV or Parquet table
+    with columns n1, n2, n3 of standard-normal draws, one row per step, scaled
+    by chol(true R) at use. A relative ``file`` is resolved against the config
+    file's directory when loaded; the stored value is the absolute path.
+    """
+
+    seed: Int = Field(0, ge=0, description="root seed of the standard-normal realisation [-]")
+    file: str | None = Field(
+        None,
+        description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3)",
+    )
+
+    @field_validator("file")
+    @classmethod
+    def _resolve_file(cls, value: str | None, info: ValidationInfo) -> str | None:
+        if value is None:
+            return None
+        if not value.strip():
+            raise ValueError("must be a non-empty path")
+        path = Path(value).expanduser()
+        if not path.is_absolute():
+            base = (info.context or {}).get("base_dir")
+            path = (Path(base) if base is not None else Path.cwd()) / path
+        path = path.resolve()
+        if path.suffix.lower() not in _NOISE_SUFFIXES:
+            raise ValueError(f"must be a CSV or Parquet file ({', '.join(_NOISE_SUFFIXES)})")
+        if not path.is_file():
+            raise ValueError(f"file not found: {path}")
+        return str(path)
+
+
+class OutputConfig(_FrozenModel):
+    """Where results go: ``<dir>/<name>/...``."""
+
+    dir: str = Field("results", min_length=1, description="results root directory")
+    name: str | None = Field(
+        None,
+        description="run/campaign name, a plain file name (default: the config file's stem)",
+    )
+
+    @field_validator("name")
+    @classmethod
+    def _safe_name(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
+        if len(value) > 128 or not _SAFE_NAME.fullmatch(value):
+            raise ValueError(
+                "must be a plain name: letters, digits, '.', '_', '-', starting with a "
+                "letter or digit, no path separators, at most 128 characters"
+            )
+        return value
+
+
+class CwrendConfig(_FrozenModel):
+    """The whole configuration of a cwrend run or campaign (defaults: SPEC §6)."""
+
+    scenario: ScenarioConfig = Field(default_factory=ScenarioConfig, description="scenario")
+    estimator: EstimatorConfig = Field(default_factory=EstimatorConfig, description="Kalman filter")
+    schedule: ScheduleConfig = Field(
+        default_factory=ScheduleConfig, description="adaptive homotopy schedule"
+    )
+    guidance: GuidanceConfig = Field(
+        default_factory=GuidanceConfig, description="receding-horizon guidance"
+    )
+    solver: SolverConfig = Field(default_factory=SolverConfig, description="shooting solver")
+    degradation: DegradationConfig = Field(
+        default_factory=DegradationConfig, description="sensor degradation windows"
+    )
+    noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
+    output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
+
+    @model_validator(mode="after")
+    def _cross_section_rules(self) -> Self:
+        sc = self.scenario
+        problems: list[tuple[str, Any, str]] = []
+        for i, w in enumerate(self.degradation.windows):
+            if w.end_s > sc.horizon_s:
+                problems.append(
+                    (
+                        f"degradation.windows.{i}.end_s",
+                        w.end_s,
+                        f"window must lie within [0, scenario.horizon_s] = "
+                        f"[0, {_fmt_num(sc.horizon_s)}]",
+                    )
+                )
+        if not _is_whole_multiple(self.guidance.t_resolve_s, sc.dt_s):
+            problems.append(
+                (
+                    "guidance.t_resolve_s",
+                    self.guidance.t_resolve_s,
+                    f"must be a whole multiple of scenario.dt_s ({_fmt_num(sc.dt_s)})",
+                )
+            )
+        if self.guidance.t_min_rem_s >= sc.horizon_s:
+            problems.append(
+                (
+                    "guidance.t_min_rem_s",
+                    self.guidance.t_min_rem_s,
+                    f"must be < scenario.horizon_s ({_fmt_num(sc.horizon_s)})",
+                )
+            )
+        if problems:
+            raise _rules_error(problems)
+        return self
+
+
+# ---------------------------------------------------------------------------
+# Architectures (the ablation of SPEC §6)
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Architecture:
+    """One closed-loop architecture: estimator (plain/MTF KF) × schedule (fixed/adaptive ε)."""
+
+    slug: str
+    mtf: bool
+    adaptive: bool
+
+    @property
+    def label(self) -> str:
+        """Human-readable name, e.g. ``"MTF KF, adaptive ε"``."""
+        kf = "MTF KF" if self.mtf else "plain KF"
+        return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε"
+
+
+ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+    {
+        a.slug: a
+        for a in (
+            Architecture("plain_fixed", mtf=False, adaptive=False),
+            Architecture("mtf_fixed", mtf=True, adaptive=False),
+            Architecture("plain_adaptive", mtf=False, adaptive=True),
+            Architecture("mtf_adaptive", mtf=True, adaptive=True),
+        )
+    }
+)
+
+
+def parse_arch(slug: str) -> Architecture:
+    """Return the architecture named ``slug``; :class:`ConfigError` lists the valid slugs."""
+    try:
+        return ARCHITECTURES[slug.strip()]
+    except KeyError:
+        allowed = ", ".join(ARCHITECTURES)
+        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed})") from None
+
+
+# ---------------------------------------------------------------------------
+# Validation-error formatting
+# ---------------------------------------------------------------------------
+
+
+def _model_at(loc: Sequence[str | int]) -> type[BaseModel] | None:
+    """The config model class found at ``loc`` inside :class:`CwrendConfig`, if any."""
+    tp: Any = CwrendConfig
+    for part in loc:
+        if isinstance(part, int):
+            args = get_args(tp)
+            if get_origin(tp) is tuple and args:
+                tp = args[0]
+                continue
+            return None
+        if isinstance(tp, type) and issubclass(tp, BaseModel) and part in tp.model_fields:
+            tp = tp.model_fields[part].annotation
+        else:
+            return None
+    return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+
+
+def _describe(err: Mapping[str, Any]) -> str:
+    """What is allowed, in words, for one pydantic error dict."""
+    kind = err["type"]
+    ctx = err.get("ctx") or {}
+    bounds = {
+        "greater_than": ("gt", ">"),
+        "greater_than_equal": ("ge", ">="),
+        "less_than": ("lt", "<"),
+        "less_than_equal": ("le", "<="),
+    }
+    if kind in bounds:
+        key, op = bounds[kind]
+        return f"must be {op} {_fmt_num(ctx[key])}"
+    simple = {
+        "finite_number": "must be a finite number",
+        "float_type": "must be a number",
+        "float_parsing": "must be a number",
+        "int_type": "must be an integer",
+        "int_parsing": "must be an integer",
+        "int_from_float": "must be an integer",
+        "bool_type": "must be true or false",
+        "bool_parsing": "must be true or false",
+        "string_type": "must be a string",
+        "tuple_type": "must be an array",
+        "list_type": "must be an array",
+        "model_type": "must be a table",
+        "model_attributes_type": "must be a table",
+        "dict_type": "must be a table",
+    }
+    if kind in simple:
+        return simple[kind]
+    if kind == "literal_error":
+        return f"must be one of {ctx.get('expected', '')}"
+    if kind in ("too_short", "too_long"):
+        n = ctx.get("min_length", ctx.get("max_length"))
+        return f"must have {n} entries (got {ctx.get('actual_length')})"
+    if kind == "string_too_short":
+        return "must not be empty"
+    msg = str(err.get("msg", kind))
+    return msg.removeprefix("Value error, ")
+
+
+def format_validation_error(exc: ValidationError) -> list[str]:
+    """One line per problem: ``dotted.path = value: what is allowed``."""
+    lines: list[str] = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(err["loc"])
+        path = ".".join(str(p) for p in loc)
+        kind = err["type"]
+        if kind == _RULES_ERROR:
+            for field, value, message in err["ctx"]["problems"]:
+                full = f"{path}.{field}" if path else field
+                lines.append(f"{full} = {value}: {message}")
+        elif kind == "extra_forbidden":
+            model = _model_at(loc[:-1])
+            allowed = f" (allowed: {', '.join(model.model_fields)})" if model else ""
+            lines.append(f"{path}: unknown key{allowed}")
+        elif kind == "missing":
+            lines.append(f"{path}: missing required key")
+        else:
+            where = path or "<config>"
+            lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}")
+    return lines
+
+
+# ---------------------------------------------------------------------------
+# Overrides (``--set dotted.key=value``)
+# ---------------------------------------------------------------------------
+
+
+def _parse_value(raw: str) -> Any:
+    """A TOML value (``1e-3``, ``"mean"``, ``[1, 2]``, ``true``), else the bare string."""
+    try:
+        parsed = tomllib.loads(f"v = {raw}")
+    except tomllib.TOMLDecodeError:
+        return raw
+    return parsed["v"] if parsed.keys() == {"v"} else raw
+
+
+def _split_key(key: str) -> list[str]:
+    """Split a dotted key, rejecting empty components."""
+    parts = [p.strip() for p in key.split(".")]
+    if not key.strip() or any(not p for p in parts):
+        raise ConfigError(f"malformed key {key!r}: empty key component")
+    return parts
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse ``dotted.key=value`` into ``(key, value)``; the value is read as TOML.
+
+    Raises :class:`ConfigError` when there is no ``=`` or the key is empty.
+    """
+    if "=" not in text:
+        raise ConfigError(
+            f"malformed override {text!r}: expected KEY=VALUE, e.g. schedule.beta=0.5"
+        )
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if not key:
+        raise ConfigError(f"malformed override {text!r}: empty key")
+    _split_key(key)
+    return key, _parse_value(raw.strip())
+
+
+def _thaw(value: Any) -> Any:
+    """Deep copy into plain dicts and lists so the tree can be edited in place."""
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_thaw(v) for v in value]
+    return copy.deepcopy(value)
+
+
+def _default_tree() -> dict[str, Any]:
+    """The defaults as a plain JSON-style tree (lists, dicts)."""
+    return CwrendConfig().model_dump(mode="json")
+
+
+def _index(part: str, seq: list[Any], prefix: str) -> int:
+    """A non-negative list index from a key component, range-checked."""
+    if not part.isdigit():
+        raise ConfigError(f"{prefix}: is an array, use an integer index instead of {part!r}")
+    idx = int(part)
+    if idx >= len(seq):
+        raise ConfigError(f"{prefix}: index {idx} out of range ({len(seq)} entries)")
+    return idx
+
+
+def set_dotted(data: Mapping[str, Any], key: str, value: Any) -> dict[str, Any]:
+    """Return a copy of ``data`` with ``value`` set at dotted ``key``.
+
+    Integer components index arrays (``degradation.windows.1.bias_km``). A
+    missing table on the way is created; a missing array is first filled with
+    its default, so indexing the default degradation windows works on an empty
+    file. No validation happens here: an unknown key ends up in the tree and is
+    rejected by :func:`config_from_dict` like an unknown key in the file.
+    """
+    parts = _split_key(key)
+    root = _thaw(data)
+    node: Any = root
+    default: Any = _default_tree()
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, dict):
+            default = default.get(part) if isinstance(default, dict) else None
+            if last:
+                node[part] = _thaw(value)
+                break
+            if part not in node:
+                # Arrays are filled from the defaults so they can be indexed;
+                # tables start empty so omitted keys keep meaning "default".
+                node[part] = _thaw(default) if isinstance(default, list) else {}
+            node = node[part]
+        elif isinstance(node, list):
+            idx = _index(part, node, ".".join(parts[:i]))
+            default = default[idx] if isinstance(default, list) and idx < len(default) else None
+            if last:
+                node[idx] = _thaw(value)
+                break
+            node = node[idx]
+        else:
+            parent = ".".join(parts[:i])
+            raise ConfigError(f"cannot set {key}: {parent} is a value, not a table")
+    return root
+
+
+# ---------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------
+
+
+def config_from_dict(
+    data: Mapping[str, Any], base_dir: Path | None = None, *, source: str | None = None
+) -> CwrendConfig:
+    """Validate a raw config tree into a :class:`CwrendConfig`.
+
+    ``base_dir`` resolves relative paths (the noise file); without it they are
+    resolved against the working directory. ``source`` only labels errors.
+    Raises :class:`ConfigError` with one line per problem.
+    """
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"configuration must be a table, not {type(data).__name__}")
+    try:
+        return CwrendConfig.model_validate(data, context={"base_dir": base_dir})
+    except ValidationError as exc:
+        header = f"invalid configuration ({source})" if source else "invalid configuration"
+        raise ConfigError(header, format_validation_error(exc)) from None
+
+
+def _safe_stem(path: Path) -> str:
+    """The file stem made into a valid ``output.name``."""
+    stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-")
+    return stem[:128] or "cwrend"
+
+
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig:
+    """Read a TOML config, apply ``dotted.key=value`` overrides, validate.
+
+    ``output.name`` defaults to the file's stem. A relative ``noise.file`` from
+    the file is resolved against the file's directory; one given as an override
+    against the working directory. Raises :class:`ConfigError` for a missing or
+    unreadable file, malformed TOML, a malformed override or invalid values.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"config file not found: {path}")
+    if not path.is_file():
+        raise ConfigError(f"config path is not a file: {path}")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        data: dict[str, Any] = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: malformed TOML: {exc}") from None
+
+    for text_override in overrides:
+        key, value = parse_override(text_override)
+        if key == "noise.file" and isinstance(value, str) and value.strip():
+            given = Path(value).expanduser()
+            value = str(given if given.is_absolute() else Path.cwd() / given)
+        data = set_dotted(data, key, value)
+
+    output = data.get("output")
+    if output is None:
+        data["output"] = {"name": _safe_stem(path)}
+    elif isinstance(output, dict) and output.get("name") is None:
+        output["name"] = _safe_stem(path)
+
+    return config_from_dict(data, base_dir=path.resolve().parent, source=str(path))
+
+
+# ---------------------------------------------------------------------------
+# Serialisation and provenance
+# ---------------------------------------------------------------------------
+
+
+def resolved_dict(cfg: CwrendConfig) -> dict[str, Any]:
+    """The fully resolved config as a JSON-ready dict (valid input to :func:`config_from_dict`)."""
+    return cfg.model_dump(mode="json")
+
+
+def config_hash(cfg: CwrendConfig) -> str:
+    """SHA-256 hex digest of the canonical JSON of the resolved config.
+
+    Canonical: ``model_dump(mode="json")``, keys sorted, compact separators.
+    Covariances are stored in canonical form, so a diagonal written as a full
+    matrix hashes like its diagonal.
+    """
+    canonical = json.dumps(resolved_dict(cfg), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def _drop_none(value: Any) -> Any:
+    """Remove ``None`` values from tables (TOML has no null; unset means default)."""
+    if isinstance(value, dict):
+        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list):
+        return [_drop_none(v) for v in value]
+    return value
+
+
+def to_toml(cfg: CwrendConfig) -> str:
+    """The resolved config as TOML text that :func:`load_config` reads back unchanged."""
+    return tomli_w.dumps(_drop_none(resolved_dict(cfg)))
+
+
+def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
+    """The resolved config as JSON text."""
+    return json.dumps(resolved_dict(cfg), indent=indent)

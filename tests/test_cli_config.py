@@ -1,0 +1,78 @@
+"""Tests of ``cwrend config validate|show`` and the CLI error handling."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from cwrend_cli import __version__
+from cwrend_cli.cli import app
+from cwrend_cli.config import config_hash, load_config
+
+REPO = Path(__file__).resolve().parents[1]
+PAPER_TOML = REPO / "campaigns" / "paper.toml"
+runner = CliRunner()
+
+
+def test_validate_paper_toml_ok() -> None:
+    result = runner.invoke(app, ["config", "validate", str(PAPER_TOML)])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.strip() == f"OK {config_hash(load_config(PAPER_TOML))}"
+
+
+def test_validate_bad_override_exits_2_naming_field() -> None:
+    result = runner.invoke(
+        app, ["config", "validate", str(PAPER_TOML), "--set", "schedule.alpha_eps=1.5"]
+    )
+    assert result.exit_code == 2
+    assert "error:" in result.stderr
+    assert "schedule.alpha_eps = 1.5: must be <= 1" in result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_validate_unknown_override_key_exits_2() -> None:
+    result = runner.invoke(app, ["config", "validate", str(PAPER_TOML), "-s", "scenario.foo=1"])
+    assert result.exit_code == 2
+    assert "scenario.foo: unknown key" in result.stderr
+
+
+def test_validate_malformed_override_exits_2() -> None:
+    result = runner.invoke(app, ["config", "validate", str(PAPER_TOML), "--set", "nokey"])
+    assert result.exit_code == 2
+    assert "malformed override" in result.stderr
+
+
+def test_validate_missing_file_exits_2(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["config", "validate", str(tmp_path / "absent.toml")])
+    assert result.exit_code == 2
+    assert "config file not found" in result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_show_toml_includes_hash_and_override() -> None:
+    result = runner.invoke(app, ["config", "show", str(PAPER_TOML), "--set", "schedule.beta=0.5"])
+    assert result.exit_code == 0, result.output
+    cfg = load_config(PAPER_TOML, ["schedule.beta=0.5"])
+    assert f"# config_hash = {config_hash(cfg)}" in result.stdout
+    assert "beta = 0.5" in result.stdout
+
+
+def test_show_json_is_the_resolved_config() -> None:
+    result = runner.invoke(app, ["config", "show", str(PAPER_TOML), "--format", "json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["output"]["name"] == "paper"
+    assert data["scenario"]["horizon_s"] == 800.0
+
+
+def test_version() -> None:
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0
+    assert __version__ in result.stdout
+
+
+def test_unknown_command_option_exits_2() -> None:
+    result = runner.invoke(app, ["config", "validate", str(PAPER_TOML), "--nope"])
+    assert result.exit_code == 2
