@@ -17,9 +17,19 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__
-from cwrend_cli.config import config_hash, format_validation_error, load_config, to_json, to_toml
-from cwrend_cli.errors import CwrendError
+from cwrend_cli import __version__, campaign, storage
+from cwrend_cli.config import (
+    ARCHITECTURES,
+    config_hash,
+    format_validation_error,
+    load_config,
+    parse_arch,
+    resolved_dict,
+    to_json,
+    to_toml,
+)
+from cwrend_cli.console import summary_console_table
+from cwrend_cli.errors import ConfigError, CwrendError
 
 app = typer.Typer(
     name="cwrend",
@@ -130,3 +140,66 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
     with user_errors():
         cfg = load_config(file, set_ or ())
         typer.echo(f"OK {config_hash(cfg)}")
+
+
+def _parse_archs(text: str) -> tuple:
+    """``all`` or a comma-separated list of architecture slugs."""
+    if text.strip() == "all":
+        return tuple(ARCHITECTURES.values())
+    archs = tuple(parse_arch(part) for part in text.split(",") if part.strip())
+    if not archs:
+        raise ConfigError(f"--arch {text!r}: name at least one of {', '.join(ARCHITECTURES)}")
+    return archs
+
+
+@app.command("run")
+def run(
+    file: ConfigFile,
+    arch: Annotated[
+        str,
+        typer.Option(
+            "--arch",
+            "-a",
+            help="Architecture slug(s), comma-separated, or 'all': "
+            + ", ".join(ARCHITECTURES)
+            + ".",
+        ),
+    ] = "mtf_adaptive",
+    seed: Annotated[
+        int | None,
+        typer.Option("--seed", min=0, help="Noise seed (default: noise.seed of the config)."),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Output directory (default: <output.dir>/<output.name>/run-<arch>-seed<N>).",
+        ),
+    ] = None,
+    set_: SetOption = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table on the console.")] = False,
+) -> None:
+    """Run closed-loop case(s) and the open-loop references; write Parquet results.
+
+    Writes config.json, summary.parquet, steps.parquet, solves.parquet and
+    references.parquet (each atomically) into the output directory.
+    """
+    with user_errors():
+        cfg = load_config(file, set_ or ())
+        archs = _parse_archs(arch)
+        seed_ = cfg.noise.seed if seed is None else seed
+        if out is None:
+            slug = archs[0].slug if len(archs) == 1 else "multi"
+            out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
+        console = Console(stderr=True, highlight=False)
+        with console.status("compiling kernels and running…", spinner="dots"):
+            case = campaign.run_case(cfg, archs, seed_)
+        written = storage.write_run(
+            out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references
+        )
+        if not quiet:
+            Console(highlight=False).print(
+                summary_console_table(case, title=f"cwrend run · {file}")
+            )
+        console.print(f"results written to {written}")

@@ -34,3 +34,7 @@ class ConfigError(CwrendError):
 
 class InputDataError(CwrendError):
     """A data file referenced by the configuration (e.g. a noise file) is unusable."""
+
+
+class ScenarioError(CwrendError):
+    """The scenario itself cannot be flown (e.g. no bounded control reaches the target)."""

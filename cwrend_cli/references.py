@@ -17,6 +17,7 @@ import scipy.linalg
 
 from cwrend_cli import guidance
 from cwrend_cli.dynamics import costate_stm, cw_system
+from cwrend_cli.errors import ScenarioError
 
 #: ε sequence of the fuel-optimal continuation (SPEC §2).
 FUEL_CONTINUATION = tuple(round(1.0 - 0.1 * i, 1) for i in range(11))
@@ -88,7 +89,8 @@ def fuel_optimal(
     """Fuel-optimal reference by ε-continuation ``FUEL_CONTINUATION`` from the energy costate.
 
     ``problem.eps`` is ignored; the result is the ε = 0 (bang-bang) plan.
-    Raises RuntimeError if a continuation step does not converge.
+    Raises :class:`ScenarioError` if a continuation step does not converge
+    (for instance because no control within ``u_max`` reaches the target).
     """
     lam = guidance.energy_optimal_costate(problem)
     solves = []
@@ -102,9 +104,16 @@ def fuel_optimal(
             problem.xf,
         )
         result = guidance.solve(step, lam, settings)
+        if result.status is guidance.SolveStatus.INFEASIBLE:
+            raise ScenarioError(
+                "scenario infeasible: no control with |u| <= scenario.u_max_km_s2 = "
+                f"{problem.u_max_km_s2:g} reaches scenario.xf from scenario.x0 within "
+                f"scenario.horizon_s = {problem.horizon_s:g}; increase u_max_km_s2 or horizon_s"
+            )
         if not result.converged:
-            raise RuntimeError(
-                f"fuel-optimal continuation failed at eps = {eps}: {result.status.value}"
+            raise ScenarioError(
+                f"open-loop fuel-optimal continuation did not converge at eps = {eps} "
+                f"(residual {result.residual_km:.3g}); check scenario.x0, xf and horizon_s"
             )
         solves.append(result)
         lam = result.costate

@@ -1,0 +1,295 @@
+"""Parquet and JSON output of runs (I/O at the edge; nothing here computes physics).
+
+Tables carry their units in the column names (``t_s``, ``miss_km``,
+``u_norm_km_s2``) and explicit Arrow schemas so that typed columns never
+drift between files. Every file is written to a temporary name in the same
+directory and moved into place with :func:`os.replace`, so a reader (or a
+``kill -9``) never sees a half-written file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from cwrend_cli import __version__
+from cwrend_cli.references import OpenLoopResult
+from cwrend_cli.simulation import References, RunResult
+
+_AXES = ("x", "y", "z")
+_VEL = ("vx", "vy", "vz")
+
+
+@contextmanager
+def _atomic_path(path: Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; move it onto ``path`` on success."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_parquet(table: pa.Table, path: str | Path) -> Path:
+    """Write ``table`` to ``path`` atomically (temp file + rename)."""
+    path = Path(path)
+    with _atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return path
+
+
+def write_json(data: Any, path: str | Path) -> Path:
+    """Write ``data`` as indented JSON to ``path`` atomically."""
+    path = Path(path)
+    with _atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    return path
+
+
+def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
+    meta = {"cwrend_version": __version__, "units": "km, s, km/s, km/s^2", **extra}
+    return {k.encode(): str(v).encode() for k, v in meta.items()}
+
+
+STEPS_SCHEMA = pa.schema(
+    [
+        ("arch", pa.string()),
+        ("seed", pa.int64()),
+        ("step", pa.int64()),
+        ("t_s", pa.float64()),
+        *[(f"{a}_km", pa.float64()) for a in _AXES],
+        *[(f"{a}_km_s", pa.float64()) for a in _VEL],
+        *[(f"{a}_hat_km", pa.float64()) for a in _AXES],
+        *[(f"{a}_hat_km_s", pa.float64()) for a in _VEL],
+        *[(f"u{a}_km_s2", pa.float64()) for a in _AXES],
+        ("u_norm_km_s2", pa.float64()),
+        *[(f"meas_{a}_km", pa.float64()) for a in _AXES],
+        ("nis", pa.float64()),
+        ("mtf_ratio", pa.float64()),
+        ("score", pa.float64()),
+        ("score_filtered", pa.float64()),
+        ("eps", pa.float64()),
+        ("pos_err_km", pa.float64()),
+        ("est_err_km", pa.float64()),
+        ("est_vel_err_km_s", pa.float64()),
+        ("trace_p", pa.float64()),
+        ("window", pa.int64()),
+    ]
+)
+
+
+def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
+    """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
+    rows = result.t_s.size
+    cols: dict[str, Any] = {
+        "arch": [result.arch] * rows,
+        "seed": np.full(rows, result.seed, dtype=np.int64),
+        "step": np.arange(rows, dtype=np.int64),
+        "t_s": result.t_s,
+    }
+    for i, a in enumerate(_AXES):
+        cols[f"{a}_km"] = result.x_true[:, i]
+    for i, a in enumerate(_VEL):
+        cols[f"{a}_km_s"] = result.x_true[:, 3 + i]
+    for i, a in enumerate(_AXES):
+        cols[f"{a}_hat_km"] = result.x_hat[:, i]
+    for i, a in enumerate(_VEL):
+        cols[f"{a}_hat_km_s"] = result.x_hat[:, 3 + i]
+    for i, a in enumerate(_AXES):
+        cols[f"u{a}_km_s2"] = result.u[:, i]
+    cols["u_norm_km_s2"] = np.linalg.norm(result.u, axis=1)
+    for i, a in enumerate(_AXES):
+        cols[f"meas_{a}_km"] = result.y[:, i]
+    cols["nis"] = result.nis
+    cols["mtf_ratio"] = result.mtf_ratio
+    cols["score"] = result.score
+    cols["score_filtered"] = result.score_filtered
+    cols["eps"] = result.eps
+    cols["pos_err_km"] = np.linalg.norm(result.x_true[:, :3], axis=1)
+    cols["est_err_km"] = np.linalg.norm(result.x_hat[:, :3] - result.x_true[:, :3], axis=1)
+    cols["est_vel_err_km_s"] = np.linalg.norm(result.x_hat[:, 3:] - result.x_true[:, 3:], axis=1)
+    cols["trace_p"] = result.trace_p
+    cols["window"] = result.window.astype(np.int64)
+    schema = STEPS_SCHEMA.with_metadata(_metadata(metadata or {}))
+    return pa.table(cols, schema=schema)
+
+
+SOLVES_SCHEMA = pa.schema(
+    [
+        ("arch", pa.string()),
+        ("seed", pa.int64()),
+        ("kind", pa.string()),
+        ("step", pa.int64()),
+        ("t_s", pa.float64()),
+        ("horizon_s", pa.float64()),
+        ("eps", pa.float64()),
+        ("status", pa.string()),
+        ("fallback_step", pa.string()),
+        ("iterations", pa.int64()),
+        ("residual_km", pa.float64()),
+        ("wall_time_ms", pa.float64()),
+        ("success", pa.bool_()),
+    ]
+)
+
+
+def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
+    """One row per solve (the initial one of adaptive runs, then every re-solve)."""
+    recs = result.solves
+    cols = {
+        "arch": [result.arch] * len(recs),
+        "seed": [result.seed] * len(recs),
+        "kind": [s.kind for s in recs],
+        "step": [s.step for s in recs],
+        "t_s": [s.t_s for s in recs],
+        "horizon_s": [s.horizon_s for s in recs],
+        "eps": [s.eps for s in recs],
+        "status": [s.status for s in recs],
+        "fallback_step": [s.fallback_step for s in recs],
+        "iterations": [s.iterations for s in recs],
+        "residual_km": [s.residual_km for s in recs],
+        "wall_time_ms": [s.wall_time_ms for s in recs],
+        "success": [s.success for s in recs],
+    }
+    schema = SOLVES_SCHEMA.with_metadata(_metadata(metadata or {}))
+    return pa.table(cols, schema=schema)
+
+
+SUMMARY_SCHEMA = pa.schema(
+    [
+        ("arch", pa.string()),
+        ("seed", pa.int64()),
+        ("delta_v_km_s", pa.float64()),
+        ("miss_km", pa.float64()),
+        ("fuel_penalty_pct", pa.float64()),
+        ("n_solves", pa.int64()),
+        ("n_converged", pa.int64()),
+        ("n_infeasible", pa.int64()),
+        ("n_failed", pa.int64()),
+        ("solve_success_pct", pa.float64()),
+        ("solve_mean_ms", pa.float64()),
+        ("solve_max_ms", pa.float64()),
+    ]
+)
+
+
+def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+    """Metrics of one run; solve statistics are over the re-solves (SPEC §7 convention)."""
+    rs = result.resolves
+    times = np.array([s.wall_time_ms for s in rs]) if rs else np.array([np.nan])
+    return {
+        "arch": result.arch,
+        "seed": result.seed,
+        "delta_v_km_s": result.delta_v_km_s,
+        "miss_km": result.miss_km,
+        "fuel_penalty_pct": 100.0 * (result.delta_v_km_s / fuel_delta_v_km_s - 1.0),
+        "n_solves": len(rs),
+        "n_converged": sum(s.status == "converged" for s in rs),
+        "n_infeasible": sum(s.status == "infeasible" for s in rs),
+        "n_failed": sum(s.status == "failed" for s in rs),
+        "solve_success_pct": 100.0 * sum(s.success for s in rs) / len(rs) if rs else float("nan"),
+        "solve_mean_ms": float(np.mean(times)),
+        "solve_max_ms": float(np.max(times)),
+    }
+
+
+def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+    """Summary row of an open-loop reference (``arch`` = ``open_loop_<name>``)."""
+    times = [s.wall_time_s * 1e3 for s in ref.solves] or [float("nan")]
+    return {
+        "arch": f"open_loop_{ref.name}",
+        "seed": -1,
+        "delta_v_km_s": ref.delta_v_km_s,
+        "miss_km": ref.miss_km,
+        "fuel_penalty_pct": 100.0 * (ref.delta_v_km_s / fuel_delta_v_km_s - 1.0),
+        "n_solves": len(ref.solves),
+        "n_converged": sum(s.converged for s in ref.solves),
+        "n_infeasible": 0,
+        "n_failed": sum(not s.converged for s in ref.solves),
+        "solve_success_pct": 100.0 if ref.solves else float("nan"),
+        "solve_mean_ms": float(np.mean(times)),
+        "solve_max_ms": float(np.max(times)),
+    }
+
+
+def summary_table(
+    rows: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any] | None = None
+) -> pa.Table:
+    """Table of summary rows (see :func:`summary_row`)."""
+    schema = SUMMARY_SCHEMA.with_metadata(_metadata(metadata or {}))
+    return pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
+
+
+REFERENCE_SCHEMA = pa.schema(
+    [
+        ("reference", pa.string()),
+        ("t_s", pa.float64()),
+        *[(f"{a}_km", pa.float64()) for a in _AXES],
+        *[(f"{a}_km_s", pa.float64()) for a in _VEL],
+        *[(f"u{a}_km_s2", pa.float64()) for a in _AXES],
+        ("u_norm_km_s2", pa.float64()),
+    ]
+)
+
+
+def references_table(refs: References, metadata: Mapping[str, Any] | None = None) -> pa.Table:
+    """Open-loop reference trajectories sampled on the grid, one row per (reference, time)."""
+    parts = []
+    for ref in (refs.energy, refs.fuel):
+        cols: dict[str, Any] = {"reference": [ref.name] * ref.t_s.size, "t_s": ref.t_s}
+        for i, a in enumerate(_AXES):
+            cols[f"{a}_km"] = ref.x[:, i]
+        for i, a in enumerate(_VEL):
+            cols[f"{a}_km_s"] = ref.x[:, 3 + i]
+        for i, a in enumerate(_AXES):
+            cols[f"u{a}_km_s2"] = ref.u[:, i]
+        cols["u_norm_km_s2"] = np.linalg.norm(ref.u, axis=1)
+        parts.append(pa.table(cols, schema=REFERENCE_SCHEMA))
+    return pa.concat_tables(parts).replace_schema_metadata(_metadata(metadata or {}))
+
+
+def write_run(
+    out_dir: str | Path,
+    resolved_config: Mapping[str, Any],
+    config_hash: str,
+    results: Sequence[RunResult],
+    refs: References,
+) -> Path:
+    """Write the files of ``cwrend run`` into ``out_dir``.
+
+    ``config.json`` (resolved config and its hash), ``summary.parquet``,
+    ``steps.parquet``, ``solves.parquet`` and ``references.parquet``. The
+    config is written last, so its presence marks a complete output.
+    """
+    out = Path(out_dir)
+    meta = {"config_hash": config_hash}
+    fuel_dv = refs.fuel.delta_v_km_s
+    rows = [reference_row(refs.energy, fuel_dv), reference_row(refs.fuel, fuel_dv)]
+    rows += [summary_row(r, fuel_dv) for r in results]
+    write_parquet(summary_table(rows, meta), out / "summary.parquet")
+    write_parquet(pa.concat_tables([steps_table(r, meta) for r in results]), out / "steps.parquet")
+    write_parquet(
+        pa.concat_tables([solves_table(r, meta) for r in results]), out / "solves.parquet"
+    )
+    write_parquet(references_table(refs, meta), out / "references.parquet")
+    write_json(
+        {"cwrend_version": __version__, "config_hash": config_hash, "config": resolved_config},
+        out / "config.json",
+    )
+    return out
