@@ -62,6 +62,15 @@ class ShootingProblem:
     u_max_km_s2: float
     xf: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
+    def __post_init__(self) -> None:
+        # Own read-only copies: callers often pass views of arrays they keep mutating.
+        for name in ("x0", "xf"):
+            arr = np.array(getattr(self, name), dtype=float)
+            if arr.shape != (6,):
+                raise ValueError(f"{name} must have shape (6,), got {arr.shape}")
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
 
 @dataclass(frozen=True)
 class SolverSettings:
