@@ -26,13 +26,25 @@ def standard_normal_for(cfg: CwrendConfig, seed: int) -> np.ndarray:
     """The standard-normal realisation (N, 3) of one seed.
 
     ``noise.file`` replays an external realisation (validated for length and
-    finiteness); otherwise a ``SeedSequence(seed)`` stream. All architectures
-    of a seed share it (SPEC §6).
+    finiteness); otherwise the stream ``SeedSequence(noise.seed,
+    spawn_key=(seed, 0))``, so realisation ``seed`` is the same in a single
+    run, an ablation and a sweep, whatever worker computes it. All
+    architectures of a seed share it (SPEC §6).
     """
     n_steps = cfg.scenario.n_steps
     if cfg.noise.file is not None:
         return sensors.load_noise_file(cfg.noise.file, n_steps)
-    return sensors.standard_normal_stream(np.random.SeedSequence(seed), n_steps)
+    return sensors.standard_normal_stream(noise_seed_sequence(cfg.noise.seed, seed), n_steps)
+
+
+def noise_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the measurement noise of realisation ``seed``."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 0))
+
+
+def dispersion_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the dispersion draws of realisation ``seed`` (independent of the noise)."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 1))
 
 
 def run_case(

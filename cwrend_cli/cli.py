@@ -167,7 +167,7 @@ def run(
     ] = "mtf_adaptive",
     seed: Annotated[
         int | None,
-        typer.Option("--seed", min=0, help="Noise seed (default: noise.seed of the config)."),
+        typer.Option("--seed", min=0, help="Noise realisation (default 0; root: noise.seed)."),
     ] = None,
     out: Annotated[
         Path | None,
@@ -188,7 +188,7 @@ def run(
     with user_errors():
         cfg = load_config(file, set_ or ())
         archs = _parse_archs(arch)
-        seed_ = cfg.noise.seed if seed is None else seed
+        seed_ = 0 if seed is None else seed
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"

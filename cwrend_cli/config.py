@@ -49,6 +49,7 @@ __all__ = [
     "CwrendConfig",
     "DegradationConfig",
     "DegradationWindow",
+    "Dispersion",
     "EstimatorConfig",
     "GuidanceConfig",
     "NoiseConfig",
@@ -277,6 +278,17 @@ class EstimatorConfig(_FrozenModel):
     def _check_q_p0(cls, value: Any) -> Any:
         return _normalise_covariance(value, 6)
 
+    initial_error: Vec6 = Field(
+        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        description="initial estimate minus true initial state [km, km/s]; the paper's "
+        "filter starts at the truth (zeros). A dispersion target for initial errors.",
+    )
+
+    @field_validator("initial_error", mode="before")
+    @classmethod
+    def _six_errors(cls, value: Any) -> Any:
+        return _check_length(value, 6)
+
     def r_nominal_matrix(self) -> np.ndarray:
         """R_nominal as a new 3×3 float64 array [km²]."""
         return _covariance_matrix(self.r_nominal_km2)
@@ -502,8 +514,44 @@ class OutputConfig(_FrozenModel):
         return value
 
 
+SweepValue = Float | Int | bool | str | tuple[Float, ...]
+
+
+class Dispersion(_FrozenModel):
+    """A per-run random draw applied to one config value (``[dispersions]`` table).
+
+    ``normal``: ``mean + std·z``; ``uniform``: ``U(low, high)``. With
+    ``mode = "add"`` (default) the draw is added to the base value, with
+    ``"set"`` it replaces it. Draws come from the run's own random stream,
+    keyed by (noise.seed, seed), so every architecture of a seed flies the
+    same dispersed scenario.
+    """
+
+    dist: Literal["normal", "uniform"] = Field(description="distribution")
+    mean: Float = Field(0.0, description="normal: mean of the draw")
+    std: Float | None = Field(None, ge=0, description="normal: standard deviation")
+    low: Float | None = Field(None, description="uniform: lower bound")
+    high: Float | None = Field(None, description="uniform: upper bound")
+    mode: Literal["add", "set"] = Field("add", description="add the draw to the base or set it")
+
+    @model_validator(mode="after")
+    def _parameters_present(self) -> Self:
+        if self.dist == "normal" and self.std is None:
+            raise _rules_error([("std", None, "required for dist = 'normal'")])
+        if self.dist == "uniform":
+            if self.low is None or self.high is None:
+                raise _rules_error([("low", None, "low and high required for dist = 'uniform'")])
+            if self.high < self.low:
+                raise _rules_error([("high", self.high, f"must be >= low ({self.low})")])
+        return self
+
+
 class CwrendConfig(_FrozenModel):
-    """The whole configuration of a cwrend run or campaign (defaults: SPEC §6)."""
+    """The whole configuration of a cwrend run or campaign (defaults: SPEC §6).
+
+    ``sweep`` and ``dispersions`` describe campaigns (``cwrend sweep``); a
+    single run ignores them.
+    """
 
     scenario: ScenarioConfig = Field(default_factory=ScenarioConfig, description="scenario")
     estimator: EstimatorConfig = Field(default_factory=EstimatorConfig, description="Kalman filter")
@@ -519,6 +567,13 @@ class CwrendConfig(_FrozenModel):
     )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
+    sweep: dict[str, tuple[SweepValue, ...] | str] = Field(
+        default_factory=dict,
+        description="grid: dotted.key = [v1, v2, …] or 'start:stop:num' (cartesian product)",
+    )
+    dispersions: dict[str, Dispersion] = Field(
+        default_factory=dict, description="per-run random draws: dotted.key = {dist = …}"
+    )
 
     @model_validator(mode="after")
     def _cross_section_rules(self) -> Self:

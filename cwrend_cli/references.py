@@ -51,12 +51,17 @@ def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLo
     z[:6, :6] = a
     z[:6, 6:] = -b @ b.T
     z[6:, 6:] = -a.T
-    x = np.empty((t_s.size, 6))
-    u = np.empty((t_s.size, 3))
-    for i, t in enumerate(t_s):
-        e = scipy.linalg.expm(z * t)
-        x[i] = e[:6, :6] @ problem.x0 + e[:6, 6:] @ lam0
-        u[i] = -(costate_stm(n, t) @ lam0)[3:]
+    # The state–costate system is linear: propagate [x; λ] exactly between grid times.
+    zt = np.empty((t_s.size, 12))
+    zt[0] = np.concatenate([problem.x0, lam0])
+    steps: dict[float, np.ndarray] = {}
+    for i in range(1, t_s.size):
+        h = float(t_s[i] - t_s[i - 1])
+        if h not in steps:
+            steps[h] = scipy.linalg.expm(z * h)
+        zt[i] = steps[h] @ zt[i - 1]
+    x = zt[:, :6]
+    u = -zt[:, 9:12]  # u = −Bᵀλ = −λ_v
     miss = float(np.linalg.norm(x[-1, :3] - problem.xf[:3]))
     return OpenLoopResult("energy", lam0, t_s, x, u, delta_v(t_s, u), miss)
 

@@ -178,13 +178,14 @@ def simulate(
     )
 
     x0 = np.asarray(sc.x0, dtype=float)
+    # the filter starts at the true initial state (SPEC §3) unless an initial error is set
+    x_hat0 = x0 + np.asarray(est.initial_error, dtype=float)
     solves: list[SolveRecord] = []
     if arch.adaptive:
         eps0 = sch.eps_max
         # initial solve at ε_max from the energy costate; on failure keep it (SPEC §4)
-        result = guidance.solve(
-            _problem(cfg, x0, sc.horizon_s, eps0), refs.energy.costate, settings
-        )
+        first = _problem(cfg, x_hat0, sc.horizon_s, eps0)
+        result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
     else:
@@ -215,7 +216,7 @@ def simulate(
     log_eps = np.full(rows, np.nan)
     log_trp = np.full(rows, np.nan)
     x_true = x0.copy()
-    x_hat = x0.copy()  # the filter starts at the true initial state (SPEC §3)
+    x_hat = x_hat0.copy()
     p = est.p0_matrix()
     q = est.q_matrix()
     log_x[0] = x_true

@@ -111,7 +111,7 @@ def test_different_seed_gives_different_noise(paper_run: Path, tmp_path: Path) -
 
 def test_noise_file_replays_a_realisation(paper_run: Path, tmp_path: Path) -> None:
     """noise.file with the seed-0 stream reproduces the seed-0 run exactly."""
-    noise = standard_normal_stream(np.random.SeedSequence(0), 800)
+    noise = standard_normal_stream(np.random.SeedSequence(0, spawn_key=(0, 0)), 800)
     path = tmp_path / "noise.csv"
     pd.DataFrame(noise, columns=["n1", "n2", "n3"]).to_csv(path, index=False, float_format="%.17g")
     out = tmp_path / "replay"
