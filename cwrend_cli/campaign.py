@@ -1,17 +1,53 @@
-"""Running cases: noise selection and the closed loop with its references.
+"""Campaigns: what runs (a pure plan) and how one batch of runs is executed.
 
-This module decides *what* runs (architecture, seed, noise realisation) and
-returns plain results; :mod:`cwrend_cli.storage` decides where they are written.
+A campaign is a grid of parameter points × architectures × noise seeds, with
+optional per-run dispersions. :func:`plan` turns a validated config into a
+tuple of :class:`Task` (batches of :class:`RunSpec`) without side effects;
+every run's resolved config is validated there, before anything runs.
+:func:`execute_task` runs one batch in a worker and writes its per-run
+Parquet files; :mod:`cwrend_cli.campaign_runner` drives the tasks through an
+executor and keeps the journal.
+
+Random streams are keyed by (noise.seed, realisation): the noise by
+``(seed, 0)`` and the dispersion draws by ``(seed, 1)``, so every architecture
+and grid point of a seed sees the same noise and the same dispersed values
+(common random numbers), and the numbers do not depend on the worker count or
+the executor.
 """
 
 from __future__ import annotations
 
+import hashlib
+import itertools
+import json
+import shutil
+import time
+import traceback
+from collections.abc import Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
-from cwrend_cli import sensors, simulation
-from cwrend_cli.config import Architecture, CwrendConfig
+from cwrend_cli import __version__, sensors, simulation, storage
+from cwrend_cli.config import (
+    ARCHITECTURES,
+    Architecture,
+    CwrendConfig,
+    Dispersion,
+    config_from_dict,
+    config_hash,
+    parse_override,
+    resolved_dict,
+    set_dotted,
+)
+from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.executors import ExecutorKind, open_executor
+
+BASE_POINT = "base"
 
 
 @dataclass(frozen=True)
@@ -58,3 +94,580 @@ def run_case(
     refs = refs if refs is not None else simulation.open_loop_references(cfg)
     runs = tuple(simulation.simulate(cfg, a, noise, refs, seed=seed) for a in archs)
     return CaseResult(runs, refs)
+
+
+# ---------------------------------------------------------------------------
+# The plan (pure)
+# ---------------------------------------------------------------------------
+
+Assignment = tuple[tuple[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run: a grid point, an architecture, a noise realisation, applied values."""
+
+    run_key: str
+    point: str
+    arch: str
+    seed: int
+    params: Assignment  # grid values of the point
+    dispersed: Assignment  # dispersion values drawn for this seed
+
+    @property
+    def overrides(self) -> Assignment:
+        """Everything applied on top of the base config."""
+        return self.params + self.dispersed
+
+
+@dataclass(frozen=True)
+class Task:
+    """A batch of runs executed together (one grid point, a chunk of seeds, all archs)."""
+
+    task_key: str
+    runs: tuple[RunSpec, ...]
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """Everything a campaign will run, decided before anything runs."""
+
+    base: Mapping[str, Any]  # resolved base config (JSON tree)
+    grid: tuple[tuple[str, tuple[Any, ...]], ...]
+    seeds: tuple[int, ...]
+    archs: tuple[str, ...]
+    tasks: tuple[Task, ...]
+    campaign_hash: str
+
+    @property
+    def runs(self) -> tuple[RunSpec, ...]:
+        """All runs, in plan order."""
+        return tuple(r for t in self.tasks for r in t.runs)
+
+
+def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
+    """``key=v1,v2,v3`` or ``key=start:stop:num`` into ``(key, values)``.
+
+    Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
+    word is a string. A range gives ``num`` evenly spaced floats.
+    """
+    key, raw = parse_override(text)
+    raw_text = text.split("=", 1)[1].strip()
+    if isinstance(raw, str) and raw.count(":") == 2 and "," not in raw_text:
+        return key, _range_values(key, raw)
+    parts = [p.strip() for p in raw_text.split(",")]
+    if any(not p for p in parts):
+        raise ConfigError(f"--param {text!r}: empty value in the list")
+    return key, tuple(parse_override(f"{key}={p}")[1] for p in parts)
+
+
+def _range_values(key: str, spec: str) -> tuple[float, ...]:
+    try:
+        start, stop, num = spec.split(":")
+        count = int(num)
+        values = np.linspace(float(start), float(stop), count)
+    except ValueError:
+        raise ConfigError(
+            f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
+        ) from None
+    if count < 1:
+        raise ConfigError(f"sweep {key} = {spec!r}: num must be at least 1")
+    return tuple(float(v) for v in values)
+
+
+def expand_grid(
+    sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
+) -> tuple[tuple[str, tuple[Any, ...]], ...]:
+    """The swept keys and their values: ``[sweep]`` table, then ``--param`` (which wins)."""
+    grid: dict[str, tuple[Any, ...]] = {}
+    for key, values in sweep.items():
+        grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
+    for text in cli_params:
+        key, values = parse_param(text)
+        grid[key] = values
+    for key, values in grid.items():
+        if not values:
+            raise ConfigError(f"sweep {key}: needs at least one value")
+    return tuple(grid.items())
+
+
+def grid_points(grid: Sequence[tuple[str, Sequence[Any]]]) -> tuple[tuple[str, Assignment], ...]:
+    """Cartesian product of the grid as ``(point_id, assignment)`` pairs.
+
+    The id is a hash of the assignment, so it does not depend on the grid's
+    order or on which other points exist (a campaign can be extended).
+    """
+    if not grid:
+        return ((BASE_POINT, ()),)
+    keys = [k for k, _ in grid]
+    points = []
+    for combo in itertools.product(*(v for _, v in grid)):
+        assignment = tuple(zip(keys, combo, strict=True))
+        points.append((point_id(assignment), assignment))
+    return tuple(points)
+
+
+def point_id(assignment: Assignment) -> str:
+    """Stable short id of a grid point."""
+    if not assignment:
+        return BASE_POINT
+    text = json.dumps(sorted([k, v] for k, v in assignment), sort_keys=True)
+    return "p" + hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
+def run_key(point: str, arch: str, seed: int) -> str:
+    """Unique, stable key of a run."""
+    return f"{point}.{arch}.s{seed:06d}"
+
+
+def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
+    """Value at a dotted key of a JSON tree (integer components index arrays)."""
+    node: Any = tree
+    for part in key.split("."):
+        node = node[part] if isinstance(node, Mapping) else node[int(part)]
+    return node
+
+
+def apply(base: Mapping[str, Any], assignment: Assignment) -> dict[str, Any]:
+    """``base`` with every ``(key, value)`` of ``assignment`` set."""
+    tree = dict(base)
+    for key, value in assignment:
+        tree = set_dotted(tree, key, value)
+    return tree
+
+
+def draw_dispersions(
+    dispersions: Mapping[str, Dispersion], point_tree: Mapping[str, Any], root_seed: int, seed: int
+) -> Assignment:
+    """Dispersed values of realisation ``seed`` on top of a grid point.
+
+    Draws come from the realisation's dispersion stream in sorted key order,
+    one draw per key, so they do not depend on the point, the architecture or
+    the worker.
+    """
+    if not dispersions:
+        return ()
+    rng = np.random.Generator(np.random.PCG64(dispersion_seed_sequence(root_seed, seed)))
+    out = []
+    for key in sorted(dispersions):
+        d = dispersions[key]
+        if d.dist == "normal":
+            draw = d.mean + d.std * rng.standard_normal()
+        else:
+            draw = rng.uniform(d.low, d.high)
+        if d.mode == "add":
+            try:
+                base = get_dotted(point_tree, key)
+            except (KeyError, IndexError, ValueError, TypeError):
+                raise ConfigError(
+                    f"dispersions.{key}: no such config value to disperse "
+                    "(use a dotted key such as scenario.x0.2 or scenario.u_max_km_s2)"
+                ) from None
+            if not isinstance(base, (int, float)) or isinstance(base, bool):
+                raise ConfigError(
+                    f"dispersions.{key}: the base value {base!r} is not a number "
+                    "(point at a single number, e.g. scenario.x0.0)"
+                )
+            draw = base + draw
+        out.append((key, float(draw)))
+    return tuple(out)
+
+
+def _validated(base: Mapping[str, Any], assignment: Assignment, what: str) -> CwrendConfig:
+    try:
+        return config_from_dict(apply(base, assignment), source=what)
+    except ConfigError as exc:
+        values = ", ".join(f"{k} = {v!r}" for k, v in assignment)
+        raise ConfigError(f"{what} ({values}) is invalid:", exc.problems or (str(exc),)) from None
+
+
+def campaign_hash(base: Mapping[str, Any], grid: Sequence[tuple[str, Sequence[Any]]]) -> str:
+    """Hash of what determines a campaign's numbers (not where it is written)."""
+    tree = {k: v for k, v in base.items() if k != "output"}
+    text = json.dumps({"config": tree, "grid": [[k, list(v)] for k, v in grid]}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def plan(
+    cfg: CwrendConfig,
+    archs: Sequence[str],
+    seeds: Sequence[int],
+    cli_params: Sequence[str] = (),
+    seeds_per_task: int = 4,
+) -> CampaignPlan:
+    """Expand a campaign into tasks, validating every run's resolved config first.
+
+    Raises :class:`ConfigError` naming the key and value of the first bad
+    grid value or dispersion draw; nothing has run or been written then.
+    """
+    unknown = [a for a in archs if a not in ARCHITECTURES]
+    if unknown:
+        raise ConfigError(
+            f"unknown architecture(s) {', '.join(unknown)} (allowed: {', '.join(ARCHITECTURES)})"
+        )
+    if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
+        raise ConfigError("seeds must be distinct non-negative integers")
+    base = resolved_dict(cfg)
+    base.pop("sweep", None)
+    base.pop("dispersions", None)
+    grid = expand_grid(cfg.sweep, cli_params)
+    root = cfg.noise.seed
+    tasks = []
+    for pid, params in grid_points(grid):
+        point_cfg = _validated(base, params, f"grid point {pid}")
+        point_tree = resolved_dict(point_cfg)
+        for start in range(0, len(seeds), seeds_per_task):
+            chunk = seeds[start : start + seeds_per_task]
+            runs = []
+            for seed in chunk:
+                dispersed = draw_dispersions(cfg.dispersions, point_tree, root, seed)
+                if dispersed:
+                    _validated(base, params + dispersed, f"dispersed run (seed {seed})")
+                runs.extend(
+                    RunSpec(run_key(pid, a, seed), pid, a, seed, params, dispersed) for a in archs
+                )
+            tasks.append(Task(f"{pid}.s{chunk[0]:06d}-{chunk[-1]:06d}", tuple(runs)))
+    base["sweep"] = {}
+    base["dispersions"] = resolved_dict(cfg)["dispersions"]
+    return CampaignPlan(
+        base=base,
+        grid=grid,
+        seeds=tuple(seeds),
+        archs=tuple(archs),
+        tasks=tuple(tasks),
+        campaign_hash=campaign_hash(base, grid),
+    )
+
+
+# ---------------------------------------------------------------------------
+# Executing one task (in a worker process)
+# ---------------------------------------------------------------------------
+
+_REFERENCES_CACHE: dict[str, simulation.References] = {}
+_CACHE_SIZE = 32
+
+
+def _references(cfg: CwrendConfig) -> simulation.References:
+    """Open-loop references, cached per worker by the sections they depend on."""
+    key = json.dumps(
+        [cfg.scenario.model_dump(mode="json"), cfg.solver.model_dump(mode="json")], sort_keys=True
+    )
+    if key not in _REFERENCES_CACHE:
+        if len(_REFERENCES_CACHE) >= _CACHE_SIZE:
+            _REFERENCES_CACHE.pop(next(iter(_REFERENCES_CACHE)))
+        _REFERENCES_CACHE[key] = simulation.open_loop_references(cfg)
+    return _REFERENCES_CACHE[key]
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What a worker returns for one run: small, whatever the run's length."""
+
+    spec: RunSpec
+    status: str  # "ok" or "failed"
+    metrics: Mapping[str, Any]  # storage.summary_row fields (empty when failed)
+    error: str
+    started_at: float  # UNIX time
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class TaskOutcome:
+    """A task's run outcomes and the files it wrote (relative to the campaign dir)."""
+
+    execution: str  # task key and a digest of the runs executed
+    outcomes: tuple[RunOutcome, ...]
+    files: tuple[str, ...]
+
+
+def execute_task(
+    task: Task, base: Mapping[str, Any], out_dir: str, write_steps: bool = True
+) -> TaskOutcome:
+    """Run a task's runs, write their steps/solves files and return their outcomes.
+
+    A run that raises is returned as ``failed`` with its traceback; the other
+    runs of the task go on. Files are written per task execution and
+    architecture, as ``steps/arch=<slug>/<task_key>-<digest>.parquet``, where
+    the digest names the set of runs executed: rerunning the same runs
+    overwrites the same files (atomically), so nothing is ever duplicated.
+    """
+    outcomes: list[RunOutcome] = []
+    results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
+    configs: dict[Assignment, CwrendConfig] = {}
+    for spec in task.runs:
+        started = time.time()
+        t0 = time.perf_counter()
+        try:
+            cfg = configs.get(spec.overrides)
+            if cfg is None:
+                cfg = configs[spec.overrides] = config_from_dict(apply(base, spec.overrides))
+            refs = _references(cfg)
+            noise = standard_normal_for(cfg, spec.seed)
+            result = simulation.simulate(cfg, ARCHITECTURES[spec.arch], noise, refs, spec.seed)
+            metrics = storage.summary_row(result, refs.fuel.delta_v_km_s)
+            results.setdefault(spec.arch, []).append((spec, result))
+            outcomes.append(RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0))
+        except Exception as exc:  # failure isolation: the campaign goes on
+            kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
+            text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
+            outcomes.append(RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0))
+    files: list[str] = []
+    digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
+    if write_steps and results:
+        root = Path(out_dir)
+        for arch, items in sorted(results.items()):
+            extra = {
+                "run_key": [s.run_key for s, _ in items],
+                "point": [s.point for s, _ in items],
+            }
+            runs = [r for _, r in items]
+            for kind, table in (
+                ("steps", storage.campaign_steps_table(runs, extra)),
+                ("solves", storage.campaign_solves_table(runs, extra)),
+            ):
+                rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
+                storage.write_parquet(table, root / rel)
+                files.append(rel)
+    return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files))
+
+
+# ---------------------------------------------------------------------------
+# Driving a campaign: resume, fan-out, journal
+# ---------------------------------------------------------------------------
+
+
+class Progress(Protocol):
+    """What the driver reports while it works (the CLI draws it; tests may ignore it)."""
+
+    def start(self, total: int, skipped: int) -> None:
+        """``total`` runs to execute now; ``skipped`` already done."""
+
+    def advance(self, ok: int, failed: int) -> None:
+        """Runs just completed."""
+
+    def close(self) -> None:
+        """The campaign stopped."""
+
+
+class _NoProgress:
+    def start(self, total: int, skipped: int) -> None:
+        pass
+
+    def advance(self, ok: int, failed: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class CampaignSummary:
+    """Outcome of one invocation of a campaign."""
+
+    out_dir: Path
+    executed: int
+    skipped: int
+    ok: int  # in the whole campaign directory
+    failed: int  # in the whole campaign directory
+    interrupted: bool
+
+
+def _wipe(out_dir: Path) -> None:
+    """Remove what a campaign writes (``--force``), nothing else."""
+    for name in (storage.MANIFEST, storage.RUNS, storage.EVENTS, *STATS_FILES):
+        (out_dir / name).unlink(missing_ok=True)
+    for dataset in storage.DATASETS:
+        if (out_dir / dataset).exists():
+            shutil.rmtree(out_dir / dataset)
+
+
+STATS_FILES = ("ablation.parquet", "sweep.parquet")
+
+
+def _check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> None:
+    manifest = out_dir / storage.MANIFEST
+    if not manifest.exists():
+        return
+    try:
+        previous = json.loads(manifest.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        raise ConfigError(
+            f"{manifest}: unreadable manifest; use --force to start the campaign over"
+        ) from None
+    if previous.get("campaign_hash") != plan_.campaign_hash:
+        raise ConfigError(
+            f"{out_dir} holds a campaign with a different configuration or grid "
+            f"(hash {str(previous.get('campaign_hash'))[:12]}… vs {plan_.campaign_hash[:12]}…); "
+            "use --force to start over, or another output.name"
+        )
+
+
+def _events_of(outcome: TaskOutcome, campaign: str) -> list[dict[str, Any]]:
+    events: list[dict[str, Any]] = []
+    for o in outcome.outcomes:
+        s = o.spec
+        common = {
+            "run_key": s.run_key,
+            "execution": outcome.execution,
+            "campaign_hash": campaign,
+        }
+        events.append({"event": "run_started", "time": _iso(o.started_at), **common})
+        events.append(
+            {
+                "event": "run_finished" if o.status == "ok" else "run_failed",
+                "time": _iso(o.started_at + o.duration_s),
+                **common,
+                "point": s.point,
+                "arch": s.arch,
+                "seed": s.seed,
+                "params": dict(s.params),
+                "dispersed": dict(s.dispersed),
+                "status": o.status,
+                "metrics": dict(o.metrics),
+                "error": o.error,
+                "duration_s": o.duration_s,
+            }
+        )
+    events.append(
+        {
+            "event": "task_done",
+            "time": _iso(time.time()),
+            "execution": outcome.execution,
+            "files": list(outcome.files),
+            "campaign_hash": campaign,
+        }
+    )
+    return events
+
+
+def _failed_outcome(task: Task, exc: BaseException) -> TaskOutcome:
+    text = f"{type(exc).__name__}: {exc}"
+    now = time.time()
+    return TaskOutcome(
+        f"{task.task_key}-lost",
+        tuple(RunOutcome(r, "failed", {}, text, now, 0.0) for r in task.runs),
+        (),
+    )
+
+
+def _iso(unix: float) -> str:
+    return datetime.fromtimestamp(unix, tz=UTC).isoformat(timespec="milliseconds")
+
+
+def run_campaign(
+    plan_: CampaignPlan,
+    out_dir: Path,
+    *,
+    command: str,
+    executor_kind: ExecutorKind = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    force: bool = False,
+    retry_failed: bool = False,
+    progress: Progress | None = None,
+    write_steps: bool = True,
+) -> CampaignSummary:
+    """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
+
+    Completed runs (same campaign hash) are skipped, failed ones too unless
+    ``retry_failed``; a changed configuration is refused unless ``force``,
+    which starts over. Each finished task appends its run events and a
+    ``task_done`` record to ``events.jsonl`` in one write, so an interrupted
+    campaign (Ctrl-C or ``kill -9``) keeps every completed task and leaves no
+    partial data: files of unfinished executions are removed on resume.
+    """
+    progress = progress or _NoProgress()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if force:
+        _wipe(out_dir)
+    _check_same_campaign(out_dir, plan_)
+    journal = storage.load_journal(out_dir / storage.EVENTS)
+    storage.remove_orphan_files(out_dir, journal.files)
+    done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
+    tasks = [
+        Task(t.task_key, tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
+    ]
+    tasks = [t for t in tasks if t.runs]
+    total = sum(len(t.runs) for t in tasks)
+    skipped = len(plan_.runs) - total
+    started = time.time()
+    manifest = {
+        "cwrend_version": __version__,
+        "command": command,
+        "campaign_hash": plan_.campaign_hash,
+        "config": plan_.base,
+        "config_hash": config_hash(config_from_dict(plan_.base)),
+        "grid": {k: list(v) for k, v in plan_.grid},
+        "seeds": list(plan_.seeds),
+        "root_seed": plan_.base["noise"]["seed"],
+        "archs": list(plan_.archs),
+        "executor": {"kind": executor_kind, "workers": workers, "address": address},
+        "started_at": _iso(started),
+        "status": "running",
+    }
+    storage.write_json(manifest, out_dir / storage.MANIFEST)
+    interrupted = False
+    progress.start(total, skipped)
+    try:
+        if tasks:
+            with open_executor(executor_kind, workers, address) as (executor, parallel):
+                _drive(executor, parallel, tasks, plan_, out_dir, write_steps, progress)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        progress.close()
+        journal = storage.load_journal(out_dir / storage.EVENTS)
+        records = list(journal.runs.values())
+        ok = sum(r["status"] == "ok" for r in records)
+        failed = len(records) - ok
+        storage.write_parquet(
+            storage.runs_table(records, {"campaign_hash": plan_.campaign_hash}),
+            out_dir / storage.RUNS,
+        )
+        manifest.update(
+            finished_at=_iso(time.time()),
+            status="interrupted" if interrupted else "complete",
+            counts={"ok": ok, "failed": failed, "runs": len(records)},
+        )
+        storage.write_json(manifest, out_dir / storage.MANIFEST)
+    return CampaignSummary(out_dir, total, skipped, ok, failed, interrupted)
+
+
+def _drive(
+    executor: Executor,
+    parallel: int,
+    tasks: Sequence[Task],
+    plan_: CampaignPlan,
+    out_dir: Path,
+    write_steps: bool,
+    progress: Progress,
+) -> None:
+    """Submit tasks with a bounded number in flight; journal each as it completes."""
+    queue = iter(tasks)
+    in_flight: dict[Future, Task] = {}
+    limit = 2 * parallel
+    events_path = out_dir / storage.EVENTS
+    try:
+        while True:
+            while len(in_flight) < limit:
+                task = next(queue, None)
+                if task is None:
+                    break
+                future = executor.submit(execute_task, task, plan_.base, str(out_dir), write_steps)
+                in_flight[future] = task
+            if not in_flight:
+                return
+            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in finished:
+                task = in_flight.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # the worker itself died or the task failed to run
+                    outcome = _failed_outcome(task, exc)
+                storage.append_events(events_path, _events_of(outcome, plan_.campaign_hash))
+                n_ok = sum(o.status == "ok" for o in outcome.outcomes)
+                progress.advance(n_ok, len(outcome.outcomes) - n_ok)
+    except KeyboardInterrupt:
+        for future in in_flight:
+            future.cancel()
+        raise

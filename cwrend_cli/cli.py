@@ -7,17 +7,20 @@ with code 2, without a traceback. Typer's own usage errors also exit with 2.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
+import pandas as pd
+import pyarrow as pa
 import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__, campaign, storage
+from cwrend_cli import __version__, campaign, statistics, storage
 from cwrend_cli.config import (
     ARCHITECTURES,
     config_hash,
@@ -28,7 +31,13 @@ from cwrend_cli.config import (
     to_json,
     to_toml,
 )
-from cwrend_cli.console import summary_console_table
+from cwrend_cli.console import (
+    RichProgress,
+    ablation_console_table,
+    paired_console_table,
+    summary_console_table,
+    sweep_console_table,
+)
 from cwrend_cli.errors import ConfigError, CwrendError
 
 app = typer.Typer(
@@ -203,3 +212,199 @@ def run(
                 summary_console_table(case, title=f"cwrend run · {file}")
             )
         console.print(f"results written to {written}")
+
+
+# ---------------------------------------------------------------------------
+# Campaigns: ablate and sweep
+# ---------------------------------------------------------------------------
+
+SeedsOption = Annotated[
+    int | None, typer.Option("--seeds", "-n", min=1, help="Seeds 0 … N−1 (default 1).")
+]
+SeedListOption = Annotated[
+    str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 0,5,9.")
+]
+ArchsOption = Annotated[
+    str,
+    typer.Option("--arch", "-a", help="Architectures, comma-separated, or 'all'."),
+]
+WorkersOption = Annotated[
+    int | None,
+    typer.Option(
+        "--workers", "-w", min=1, help="Parallel workers (default: all cores; 1 = in-process)."
+    ),
+]
+ExecutorOption = Annotated[
+    str, typer.Option("--executor", help="'local' (process pool) or 'dask'.")
+]
+AddressOption = Annotated[
+    str | None, typer.Option("--address", help="Dask scheduler, e.g. tcp://host:8786 (dask only).")
+]
+NameOption = Annotated[
+    str | None,
+    typer.Option(
+        "--name", help="Campaign name: results go to <output.dir>/<name> (default output.name)."
+    ),
+]
+ForceOption = Annotated[
+    bool, typer.Option("--force", help="Start over: discard what the campaign directory holds.")
+]
+RetryOption = Annotated[bool, typer.Option("--retry-failed", help="Rerun the failed runs.")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or tables.")]
+
+
+def _seeds(seeds: int | None, seed_list: str | None) -> list[int]:
+    if seeds is not None and seed_list is not None:
+        raise ConfigError("use either --seeds or --seed-list, not both")
+    if seed_list is None:
+        return list(range(seeds or 1))
+    try:
+        values = [int(v) for v in seed_list.split(",") if v.strip()]
+    except ValueError:
+        raise ConfigError(
+            f"--seed-list {seed_list!r}: comma-separated integers, e.g. 0,5,9"
+        ) from None
+    if not values or len(set(values)) != len(values) or min(values) < 0:
+        raise ConfigError(f"--seed-list {seed_list!r}: distinct non-negative integers required")
+    return values
+
+
+def _campaign_dir(cfg, name: str | None) -> Path:
+    base = Path(cfg.output.dir)
+    out = (base / (cfg.output.name or "campaign")).resolve()
+    if not out.is_relative_to(base.resolve()) or out == base.resolve():
+        raise ConfigError(f"output.name = {cfg.output.name!r}: must stay inside output.dir")
+    return out
+
+
+def _campaign(
+    command: str,
+    file: Path,
+    set_: list[str] | None,
+    params: list[str],
+    seeds: int | None,
+    seed_list: str | None,
+    arch: str,
+    workers: int | None,
+    executor: str,
+    address: str | None,
+    name: str | None,
+    force: bool,
+    retry_failed: bool,
+    quiet: bool,
+) -> None:
+    err = Console(stderr=True, highlight=False)
+    with user_errors():
+        overrides = list(set_ or [])
+        if name is not None:
+            overrides.append(f"output.name={json.dumps(name)}")
+        cfg = load_config(file, overrides)
+        if executor not in ("local", "dask"):
+            raise ConfigError(f"--executor {executor!r}: must be 'local' or 'dask'")
+        if address and executor != "dask":
+            raise ConfigError("--address needs --executor dask")
+        archs = [a.slug for a in _parse_archs(arch)]
+        plan = campaign.plan(cfg, archs, _seeds(seeds, seed_list), params)
+        out = _campaign_dir(cfg, name)
+        progress = RichProgress(err, f"{command} {out.name}", quiet=quiet)
+        summary = campaign.run_campaign(
+            plan, out, command=command, executor_kind=executor, workers=workers,
+            address=address, force=force, retry_failed=retry_failed, progress=progress,
+        )  # fmt: skip
+        runs = pd.read_parquet(out / storage.RUNS)
+        by = ["arch"] if command == "ablate" else ["point", *_param_columns(runs), "arch"]
+        stats = pd.concat(
+            [
+                statistics.describe(runs, by, seed=cfg.noise.seed),
+                statistics.paired(runs, by[:-1], seed=cfg.noise.seed),
+            ],
+            ignore_index=True,
+        )
+        stats_file = out / ("ablation.parquet" if command == "ablate" else "sweep.parquet")
+        if not stats.empty:
+            storage.write_parquet(pa.Table.from_pandas(stats, preserve_index=False), stats_file)
+        if not quiet and not stats.empty:
+            stdout = Console(highlight=False)
+            if command == "ablate":
+                stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
+                pairs = paired_console_table(stats)
+                if pairs is not None:
+                    stdout.print(pairs)
+            else:
+                stdout.print(sweep_console_table(stats, by[:-1], f"cwrend sweep · {out.name}"))
+        err.print(
+            f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
+            f"holds {summary.ok} ok, {summary.failed} failed → {out}"
+        )
+        if summary.interrupted:
+            err.print("interrupted: completed runs are kept; run the same command to resume")
+            raise typer.Exit(code=130)
+        if summary.failed:
+            err.print(
+                "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
+            )
+            raise typer.Exit(code=1)
+
+
+def _param_columns(runs: pd.DataFrame) -> list[str]:
+    return [c for c in runs.columns if c.startswith("param.")]
+
+
+@app.command("ablate")
+def ablate(
+    file: ConfigFile,
+    seeds: SeedsOption = None,
+    seed_list: SeedListOption = None,
+    arch: ArchsOption = "all",
+    workers: WorkersOption = None,
+    executor: ExecutorOption = "local",
+    address: AddressOption = None,
+    name: NameOption = None,
+    force: ForceOption = False,
+    retry_failed: RetryOption = False,
+    quiet: QuietOption = False,
+    set_: SetOption = None,
+) -> None:
+    """Compare the architectures on the same noise per seed (plus open-loop references).
+
+    Results: <output.dir>/<name>/ with manifest.json, runs.parquet, steps/ and
+    solves/ datasets, events.jsonl and ablation.parquet (statistics with 95 %
+    bootstrap intervals and paired comparisons). Rerunning resumes.
+    Exit code 1 if any run failed, 130 if interrupted.
+    """
+    _campaign("ablate", file, set_, [], seeds, seed_list, arch, workers, executor, address,
+              name, force, retry_failed, quiet)  # fmt: skip
+
+
+@app.command("sweep")
+def sweep(
+    file: ConfigFile,
+    param: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--param",
+            "-p",
+            help="Swept key: dotted.key=v1,v2,v3 or dotted.key=start:stop:num (repeatable; "
+            "adds to / replaces the config's [sweep] table).",
+            metavar="KEY=VALUES",
+        ),
+    ] = None,
+    seeds: SeedsOption = None,
+    seed_list: SeedListOption = None,
+    arch: ArchsOption = "all",
+    workers: WorkersOption = None,
+    executor: ExecutorOption = "local",
+    address: AddressOption = None,
+    name: NameOption = None,
+    force: ForceOption = False,
+    retry_failed: RetryOption = False,
+    quiet: QuietOption = False,
+    set_: SetOption = None,
+) -> None:
+    """Grid (cartesian product) × architectures × seeds, with [dispersions] per run.
+
+    Every run's config is validated before anything runs. Results as for
+    ablate, with sweep.parquet holding the statistics per grid point.
+    """
+    _campaign("sweep", file, set_, list(param or []), seeds, seed_list, arch, workers, executor,
+              address, name, force, retry_failed, quiet)  # fmt: skip

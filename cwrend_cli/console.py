@@ -3,9 +3,21 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Mapping
 from typing import Any
 
+import pandas as pd
+from rich import box
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rich.table import Table
 
 from cwrend_cli.campaign import CaseResult
@@ -44,4 +56,154 @@ def summary_console_table(case: CaseResult, title: str = "") -> Table:
             f"{_num(r['solve_mean_ms'], '.2f')}/{_num(r['solve_max_ms'], '.1f')}",
         )
     table.caption = "solve ms: mean/max wall time per re-solve; inf.: certified infeasible"
+    return table
+
+
+class RichProgress:
+    """Progress bar with counts, failures and ETA (a TTY), or plain lines (otherwise)."""
+
+    def __init__(self, console: Console, label: str, quiet: bool = False) -> None:
+        self._console = console
+        self._label = label
+        self._quiet = quiet
+        self._bar: Progress | None = None
+        self._task = None
+        self._done = 0
+        self._failed = 0
+        self._total = 0
+        self._next_report = 0.0
+        self._t0 = time.monotonic()
+
+    def start(self, total: int, skipped: int) -> None:
+        """Begin: ``total`` runs to compute, ``skipped`` already in the campaign."""
+        self._total = total
+        self._t0 = time.monotonic()
+        if self._quiet:
+            return
+        if skipped:
+            self._console.print(f"{skipped} run(s) already done, {total} to compute")
+        if self._console.is_terminal:
+            self._bar = Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("[red]{task.fields[failed]} failed"),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+                console=self._console,
+                transient=False,
+            )
+            self._bar.start()
+            self._task = self._bar.add_task(self._label, total=total, failed=0)
+
+    def advance(self, ok: int, failed: int) -> None:
+        """Runs just completed."""
+        self._done += ok + failed
+        self._failed += failed
+        if self._quiet:
+            return
+        if self._bar is not None:
+            self._bar.update(self._task, advance=ok + failed, failed=self._failed)
+            return
+        elapsed = time.monotonic() - self._t0
+        if self._done >= self._total or elapsed >= self._next_report:
+            rate = self._done / elapsed if elapsed > 0 else float("nan")
+            eta = (self._total - self._done) / rate if rate > 0 else float("nan")
+            self._console.print(
+                f"{self._label}: {self._done}/{self._total} runs, {self._failed} failed, "
+                f"{elapsed:.0f} s elapsed, ETA {eta:.0f} s"
+            )
+            self._next_report = elapsed + 10.0
+
+    def close(self) -> None:
+        """Stop drawing."""
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+
+
+def _ci(row: pd.Series, spec: str, scale: float = 1.0) -> str:
+    """Value, and its 95 % interval on a second (dim) line."""
+    value = row["value"] * scale
+    if math.isnan(row["ci_low"]):
+        return f"{value:{spec}}"
+    lo, hi = row["ci_low"] * scale, row["ci_high"] * scale
+    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}[/dim]"
+
+
+def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
+    """Per architecture: mean Δv, miss and fuel penalty with 95 % CIs, and the solves.
+
+    Medians and p95 are in ``ablation.parquet``; the console keeps to 80 columns.
+    """
+    marginal = stats[stats["kind"] == "marginal"]
+    n = int(marginal["n"].max()) if not marginal.empty else 0
+    table = Table(
+        title=f"{title} · {n} seed(s)",
+        title_style="bold",
+        header_style="bold cyan",
+        box=box.SIMPLE_HEAD,
+    )
+    table.add_column("architecture", no_wrap=True)
+    for name in ("Δv km/s", "miss m", "fuel pen. %", "solves ok %\nms mean/max"):
+        table.add_column(name, justify="right", no_wrap=True)
+    for arch, g in marginal.groupby("arch", sort=False):
+        get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
+        table.add_row(
+            str(arch),
+            _ci(get[("delta_v_km_s", "mean")], ".4f"),
+            _ci(get[("miss_km", "mean")], ".2f", 1e3),
+            _ci(get[("fuel_penalty_pct", "mean")], ".1f"),
+            f"{get[('solve_success_pct', 'mean')]['value']:.2f}\n"
+            f"{get[('solve_mean_ms', 'mean')]['value']:.2f}/"
+            f"{get[('solve_max_ms', 'max')]['value']:.1f}",
+        )
+    table.caption = "means, 95 % bootstrap interval below"
+    return table
+
+
+def paired_console_table(stats: pd.DataFrame) -> Table | None:
+    """Seed-by-seed comparisons: P(A misses less than B) and the median miss difference."""
+    pairs = stats[stats["kind"] == "paired"]
+    if pairs.empty:
+        return None
+    table = Table(
+        title="paired comparisons (same noise)", header_style="bold cyan", box=box.SIMPLE_HEAD
+    )
+    table.add_column("A vs B", no_wrap=True)
+    for name in ("seeds", "P(miss\nA < B)", "median\nΔmiss m", "mean\nΔΔv km/s"):
+        table.add_column(name, justify="right", no_wrap=True)
+    for (a, b), g in pairs.groupby(["arch", "other"], sort=False):
+        get = {r.statistic: r for _, r in g.iterrows()}
+        table.add_row(
+            f"{a}\nvs {b}",
+            str(int(get["frac_less"]["n"])),
+            _ci(get["frac_less"], ".2f"),
+            _ci(get["median_diff"], ".2f", 1e3),
+            _ci(get["mean_diff"], ".4f"),
+        )
+    table.caption = "Δ = A − B; 95 % interval below (Wilson for P, bootstrap otherwise)"
+    return table
+
+
+def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) -> Table:
+    """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
+    table = Table(title=title, title_style="bold", header_style="bold cyan", box=box.SIMPLE_HEAD)
+    params = [c for c in point_cols if c != "point"]
+    for name in [*(p.removeprefix("param.") for p in params), "architecture", "n",
+                 "Δv km/s (mean)", "miss m (mean)", "miss m (p95)"]:  # fmt: skip
+        table.add_column(name, justify="right", no_wrap=True)
+    marginal = stats[stats["kind"] == "marginal"]
+    for _, g in marginal.groupby([*point_cols, "arch"], sort=True, observed=True):
+        get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
+        first = g.iloc[0]
+        table.add_row(
+            *(str(first[p]) for p in params),
+            str(first["arch"]),
+            str(int(get[("miss_km", "mean")]["n"])),
+            _ci(get[("delta_v_km_s", "mean")], ".4f"),
+            _ci(get[("miss_km", "mean")], ".2f", 1e3),
+            _ci(get[("miss_km", "p95")], ".2f", 1e3),
+        )
+    table.caption = "means with their 95 % bootstrap interval below"
     return table

@@ -14,6 +14,7 @@ import os
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -293,3 +294,161 @@ def write_run(
         out / "config.json",
     )
     return out
+
+
+# ---------------------------------------------------------------------------
+# Campaign layout: results/<name>/{manifest.json, runs.parquet, events.jsonl,
+# steps/arch=<slug>/*.parquet, solves/arch=<slug>/*.parquet}
+# ---------------------------------------------------------------------------
+
+MANIFEST = "manifest.json"
+RUNS = "runs.parquet"
+EVENTS = "events.jsonl"
+DATASETS = ("steps", "solves")
+
+CAMPAIGN_STEPS_SCHEMA = pa.schema(
+    [f for f in STEPS_SCHEMA if f.name != "arch"]
+    + [pa.field("run_key", pa.string()), pa.field("point", pa.string())]
+)
+CAMPAIGN_SOLVES_SCHEMA = pa.schema(
+    [f for f in SOLVES_SCHEMA if f.name != "arch"]
+    + [pa.field("run_key", pa.string()), pa.field("point", pa.string())]
+)
+
+
+def _with_run_columns(
+    tables: Sequence[pa.Table], extra: Mapping[str, Sequence[str]], schema: pa.Schema
+) -> pa.Table:
+    """Concatenate per-run tables, drop ``arch`` (a partition key), add per-run columns."""
+    parts = []
+    for i, table in enumerate(tables):
+        table = table.drop_columns(["arch"]).replace_schema_metadata(None)
+        for name, values in extra.items():
+            table = table.append_column(name, pa.array([values[i]] * table.num_rows, pa.string()))
+        parts.append(table.cast(schema))
+    return pa.concat_tables(parts)
+
+
+def campaign_steps_table(results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]):
+    """Steps of several runs for the hive-partitioned ``steps/`` dataset."""
+    return _with_run_columns([steps_table(r) for r in results], extra, CAMPAIGN_STEPS_SCHEMA)
+
+
+def campaign_solves_table(results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]):
+    """Solves of several runs for the hive-partitioned ``solves/`` dataset."""
+    return _with_run_columns([solves_table(r) for r in results], extra, CAMPAIGN_SOLVES_SCHEMA)
+
+
+def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None:
+    """Append JSON lines in one write and fsync (a ``kill -9`` can only tear the last line)."""
+    text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def read_events(path: str | Path) -> list[dict[str, Any]]:
+    """All complete events of a journal; a torn (unparsable) line is dropped."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    events = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+@dataclass(frozen=True)
+class JournalState:
+    """What a campaign directory holds according to its journal."""
+
+    runs: Mapping[str, Mapping[str, Any]]  # run_key -> its latest complete outcome event
+    files: frozenset[str]  # data files written by completed task executions
+
+
+def load_journal(path: str | Path) -> JournalState:
+    """Runs and files of every task execution that completed (its ``task_done`` was written)."""
+    events = read_events(path)
+    done_tasks = {e["execution"]: e for e in events if e.get("event") == "task_done"}
+    runs: dict[str, Mapping[str, Any]] = {}
+    for e in events:
+        if e.get("event") in ("run_finished", "run_failed") and e.get("execution") in done_tasks:
+            runs[e["run_key"]] = e
+    files = frozenset(f for e in done_tasks.values() for f in e.get("files", ()))
+    return JournalState(runs, files)
+
+
+def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
+    """Delete data files (and temp files) not written by a completed task execution."""
+    root = Path(root)
+    removed = []
+    for dataset in DATASETS:
+        base = root / dataset
+        if not base.exists():
+            continue
+        for path in sorted(base.rglob("*")):
+            if path.is_file():
+                rel = path.relative_to(root).as_posix()
+                if rel not in keep:
+                    path.unlink()
+                    removed.append(rel)
+    return removed
+
+
+_RUN_METRICS = [f for f in SUMMARY_SCHEMA if f.name not in ("arch", "seed")]
+
+
+def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]) -> pa.Table:
+    """``runs.parquet``: one row per run, sorted by run key, with applied parameters.
+
+    Swept values are columns ``param.<key>``, dispersion draws ``disp.<key>``.
+    """
+    records = sorted(records, key=lambda r: r["run_key"])
+    cols: dict[str, list[Any]] = {
+        "run_key": [r["run_key"] for r in records],
+        "point": [r["point"] for r in records],
+        "arch": [r["arch"] for r in records],
+        "seed": [r["seed"] for r in records],
+        "status": [r["status"] for r in records],
+        "error": [r.get("error", "") for r in records],
+        "duration_s": [r.get("duration_s", float("nan")) for r in records],
+    }
+    fields = [
+        pa.field("run_key", pa.string()),
+        pa.field("point", pa.string()),
+        pa.field("arch", pa.string()),
+        pa.field("seed", pa.int64()),
+        pa.field("status", pa.string()),
+        pa.field("error", pa.string()),
+        pa.field("duration_s", pa.float64()),
+    ]
+    for f in _RUN_METRICS:
+        cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
+        fields.append(f)
+    for prefix, key in (("param", "params"), ("disp", "dispersed")):
+        names = sorted({k for r in records for k in r.get(key, {})})
+        for name in names:
+            values = [r.get(key, {}).get(name) for r in records]
+            kinds = {type(v) for v in values if v is not None}
+            if kinds <= {int, float} and not kinds <= {int}:
+                arr = pa.array([None if v is None else float(v) for v in values], pa.float64())
+            elif len(kinds) == 1:
+                arr = pa.array(values)
+            else:
+                arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())
+            cols[f"{prefix}.{name}"] = arr
+            fields.append(pa.field(f"{prefix}.{name}", arr.type))
+    schema = pa.schema(fields).with_metadata(_metadata(metadata))
+    return pa.table(cols, schema=schema)

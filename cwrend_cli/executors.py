@@ -1,0 +1,101 @@
+"""Where campaign tasks run: one interface, a ``concurrent.futures.Executor``.
+
+* ``local`` (default): a process pool over the machine's cores (spawn start
+  method, workers ignore Ctrl-C so the parent can stop them cleanly);
+  ``workers = 1`` runs in-process.
+* ``dask``: a Dask distributed cluster through ``Client.get_executor()``; a
+  ``LocalCluster`` when no address is given. Dask workers must see the
+  campaign's output directory (a shared filesystem), since each task writes
+  its own Parquet files.
+
+No scheduling logic lives here: the campaign driver submits tasks and
+collects them as they complete, whatever executor it was given.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from contextlib import contextmanager
+from typing import Any, Literal
+
+from cwrend_cli.errors import ConfigError
+
+ExecutorKind = Literal["local", "dask"]
+
+
+class InlineExecutor(Executor):
+    """Runs each submitted call at once in this process (``--workers 1``)."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            future.set_exception(exc)
+        return future
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def default_workers() -> int:
+    """All cores available to this process."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@contextmanager
+def open_executor(
+    kind: ExecutorKind = "local", workers: int | None = None, address: str | None = None
+) -> Iterator[tuple[Executor, int]]:
+    """Yield ``(executor, parallelism)`` and shut it down afterwards."""
+    n = workers or default_workers()
+    if kind == "local":
+        if n == 1:
+            yield InlineExecutor(), 1
+            return
+        pool = ProcessPoolExecutor(
+            max_workers=n,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_ignore_sigint,
+        )
+        try:
+            yield pool, n
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ConfigError(
+            "--executor dask needs Dask distributed: pip install 'cwrend[dask]'"
+        ) from None
+    cluster = None
+    if address:
+        try:
+            client = Client(address, timeout="20s")
+        except OSError as exc:
+            raise ConfigError(
+                f"--address {address}: cannot reach the Dask scheduler ({exc})"
+            ) from None
+    else:
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    try:
+        parallelism = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+        yield client.get_executor(pure=False), max(parallelism, 1)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
