@@ -190,20 +190,20 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
     """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
     table = Table(title=title, title_style="bold", header_style="bold cyan", box=box.SIMPLE_HEAD)
     params = [c for c in point_cols if c != "point"]
-    for name in [*(p.removeprefix("param.") for p in params), "architecture", "n",
-                 "Δv km/s (mean)", "miss m (mean)", "miss m (p95)"]:  # fmt: skip
+    for p in params:
+        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    for name in ("architecture", "n", "Δv km/s", "miss m"):
         table.add_column(name, justify="right", no_wrap=True)
     marginal = stats[stats["kind"] == "marginal"]
-    for _, g in marginal.groupby([*point_cols, "arch"], sort=True, observed=True):
+    for _, g in marginal.groupby([*params, "point", "arch"], sort=True, observed=True):
         get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
         first = g.iloc[0]
         table.add_row(
-            *(str(first[p]) for p in params),
+            *(f"{first[p]:g}" if isinstance(first[p], float) else str(first[p]) for p in params),
             str(first["arch"]),
             str(int(get[("miss_km", "mean")]["n"])),
             _ci(get[("delta_v_km_s", "mean")], ".4f"),
             _ci(get[("miss_km", "mean")], ".2f", 1e3),
-            _ci(get[("miss_km", "p95")], ".2f", 1e3),
         )
-    table.caption = "means with their 95 % bootstrap interval below"
+    table.caption = "means, 95 % bootstrap interval below; all statistics in sweep.parquet"
     return table
