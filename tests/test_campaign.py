@@ -1,0 +1,319 @@
+"""Campaigns: the planner, dispersions, fan-out, resume and failure isolation (issue 9)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli import campaign, storage
+from cwrend_cli.cli import app
+from cwrend_cli.config import CwrendConfig, config_from_dict
+from cwrend_cli.errors import ConfigError
+
+runner = CliRunner()
+# Wall-time columns differ between otherwise identical runs.
+TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
+ADAPTIVE = "mtf_adaptive,plain_adaptive"  # the fast architectures (a few ms per run)
+
+
+def _write_config(path: Path, name: str, extra: str = "") -> Path:
+    path.write_text(f'[output]\ndir = "{path.parent / "results"}"\nname = "{name}"\n{extra}')
+    return path
+
+
+def _cli(*args: str):
+    return runner.invoke(app, list(args))
+
+
+def _runs(out: Path) -> pd.DataFrame:
+    runs = pd.read_parquet(out / "runs.parquet")
+    return runs.drop(columns=[c for c in TIMING if c in runs.columns])
+
+
+def _steps(out: Path) -> pd.DataFrame:
+    steps = pd.read_parquet(out / "steps")
+    steps["arch"] = steps["arch"].astype(str)
+    return steps.sort_values(["run_key", "step"]).reset_index(drop=True)
+
+
+# --- planner (pure) ---------------------------------------------------------
+
+
+def test_param_list_values_are_read_as_toml() -> None:
+    assert campaign.parse_param("schedule.beta=0.1,0.5") == ("schedule.beta", (0.1, 0.5))
+    assert campaign.parse_param("guidance.hold=sample,mean") == (
+        "guidance.hold",
+        ("sample", "mean"),
+    )
+
+
+def test_param_range_is_start_stop_num() -> None:
+    key, values = campaign.parse_param("schedule.beta=0.1:0.5:5")
+    assert key == "schedule.beta"
+    assert values == pytest.approx((0.1, 0.2, 0.3, 0.4, 0.5))
+
+
+@pytest.mark.parametrize("text", ["schedule.beta", "schedule.beta=0.1,,0.2", "x=1:2:zero"])
+def test_malformed_param_is_refused(text: str) -> None:
+    with pytest.raises(ConfigError):
+        campaign.parse_param(text)
+
+
+def test_grid_is_the_cartesian_product_and_cli_wins() -> None:
+    grid = campaign.expand_grid(
+        {"schedule.beta": (0.1, 0.2), "guidance.hold": ("sample",)},
+        ["guidance.hold=sample,mean", "schedule.kappa_mtf=6,12,24"],
+    )
+    assert dict(grid)["guidance.hold"] == ("sample", "mean")
+    assert len(campaign.grid_points(grid)) == 2 * 2 * 3
+
+
+def test_point_id_does_not_depend_on_key_order() -> None:
+    a = campaign.point_id((("schedule.beta", 0.1), ("guidance.hold", "mean")))
+    b = campaign.point_id((("guidance.hold", "mean"), ("schedule.beta", 0.1)))
+    assert a == b != campaign.BASE_POINT
+
+
+def test_plan_has_every_arch_for_every_seed() -> None:
+    plan = campaign.plan(CwrendConfig(), ["mtf_adaptive", "plain_fixed"], [0, 1, 2])
+    keys = {(r.arch, r.seed) for r in plan.runs}
+    assert keys == {(a, s) for a in ("mtf_adaptive", "plain_fixed") for s in (0, 1, 2)}
+    assert len({r.run_key for r in plan.runs}) == 6
+
+
+def test_bad_grid_value_fails_before_anything_runs() -> None:
+    with pytest.raises(ConfigError, match=r"schedule\.alpha_eps"):
+        campaign.plan(CwrendConfig(), ["mtf_adaptive"], [0], ["schedule.alpha_eps=0.1,1.5"])
+
+
+def test_unknown_grid_key_is_refused() -> None:
+    with pytest.raises(ConfigError, match="nonsense"):
+        campaign.plan(CwrendConfig(), ["mtf_adaptive"], [0], ["schedule.nonsense=1,2"])
+
+
+def _dispersed_config() -> CwrendConfig:
+    return config_from_dict(
+        {
+            "dispersions": {
+                "scenario.x0.0": {"dist": "normal", "std": 1e-3},
+                "scenario.u_max_km_s2": {
+                    "dist": "uniform",
+                    "low": 7e-4,
+                    "high": 9e-4,
+                    "mode": "set",
+                },
+            }
+        }
+    )
+
+
+def test_dispersions_are_shared_by_the_architectures_of_a_seed() -> None:
+    plan = campaign.plan(_dispersed_config(), ["mtf_adaptive", "plain_fixed"], [0, 1])
+    by_seed: dict[int, set] = {}
+    for r in plan.runs:
+        by_seed.setdefault(r.seed, set()).add(r.dispersed)
+    assert all(len(v) == 1 for v in by_seed.values())
+    assert by_seed[0] != by_seed[1]
+
+
+def test_dispersion_draws_follow_their_distribution_and_mode() -> None:
+    plan = campaign.plan(_dispersed_config(), ["mtf_adaptive"], list(range(200)))
+    draws = pd.DataFrame([dict(r.dispersed) for r in plan.runs])
+    x0 = CwrendConfig().scenario.x0[0]
+    # mode "add": base + N(0, 1e-3); 200 draws: the mean is within 4 σ/√200 ≈ 2.8e-4
+    assert abs(draws["scenario.x0.0"].mean() - x0) < 2.8e-4
+    assert draws["scenario.u_max_km_s2"].between(7e-4, 9e-4).all()  # mode "set"
+
+
+def test_dispersing_a_non_number_is_refused() -> None:
+    cfg = config_from_dict({"dispersions": {"scenario.x0": {"dist": "normal", "std": 1.0}}})
+    with pytest.raises(ConfigError, match=r"scenario\.x0"):
+        campaign.plan(cfg, ["mtf_adaptive"], [0])
+
+
+def test_noise_of_a_seed_does_not_depend_on_anything_else() -> None:
+    cfg = CwrendConfig()
+    a = campaign.standard_normal_for(cfg, 3)
+    b = campaign.standard_normal_for(cfg, 3)
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, campaign.standard_normal_for(cfg, 4))
+
+
+# --- end to end -------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def small_ablation(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cfg = _write_config(tmp_path_factory.mktemp("abl") / "c.toml", "small")
+    result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q")
+    assert result.exit_code == 0, result.output
+    return cfg.parent / "results" / "small"
+
+
+def test_ablation_writes_the_campaign_layout(small_ablation: Path) -> None:
+    names = {p.name for p in small_ablation.iterdir()}
+    assert {"manifest.json", "runs.parquet", "events.jsonl", "steps", "solves"} <= names
+    assert "ablation.parquet" in names
+
+
+def test_runs_table_has_one_row_per_run(small_ablation: Path) -> None:
+    runs = pd.read_parquet(small_ablation / "runs.parquet")
+    assert len(runs) == 6 and (runs["status"] == "ok").all()
+    assert runs["miss_km"].dtype == np.float64
+
+
+def test_steps_dataset_reads_as_one_typed_table(small_ablation: Path) -> None:
+    steps = pd.read_parquet(small_ablation / "steps")
+    assert len(steps) == 6 * 801
+    assert set(steps["arch"].astype(str)) == {"mtf_adaptive", "plain_adaptive"}
+    assert steps["t_s"].dtype == np.float64 and steps["window"].dtype == np.int64
+    assert steps.groupby("run_key").size().eq(801).all()
+
+
+def test_ablation_statistics_have_intervals(small_ablation: Path) -> None:
+    stats = pd.read_parquet(small_ablation / "ablation.parquet")
+    mean_miss = stats.query("kind == 'marginal' and metric == 'miss_km' and statistic == 'mean'")
+    assert len(mean_miss) == 2
+    assert (mean_miss["ci_low"] <= mean_miss["value"]).all()
+    assert (mean_miss["value"] <= mean_miss["ci_high"]).all()
+    paired = stats.query("kind == 'paired' and statistic == 'frac_less'")
+    assert set(zip(paired["arch"], paired["other"], strict=True)) == {
+        ("mtf_adaptive", "plain_adaptive")
+    }
+
+
+def test_manifest_records_provenance(small_ablation: Path) -> None:
+    manifest = json.loads((small_ablation / "manifest.json").read_text())
+    assert manifest["seeds"] == [0, 1, 2]
+    assert manifest["counts"] == {"ok": 6, "failed": 0, "runs": 6}
+    assert manifest["status"] == "complete"
+    assert len(manifest["campaign_hash"]) == 64
+
+
+def test_rerun_skips_completed_runs(small_ablation: Path) -> None:
+    before = (small_ablation / "events.jsonl").read_text()
+    cfg = small_ablation.parent.parent / "c.toml"
+    result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q")
+    assert result.exit_code == 0
+    assert (small_ablation / "events.jsonl").read_text() == before  # nothing recomputed
+
+
+def test_extending_seeds_equals_a_fresh_larger_campaign(
+    tmp_path: Path, small_ablation: Path
+) -> None:
+    cfg = small_ablation.parent.parent / "c.toml"
+    ext = _cli("ablate", str(cfg), "--seeds", "4", "--arch", ADAPTIVE, "--name", "ext", "-q",
+               "--workers", "1")  # fmt: skip
+    assert ext.exit_code == 0
+    fresh_cfg = _write_config(tmp_path / "f.toml", "fresh")
+    fresh = _cli(
+        "ablate", str(fresh_cfg), "--seeds", "4", "--arch", ADAPTIVE, "--workers", "1", "-q"
+    )
+    assert fresh.exit_code == 0
+    pd.testing.assert_frame_equal(
+        _runs(small_ablation.parent / "ext"), _runs(tmp_path / "results" / "fresh")
+    )
+
+
+def test_changed_config_is_refused_unless_forced(small_ablation: Path) -> None:
+    cfg = small_ablation.parent.parent / "c.toml"
+    args = ["ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q",
+            "--set", "schedule.beta=0.3"]  # fmt: skip
+    refused = _cli(*args)
+    assert refused.exit_code == 2
+    assert "--force" in refused.output
+
+
+def test_path_traversal_name_is_refused(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "ok")
+    result = _cli("ablate", str(cfg), "--name", "../escape", "-q")
+    assert result.exit_code == 2
+    assert "output.name" in result.output
+    assert not (tmp_path / "escape").exists()
+
+
+# --- determinism across executors ---------------------------------------------
+
+
+@pytest.mark.parametrize(("executor", "workers"), [("local", "2"), ("dask", "2")])
+def test_numbers_do_not_depend_on_workers_or_executor(
+    executor: str, workers: str, tmp_path: Path, small_ablation: Path
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "par")
+    result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "-q",
+                  "--workers", workers, "--executor", executor)  # fmt: skip
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "results" / "par"
+    pd.testing.assert_frame_equal(_runs(out), _runs(small_ablation))
+    a, b = _steps(out), _steps(small_ablation)
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+
+
+# --- failures and interruption ---------------------------------------------------
+
+
+def test_failing_runs_are_isolated_and_retried(tmp_path: Path) -> None:
+    """u_max = 1e-5 km/s² cannot reach the target: those runs fail, the others go on."""
+    cfg = _write_config(tmp_path / "c.toml", "fail")
+    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,1e-5", "--arch",
+            "mtf_adaptive", "--seeds", "2", "--workers", "1", "-q"]  # fmt: skip
+    first = _cli(*args)
+    assert first.exit_code == 1  # some runs failed
+    out = tmp_path / "results" / "fail"
+    runs = pd.read_parquet(out / "runs.parquet")
+    failed = runs[runs["status"] == "failed"]
+    assert len(failed) == 2 and (runs["status"] == "ok").sum() == 2
+    assert failed["error"].str.contains("infeasible").all()
+    assert (failed["param.scenario.u_max_km_s2"] == 1e-5).all()
+    retry = _cli(*args, "--retry-failed")
+    assert retry.exit_code == 1
+    events = storage.read_events(out / "events.jsonl")
+    finished = [e for e in events if e["event"] == "run_finished"]
+    failed_events = [e for e in events if e["event"] == "run_failed"]
+    assert len(finished) == 2  # the good runs were not recomputed
+    assert len(failed_events) == 4  # the failed ones ran twice
+
+
+def _events_done(path: Path) -> int:
+    if not path.exists():
+        return 0
+    return sum(e["event"] == "task_done" for e in storage.read_events(path))
+
+
+def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
+    """SIGKILL mid-campaign, then resume: same tables as an uninterrupted run, no duplicates."""
+    cfg = _write_config(tmp_path / "c.toml", "killed")
+    out = tmp_path / "results" / "killed"
+    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "24", "--arch",
+            ADAPTIVE, "--workers", "1", "-q"]  # fmt: skip
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while _events_done(out / "events.jsonl") < 2 and time.monotonic() < deadline:
+        if proc.poll() is not None:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = _events_done(out / "events.jsonl")
+    assert 0 < done_before < 6, "the kill should land mid-campaign (6 tasks of 4 seeds)"
+    resumed = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    whole_cfg = _write_config(tmp_path / "w.toml", "whole")
+    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], env=env, capture_output=True,
+                           text=True, timeout=300)  # fmt: skip
+    assert whole.returncode == 0, whole.stderr
+    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
+    steps = _steps(out)
+    assert len(steps) == 48 * 801  # nothing duplicated
+    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
