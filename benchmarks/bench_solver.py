@@ -115,7 +115,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=20, help="seeds for the ε = 0 study")
     parser.add_argument("--naive", type=int, default=4, help="naive baseline solves per ε")
     args = parser.parse_args()
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}"
+    )
 
     base = CwrendConfig()
     # warm compile
@@ -140,30 +142,25 @@ def main() -> None:
             f" {naive_med / np.median(times):>8.0f}x"
         )
 
-    print(f"\n2. ε = 0 re-solves, fixed architectures, seeds 0..{args.seeds - 1}")
-    for fallback in ("chain", "none"):
-        s = guidance.SolverSettings(
-            **{**settings.__dict__, "fallback": fallback}
-        )
-        all_t, all_status, all_steps, inf_t = [], [], [], []
-        for slug in ("plain_fixed", "mtf_fixed"):
-            for seed in range(args.seeds):
-                probs = capture_resolves(base, slug, seed)[:]
-                t, st, stp, it = timed_solves(probs, s)
-                all_t.extend(t)
-                all_status.extend(st)
-                all_steps.extend(stp)
-                inf_t.extend(it)
+    print(f"\n2. every re-solve of each architecture, seeds 0..{args.seeds - 1}")
+    problems = {
+        slug: [p for seed in range(args.seeds) for p in capture_resolves(base, slug, seed)]
+        for slug in ARCHITECTURES
+    }
+    for slug, fallback in [(s, f) for s in ARCHITECTURES for f in ("chain", "none")]:
+        s = guidance.SolverSettings(**{**settings.__dict__, "fallback": fallback})
+        all_t, all_status, all_steps, inf_t = timed_solves(problems[slug], s)
         counts = Counter(all_status)
         feasible = len(all_status) - counts["infeasible"]
         print(
-            f"  fallback={fallback:<5} solves {len(all_status)}: converged {counts['converged']}"
+            f"  {slug:<15} fallback={fallback:<5} solves {len(all_status)}:"
+            f" converged {counts['converged']}"
             f" ({100 * counts['converged'] / feasible:.2f} % of feasible), infeasible"
             f" {counts['infeasible']} ({100 * counts['infeasible'] / len(all_status):.1f} %,"
             f" t in [{min(inf_t, default=np.nan):.0f}, {max(inf_t, default=np.nan):.0f}] s),"
             f" failed {counts['failed']}; mean {np.mean(all_t):.2f} ms, max {np.max(all_t):.2f} ms"
         )
-        print(f"    step that ended each solve: {dict(Counter(all_steps))}")
+        print(f"      step that ended each solve: {dict(Counter(all_steps))}")
 
     print("\n3. one closed-loop run (800 steps, after compilation), seed 0")
     refs = simulation.open_loop_references(base)
@@ -175,8 +172,8 @@ def main() -> None:
             simulation.simulate(base, arch, noise, refs)
             times.append(time.perf_counter() - start)
         published = PUBLISHED.get(slug, "")
-        print(f"  {slug:<15} median {1e3 * np.median(times):7.1f} ms   "
-              f"{'(published MATLAB re-solves: ' + published + ')' if published else ''}")  # fmt: skip
+        note = f"(published MATLAB re-solves: {published})" if published else ""
+        print(f"  {slug:<15} median {1e3 * np.median(times):7.1f} ms   {note}")
 
     print(f"\n4. fixed-ε (ε = 0) miss and Δv over seeds 0..{args.seeds - 1} (mean, max)")
     for timing in ("correct", "reference"):
