@@ -1,0 +1,101 @@
+"""Shared fixtures of the numerics tests: the paper scenario (SPEC §6) and its references.
+
+The session-scoped fixtures are computed once per test process: the paper
+configuration, its open-loop references (SPEC §2, ~0.5 s once the kernels are
+compiled) and the shooting costates of the paper problem at the homotopy
+parameters the guidance tests use, obtained by ε-continuation from the
+energy-optimal costate (SPEC §1–2).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from cwrend_cli import guidance, simulation
+from cwrend_cli.config import CwrendConfig
+
+#: Homotopy parameters of the guidance tests, in continuation order (1 → 0).
+EPS_CONTINUATION = (1.0, 0.3, 0.05, 0.0)
+
+
+def spec_cw_matrices(n: float) -> tuple[np.ndarray, np.ndarray]:
+    """``A`` (6×6) and ``B`` (6×3) written out from SPEC §1 / paper Eq. (4).
+
+    Built here independently of :func:`cwrend_cli.dynamics.cw_system` so that
+    reference computations (matrix exponentials, brute-force integration) do
+    not share code with the package.
+    """
+    a = np.array(
+        [
+            [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+            [3.0 * n * n, 0.0, 0.0, 0.0, 2.0 * n, 0.0],
+            [0.0, 0.0, 0.0, -2.0 * n, 0.0, 0.0],
+            [0.0, 0.0, -n * n, 0.0, 0.0, 0.0],
+        ]
+    )
+    b = np.vstack([np.zeros((3, 3)), np.eye(3)])
+    return a, b
+
+
+@pytest.fixture(scope="session")
+def cw_matrices() -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+    """Factory ``n ↦ (A, B)`` of SPEC §1, independent of the package."""
+    return spec_cw_matrices
+
+
+@pytest.fixture(scope="session")
+def paper_cfg() -> CwrendConfig:
+    """The paper scenario: every default of the config (SPEC §6, paper Table 1)."""
+    return CwrendConfig()
+
+
+@pytest.fixture(scope="session")
+def paper_refs(paper_cfg: CwrendConfig) -> simulation.References:
+    """Open-loop energy- and fuel-optimal references of the paper scenario (SPEC §2)."""
+    return simulation.open_loop_references(paper_cfg)
+
+
+@pytest.fixture(scope="session")
+def paper_problem(
+    paper_cfg: CwrendConfig,
+) -> Callable[..., guidance.ShootingProblem]:
+    """Factory of shooting problems of the paper scenario (x0, T = 800 s, x_f = 0 by default)."""
+    sc = paper_cfg.scenario
+
+    def make(
+        eps: float, x0: np.ndarray | None = None, horizon_s: float | None = None
+    ) -> guidance.ShootingProblem:
+        return guidance.ShootingProblem(
+            np.array(sc.x0 if x0 is None else x0, dtype=float),
+            float(sc.horizon_s if horizon_s is None else horizon_s),
+            float(eps),
+            sc.mean_motion_rad_s,
+            sc.u_max_km_s2,
+            np.array(sc.xf, dtype=float),
+        )
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def paper_costates(
+    paper_problem: Callable[..., guidance.ShootingProblem],
+) -> dict[float, np.ndarray]:
+    """``λ(0)`` solving the paper problem at each ε of :data:`EPS_CONTINUATION`.
+
+    ε-continuation 1 → 0.3 → 0.05 → 0 with :func:`guidance.solve`, the first
+    solve warm-started from the closed-form energy-optimal costate (SPEC §2).
+    """
+    lam = guidance.energy_optimal_costate(paper_problem(EPS_CONTINUATION[0]))
+    out: dict[float, np.ndarray] = {}
+    for eps in EPS_CONTINUATION:
+        result = guidance.solve(paper_problem(eps), lam)
+        assert result.converged, f"continuation failed at eps = {eps}: {result.status}"
+        lam = result.costate
+        out[eps] = lam.copy()
+    return out

@@ -1,0 +1,203 @@
+"""Closed-loop receding-horizon simulation (SPEC §3–§6).
+
+One run is ~0.1 s once compiled. The paper scenario (SPEC §6) is used
+throughout; settings are varied with ``config_from_dict`` (validated).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from cwrend_cli import campaign, sensors, simulation
+from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
+from cwrend_cli.dynamics import discretize
+
+U_MAX = 8e-4  # km/s², paper Table 1
+N_STEPS = 800
+#: Re-solve steps of the paper scenario (SPEC §5): every 10 s while T − t > 20 s.
+#: "correct": T − (k+1) > 20 ⇔ k < 779; "reference": T − k > 20 ⇔ k < 780 ⇒ both k = 0 … 770.
+PAPER_RESOLVE_STEPS = list(range(0, 771, 10))
+#: One ulp of a 31 km coordinate is 3.6e-15 km; (x + v) − x recovers v to ~1e-14 km.
+TOL_NOISE_KM = 1e-13
+
+
+def standard_normal(seed: int) -> np.ndarray:
+    """The seed's realisation of the paper config, shared by all architectures (SPEC §6)."""
+    return campaign.standard_normal_for(CwrendConfig(), seed)
+
+
+def run_all(cfg: CwrendConfig, refs, seed: int) -> dict[str, simulation.RunResult]:
+    z = standard_normal(seed)
+    return {slug: simulation.simulate(cfg, a, z, refs, seed) for slug, a in ARCHITECTURES.items()}
+
+
+@pytest.fixture(scope="module")
+def runs_seed0(paper_cfg, paper_refs) -> dict[str, simulation.RunResult]:
+    return run_all(paper_cfg, paper_refs, 0)
+
+
+ARRAY_FIELDS = [
+    f.name
+    for f in dataclasses.fields(simulation.RunResult)
+    if f.name not in ("arch", "seed", "solves", "delta_v_km_s", "miss_km")
+]
+
+
+# --- determinism and the shared noise -------------------------------------------------
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_simulation_is_deterministic(slug: str, paper_cfg, paper_refs, runs_seed0) -> None:
+    """Same config and seed → bitwise identical histories and solve outcomes."""
+    again = simulation.simulate(paper_cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs, 0)
+    first = runs_seed0[slug]
+    for name in ARRAY_FIELDS:
+        np.testing.assert_array_equal(getattr(again, name), getattr(first, name), err_msg=name)
+    assert again.delta_v_km_s == first.delta_v_km_s
+    assert again.miss_km == first.miss_km
+    strip = [dataclasses.replace(s, wall_time_ms=0.0) for s in first.solves]
+    assert [dataclasses.replace(s, wall_time_ms=0.0) for s in again.solves] == strip
+
+
+def test_architectures_share_the_noise(paper_cfg, runs_seed0) -> None:
+    """SPEC §6: y − H x_true is the same realisation for all four architectures.
+
+    It is chol(true R) n + bias of the window at the step's start (SPEC §5).
+    """
+    t = simulation.time_grid(paper_cfg)
+    expected, _ = sensors.measurement_noise(
+        standard_normal(0), t[:-1], paper_cfg.estimator.r_nominal_matrix(),
+        paper_cfg.degradation.windows,
+    )  # fmt: skip
+    for slug, run in runs_seed0.items():
+        noise = run.y[1:] - run.x_true[1:, :3]
+        np.testing.assert_allclose(noise, expected, rtol=0, atol=TOL_NOISE_KM, err_msg=slug)
+
+
+def test_different_seeds_give_different_noise(paper_cfg, paper_refs, runs_seed0) -> None:
+    """The realisation is seed-dependent."""
+    other = simulation.simulate(
+        paper_cfg, ARCHITECTURES["mtf_adaptive"], standard_normal(1), paper_refs, 1
+    )
+    assert not np.array_equal(other.y[1:], runs_seed0["mtf_adaptive"].y[1:])
+
+
+# --- truth propagation and Δv -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_filter_starts_at_true_state(slug: str, paper_cfg, runs_seed0) -> None:
+    """SPEC §3: the filter starts at the true initial state (x̂₀ = x₀), trace P₀ logged."""
+    run = runs_seed0[slug]
+    np.testing.assert_array_equal(run.x_hat[0], run.x_true[0])
+    assert run.trace_p[0] == pytest.approx(3e-6 + 3e-10, rel=1e-15)  # Table 1 P0
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_truth_is_zero_order_hold_propagation(slug: str, paper_cfg, runs_seed0) -> None:
+    """SPEC §1: x_{k+1} = Φ x_k + Γ u_k exactly (ZOH of the commanded control)."""
+    run = runs_seed0[slug]
+    phi, gam = discretize(paper_cfg.scenario.mean_motion_rad_s, paper_cfg.scenario.dt_s)
+    pred = run.x_true[:-1] @ phi.T + run.u[:-1] @ gam.T
+    np.testing.assert_allclose(run.x_true[1:, :3], pred[:, :3], rtol=0, atol=1e-12)  # 1 nm
+    np.testing.assert_allclose(run.x_true[1:, 3:], pred[:, 3:], rtol=0, atol=1e-15)  # 1 nm/s
+    np.testing.assert_array_equal(run.x_true[0], paper_cfg.scenario.x0)
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_delta_v_is_trapezoid_with_zero_final_control(slug: str, runs_seed0) -> None:
+    """SPEC §2: Δv = trapezoid of ‖u‖ on t = 0 … 800; no control at t = 800 (u[N] = 0)."""
+    run = runs_seed0[slug]
+    np.testing.assert_array_equal(run.u[-1], 0.0)
+    norms = np.linalg.norm(run.u, axis=1)
+    dv = sum(0.5 * (norms[k] + norms[k + 1]) for k in range(N_STEPS))  # Δt = 1 s
+    assert run.delta_v_km_s == pytest.approx(dv, rel=1e-12)  # summation order only
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_miss_is_final_true_position_norm(slug: str, runs_seed0) -> None:
+    """SPEC §2: miss = ‖r_true(T)‖."""
+    run = runs_seed0[slug]
+    assert run.miss_km == pytest.approx(np.linalg.norm(run.x_true[-1, :3]), rel=1e-15)
+
+
+# --- re-solve schedule ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("timing", ["correct", "reference"])
+def test_resolve_steps_paper(timing: str) -> None:
+    """78 re-solves for the paper scenario with either timing (SPEC §5)."""
+    cfg = config_from_dict({"guidance": {"resolve_timing": timing}})
+    steps = simulation.resolve_steps(cfg)
+    assert len(steps) == 78
+    assert steps == PAPER_RESOLVE_STEPS
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_correct_timing_horizons(slug: str, runs_seed0) -> None:
+    """Correct timing: the re-solve of step k starts at t_{k+1} with T − t_{k+1} remaining."""
+    res = runs_seed0[slug].resolves
+    assert [r.step for r in res] == PAPER_RESOLVE_STEPS
+    assert all(r.t_s == r.step + 1.0 and r.horizon_s == 800.0 - (r.step + 1) for r in res)
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_initial_solve_only_for_adaptive(slug: str, runs_seed0) -> None:
+    """SPEC §4: adaptive runs record an initial solve at ε_max from x0 over T; fixed ones none."""
+    run = runs_seed0[slug]
+    initial = [s for s in run.solves if s.kind == "initial"]
+    if ARCHITECTURES[slug].adaptive:
+        assert len(initial) == 1 and run.solves[0] is initial[0]
+        assert (initial[0].t_s, initial[0].horizon_s, initial[0].eps) == (0.0, 800.0, 1.0)
+        assert run.eps[0] == 1.0
+    else:
+        assert initial == []
+        assert np.all(run.eps[~np.isnan(run.eps)] == 0.0)  # fixed ε = 0 throughout
+    assert len(run.solves) == 78 + len(initial)
+
+
+# --- fixed ε = 0: every re-solve converged or infeasible (SPEC §5) ------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("slug", ["plain_fixed", "mtf_fixed"])
+def test_fixed_eps_resolves_converged_or_infeasible(
+    slug: str, seed: int, paper_cfg, paper_refs
+) -> None:
+    """SPEC §5: no re-solve fails; the infeasible ones are in the final braking burn (t ≥ 700 s)."""
+    run = simulation.simulate(paper_cfg, ARCHITECTURES[slug], standard_normal(seed), paper_refs)
+    statuses = [r.status for r in run.resolves]
+    assert set(statuses) <= {"converged", "infeasible"}, statuses
+    late = [r.t_s for r in run.resolves if r.status == "infeasible"]
+    assert all(t >= 700.0 for t in late), late
+    assert all(r.success == (r.status == "converged") for r in run.resolves)
+
+
+# --- options ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_hold_mean_keeps_control_bounded(slug: str, paper_refs) -> None:
+    """``guidance.hold = "mean"``: the step-averaged plan control has ‖u‖ ≤ u_max (SPEC §5).
+
+    Tolerance: a few ulp of the quadrature-weighted average (weights sum to 1 ± 1e-15).
+    """
+    cfg = config_from_dict({"guidance": {"hold": "mean"}})
+    run = simulation.simulate(cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs)
+    assert np.linalg.norm(run.u, axis=1).max() <= U_MAX * (1.0 + 1e-14)
+    assert np.isfinite(run.miss_km)
+
+
+@pytest.mark.parametrize("slug", list(ARCHITECTURES))
+def test_reference_timing_runs(slug: str, paper_refs) -> None:
+    """``resolve_timing = "reference"`` (authors' code): solve at t_{k+1} with horizon T − t_k."""
+    cfg = config_from_dict({"guidance": {"resolve_timing": "reference"}})
+    run = simulation.simulate(cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs)
+    res = run.resolves
+    assert [r.step for r in res] == PAPER_RESOLVE_STEPS
+    assert all(r.t_s == r.step + 1.0 and r.horizon_s == 800.0 - r.step for r in res)
+    assert np.isfinite(run.miss_km) and np.isfinite(run.delta_v_km_s)
+    assert np.linalg.norm(run.u, axis=1).max() <= U_MAX * (1.0 + 1e-15)
