@@ -78,24 +78,42 @@ def _terminal_rows(g: GridProblem, n_vars: int) -> tuple[sp.csc_matrix, np.ndarr
     return a, g.rhs * g.row_scale
 
 
+def _cone_rows(steps: int, n_vars: int, head_cols: np.ndarray | None) -> sp.csc_matrix:
+    """Rows of N second-order cones ``(head_j, ũ_j) ∈ SOC(4)`` as ``s = b − A x``.
+
+    Cone j has rows 4j … 4j+3: the head is ``x[head_cols[j]]`` (or the constant
+    in ``b`` when ``head_cols`` is None) and the body is ``ũ_j``.
+    """
+    j = np.arange(steps)
+    body_rows = (4 * j[:, None] + 1 + np.arange(3)).ravel()
+    body_cols = (3 * j[:, None] + np.arange(3)).ravel()
+    rows = [body_rows]
+    cols = [body_cols]
+    if head_cols is not None:
+        rows.append(4 * j)
+        cols.append(head_cols)
+    r = np.concatenate(rows)
+    c = np.concatenate(cols)
+    return sp.csc_matrix((-np.ones(r.size), (r, c)), shape=(4 * steps, n_vars))
+
+
 def min_peak_thrust(g: GridProblem) -> float:
     """Minimum over grid controls of ``max_j ‖u_j‖`` reaching ``x_f`` [km/s²]; inf if unsolved."""
     steps = g.blocks.shape[0]
     n_vars = 3 * steps + 1  # ũ_0 … ũ_{N−1}, s̃
     a_eq, b_eq = _terminal_rows(g, n_vars)
-    rows = []
-    for j in range(steps):
-        blk = sp.lil_matrix((4, n_vars))
-        blk[0, 3 * steps] = -1.0
-        for i in range(3):
-            blk[1 + i, 3 * j + i] = -1.0
-        rows.append(blk)
-    a = sp.vstack([a_eq, *rows]).tocsc()
+    cones = _cone_rows(steps, n_vars, np.full(steps, 3 * steps))  # (s̃, ũ_j) ∈ SOC
+    a = sp.vstack([a_eq, cones]).tocsc()
     b = np.concatenate([b_eq, np.zeros(4 * steps)])
-    cones = [clarabel.ZeroConeT(6)] + [clarabel.SecondOrderConeT(4)] * steps
     q = np.zeros(n_vars)
     q[-1] = 1.0
-    sol = _solve(sp.csc_matrix((n_vars, n_vars)), q, a, b, cones)
+    sol = _solve(
+        sp.csc_matrix((n_vars, n_vars)),
+        q,
+        a,
+        b,
+        [clarabel.ZeroConeT(6)] + [clarabel.SecondOrderConeT(4)] * steps,
+    )
     if not _solved(sol):
         return float("inf")
     return float(sol.x[-1]) * g.u_max_km_s2
@@ -112,23 +130,21 @@ def min_fuel_costate(g: GridProblem, n: float) -> np.ndarray | None:
     steps = g.blocks.shape[0]
     n_vars = 4 * steps  # ũ (3N), t̃ (N)
     a_eq, b_eq = _terminal_rows(g, n_vars)
-    blocks = []
-    for j in range(steps):
-        # (t̃_j, ũ_j) ∈ SOC and (1, ũ_j) ∈ SOC (‖u_j‖ ≤ u_max)
-        blk = sp.lil_matrix((8, n_vars))
-        blk[0, 3 * steps + j] = -1.0
-        for i in range(3):
-            blk[1 + i, 3 * j + i] = -1.0
-            blk[5 + i, 3 * j + i] = -1.0
-        blocks.append(blk)
-    a = sp.vstack([a_eq, *blocks]).tocsc()
-    b_soc = np.zeros(8 * steps)
-    b_soc[4::8] = 1.0
-    b = np.concatenate([b_eq, b_soc])
-    cones = [clarabel.ZeroConeT(6)] + [clarabel.SecondOrderConeT(4)] * (2 * steps)
+    epigraph = _cone_rows(steps, n_vars, 3 * steps + np.arange(steps))  # (t̃_j, ũ_j) ∈ SOC
+    bound = _cone_rows(steps, n_vars, None)  # (1, ũ_j) ∈ SOC: ‖u_j‖ ≤ u_max
+    a = sp.vstack([a_eq, epigraph, bound]).tocsc()
+    b_bound = np.zeros(4 * steps)
+    b_bound[0::4] = 1.0
+    b = np.concatenate([b_eq, np.zeros(4 * steps), b_bound])
     q = np.zeros(n_vars)
     q[3 * steps :] = 1.0
-    sol = _solve(sp.csc_matrix((n_vars, n_vars)), q, a, b, cones)
+    sol = _solve(
+        sp.csc_matrix((n_vars, n_vars)),
+        q,
+        a,
+        b,
+        [clarabel.ZeroConeT(6)] + [clarabel.SecondOrderConeT(4)] * (2 * steps),
+    )
     if not _solved(sol):
         return None
     # Clarabel: q + Aᵀz = 0 with objective Σ t̃ = Σ Δt‖u‖/(Δt u_max); undo both scalings.
@@ -150,24 +166,23 @@ def min_miss_controls(g: GridProblem, velocity_weight_s: float) -> np.ndarray | 
     scale = 1.0 / (g.u_max_km_s2 * max(steps * g.dt_s, 1.0) ** 2)
     wm = m * (weights * scale)[:, None]
     wb = g.rhs * weights * scale
-    # (e, W(M ũ − b)) ∈ SOC(7):  s = b_c − A x  with  A = [[−1, 0], [0, −W M]], b_c = [0, −W b]
-    top = sp.lil_matrix((1, n_vars))
-    top[0, 3 * steps] = -1.0
+    # (e, W(M ũ − b)) ∈ SOC(7):  s = b_c − A x  with  A = [[−1, 0], [−W M, 0]], b_c = [0, −W b]
+    top = sp.csc_matrix(([-1.0], ([0], [3 * steps])), shape=(1, n_vars))
     body = sp.hstack([sp.csc_matrix(-wm), sp.csc_matrix((6, 1))])
-    a_rows = [top, body]
-    b_rows = [np.zeros(1), -wb]
-    for j in range(steps):
-        blk = sp.lil_matrix((4, n_vars))
-        for i in range(3):
-            blk[1 + i, 3 * j + i] = -1.0
-        a_rows.append(blk)
-        b_rows.append(np.array([1.0, 0.0, 0.0, 0.0]))
-    a = sp.vstack(a_rows).tocsc()
-    b = np.concatenate(b_rows)
-    cones = [clarabel.SecondOrderConeT(7)] + [clarabel.SecondOrderConeT(4)] * steps
+    bound = _cone_rows(steps, n_vars, None)  # (1, ũ_j) ∈ SOC
+    a = sp.vstack([top, body, bound]).tocsc()
+    b_bound = np.zeros(4 * steps)
+    b_bound[0::4] = 1.0
+    b = np.concatenate([np.zeros(1), -wb, b_bound])
     q = np.zeros(n_vars)
     q[-1] = 1.0
-    sol = _solve(sp.csc_matrix((n_vars, n_vars)), q, a, b, cones)
+    sol = _solve(
+        sp.csc_matrix((n_vars, n_vars)),
+        q,
+        a,
+        b,
+        [clarabel.SecondOrderConeT(7)] + [clarabel.SecondOrderConeT(4)] * steps,
+    )
     if not _solved(sol):
         return None
     u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3) * g.u_max_km_s2
