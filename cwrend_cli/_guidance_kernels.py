@@ -206,9 +206,13 @@ def find_switches(
     eps: float,
     n_cells: int,
     breaks: np.ndarray,
+    minima: np.ndarray,
     work: np.ndarray,
-) -> int:
-    """Switching times in ``(t0, t1)``, sorted, written into ``breaks``; returns their count.
+) -> tuple:
+    """Switching times in ``(t0, t1)``, sorted, written into ``breaks``.
+
+    Returns ``(count, n_minima)``; the interior local minima of ``‖λ_v‖`` met
+    on the way are written into ``minima`` (used to refine the quadrature).
 
     Switching times are the roots of ``f(t) = ‖λ_v(t)‖²`` at the levels
     ``(1 ± ε)²`` (just 1 at ε = 0). ``[t0, t1]`` is cut into ``n_cells`` cells;
@@ -230,7 +234,9 @@ def find_switches(
         lv0 = (1.0 + eps) ** 2
         lv1 = lv0
     count = 0
+    n_min = 0
     pieces = np.empty(4)
+    is_min = np.zeros(4, dtype=np.bool_)
     h = (t1 - t0) / n_cells
     a = t0
     fa0, fa1, fa2, _ = _switch_derivs(n, lam0, a, work)
@@ -239,9 +245,9 @@ def find_switches(
         fb0, fb1, fb2, _ = _switch_derivs(n, lam0, b, work)
         # Split points: an inflection (f'' = 0) where f' may change sign twice,
         # then the extrema (f' = 0) on each side of it.
-        n_pieces = 0
         pieces[0] = a
         n_pieces = 1
+        is_min[:] = False
         inflect = -1.0
         if (fa2 < 0.0) != (fb2 < 0.0):
             inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, 2, 0.0, work)
@@ -249,15 +255,22 @@ def find_switches(
             _, fi1, _, _ = _switch_derivs(n, lam0, inflect, work)
             if (fa1 < 0.0) != (fi1 < 0.0):
                 pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, 1, 0.0, work)
+                is_min[n_pieces] = fa1 < 0.0
                 n_pieces += 1
             pieces[n_pieces] = inflect
             n_pieces += 1
             if (fi1 < 0.0) != (fb1 < 0.0):
                 pieces[n_pieces] = _bracketed_root(n, lam0, inflect, b, fi1, fb1, 1, 0.0, work)
+                is_min[n_pieces] = fi1 < 0.0
                 n_pieces += 1
         elif (fa1 < 0.0) != (fb1 < 0.0):
             pieces[n_pieces] = _bracketed_root(n, lam0, a, b, fa1, fb1, 1, 0.0, work)
+            is_min[n_pieces] = fa1 < 0.0
             n_pieces += 1
+        for k in range(1, n_pieces):
+            if is_min[k] and n_min < minima.shape[0]:
+                minima[n_min] = pieces[k]
+                n_min += 1
         # Monotone pieces: each level is crossed at most once on each.
         u = a
         fu0 = fa0
@@ -284,7 +297,75 @@ def find_switches(
         fa0 = fb0
         fa1 = fb1
         fa2 = fb2
-    return count
+    return count, n_min
+
+
+#: Rotation time scale ‖λ_v‖/‖λ̇_v‖ [s] below which the quadrature is graded
+#: towards a minimum of ‖λ_v‖ (the thrust direction turns quickly there).
+REFINE_SCALE_S = 10.0
+#: Most quadrature breakpoints of one evaluation (switches plus refinement).
+MAX_QUAD_BREAKS = 4 * MAX_BREAKS
+
+
+@njit(cache=True)
+def quadrature_breaks(
+    n: float,
+    lam0: np.ndarray,
+    t0: float,
+    t1: float,
+    eps: float,
+    n_cells: int,
+    switches: np.ndarray,
+    breaks: np.ndarray,
+    work: np.ndarray,
+) -> tuple:
+    """Switching times, and the breakpoints of the arc-by-arc quadrature.
+
+    Returns ``(n_switches, n_breaks)``. The breakpoints are the switching
+    times plus, around each minimum of ``‖λ_v‖`` (interior, or at an end of
+    the interval) where the direction ``λ_v/‖λ_v‖`` turns within
+    ``w = ‖λ_v‖/‖λ̇_v‖ < REFINE_SCALE_S`` seconds, points at ``t_m ± w·2ᵏ``:
+    the integrand has complex singularities at distance ``w`` from ``t_m``,
+    and this grading keeps Gauss–Legendre spectrally accurate on every arc.
+    """
+    minima = np.empty(MAX_BREAKS // 4 + 2)
+    n_sw, n_min = find_switches(n, lam0, t0, t1, eps, n_cells, switches, minima, work)
+    nb = 0
+    for i in range(n_sw):
+        breaks[nb] = switches[i]
+        nb += 1
+    # the ends are minima of ‖λ_v‖ on the interval when it grows away from them
+    _, f1, _, _ = _switch_derivs(n, lam0, t0, work)
+    if f1 > 0.0:
+        minima[n_min] = t0
+        n_min += 1
+    _, f1, _, _ = _switch_derivs(n, lam0, t1, work)
+    if f1 < 0.0:
+        minima[n_min] = t1
+        n_min += 1
+    lam = work[0]
+    d1 = work[1]
+    for i in range(n_min):
+        tm = minima[i]
+        costate_at(n, tm, lam0, lam)
+        costate_derivative(n, lam, d1)
+        p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
+        r = np.sqrt(d1[3] ** 2 + d1[4] ** 2 + d1[5] ** 2)
+        if r <= 0.0 or p >= REFINE_SCALE_S * r:
+            continue
+        w = max(p / r, 1e-9)
+        if t0 < tm < t1 and nb < breaks.shape[0]:
+            breaks[nb] = tm
+            nb += 1
+        d = w
+        while d < t1 - t0:
+            for t in (tm - d, tm + d):
+                if t0 < t < t1 and nb < breaks.shape[0]:
+                    breaks[nb] = t
+                    nb += 1
+            d *= 2.0
+    breaks[:nb] = np.sort(breaks[:nb])
+    return n_sw, nb
 
 
 @njit(cache=True)
@@ -326,8 +407,11 @@ def dual_evaluate(
     ``c = −λ₀ᵀd − u_max ∫‖W(τ)ᵀλ₀‖ dτ`` (positive ⇒ no bounded control reaches
     ``x_f``) and the number of switching times found.
     """
-    breaks = work[8, :MAX_BREAKS]
-    n_breaks = find_switches(n, lam0, 0.0, horizon, eps, n_cells, breaks, work)
+    switches = work[8, :MAX_BREAKS]
+    breaks = np.empty(MAX_QUAD_BREAKS)
+    n_switches, n_breaks = quadrature_breaks(
+        n, lam0, 0.0, horizon, eps, n_cells, switches, breaks, work
+    )
     w = np.empty((6, 3))
     wq = np.empty(6)
     for i in range(6):
@@ -379,8 +463,8 @@ def dual_evaluate(
         # Jump terms at ε = 0: −u_max W q̂q̂ᵀWᵀ/|ṗ| at each switching time.
         lam = work[0]
         d1 = work[1]
-        for s in range(n_breaks):
-            ts = breaks[s]
+        for s in range(n_switches):
+            ts = switches[s]
             costate_at(n, ts, lam0, lam)
             costate_derivative(n, lam, d1)
             p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
@@ -402,7 +486,7 @@ def dual_evaluate(
         grad[i] -= d[i]
     value = -lam_d - u_max * int_psi
     cert = -lam_d - u_max * int_p
-    return value, cert, n_breaks
+    return value, cert, n_switches
 
 
 @njit(cache=True)

@@ -17,9 +17,10 @@ from numba import njit
 
 from cwrend_cli._guidance_kernels import (
     MAX_BREAKS,
+    MAX_QUAD_BREAKS,
     control_from_costate,
     costate_at,
-    find_switches,
+    quadrature_breaks,
 )
 from cwrend_cli.estimation import kf_predict, kf_update
 from cwrend_cli.scheduling import composite_score, eps_blend, eps_target, lowpass_score
@@ -60,8 +61,9 @@ def mean_control(
     Integrated exactly arc by arc between switching times, so its norm never
     exceeds ``u_max``.
     """
-    breaks = work[8, :MAX_BREAKS]
-    n_breaks = find_switches(n, lam, 0.0, dt, eps, 1, breaks, work)
+    switches = work[8, :MAX_BREAKS]
+    breaks = np.empty(MAX_QUAD_BREAKS)
+    _, n_breaks = quadrature_breaks(n, lam, 0.0, dt, eps, 1, switches, breaks, work)
     lam_t = work[7, :6]
     u = np.empty(3)
     acc0 = 0.0

@@ -330,8 +330,9 @@ def switching_times(
     """Times in ``(t0, t1)`` where ``‖λ_v‖`` crosses ``1 ± ε`` (1 at ε = 0) [s]."""
     t1 = problem.horizon_s if t1 is None else t1
     breaks = np.empty(kern.MAX_BREAKS)
+    minima = np.empty(kern.MAX_BREAKS)
     work = np.empty((9, kern.MAX_BREAKS))
-    count = kern.find_switches(
+    count, _ = kern.find_switches(
         problem.mean_motion_rad_s,
         np.ascontiguousarray(costate, dtype=float),
         float(t0),
@@ -339,6 +340,7 @@ def switching_times(
         float(problem.eps),
         n_cells(t1 - t0),
         breaks,
+        minima,
         work,
     )
     return breaks[:count].copy()
