@@ -17,6 +17,8 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import threading
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -41,8 +43,18 @@ class InlineExecutor(Executor):
         return future
 
 
-def _ignore_sigint() -> None:
+def _worker_init() -> None:
+    """Pool workers ignore Ctrl-C (the parent stops them) and exit if the parent dies."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:  # orphaned: the campaign was killed
+                os._exit(1)
+
+    threading.Thread(target=watch, name="cwrend-parent-watch", daemon=True).start()
 
 
 def default_workers() -> int:
@@ -66,7 +78,7 @@ def open_executor(
         pool = ProcessPoolExecutor(
             max_workers=n,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=_ignore_sigint,
+            initializer=_worker_init,
         )
         try:
             yield pool, n

@@ -317,3 +317,42 @@ def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
     steps = _steps(out)
     assert len(steps) == 48 * 801  # nothing duplicated
     pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                kids.append(int(entry.name))
+    return kids
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_workers_exit_when_the_campaign_is_killed(tmp_path: Path) -> None:
+    """No leaked processes: pool workers notice a killed parent and exit (NOTES item 7)."""
+    cfg = _write_config(tmp_path / "c.toml", "orphans")
+    out = tmp_path / "results" / "orphans"
+    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "400", "--arch",
+            ADAPTIVE, "--workers", "2", "-q"]  # fmt: skip
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while _events_done(out / "events.jsonl") < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = [
+        p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()
+    ]
+    assert workers, "the pool should have started worker processes"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 15
+    while any(Path(f"/proc/{p}").exists() for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [p for p in workers if Path(f"/proc/{p}").exists()]
+    for p in alive:
+        os.kill(p, signal.SIGKILL)
+    assert not alive, f"worker processes {alive} outlived the killed campaign"
