@@ -115,6 +115,19 @@ def control_from_costate(lam_v: np.ndarray, eps: float, u_max: float, out: np.nd
 
 
 @njit(cache=True)
+def _speed_and_rate(n: float, t: float, lam0: np.ndarray, work: np.ndarray) -> tuple:
+    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``work[0]`` holds λ(t) afterwards."""
+    lam = work[0]
+    d1 = work[1]
+    costate_at(n, t, lam0, lam)
+    costate_derivative(n, lam, d1)
+    p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
+    pdot = (lam[3] * d1[3] + lam[4] * d1[4] + lam[5] * d1[5]) / p
+    r = np.sqrt(d1[3] ** 2 + d1[4] ** 2 + d1[5] ** 2)
+    return p, pdot, r
+
+
+@njit(cache=True)
 def _switch_derivs(n: float, lam0: np.ndarray, t: float, work: np.ndarray) -> tuple:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
     lam = work[0]
@@ -343,14 +356,9 @@ def quadrature_breaks(
     if f1 < 0.0:
         minima[n_min] = t1
         n_min += 1
-    lam = work[0]
-    d1 = work[1]
     for i in range(n_min):
         tm = minima[i]
-        costate_at(n, tm, lam0, lam)
-        costate_derivative(n, lam, d1)
-        p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
-        r = np.sqrt(d1[3] ** 2 + d1[4] ** 2 + d1[5] ** 2)
+        p, _, r = _speed_and_rate(n, tm, lam0, work)
         if r <= 0.0 or p >= REFINE_SCALE_S * r:
             continue
         w = max(p / r, 1e-9)
@@ -462,13 +470,9 @@ def dual_evaluate(
     if want_hess and eps < EPS_BANG_BANG:
         # Jump terms at ε = 0: −u_max W q̂q̂ᵀWᵀ/|ṗ| at each switching time.
         lam = work[0]
-        d1 = work[1]
         for s in range(n_switches):
             ts = switches[s]
-            costate_at(n, ts, lam0, lam)
-            costate_derivative(n, lam, d1)
-            p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
-            pdot = (lam[3] * d1[3] + lam[4] * d1[4] + lam[5] * d1[5]) / p
+            p, pdot, _ = _speed_and_rate(n, ts, lam0, work)
             rate = max(abs(pdot), MIN_SWITCH_RATE)
             input_kernel(n, ts, w)
             for i in range(6):

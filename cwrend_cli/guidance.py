@@ -209,8 +209,9 @@ def _continuation(
     return SolveStatus.FAILED, lam, total, res
 
 
-def _multiplier_guess(problem: ShootingProblem, settings: SolverSettings) -> np.ndarray | None:
-    g = feasibility.grid_problem(
+def _grid(problem: ShootingProblem, settings: SolverSettings) -> feasibility.GridProblem:
+    """The re-solve transcribed on the zero-order-hold grid of the convex checks."""
+    return feasibility.grid_problem(
         problem.mean_motion_rad_s,
         problem.x0,
         problem.xf,
@@ -218,7 +219,10 @@ def _multiplier_guess(problem: ShootingProblem, settings: SolverSettings) -> np.
         settings.dt_grid_s,
         problem.u_max_km_s2,
     )
-    return feasibility.min_fuel_costate(g, problem.mean_motion_rad_s)
+
+
+def _multiplier_guess(problem: ShootingProblem, settings: SolverSettings) -> np.ndarray | None:
+    return feasibility.min_fuel_costate(_grid(problem, settings), problem.mean_motion_rad_s)
 
 
 def solve(
@@ -275,53 +279,41 @@ def solve(
     return done(classify_failure(problem, settings), guess, "zoh_peak_thrust", first_res)
 
 
-def terminal_state(problem: ShootingProblem, costate: np.ndarray, nodes: int = 12) -> np.ndarray:
-    """``x(T)`` reached from ``x0`` under the control law with ``λ(0) = costate``."""
+def _evaluate(
+    problem: ShootingProblem, costate: np.ndarray, nodes: int, want_hess: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """``Φ(T)·(x₀ + ∫W u dτ) = x(T)`` and ``Φ(T)·∂G/∂λ₀`` for a costate (any ``x_f``)."""
     gl_x, gl_w = _gauss_legendre(nodes)
-    d = -np.asarray(problem.x0, dtype=float)  # with x_f = 0: G = ∫W u + x₀
     grad = np.empty(6)
     hess = np.empty((6, 6))
     work = np.empty((9, kern.MAX_BREAKS))
     kern.dual_evaluate(
         problem.mean_motion_rad_s,
         np.ascontiguousarray(costate, dtype=float),
-        d,
+        -np.asarray(problem.x0, dtype=float),  # d = −x₀ makes G = x₀ + ∫ W u dτ
         float(problem.horizon_s),
         float(problem.eps),
         problem.u_max_km_s2,
         gl_x,
         gl_w,
         n_cells(problem.horizon_s),
-        False,
+        want_hess,
         grad,
         hess,
         work,
     )
-    return stm(problem.mean_motion_rad_s, problem.horizon_s) @ grad
+    phi = stm(problem.mean_motion_rad_s, problem.horizon_s)
+    return phi @ grad, phi @ hess
+
+
+def terminal_state(problem: ShootingProblem, costate: np.ndarray, nodes: int = 12) -> np.ndarray:
+    """``x(T)`` reached from ``x0`` under the control law with ``λ(0) = costate``."""
+    return _evaluate(problem, costate, nodes, want_hess=False)[0]
 
 
 def shooting_jacobian(problem: ShootingProblem, costate: np.ndarray, nodes: int = 12) -> np.ndarray:
     """Analytic ``∂x(T)/∂λ(0)`` (6×6), including the ε = 0 jump terms."""
-    gl_x, gl_w = _gauss_legendre(nodes)
-    grad = np.empty(6)
-    hess = np.empty((6, 6))
-    work = np.empty((9, kern.MAX_BREAKS))
-    kern.dual_evaluate(
-        problem.mean_motion_rad_s,
-        np.ascontiguousarray(costate, dtype=float),
-        -np.asarray(problem.x0, dtype=float),
-        float(problem.horizon_s),
-        float(problem.eps),
-        problem.u_max_km_s2,
-        gl_x,
-        gl_w,
-        n_cells(problem.horizon_s),
-        True,
-        grad,
-        hess,
-        work,
-    )
-    return stm(problem.mean_motion_rad_s, problem.horizon_s) @ hess
+    return _evaluate(problem, costate, nodes, want_hess=True)[1]
 
 
 def switching_times(
@@ -348,13 +340,5 @@ def switching_times(
 
 def classify_failure(problem: ShootingProblem, settings: SolverSettings) -> SolveStatus:
     """``infeasible`` if the ZOH grid's minimum peak thrust exceeds ``u_max``, else ``failed``."""
-    g = feasibility.grid_problem(
-        problem.mean_motion_rad_s,
-        problem.x0,
-        problem.xf,
-        problem.horizon_s,
-        settings.dt_grid_s,
-        problem.u_max_km_s2,
-    )
-    peak = feasibility.min_peak_thrust(g)
+    peak = feasibility.min_peak_thrust(_grid(problem, settings))
     return SolveStatus.INFEASIBLE if peak > problem.u_max_km_s2 else SolveStatus.FAILED
