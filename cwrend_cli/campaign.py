@@ -45,7 +45,7 @@ from cwrend_cli.config import (
     set_dotted,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
-from cwrend_cli.executors import ExecutorKind, open_executor
+from cwrend_cli.executors import ExecutorKind, default_workers, open_executor
 
 BASE_POINT = "base"
 
@@ -387,8 +387,9 @@ def execute_task(
 
     A run that raises is returned as ``failed`` with its traceback; the other
     runs of the task go on. Files are written per task execution and
-    architecture, as ``steps/arch=<slug>/<task_key>-<digest>.parquet``, where
-    the digest names the set of runs executed: rerunning the same runs
+    architecture, as ``steps/arch=<slug>/<task_key>-<digest>.parquet`` (only
+    seeds below ``output.steps_seeds`` when set), where the digest names the set
+    of runs executed: rerunning the same runs
     overwrites the same files (atomically), so nothing is ever duplicated.
     """
     outcomes: list[RunOutcome] = []
@@ -413,20 +414,24 @@ def execute_task(
             outcomes.append(RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0))
     files: list[str] = []
     digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
-    if write_steps and results:
-        root = Path(out_dir)
+    limit = base["output"].get("steps_seeds")
+    if write_steps:
         for arch, items in sorted(results.items()):
-            extra = {
-                "run_key": [s.run_key for s, _ in items],
-                "point": [s.point for s, _ in items],
-            }
-            runs = [r for _, r in items]
-            for kind, table in (
-                ("steps", storage.campaign_steps_table(runs, extra)),
-                ("solves", storage.campaign_solves_table(runs, extra)),
-            ):
+            kept = [(s, r) for s, r in items if limit is None or s.seed < limit]
+            for kind, chosen in (("solves", items), ("steps", kept)):
+                if not chosen:
+                    continue
+                extra = {
+                    "run_key": [s.run_key for s, _ in chosen],
+                    "point": [s.point for s, _ in chosen],
+                }
+                build = (
+                    storage.campaign_steps_table
+                    if kind == "steps"
+                    else storage.campaign_solves_table
+                )
                 rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
-                storage.write_parquet(table, root / rel)
+                storage.write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
                 files.append(rel)
     return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files))
 
@@ -610,6 +615,8 @@ def run_campaign(
     progress.start(total, skipped)
     try:
         if tasks:
+            if executor_kind == "local":  # no pool larger than the work (one task: in-process)
+                workers = min(workers or default_workers(), len(tasks))
             with open_executor(executor_kind, workers, address) as (executor, parallel):
                 _drive(executor, parallel, tasks, plan_, out_dir, write_steps, progress)
     except KeyboardInterrupt:

@@ -500,6 +500,12 @@ class OutputConfig(_FrozenModel):
         None,
         description="run/campaign name, a plain file name (default: the config file's stem)",
     )
+    steps_seeds: Int | None = Field(
+        None,
+        ge=0,
+        description="campaigns: write per-step data (steps/ dataset) only for seeds below "
+        "this number; unset = every seed, 0 = none (a run's steps take about 200 kB)",
+    )
 
     @field_validator("name")
     @classmethod

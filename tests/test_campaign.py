@@ -356,3 +356,13 @@ def test_workers_exit_when_the_campaign_is_killed(tmp_path: Path) -> None:
     for p in alive:
         os.kill(p, signal.SIGKILL)
     assert not alive, f"worker processes {alive} outlived the killed campaign"
+
+
+def test_steps_seeds_limits_the_per_step_data(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "lean", "steps_seeds = 1\n")
+    result = _cli("ablate", str(cfg), "--seeds", "2", "--arch", "mtf_adaptive", "-q")
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "results" / "lean"
+    assert set(pd.read_parquet(out / "steps")["seed"]) == {0}
+    assert set(pd.read_parquet(out / "solves")["seed"]) == {0, 1}
+    assert len(pd.read_parquet(out / "runs.parquet")) == 2
