@@ -1,0 +1,164 @@
+"""Campaign throughput, memory and end-to-end time through the CLI (run by hand).
+
+    python -m benchmarks.bench_campaign [--runs 200] [--big 2000]
+
+Every figure is the wall time of a real ``cwrend`` process (Parquet written),
+so it includes interpreter start-up, loading the compiled kernels from the
+numba cache and spawning workers:
+
+1. the paper ablation end to end (``cwrend ablate campaigns/paper.toml``),
+   with a warm compilation cache and with a cold one (``NUMBA_CACHE_DIR``
+   pointed at an empty directory);
+2. a Monte Carlo campaign of the two adaptive architectures and the
+   four-architecture ablation, ``--runs`` runs each, with 1 and 2 workers:
+   runs per second, the speed-up, and peak memory (largest process RSS);
+3. the same adaptive campaign with ``--big`` runs (steps written for the
+   first 20 seeds only) to show that memory stays flat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.common import Row
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "campaigns" / "paper.toml"
+CHILD = (
+    "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True,"
+    " stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL);"
+    " print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+)
+
+
+def cwrend(args: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+    """Run ``cwrend ARGS`` in a fresh process: (wall time [s], peak RSS of any process [MiB])."""
+    cmd = [sys.executable, "-c", CHILD, sys.executable, "-m", "cwrend_cli", *args]
+    start = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True)
+    wall = time.perf_counter() - start
+    return wall, int(out.stdout.strip()) / 1024.0  # ru_maxrss is in KiB on Linux
+
+
+def _common(out: Path, name: str) -> list[str]:
+    return ["--set", f'output.dir="{out}"', "--name", name, "--force", "-q"]
+
+
+def paper_ablation(tmp: Path) -> list[Row]:
+    """Section 1: the paper ablation end to end, warm and cold compilation cache."""
+    args = ["ablate", str(PAPER), *_common(tmp, "paper")]
+    cwrend(args)  # make sure the cache is warm
+    warm = min(cwrend(args)[0] for _ in range(3))
+    cold_env = {**os.environ, "NUMBA_CACHE_DIR": tempfile.mkdtemp(prefix="cwrend-cold-")}
+    cold = cwrend(args, cold_env)[0]
+    return [
+        Row(
+            "end to end", "cwrend ablate campaigns/paper.toml, warm cache", warm, "s", target="<= 5"
+        ),
+        Row(
+            "end to end",
+            "cwrend ablate campaigns/paper.toml, cold cache (compiles)",
+            cold,
+            "s",
+            note="numba compiles every kernel once; cached on disk afterwards",
+        ),
+    ]
+
+
+def throughput(tmp: Path, runs: int) -> list[Row]:
+    """Section 2: runs per second with 1 and 2 workers, and peak memory."""
+    rows = []
+    cases = (
+        ("adaptive Monte Carlo", "mtf_adaptive,plain_adaptive", 2, ">= 200"),
+        ("four-architecture ablation", "all", 4, ">= 20"),
+    )
+    for label, archs, n_archs, target in cases:
+        seeds = str(runs // n_archs)
+        rates = {}
+        for workers in (1, 2):
+            args = [
+                "ablate",
+                str(PAPER),
+                "--seeds",
+                seeds,
+                "--arch",
+                archs,
+                "--workers",
+                str(workers),
+                *_common(tmp, f"tp{workers}"),
+            ]
+            wall, rss = cwrend(args)
+            rates[workers] = runs / wall
+            rows.append(
+                Row(
+                    "campaign",
+                    f"{label}, {runs} runs, {workers} worker(s)",
+                    rates[workers],
+                    "runs/s",
+                    target=target if workers == 2 else "",
+                    note=f"wall {wall:.1f} s, peak RSS {rss:.0f} MiB",
+                )
+            )
+        rows.append(Row("campaign", f"{label}: speed-up 2 vs 1 worker", rates[2] / rates[1], "×"))
+    return rows
+
+
+def memory(tmp: Path, runs: int, big: int) -> list[Row]:
+    """Section 3: peak memory for a small and a big campaign (flat in the number of runs)."""
+    rows = []
+    for n in (runs, big):
+        args = [
+            "ablate",
+            str(PAPER),
+            "--seeds",
+            str(n // 2),
+            "--arch",
+            "mtf_adaptive,plain_adaptive",
+            "--workers",
+            "2",
+            "--set",
+            "output.steps_seeds=20",
+            *_common(tmp, f"mem{n}"),
+        ]
+        wall, rss = cwrend(args)
+        rows.append(
+            Row(
+                "memory",
+                f"adaptive campaign, {n} runs: peak RSS",
+                rss,
+                "MiB",
+                note=f"{n / wall:.0f} runs/s",
+            )
+        )
+    return rows
+
+
+def run(runs: int = 200, big: int = 2000) -> list[Row]:
+    """All campaign sections, in a scratch directory."""
+    with tempfile.TemporaryDirectory(prefix="cwrend-bench-") as tmp:
+        tmp_path = Path(tmp)
+        return [
+            *paper_ablation(tmp_path),
+            *throughput(tmp_path, runs),
+            *memory(tmp_path, runs, big),
+        ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--runs", type=int, default=200)
+    parser.add_argument("--big", type=int, default=2000)
+    args = parser.parse_args()
+    from benchmarks.__main__ import print_rows
+
+    print_rows(run(args.runs, args.big))
+
+
+if __name__ == "__main__":
+    main()
