@@ -2,7 +2,11 @@
 
 Paper Eqs. (11)–(23). Pure step functions on arrays (compiled with numba so the
 closed loop can call them); history is kept by the caller. Units: km, km/s.
-The measurement is the relative position, ``H = [I₃ 0]`` (Eq. 13).
+The measurement is the relative position, ``H = [I₃ 0]`` (Eq. 13), so every
+product with ``H`` is a slice: ``H P Hᵀ = P[:3, :3]``, ``P Hᵀ = P[:, :3]``.
+The 6×6 and 3×3 products are written out as loops: at this size that is
+several times faster than calling BLAS/LAPACK, and it allocates only the
+returned arrays.
 """
 
 from __future__ import annotations
@@ -17,12 +21,52 @@ TRACE_FLOOR = 1e-12
 
 
 @njit(cache=True)
+def _inverse_spd3(s: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive-definite 3×3 matrix (adjugate / determinant)."""
+    a, b, c = s[0, 0], s[0, 1], s[0, 2]
+    d, e = s[1, 1], s[1, 2]
+    f = s[2, 2]
+    inv = np.empty((3, 3))
+    inv[0, 0] = d * f - e * e
+    inv[0, 1] = c * e - b * f
+    inv[0, 2] = b * e - c * d
+    inv[1, 1] = a * f - c * c
+    inv[1, 2] = b * c - a * e
+    inv[2, 2] = a * d - b * b
+    det = a * inv[0, 0] + b * inv[0, 1] + c * inv[0, 2]
+    for i in range(3):
+        for j in range(i, 3):
+            inv[i, j] /= det
+            inv[j, i] = inv[i, j]
+    return inv
+
+
+@njit(cache=True)
 def kf_predict(
     x: np.ndarray, p: np.ndarray, phi: np.ndarray, gam: np.ndarray, u: np.ndarray, q: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Time update, Eqs. (11)–(12): ``x⁻ = Φx⁺ + Γu``, ``P⁻ = ΦP⁺Φᵀ + Q``."""
-    x_pred = phi @ x + gam @ u
-    p_pred = phi @ p @ phi.T + q
+    x_pred = np.empty(6)
+    for i in range(6):
+        acc = gam[i, 0] * u[0] + gam[i, 1] * u[1] + gam[i, 2] * u[2]
+        for j in range(6):
+            acc += phi[i, j] * x[j]
+        x_pred[i] = acc
+    phi_p = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += phi[i, k] * p[k, j]
+            phi_p[i, j] = acc
+    p_pred = np.empty((6, 6))
+    for i in range(6):
+        for j in range(i, 6):
+            acc = q[i, j]
+            for k in range(6):
+                acc += phi_p[i, k] * phi[j, k]
+            p_pred[i, j] = acc
+            p_pred[j, i] = acc
     return x_pred, p_pred
 
 
@@ -35,14 +79,22 @@ def kf_update(
     Returns ``(x⁺, P⁺, NIS, ρ_MTF)``; ``ρ_MTF = 0`` when MTF is off.
     """
     # innovation ν = y − H x⁻ (Eq. 14) and nominal covariance S = H P⁻ Hᵀ + R (Eq. 15)
-    nu = y - x_pred[:3]
-    s = p_pred[:3, :3] + r_nominal
+    nu = np.empty(3)
+    s = np.empty((3, 3))
+    for i in range(3):
+        nu[i] = y[i] - x_pred[i]
+        for j in range(3):
+            s[i, j] = p_pred[i, j] + r_nominal[i, j]
     # NIS = νᵀ S⁻¹ ν (Eq. 22)
-    nis = nu @ np.linalg.solve(s, nu)
+    s_inv = _inverse_spd3(s)
+    nis = 0.0
+    for i in range(3):
+        for j in range(3):
+            nis += nu[i] * s_inv[i, j] * nu[j]
     r_eff = r_nominal.copy()
     rho = 0.0
     if use_mtf:
-        # S_raw = ννᵀ − S (Eq. 16); keep positive diagonal excess only (Eq. 17)
+        # S_raw = ννᵀ − S (Eq. 16); keep the positive diagonal excess only (Eq. 17)
         s_mtf_trace = 0.0
         for i in range(3):
             excess = nu[i] * nu[i] - s[i, i]
@@ -50,15 +102,48 @@ def kf_update(
                 r_eff[i, i] += excess  # R_eff = R + S_MTF (Eq. 18)
                 s_mtf_trace += excess
         # ρ = tr(S_MTF)/tr(S) (Eq. 23), with a floor on tr(S)
-        rho = s_mtf_trace / max(np.trace(s), TRACE_FLOOR)
+        rho = s_mtf_trace / max(s[0, 0] + s[1, 1] + s[2, 2], TRACE_FLOOR)
     # K = P⁻Hᵀ (H P⁻ Hᵀ + R_eff + δI)⁻¹ (Eq. 19)
-    s_eff = p_pred[:3, :3] + r_eff + GAIN_REGULARISATION * np.eye(3)
-    k = np.linalg.solve(s_eff, p_pred[:3, :].copy()).T
+    s_eff = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            s_eff[i, j] = p_pred[i, j] + r_eff[i, j]
+        s_eff[i, i] += GAIN_REGULARISATION
+    s_eff_inv = _inverse_spd3(s_eff)
+    k = np.empty((6, 3))
+    for i in range(6):
+        for j in range(3):
+            k[i, j] = (
+                p_pred[i, 0] * s_eff_inv[0, j]
+                + p_pred[i, 1] * s_eff_inv[1, j]
+                + p_pred[i, 2] * s_eff_inv[2, j]
+            )
     # x⁺ = x⁻ + K ν (Eq. 20)
-    x_post = x_pred + k @ nu
-    # Joseph form P⁺ = (I − KH) P⁻ (I − KH)ᵀ + K R_eff Kᵀ (Eq. 21): stays symmetric PSD
+    x_post = np.empty(6)
+    for i in range(6):
+        x_post[i] = x_pred[i] + k[i, 0] * nu[0] + k[i, 1] * nu[1] + k[i, 2] * nu[2]
+    # Joseph form P⁺ = (I − KH) P⁻ (I − KH)ᵀ + K R_eff Kᵀ (Eq. 21): symmetric PSD by construction
     ikh = np.eye(6)
-    ikh[:, :3] -= k
-    p_post = ikh @ p_pred @ ikh.T + k @ r_eff @ k.T
-    p_post = 0.5 * (p_post + p_post.T)
+    for i in range(6):
+        for j in range(3):
+            ikh[i, j] -= k[i, j]
+    tmp = np.empty((6, 6))
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for m in range(6):
+                acc += ikh[i, m] * p_pred[m, j]
+            tmp[i, j] = acc
+    kr = np.empty((6, 3))
+    for i in range(6):
+        for j in range(3):
+            kr[i, j] = k[i, 0] * r_eff[0, j] + k[i, 1] * r_eff[1, j] + k[i, 2] * r_eff[2, j]
+    p_post = np.empty((6, 6))
+    for i in range(6):
+        for j in range(i, 6):
+            acc = kr[i, 0] * k[j, 0] + kr[i, 1] * k[j, 1] + kr[i, 2] * k[j, 2]
+            for m in range(6):
+                acc += tmp[i, m] * ikh[j, m]
+            p_post[i, j] = acc
+            p_post[j, i] = acc
     return x_post, p_post, nis, rho
