@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from cwrend_cli import __version__, sensors, simulation, storage
+from cwrend_cli import __version__, recording, sensors, simulation, storage
 from cwrend_cli.config import (
     ARCHITECTURES,
     Architecture,
@@ -378,10 +378,15 @@ class TaskOutcome:
     execution: str  # task key and a digest of the runs executed
     outcomes: tuple[RunOutcome, ...]
     files: tuple[str, ...]
+    warnings: tuple[str, ...] = ()  # e.g. a recording that could not be written
 
 
 def execute_task(
-    task: Task, base: Mapping[str, Any], out_dir: str, write_steps: bool = True
+    task: Task,
+    base: Mapping[str, Any],
+    out_dir: str,
+    write_steps: bool = True,
+    record_seeds: tuple[int, ...] = (),
 ) -> TaskOutcome:
     """Run a task's runs, write their steps/solves files and return their outcomes.
 
@@ -391,9 +396,16 @@ def execute_task(
     seeds below ``output.steps_seeds`` when set), where the digest names the set
     of runs executed: rerunning the same runs
     overwrites the same files (atomically), so nothing is ever duplicated.
+
+    For each seed of ``record_seeds`` (the driver passes only seeds whose
+    every architecture runs in this task) a Rerun recording overlaying the
+    architectures and the references is written to
+    ``recordings/<point>.s<seed>.rrd``. A recording that cannot be written is
+    reported in the outcome's ``warnings``; the runs stay valid.
     """
     outcomes: list[RunOutcome] = []
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
+    by_seed: dict[int, list[tuple[CwrendConfig, simulation.RunResult]]] = {}
     configs: dict[Assignment, CwrendConfig] = {}
     for spec in task.runs:
         started = time.time()
@@ -407,6 +419,7 @@ def execute_task(
             result = simulation.simulate(cfg, ARCHITECTURES[spec.arch], noise, refs, spec.seed)
             metrics = storage.summary_row(result, refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))
+            by_seed.setdefault(spec.seed, []).append((cfg, result))
             outcomes.append(RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0))
         except Exception as exc:  # failure isolation: the campaign goes on
             kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
@@ -433,7 +446,45 @@ def execute_task(
                 rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
                 storage.write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
                 files.append(rel)
-    return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files))
+    warnings: list[str] = []
+    point = task.runs[0].point if task.runs else BASE_POINT
+    for seed in record_seeds:
+        cases = by_seed.get(seed, [])
+        if not cases:
+            continue
+        rel = recording_path(point, seed)
+        cfg = cases[0][0]
+        try:
+            recording.record_case(
+                Path(out_dir) / rel,
+                [r for _, r in cases],
+                _references(cfg),
+                cfg.degradation.windows,
+                u_max_km_s2=cfg.scenario.u_max_km_s2,
+                recording_name=f"cwrend {point} seed {seed}",
+            )
+            files.append(rel)
+        except Exception as exc:  # a recording never costs the runs
+            warnings.append(f"{rel}: recording not written ({type(exc).__name__}: {exc})")
+    return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files), tuple(warnings))
+
+
+def recording_path(point: str, seed: int) -> str:
+    """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
+    return f"{storage.RECORDINGS}/{point}.s{seed:06d}.rrd"
+
+
+def seeds_to_record(task: Task, archs: Sequence[str], limit: int | None) -> tuple[int, ...]:
+    """Seeds of ``task`` below ``limit`` (None = all) whose every architecture runs in it.
+
+    A resumed or retried task that reruns only some architectures of a seed
+    leaves that seed's existing recording alone rather than overwrite it with
+    a partial one.
+    """
+    counts: dict[int, int] = {}
+    for r in task.runs:
+        counts[r.seed] = counts.get(r.seed, 0) + 1
+    return tuple(s for s, n in counts.items() if n == len(archs) and (limit is None or s < limit))
 
 
 # ---------------------------------------------------------------------------
@@ -533,6 +584,10 @@ def _events_of(outcome: TaskOutcome, campaign: str) -> list[dict[str, Any]]:
                 "duration_s": o.duration_s,
             }
         )
+    events.extend(
+        {"event": "recording_failed", "time": _iso(time.time()), "error": w}
+        for w in outcome.warnings
+    )
     events.append(
         {
             "event": "task_done",
@@ -654,13 +709,17 @@ def _drive(
     in_flight: dict[Future, Task] = {}
     limit = 2 * parallel
     events_path = out_dir / storage.EVENTS
+    rrd_limit = plan_.base["output"].get("rrd_seeds")
     try:
         while True:
             while len(in_flight) < limit:
                 task = next(queue, None)
                 if task is None:
                     break
-                future = executor.submit(execute_task, task, plan_.base, str(out_dir), write_steps)
+                record = seeds_to_record(task, plan_.archs, rrd_limit)
+                future = executor.submit(
+                    execute_task, task, plan_.base, str(out_dir), write_steps, record
+                )
                 in_flight[future] = task
             if not in_flight:
                 return

@@ -188,16 +188,31 @@ def run(
     ] = None,
     set_: SetOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table on the console.")] = False,
+    rrd: Annotated[
+        bool,
+        typer.Option(
+            "--rrd/--no-rrd",
+            help="Also write recording.rrd (Rerun: all architectures and the references; "
+            "open with `rerun <out>/recording.rrd`).",
+        ),
+    ] = True,
+    spawn: Annotated[
+        bool,
+        typer.Option("--spawn", help="Open the recording in the Rerun viewer (needs a display)."),
+    ] = False,
 ) -> None:
     """Run closed-loop case(s) and the open-loop references; write Parquet results.
 
     Writes config.json, summary.parquet, steps.parquet, solves.parquet and
-    references.parquet (each atomically) into the output directory.
+    references.parquet (each atomically) into the output directory, and
+    recording.rrd unless --no-rrd.
     """
     with user_errors():
         cfg = load_config(file, set_ or ())
         archs = _parse_archs(arch)
         seed_ = 0 if seed is None else seed
+        if spawn and not rrd:
+            raise ConfigError("--spawn opens the recording: drop --no-rrd")
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
@@ -207,6 +222,19 @@ def run(
         written = storage.write_run(
             out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references
         )
+        if rrd:
+            from cwrend_cli import recording
+
+            rrd_path = recording.record_case(
+                Path(written) / "recording.rrd", case.runs, case.references,
+                cfg.degradation.windows, u_max_km_s2=cfg.scenario.u_max_km_s2,
+                recording_name=f"cwrend run · {Path(written).name}",
+            )  # fmt: skip
+            if spawn and not recording.open_in_viewer(rrd_path):
+                console.print(
+                    f"warning: no Rerun viewer could be started (no `rerun` executable or no "
+                    f"display); open the file elsewhere with `rerun {rrd_path}`"
+                )
         if not quiet:
             Console(highlight=False).print(
                 summary_console_table(case, title=f"cwrend run · {file}")
@@ -251,6 +279,24 @@ ForceOption = Annotated[
 ]
 RetryOption = Annotated[bool, typer.Option("--retry-failed", help="Rerun the failed runs.")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or tables.")]
+RrdOption = Annotated[
+    bool,
+    typer.Option(
+        "--rrd/--no-rrd",
+        help="Write Rerun recordings (.rrd) of the trajectories; open with `rerun FILE`.",
+    ),
+]
+RrdSeedsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--rrd-seeds",
+        "--rrd-steps",
+        min=0,
+        help="Record seeds below K only (one .rrd per seed and grid point, all architectures; "
+        "default output.rrd_seeds = 3).",
+        metavar="K",
+    ),
+]
 
 
 def _seeds(seeds: int | None, seed_list: str | None) -> list[int]:
@@ -292,13 +338,23 @@ def _campaign(
     force: bool,
     retry_failed: bool,
     quiet: bool,
+    rrd: bool,
+    rrd_seeds: int | None,
 ) -> None:
     err = Console(stderr=True, highlight=False)
     with user_errors():
         overrides = list(set_ or [])
         if name is not None:
             overrides.append(f"output.name={json.dumps(name)}")
+        if rrd_seeds is not None and not rrd:
+            raise ConfigError("--rrd-seeds sets how many seeds are recorded: drop --no-rrd")
+        if not rrd or rrd_seeds is not None:
+            overrides.append(f"output.rrd_seeds={0 if not rrd else rrd_seeds}")
         cfg = load_config(file, overrides)
+        if cfg.output.rrd_seeds != 0:
+            from cwrend_cli import recording
+
+            recording.check_enabled()
         if executor not in ("local", "dask"):
             raise ConfigError(f"--executor {executor!r}: must be 'local' or 'dask'")
         if address and executor != "dask":
@@ -363,17 +419,20 @@ def ablate(
     force: ForceOption = False,
     retry_failed: RetryOption = False,
     quiet: QuietOption = False,
+    rrd: RrdOption = True,
+    rrd_seeds: RrdSeedsOption = None,
     set_: SetOption = None,
 ) -> None:
     """Compare the architectures on the same noise per seed (plus open-loop references).
 
     Results: <output.dir>/<name>/ with manifest.json, runs.parquet, steps/ and
-    solves/ datasets, events.jsonl and ablation.parquet (statistics with 95 %
-    bootstrap intervals and paired comparisons). Rerunning resumes.
+    solves/ datasets, events.jsonl, ablation.parquet (statistics with 95 %
+    bootstrap intervals and paired comparisons) and recordings/ (one Rerun
+    .rrd per recorded seed). Rerunning resumes.
     Exit code 1 if any run failed, 130 if interrupted.
     """
     _campaign("ablate", file, set_, [], seeds, seed_list, arch, workers, executor, address,
-              name, force, retry_failed, quiet)  # fmt: skip
+              name, force, retry_failed, quiet, rrd, rrd_seeds)  # fmt: skip
 
 
 @app.command("sweep")
@@ -399,6 +458,8 @@ def sweep(
     force: ForceOption = False,
     retry_failed: RetryOption = False,
     quiet: QuietOption = False,
+    rrd: RrdOption = True,
+    rrd_seeds: RrdSeedsOption = None,
     set_: SetOption = None,
 ) -> None:
     """Grid (cartesian product) × architectures × seeds, with [dispersions] per run.
@@ -407,4 +468,38 @@ def sweep(
     ablate, with sweep.parquet holding the statistics per grid point.
     """
     _campaign("sweep", file, set_, list(param or []), seeds, seed_list, arch, workers, executor,
-              address, name, force, retry_failed, quiet)  # fmt: skip
+              address, name, force, retry_failed, quiet, rrd, rrd_seeds)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------
+# Report
+# ---------------------------------------------------------------------------
+
+
+@app.command("report")
+def report(
+    results_dir: Annotated[
+        Path,
+        typer.Argument(help="Output of `cwrend run` or a campaign directory (ablate/sweep)."),
+    ],
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            "--seed", min=0, help="Noise seed of the per-seed figures 1–5 (default: the first)."
+        ),
+    ] = None,
+) -> None:
+    """Write the paper's figures (PNG) and report.md into RESULTS_DIR/report/.
+
+    Figures 1–6 (trajectories, control, ε and score, NIS and MTF ratio,
+    errors, Δv vs miss); for several seeds the miss and Δv distributions and
+    the paired comparison; for a sweep one figure per swept parameter.
+    """
+    with user_errors():
+        from cwrend_cli.report import write_report
+
+        summary = write_report(results_dir, seed=seed)
+        for path in summary.files:
+            typer.echo(str(path))
+        for note in summary.notes:
+            _stderr().print(f"note: {note}", markup=False)

@@ -506,6 +506,13 @@ class OutputConfig(_FrozenModel):
         description="campaigns: write per-step data (steps/ dataset) only for seeds below "
         "this number; unset = every seed, 0 = none (a run's steps take about 200 kB)",
     )
+    rrd_seeds: Int | None = Field(
+        3,
+        ge=0,
+        description="campaigns: write a Rerun recording (all architectures of a seed and the "
+        "references, about 0.7 MB) for seeds below this number at each grid point; "
+        "0 = none, unset = every seed",
+    )
 
     @field_validator("name")
     @classmethod

@@ -31,8 +31,12 @@ _VEL = ("vx", "vy", "vz")
 
 
 @contextmanager
-def _atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; move it onto ``path`` on success."""
+def atomic_path(path: Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; move it onto ``path`` on success.
+
+    The one way cwrend writes a file: readers (and a resumed campaign) see
+    either nothing or the complete file, never a partial one.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
@@ -41,6 +45,7 @@ def _atomic_path(path: Path) -> Iterator[Path]:
         yield tmp_path
         with open(tmp_path, "rb") as fh:
             os.fsync(fh.fileno())
+        os.chmod(tmp_path, 0o644)  # mkstemp creates 0600; results are ordinary files
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
@@ -50,7 +55,7 @@ def _atomic_path(path: Path) -> Iterator[Path]:
 def write_parquet(table: pa.Table, path: str | Path) -> Path:
     """Write ``table`` to ``path`` atomically (temp file + rename)."""
     path = Path(path)
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
     return path
 
@@ -58,7 +63,7 @@ def write_parquet(table: pa.Table, path: str | Path) -> Path:
 def write_json(data: Any, path: str | Path) -> Path:
     """Write ``data`` as indented JSON to ``path`` atomically."""
     path = Path(path)
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     return path
 
@@ -304,7 +309,9 @@ def write_run(
 MANIFEST = "manifest.json"
 RUNS = "runs.parquet"
 EVENTS = "events.jsonl"
-DATASETS = ("steps", "solves")
+RECORDINGS = "recordings"
+#: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
+DATASETS = ("steps", "solves", RECORDINGS)
 
 CAMPAIGN_STEPS_SCHEMA = pa.schema(
     [f for f in STEPS_SCHEMA if f.name != "arch"]

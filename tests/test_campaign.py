@@ -155,7 +155,10 @@ def test_noise_of_a_seed_does_not_depend_on_anything_else() -> None:
 @pytest.fixture(scope="module")
 def small_ablation(tmp_path_factory: pytest.TempPathFactory) -> Path:
     cfg = _write_config(tmp_path_factory.mktemp("abl") / "c.toml", "small")
-    result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q")
+    result = _cli(
+        "ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q",
+        "--rrd-seeds", "2",
+    )  # fmt: skip
     assert result.exit_code == 0, result.output
     return cfg.parent / "results" / "small"
 
@@ -164,6 +167,28 @@ def test_ablation_writes_the_campaign_layout(small_ablation: Path) -> None:
     names = {p.name for p in small_ablation.iterdir()}
     assert {"manifest.json", "runs.parquet", "events.jsonl", "steps", "solves"} <= names
     assert "ablation.parquet" in names
+
+
+def test_ablation_records_the_first_seeds_with_every_arch(small_ablation: Path) -> None:
+    from rerun.chunk import RrdReader
+
+    files = sorted(p.name for p in (small_ablation / "recordings").iterdir())
+    assert files == ["base.s000000.rrd", "base.s000001.rrd"]  # --rrd-seeds 2 of 3 seeds
+    paths = {c.entity_path for c in RrdReader(small_ablation / "recordings" / files[0]).stream()}
+    for arch in ADAPTIVE.split(","):
+        assert f"/arch/{arch}/trajectory/true" in paths
+    assert "/reference/fuel/trajectory" in paths
+
+
+def test_only_seeds_with_every_arch_in_the_task_are_recorded() -> None:
+    cfg = CwrendConfig()
+    archs = ("mtf_adaptive", "plain_adaptive")
+    task = campaign.plan(cfg, archs, [0, 1, 2]).tasks[0]
+    assert campaign.seeds_to_record(task, archs, None) == (0, 1, 2)
+    assert campaign.seeds_to_record(task, archs, 2) == (0, 1)
+    retry = campaign.Task(task.task_key, tuple(r for r in task.runs if r.run_key[-1] != "0"
+                                              or r.arch == "mtf_adaptive"))  # fmt: skip
+    assert campaign.seeds_to_record(retry, archs, None) == (1, 2)  # seed 0 only partly rerun
 
 
 def test_runs_table_has_one_row_per_run(small_ablation: Path) -> None:
@@ -360,9 +385,18 @@ def test_workers_exit_when_the_campaign_is_killed(tmp_path: Path) -> None:
 
 def test_steps_seeds_limits_the_per_step_data(tmp_path: Path) -> None:
     cfg = _write_config(tmp_path / "c.toml", "lean", "steps_seeds = 1\n")
-    result = _cli("ablate", str(cfg), "--seeds", "2", "--arch", "mtf_adaptive", "-q")
+    result = _cli("ablate", str(cfg), "--seeds", "2", "--arch", "mtf_adaptive", "-q", "--no-rrd")
     assert result.exit_code == 0, result.output
     out = tmp_path / "results" / "lean"
+    assert not (out / "recordings").exists()
     assert set(pd.read_parquet(out / "steps")["seed"]) == {0}
     assert set(pd.read_parquet(out / "solves")["seed"]) == {0, 1}
     assert len(pd.read_parquet(out / "runs.parquet")) == 2
+
+
+def test_rrd_seeds_without_recordings_is_refused(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "contradiction")
+    result = _cli("ablate", str(cfg), "--no-rrd", "--rrd-seeds", "2", "-q")
+    assert result.exit_code == 2
+    assert "--rrd-seeds" in result.output
+    assert not (tmp_path / "results").exists()

@@ -1,0 +1,508 @@
+"""Rerun recordings of closed-loop runs (I/O at the edge, after the numerics).
+
+:func:`record_case` writes one ``.rrd`` file that overlays the architectures
+of one noise realisation and the open-loop references, on a ``sim_time``
+timeline (a duration in seconds), with a default blueprint laid out like the
+paper's Figures 1–2: the 3D trajectories on the left, the control magnitude,
+cumulative Δv, ε and score in the middle, the errors, NIS and MTF ratio on
+the right. Open it with ``rerun <file>.rrd``.
+
+Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
+
+    /arch/<slug>/trajectory/true       LineStrips3D (whole path, static)
+                                       + Points3D (current position, over time)
+    /arch/<slug>/trajectory/estimate   the same for the filter estimate
+    /arch/<slug>/thrust                Arrows3D from the current position along u (scaled)
+    /arch/<slug>/{u_norm, dv_cum, eps, score, score_filtered, nis, mtf_ratio,
+                  pos_err_km, est_err_km}   Scalars over sim_time
+    /arch/<slug>/resolve_success       Scalars at the re-solve times (1 success, 0 not)
+    /reference/{energy,fuel}/trajectory  LineStrips3D + Points3D of the open-loop plan
+    /reference/{energy,fuel}/{u_norm, dv_cum, pos_err_km}
+    /target                            Points3D at the origin (static)
+    /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
+    /about                             TextDocument: what is in the recording, arrow scale
+
+Every time series is sent with one ``send_columns`` call (no per-step
+logging); samples that are NaN (e.g. the NIS at t = 0, where there is no
+measurement) are left out. Units: km, s, km/s, km/s².
+
+``rerun`` is imported lazily, so importing this module (e.g. for
+:data:`ARCH_COLOURS`) costs nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import uuid
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cwrend_cli.errors import CwrendError
+from cwrend_cli.storage import atomic_path
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    from cwrend_cli.config import DegradationWindow
+    from cwrend_cli.simulation import References, RunResult
+
+
+class RecordingError(CwrendError):
+    """A recording cannot be written (e.g. Rerun disabled by ``RERUN=off``)."""
+
+
+#: Colour of each architecture (hex), shared by the recordings and the report figures.
+ARCH_COLOURS: Mapping[str, str] = {
+    "plain_fixed": "#d62728",  # red
+    "mtf_fixed": "#ff7f0e",  # orange
+    "plain_adaptive": "#1f77b4",  # blue
+    "mtf_adaptive": "#2ca02c",  # green
+}
+#: Colour of each open-loop reference (hex).
+REFERENCE_COLOURS: Mapping[str, str] = {
+    "energy": "#9467bd",  # purple
+    "fuel": "#8c8c8c",  # grey
+}
+#: Colour of the degradation-window series and shading (hex).
+DEGRADATION_COLOUR = "#bcbd22"
+_FALLBACK = ("#17becf", "#e377c2", "#8c564b", "#7f7f7f")
+
+TIMELINE = "sim_time"
+
+#: Scalar series of each architecture: entity name -> (label, unit).
+ARCH_SERIES: Mapping[str, tuple[str, str]] = {
+    "u_norm": ("‖u‖", "km/s²"),
+    "dv_cum": ("cumulative Δv", "km/s"),
+    "eps": ("ε", "-"),
+    "score": ("score s", "-"),
+    "score_filtered": ("filtered score s̄", "-"),
+    "nis": ("NIS", "-"),
+    "mtf_ratio": ("MTF ratio ρ", "-"),
+    "pos_err_km": ("position error ‖r‖", "km"),
+    "est_err_km": ("estimation error ‖r̂ − r‖", "km"),
+}
+REFERENCE_SERIES = ("u_norm", "dv_cum", "pos_err_km")
+
+
+def arch_colour(slug: str, index: int = 0) -> str:
+    """Hex colour of architecture ``slug`` (a fallback cycle for unknown slugs)."""
+    return ARCH_COLOURS.get(slug, _FALLBACK[index % len(_FALLBACK)])
+
+
+def rgb(hex_colour: str) -> tuple[int, int, int]:
+    """``"#rrggbb"`` as an (r, g, b) tuple of 0–255 integers."""
+    h = hex_colour.lstrip("#")
+    return int(h[0:2], 16), int(h[2:4], 16), int(h[4:6], 16)
+
+
+def cumulative_delta_v(t_s: np.ndarray, u_norm: np.ndarray) -> np.ndarray:
+    """Cumulative trapezoid of ‖u‖ over the grid [km/s]; its last value is the run's Δv."""
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(u_norm, dtype=float)
+    out = np.zeros_like(a)
+    if a.size > 1:
+        out[1:] = np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))
+    return out
+
+
+def window_activity(t_s: np.ndarray, window: DegradationWindow) -> np.ndarray:
+    """1.0 where ``start_s ≤ t ≤ end_s`` (the window is active), else 0.0."""
+    t = np.asarray(t_s, dtype=float)
+    return ((t >= window.start_s) & (t <= window.end_s)).astype(float)
+
+
+def window_label(i: int, window: DegradationWindow) -> str:
+    """Short description of degradation window ``i``, e.g. ``window 1: R×300, bias 17.6 m``."""
+    text = f"window {i}: R×{window.r_scale:g}"
+    bias_m = 1e3 * float(np.linalg.norm(window.bias_km))
+    if bias_m > 0:
+        text += f", bias {bias_m:.3g} m"
+    return text
+
+
+# ---------------------------------------------------------------------------
+# Blueprint
+# ---------------------------------------------------------------------------
+
+
+def _series_view(
+    rrb: Any, name: str, paths: Sequence[str], *, y_range: tuple[float, float] | None = None
+) -> Any:
+    kwargs: dict[str, Any] = {}
+    if y_range is not None:
+        kwargs["axis_y"] = rrb.ScalarAxis(range=y_range, zoom_lock=False)
+    return rrb.TimeSeriesView(
+        name=name,
+        origin="/",
+        contents=list(paths),
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop, visible=True),
+        **kwargs,
+    )
+
+
+def build_blueprint(
+    slugs: Sequence[str], reference_names: Sequence[str], n_windows: int
+) -> rrb.Blueprint:
+    """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors)."""
+    import rerun.blueprint as rrb
+
+    def arch(name: str) -> list[str]:
+        return [f"/arch/{s}/{name}" for s in slugs]
+
+    def ref(name: str) -> list[str]:
+        return [f"/reference/{r}/{name}" for r in reference_names]
+
+    windows = [f"/degradation/{i}" for i in range(1, n_windows + 1)]
+    spatial = rrb.Spatial3DView(
+        name="trajectories (km, CW frame)",
+        origin="/",
+        contents=[
+            *[f"/arch/{s}/trajectory/**" for s in slugs],
+            *[f"/arch/{s}/thrust" for s in slugs],
+            *[f"/reference/{r}/trajectory" for r in reference_names],
+            "/target",
+        ],
+    )
+    left = rrb.Vertical(
+        spatial,
+        rrb.TextDocumentView(name="about", origin="/about"),
+        row_shares=[5, 1],
+    )
+    middle = rrb.Vertical(
+        _series_view(rrb, "thrust ‖u‖ [km/s²]", arch("u_norm") + ref("u_norm")),
+        _series_view(rrb, "cumulative Δv [km/s]", arch("dv_cum") + ref("dv_cum")),
+        _series_view(
+            rrb, "homotopy ε [-] and degradation windows (1 = active)", arch("eps") + windows
+        ),
+        _series_view(rrb, "score s [-]", arch("score") + arch("score_filtered")),
+        _series_view(rrb, "re-solve success [1 = converged]", arch("resolve_success")),
+    )
+    right = rrb.Vertical(
+        _series_view(rrb, "position error to target [km]", arch("pos_err_km") + ref("pos_err_km")),
+        _series_view(rrb, "estimation error [km]", arch("est_err_km")),
+        _series_view(rrb, "NIS [-]", arch("nis")),
+        _series_view(rrb, "MTF ratio ρ [-]", arch("mtf_ratio")),
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(left, middle, right, column_shares=[2, 1, 1]),
+        rrb.TimePanel(state="collapsed"),
+        collapse_panels=False,
+    )
+
+
+# ---------------------------------------------------------------------------
+# Logging
+# ---------------------------------------------------------------------------
+
+
+def _send_scalars(
+    rec: rr.RecordingStream,
+    path: str,
+    t_s: np.ndarray,
+    values: np.ndarray,
+    *,
+    name: str,
+    colour: str,
+    points: bool = False,
+    width: float = 1.5,
+    step: bool = False,
+) -> None:
+    """One scalar series in one call; NaN samples are left out; style logged static."""
+    import rerun as rr
+
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    keep = np.isfinite(v)
+    if points:
+        style: Any = rr.SeriesPoints(
+            colors=[rgb(colour)], names=[name], markers=["Circle"], marker_sizes=[3.0]
+        )
+    else:
+        style = rr.SeriesLines(
+            colors=[rgb(colour)],
+            names=[name],
+            widths=[width],
+            interpolation_mode="StepAfter" if step else None,
+        )
+    rec.log(path, style, static=True)
+    if keep.any():
+        rec.send_columns(
+            path,
+            indexes=[rr.TimeColumn(TIMELINE, duration=t[keep])],
+            columns=rr.Scalars.columns(scalars=v[keep]),
+        )
+
+
+def _send_path(
+    rec: rr.RecordingStream,
+    path: str,
+    t_s: np.ndarray,
+    positions: np.ndarray,
+    *,
+    colour: str,
+    label: str,
+    line_radius: float,
+    point_radius: float,
+) -> None:
+    """The whole path as a static line strip and the current point over time."""
+    import rerun as rr
+
+    pos = np.asarray(positions, dtype=float)
+    finite = np.isfinite(pos).all(axis=1)
+    c = rgb(colour)
+    rec.log(
+        path,
+        rr.LineStrips3D([pos[finite]], colors=[c], radii=[line_radius], labels=[label]),
+        static=True,
+    )
+    rec.log(
+        path, rr.Points3D.from_fields(colors=[c], radii=[point_radius], labels=[label]), static=True
+    )
+    rec.send_columns(
+        path,
+        indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=float)[finite])],
+        columns=rr.Points3D.columns(positions=pos[finite]),
+    )
+
+
+def _about(
+    runs: Sequence[RunResult],
+    refs: References,
+    windows: Sequence[DegradationWindow],
+    arrow_scale_s2: float,
+    u_max_km_s2: float,
+) -> str:
+    lines = [
+        "# cwrend recording",
+        "",
+        f"Noise realisation (seed): {', '.join(sorted({str(r.seed) for r in runs})) or '-'}. "
+        "Timeline `sim_time` in seconds; positions in km (CW frame, target at the origin).",
+        "",
+        "| case | Δv [km/s] | miss [km] |",
+        "|---|---|---|",
+    ]
+    for ref in (refs.energy, refs.fuel):
+        lines.append(f"| open-loop {ref.name} | {ref.delta_v_km_s:.6g} | {ref.miss_km:.3g} |")
+    for r in runs:
+        lines.append(f"| {r.arch} | {r.delta_v_km_s:.6g} | {r.miss_km:.3g} |")
+    lines += [
+        "",
+        f"Thrust arrows: length = {arrow_scale_s2:.4g} s² × u "
+        f"({arrow_scale_s2 * u_max_km_s2:.3g} km at u_max = {u_max_km_s2:g} km/s²).",
+    ]
+    if windows:
+        lines.append("Degradation: " + "; ".join(
+            f"{window_label(i, w)} on [{w.start_s:g}, {w.end_s:g}] s"
+            for i, w in enumerate(windows, start=1)
+        ))  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def _log_case(
+    rec: rr.RecordingStream,
+    runs: Sequence[RunResult],
+    refs: References,
+    windows: Sequence[DegradationWindow],
+    u_max_km_s2: float,
+) -> None:
+    import rerun as rr
+
+    all_pos = [r.x_true[:, :3] for r in runs] + [refs.energy.x[:, :3], refs.fuel.x[:, :3]]
+    stacked = np.concatenate(all_pos)
+    stacked = stacked[np.isfinite(stacked).all(axis=1)]
+    extent = float(np.max(np.ptp(stacked, axis=0))) if stacked.size else 1.0
+    extent = extent if extent > 0 else 1.0
+    line_r = 0.002 * extent
+    point_r = 0.008 * extent
+    # an arrow at full thrust is 8 % of the scene
+    arrow_scale = 0.08 * extent / u_max_km_s2 if u_max_km_s2 > 0 else 1.0
+
+    rec.log(
+        "/target",
+        rr.Points3D(
+            [[0.0, 0.0, 0.0]], colors=[(255, 255, 255)], radii=[point_r], labels=["target"]
+        ),
+        static=True,
+    )
+    rec.log(
+        "/about",
+        rr.TextDocument(
+            _about(runs, refs, windows, arrow_scale, u_max_km_s2), media_type="text/markdown"
+        ),
+        static=True,
+    )
+
+    for i, run in enumerate(runs):
+        base = f"/arch/{run.arch}"
+        colour = arch_colour(run.arch, i)
+        t = run.t_s
+        _send_path(
+            rec, f"{base}/trajectory/true", t, run.x_true[:, :3],
+            colour=colour, label=run.arch, line_radius=line_r, point_radius=point_r,
+        )  # fmt: skip
+        _send_path(
+            rec, f"{base}/trajectory/estimate", t, run.x_hat[:, :3],
+            colour=colour, label=f"{run.arch} estimate",
+            line_radius=0.5 * line_r, point_radius=0.6 * point_r,
+        )  # fmt: skip
+        rec.log(
+            f"{base}/thrust",
+            rr.Arrows3D.from_fields(colors=[rgb(colour)], radii=[0.5 * line_r]),
+            static=True,
+        )
+        rec.send_columns(
+            f"{base}/thrust",
+            indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+            columns=rr.Arrows3D.columns(origins=run.x_true[:, :3], vectors=arrow_scale * run.u),
+        )
+        u_norm = np.linalg.norm(run.u, axis=1)
+        series = {
+            "u_norm": u_norm,
+            "dv_cum": cumulative_delta_v(t, u_norm),
+            "eps": run.eps,
+            "score": run.score,
+            "score_filtered": run.score_filtered,
+            "nis": run.nis,
+            "mtf_ratio": run.mtf_ratio,
+            "pos_err_km": np.linalg.norm(run.x_true[:, :3], axis=1),
+            "est_err_km": np.linalg.norm(run.x_hat[:, :3] - run.x_true[:, :3], axis=1),
+        }
+        for name, values in series.items():
+            label = run.arch if name != "score_filtered" else f"{run.arch} (filtered)"
+            _send_scalars(
+                rec, f"{base}/{name}", t, values, name=label, colour=colour,
+                width=1.0 if name == "score_filtered" else 1.5,
+            )  # fmt: skip
+        resolves = run.resolves
+        _send_scalars(
+            rec,
+            f"{base}/resolve_success",
+            np.array([s.t_s for s in resolves], dtype=float),
+            np.array([1.0 if s.success else 0.0 for s in resolves]),
+            name=run.arch,
+            colour=colour,
+            points=True,
+        )
+
+    for ref in (refs.energy, refs.fuel):
+        base = f"/reference/{ref.name}"
+        colour = REFERENCE_COLOURS.get(ref.name, _FALLBACK[-1])
+        label = f"open-loop {ref.name}"
+        _send_path(
+            rec, f"{base}/trajectory", ref.t_s, ref.x[:, :3],
+            colour=colour, label=label, line_radius=line_r, point_radius=0.7 * point_r,
+        )  # fmt: skip
+        u_norm = np.linalg.norm(ref.u, axis=1)
+        ref_series = {
+            "u_norm": u_norm,
+            "dv_cum": cumulative_delta_v(ref.t_s, u_norm),
+            "pos_err_km": np.linalg.norm(ref.x[:, :3], axis=1),
+        }
+        for name, values in ref_series.items():
+            _send_scalars(rec, f"{base}/{name}", ref.t_s, values, name=label, colour=colour)
+
+    t_grid = runs[0].t_s if runs else refs.fuel.t_s
+    for i, w in enumerate(windows, start=1):
+        path = f"/degradation/{i}"
+        _send_scalars(
+            rec, path, t_grid, window_activity(t_grid, w),
+            name=window_label(i, w), colour=DEGRADATION_COLOUR, width=2.0, step=True,
+        )  # fmt: skip
+        rec.send_columns(
+            path,
+            indexes=[rr.TimeColumn(TIMELINE, duration=[w.start_s, w.end_s])],
+            columns=rr.TextLog.columns(
+                text=[f"{window_label(i, w)}: start", f"{window_label(i, w)}: end"],
+                level=["WARN", "INFO"],
+            ),
+        )
+
+
+def _require_enabled(rec: rr.RecordingStream) -> None:
+    if not rec.is_enabled():
+        # RERUN=off in the environment would silently write an empty file
+        raise RecordingError(
+            "Rerun logging is disabled by the RERUN environment variable; unset it or pass --no-rrd"
+        )
+
+
+def check_enabled() -> None:
+    """Raise :class:`RecordingError` now if recordings could not be written (``RERUN=off``)."""
+    import rerun as rr
+
+    _require_enabled(rr.RecordingStream("cwrend-check"))
+
+
+def record_case(
+    path: Path,
+    runs: Sequence[RunResult],
+    refs: References,
+    windows: Sequence[DegradationWindow],
+    *,
+    application_id: str = "cwrend",
+    recording_id: str | None = None,
+    recording_name: str | None = None,
+    u_max_km_s2: float = 8e-4,
+) -> Path:
+    """Write one ``.rrd`` overlaying ``runs`` (one noise realisation) and the references.
+
+    ``runs`` are the closed-loop results of one seed (any subset of the
+    architectures), ``refs`` the open-loop references, ``windows`` the
+    degradation windows of the config. ``recording_id`` defaults to a fresh
+    UUID (never the process-wide default, which child processes inherit);
+    files sharing a recording id merge in the viewer. ``u_max_km_s2`` only
+    scales the thrust arrows. The file is written to a temporary name beside
+    ``path`` and moved into place, so ``path`` is either absent or complete.
+    Returns ``path``.
+    """
+    import rerun as rr
+
+    path = Path(path)
+    rec = rr.RecordingStream(
+        application_id,
+        recording_id=recording_id or str(uuid.uuid4()),
+        send_properties=True,
+    )
+    _require_enabled(rec)
+    slugs = [r.arch for r in runs]
+    blueprint = build_blueprint(slugs, ("energy", "fuel"), len(windows))
+    with atomic_path(path) as tmp:
+        rec.save(tmp, default_blueprint=blueprint)
+        seeds = sorted({r.seed for r in runs})
+        default_name = f"cwrend seed {','.join(map(str, seeds))}" if seeds else "cwrend"
+        rec.send_recording_name(recording_name or default_name)
+        _log_case(rec, runs, refs, windows, u_max_km_s2)
+        rec.flush()
+        rec.disconnect()  # closes the file sink (writes the footer)
+    return path
+
+
+def open_in_viewer(path: Path) -> bool:
+    """Start a Rerun viewer on ``path`` in the background; False if there is no viewer.
+
+    Needs the ``rerun`` executable (installed with rerun-sdk) and a display;
+    the viewer runs detached, so cwrend does not wait for it.
+    """
+    exe = shutil.which("rerun")
+    if exe is None:
+        return False
+    headless_linux = sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    )
+    if headless_linux:
+        return False
+    subprocess.Popen(
+        [exe, str(path)],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    return True
