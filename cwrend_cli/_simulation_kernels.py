@@ -134,6 +134,7 @@ def advance(
     """
     work = np.empty((9, MAX_BREAKS))
     u = np.empty(3)
+    lam_next = np.empty(6)
     for k in range(k_start, min(k_stop + 1, n_steps)):
         eps = scal[EPS]
         # control from the current costate and ε (Eqs. 8–10), held over the step
@@ -145,7 +146,12 @@ def advance(
             control_from_costate(lam[3:6], eps, u_max, u)
         log_u[k] = u
         # truth step with zero-order hold: x_{k+1} = Φ x_k + Γ u_k (exact)
-        x_next = phi @ x_true + gam @ u
+        x_next = np.empty(6)
+        for i in range(6):
+            acc = gam[i, 0] * u[0] + gam[i, 1] * u[1] + gam[i, 2] * u[2]
+            for j in range(6):
+                acc += phi[i, j] * x_true[j]
+            x_next[i] = acc
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
         y = x_next[:3] + noise[k]
@@ -178,8 +184,15 @@ def advance(
         log_score[row] = score
         log_score_f[row] = sbar
         log_eps[row] = scal[EPS]
-        log_trp[row] = np.trace(p_post)
+        log_trp[row] = (
+            p_post[0, 0] + p_post[1, 1] + p_post[2, 2] + p_post[3, 3] + p_post[4, 4] + p_post[5, 5]
+        )
         if k == k_stop:
             return  # the caller re-solves and sets the costate
         # costate propagated exactly by one step: λ ← e^{−AᵀΔt} λ
-        lam[:] = lam_step @ lam
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += lam_step[i, j] * lam[j]
+            lam_next[i] = acc
+        lam[:] = lam_next

@@ -41,7 +41,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
-from matplotlib.ticker import NullFormatter
+from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from cwrend_cli.config import ARCHITECTURES
 from cwrend_cli.errors import CwrendError
@@ -435,15 +435,27 @@ def load_results(results_dir: Path, seed: int | None = None) -> _Data:
 
 
 def _tidy_log_axes(fig: Figure) -> None:
-    """Drop minor tick labels on log axes spanning more than a decade (they overlap)."""
+    """Readable log axes: minor labels at 2 and 5 over 1–2.5 decades, none beyond."""
     for ax in fig.axes:
         for axis, scale, lim in (
             (ax.xaxis, ax.get_xscale(), ax.get_xlim()),
             (ax.yaxis, ax.get_yscale(), ax.get_ylim()),
         ):
             lo, hi = sorted(lim)
-            if scale == "log" and lo > 0 and np.log10(hi / lo) > 1.0:
+            if scale != "log" or lo <= 0:
+                continue
+            decades = np.log10(hi / lo)
+            if decades > 2.5:
                 axis.set_minor_formatter(NullFormatter())
+            elif decades > 1.0:  # otherwise a single labelled tick may be all there is
+                axis.set_minor_formatter(
+                    FuncFormatter(lambda v, _: f"{v:.0e}" if _mantissa(v) in (2, 5) else "")
+                )
+
+
+def _mantissa(value: float) -> int:
+    """Leading digit of a positive number (``3`` for ``0.03``)."""
+    return round(value / 10.0 ** np.floor(np.log10(value)))
 
 
 def _save(fig: Figure, path: Path) -> Path:
