@@ -510,8 +510,8 @@ class OutputConfig(_FrozenModel):
         3,
         ge=0,
         description="campaigns: write a Rerun recording (all architectures of a seed and the "
-        "references, about 0.7 MB) for seeds below this number at each grid point; "
-        "0 = none, unset = every seed",
+        "references, about 1.6 MB for four architectures) for seeds below this number at "
+        "each grid point; 0 = none, unset = every seed",
     )
 
     @field_validator("name")
