@@ -48,7 +48,7 @@ def print_rows(rows: list[Row]) -> None:
             r.name + (f"\n[dim]{r.note}[/dim]" if r.note else ""),
             f"{r.value:.4g} {r.unit}",
             f"{r.baseline:.4g} {r.unit}" if r.baseline is not None else "",
-            f"{r.ratio:,.0f}×" if r.ratio is not None else "",
+            _ratio(r.ratio),
             f"{r.target} {r.unit}" if r.target else "",
             verdict,
         )
@@ -59,6 +59,12 @@ def print_rows(rows: list[Row]) -> None:
     )
     for name, text in PUBLISHED.items():
         console.print(f"  {name}: {text}")
+
+
+def _ratio(ratio: float | None) -> str:
+    if ratio is None:
+        return ""
+    return f"{ratio:,.0f}×" if ratio >= 10 else f"{ratio:.2f}×"
 
 
 def machine() -> dict[str, object]:
