@@ -22,6 +22,7 @@ from cwrend_cli._guidance_kernels import (
     costate_at,
     quadrature_breaks,
 )
+from cwrend_cli.dynamics import zoh_step
 from cwrend_cli.estimation import kf_predict, kf_update
 from cwrend_cli.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 
@@ -146,12 +147,7 @@ def advance(
             control_from_costate(lam[3:6], eps, u_max, u)
         log_u[k] = u
         # truth step with zero-order hold: x_{k+1} = Φ x_k + Γ u_k (exact)
-        x_next = np.empty(6)
-        for i in range(6):
-            acc = gam[i, 0] * u[0] + gam[i, 1] * u[1] + gam[i, 2] * u[2]
-            for j in range(6):
-                acc += phi[i, j] * x_true[j]
-            x_next[i] = acc
+        x_next = zoh_step(phi, gam, x_true, u)
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
         y = x_next[:3] + noise[k]

@@ -140,3 +140,18 @@ def costate_derivative(n: float, lam: np.ndarray, out: np.ndarray) -> None:
 def discretize(n: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation ``(Φ, Γ)`` over one step ``dt_s`` (Eq. 11)."""
     return stm(n, dt_s), input_matrix(n, dt_s)
+
+
+@njit(cache=True)
+def zoh_step(phi: np.ndarray, gam: np.ndarray, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """One exact zero-order-hold step ``x⁺ = Φx + Γu`` (Eq. 11), as a new 6-vector.
+
+    Written out (no BLAS call): it runs twice per closed-loop step.
+    """
+    out = np.empty(6)
+    for i in range(6):
+        acc = gam[i, 0] * u[0] + gam[i, 1] * u[1] + gam[i, 2] * u[2]
+        for j in range(6):
+            acc += phi[i, j] * x[j]
+        out[i] = acc
+    return out

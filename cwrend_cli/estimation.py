@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from cwrend_cli.dynamics import zoh_step
+
 #: Regularisation added to the innovation covariance before inversion (SPEC §3).
 GAIN_REGULARISATION = 1e-12
 #: Floor of tr(S) in the MTF ratio (SPEC §3).
@@ -42,32 +44,33 @@ def _inverse_spd3(s: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _sandwich(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``A B Aᵀ + C`` for symmetric ``B`` (n×n) and ``C`` (m×m), ``A`` m×n; symmetric result."""
+    m, n = a.shape
+    ab = np.empty((m, n))
+    for i in range(m):
+        for j in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += a[i, k] * b[k, j]
+            ab[i, j] = acc
+    out = np.empty((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            acc = c[i, j]
+            for k in range(n):
+                acc += ab[i, k] * a[j, k]
+            out[i, j] = acc
+            out[j, i] = acc
+    return out
+
+
+@njit(cache=True)
 def kf_predict(
     x: np.ndarray, p: np.ndarray, phi: np.ndarray, gam: np.ndarray, u: np.ndarray, q: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Time update, Eqs. (11)–(12): ``x⁻ = Φx⁺ + Γu``, ``P⁻ = ΦP⁺Φᵀ + Q``."""
-    x_pred = np.empty(6)
-    for i in range(6):
-        acc = gam[i, 0] * u[0] + gam[i, 1] * u[1] + gam[i, 2] * u[2]
-        for j in range(6):
-            acc += phi[i, j] * x[j]
-        x_pred[i] = acc
-    phi_p = np.empty((6, 6))
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += phi[i, k] * p[k, j]
-            phi_p[i, j] = acc
-    p_pred = np.empty((6, 6))
-    for i in range(6):
-        for j in range(i, 6):
-            acc = q[i, j]
-            for k in range(6):
-                acc += phi_p[i, k] * phi[j, k]
-            p_pred[i, j] = acc
-            p_pred[j, i] = acc
-    return x_pred, p_pred
+    return zoh_step(phi, gam, x, u), _sandwich(phi, p, q)
 
 
 @njit(cache=True)
@@ -127,23 +130,5 @@ def kf_update(
     for i in range(6):
         for j in range(3):
             ikh[i, j] -= k[i, j]
-    tmp = np.empty((6, 6))
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for m in range(6):
-                acc += ikh[i, m] * p_pred[m, j]
-            tmp[i, j] = acc
-    kr = np.empty((6, 3))
-    for i in range(6):
-        for j in range(3):
-            kr[i, j] = k[i, 0] * r_eff[0, j] + k[i, 1] * r_eff[1, j] + k[i, 2] * r_eff[2, j]
-    p_post = np.empty((6, 6))
-    for i in range(6):
-        for j in range(i, 6):
-            acc = kr[i, 0] * k[j, 0] + kr[i, 1] * k[j, 1] + kr[i, 2] * k[j, 2]
-            for m in range(6):
-                acc += tmp[i, m] * ikh[j, m]
-            p_post[i, j] = acc
-            p_post[j, i] = acc
+    p_post = _sandwich(ikh, p_pred, _sandwich(k, r_eff, np.zeros((6, 6))))
     return x_post, p_post, nis, rho

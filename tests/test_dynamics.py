@@ -138,6 +138,15 @@ def test_discretize_is_stm_and_input_matrix() -> None:
     np.testing.assert_array_equal(gam, dynamics.input_matrix(N, 1.0))
 
 
+def test_zoh_step_is_phi_x_plus_gamma_u() -> None:
+    """Eq. 11: ``x⁺ = Φx + Γu`` (written-out kernel vs numpy matmul; rounding only)."""
+    phi, gam = dynamics.discretize(N, 1.0)
+    rng = np.random.default_rng(3)
+    x, u = rng.normal(size=6), 1e-4 * rng.normal(size=3)
+    expected = phi @ x + gam @ u
+    np.testing.assert_allclose(dynamics.zoh_step(phi, gam, x, u), expected, rtol=1e-14, atol=0)
+
+
 # --- cancellation-free scalar functions -----------------------------------------
 
 ARGS = (1e-12, 1e-8, 1e-6, N * 1.0, 0.05, 0.0999999, 0.1, 0.1000001, 0.3, 1.0, 3.0)
