@@ -21,6 +21,7 @@ RUN_FILES = (
     "steps.parquet",
     "solves.parquet",
     "references.parquet",
+    "recording.rrd",
 )
 # Columns that measure wall time and so differ between otherwise identical runs.
 TIMING_COLUMNS = ("wall_time_ms", "solve_mean_ms", "solve_max_ms")
