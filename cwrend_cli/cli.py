@@ -390,7 +390,8 @@ def _campaign(
                 stdout.print(sweep_console_table(stats, by[:-1], f"cwrend sweep · {out.name}"))
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
-            f"holds {summary.ok} ok, {summary.failed} failed → {out}"
+            f"holds {summary.ok} ok, {summary.failed} failed → {out}",
+            soft_wrap=True,  # a path must stay copyable
         )
         if summary.interrupted:
             err.print("interrupted: completed runs are kept; run the same command to resume")
