@@ -239,7 +239,7 @@ def run(
             Console(highlight=False).print(
                 summary_console_table(case, title=f"cwrend run · {file}")
             )
-        console.print(f"results written to {written}")
+        console.print(f"results written to {written}", soft_wrap=True)
 
 
 # ---------------------------------------------------------------------------
