@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy.special import ndtri
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
 CONFIDENCE = 0.95
@@ -48,6 +48,8 @@ def bootstrap_ci(
     if np.ptp(x) == 0.0:
         value = float(statistic(x))
         return value, value
+    from scipy import stats  # about 0.5 s to import; only campaigns with several seeds need it
+
     res = stats.bootstrap(
         (x,),
         statistic,
@@ -64,7 +66,7 @@ def wilson_ci(successes: int, n: int) -> tuple[float, float]:
     """Wilson score interval of a proportion (95 %)."""
     if n == 0:
         return float("nan"), float("nan")
-    z = stats.norm.ppf(0.5 + CONFIDENCE / 2)
+    z = ndtri(0.5 + CONFIDENCE / 2)
     p = successes / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
