@@ -448,14 +448,14 @@ def _tidy_log_axes(fig: Figure) -> None:
             if decades > 2.5:
                 axis.set_minor_formatter(NullFormatter())
             elif decades > 1.0:  # otherwise a single labelled tick may be all there is
-                axis.set_minor_formatter(
-                    FuncFormatter(lambda v, _: f"{v:.0e}" if _mantissa(v) in (2, 5) else "")
-                )
+                axis.set_minor_formatter(FuncFormatter(_minor_log_label))
 
 
-def _mantissa(value: float) -> int:
-    """Leading digit of a positive number (``3`` for ``0.03``)."""
-    return round(value / 10.0 ** np.floor(np.log10(value)))
+def _minor_log_label(value: float, _pos: int) -> str:
+    """``2×10⁻³`` and ``5×10⁻³`` styled like the major labels; other minor ticks unlabelled."""
+    exponent = int(np.floor(np.log10(value)))
+    mantissa = round(value / 10.0**exponent)
+    return rf"${mantissa}\times10^{{{exponent}}}$" if mantissa in (2, 5) else ""
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -919,7 +919,8 @@ def fig_paired_miss(data: _Data, path: Path) -> Path | None:
         better = int((y < x).sum())
         ax.set_title(f"{_arch_label(ya)} smaller\nin {better} of {x.size} seeds", fontsize=11)
         ax.legend(loc="upper left")
-    fig.suptitle("Paired miss per noise seed (below the diagonal: y-axis architecture is better)")
+    title = "Paired miss per noise seed (below the diagonal: y-axis architecture is better)"
+    fig.suptitle(title if len(pairs) > 1 else title.replace(" (", "\n("))
     return _save(fig, path)
 
 
