@@ -177,6 +177,49 @@ def test_converged_solve_reaches_target_when_lambda_v_passes_near_zero(
     assert miss <= TOL_POS_KM, f"'converged' solve misses x_f by {miss:.3e} km"
 
 
+#: A re-solve met in the closed loop (MTF-adaptive, sample hold, correct timing,
+#: noise seed 332 of the paper scenario, t = 21 s): ε = 0.7345, and at this
+#: λ(0) ‖λ_v‖ stays inside the throttle ramp over the whole 779 s horizon with
+#: a shallow minimum (0.2655 at t ≈ 404 s), so there is no switching time to
+#: split the quadrature at. A single 12-node Gauss–Legendre arc then missed
+#: x(T) by 13 m and stalled Newton; the nearest complex singularity of ‖λ_v‖
+#: is ‖λ_v‖/‖λ̇_v‖ ≈ 100 s from the real axis, so the quadrature must be graded
+#: towards that minimum even when it is far from small.
+SHALLOW_MINIMUM_X0 = np.array([-0.5343815196124826, 0.9188995498989595, 31.101356846663016,
+                               -0.023985549683624128, 0.04143313647736569,
+                               -0.006333723497901461])  # fmt: skip
+SHALLOW_MINIMUM_EPS = 0.7344654342074196
+SHALLOW_MINIMUM_LAMBDA = np.array([-0.00021217425353737998, 0.0014626049017398334,
+                                   0.0019128051416695826, -0.4309138435168458,
+                                   0.6432803456912373, 0.6520396330762624])  # fmt: skip
+
+
+def _shallow_minimum_problem(paper_cfg) -> guidance.ShootingProblem:
+    sc = paper_cfg.scenario
+    return guidance.ShootingProblem(
+        SHALLOW_MINIMUM_X0, 779.0, SHALLOW_MINIMUM_EPS, sc.mean_motion_rad_s, sc.u_max_km_s2
+    )
+
+
+def test_terminal_state_with_a_shallow_minimum_of_lambda_v(paper_cfg, ab) -> None:
+    """No switching time, one long arc: still within 1e-9 km of brute-force integration."""
+    problem = _shallow_minimum_problem(paper_cfg)
+    x_bf = brute_force_terminal_state(problem, SHALLOW_MINIMUM_LAMBDA, *ab)
+    x_ts = guidance.terminal_state(problem, SHALLOW_MINIMUM_LAMBDA)
+    err = np.linalg.norm(x_bf[:3] - x_ts[:3])
+    assert err <= TOL_POS_KM, f"terminal position error {err:.3e} km"
+
+
+def test_resolve_with_a_shallow_minimum_of_lambda_v_converges(paper_cfg, ab) -> None:
+    """The closed-loop re-solve above converges warm, and reaches x_f by brute force."""
+    problem = _shallow_minimum_problem(paper_cfg)
+    result = guidance.solve(problem, SHALLOW_MINIMUM_LAMBDA)
+    assert result.status is guidance.SolveStatus.CONVERGED
+    assert result.step == "warm"
+    x_bf = brute_force_terminal_state(problem, result.costate, *ab)
+    assert np.linalg.norm(x_bf[:3] - problem.xf[:3]) <= TOL_POS_KM
+
+
 # --- Jacobian -----------------------------------------------------------------------
 
 
