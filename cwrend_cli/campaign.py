@@ -293,7 +293,7 @@ def plan(
     archs: Sequence[str],
     seeds: Sequence[int],
     cli_params: Sequence[str] = (),
-    seeds_per_task: int = 4,
+    seeds_per_task: int | None = None,
 ) -> CampaignPlan:
     """Expand a campaign into tasks, validating every run's resolved config first.
 
@@ -307,6 +307,7 @@ def plan(
         )
     if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
         raise ConfigError("seeds must be distinct non-negative integers")
+    seeds_per_task = seeds_per_task or cfg.output.seeds_per_task
     base = resolved_dict(cfg)
     base.pop("sweep", None)
     base.pop("dispersions", None)

@@ -506,6 +506,13 @@ class OutputConfig(_FrozenModel):
         description="campaigns: write per-step data (steps/ dataset) only for seeds below "
         "this number; unset = every seed, 0 = none (a run's steps take about 200 kB)",
     )
+    seeds_per_task: Int = Field(
+        16,
+        ge=1,
+        description="campaigns: seeds run together as one task (all architectures), written "
+        "to one file per architecture and journaled at once; larger means fewer files and "
+        "faster campaigns, smaller a finer resume and progress; never changes the numbers",
+    )
     rrd_seeds: Int | None = Field(
         3,
         ge=0,

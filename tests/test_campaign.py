@@ -274,11 +274,13 @@ def test_path_traversal_name_is_refused(tmp_path: Path) -> None:
 def test_numbers_do_not_depend_on_workers_or_executor(
     executor: str, workers: str, tmp_path: Path, small_ablation: Path
 ) -> None:
-    cfg = _write_config(tmp_path / "c.toml", "par")
+    # one seed per task: three tasks, so the two workers really share the work
+    cfg = _write_config(tmp_path / "c.toml", "par", "seeds_per_task = 1\n")
     result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "-q",
                   "--workers", workers, "--executor", executor)  # fmt: skip
     assert result.exit_code == 0, result.output
     out = tmp_path / "results" / "par"
+    assert _events_done(out / "events.jsonl") == 3
     pd.testing.assert_frame_equal(_runs(out), _runs(small_ablation))
     a, b = _steps(out), _steps(small_ablation)
     pd.testing.assert_frame_equal(a, b, check_exact=True)
@@ -317,7 +319,7 @@ def _events_done(path: Path) -> int:
 
 def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
     """SIGKILL mid-campaign, then resume: same tables as an uninterrupted run, no duplicates."""
-    cfg = _write_config(tmp_path / "c.toml", "killed")
+    cfg = _write_config(tmp_path / "c.toml", "killed", "seeds_per_task = 4\n")
     out = tmp_path / "results" / "killed"
     args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "24", "--arch",
             ADAPTIVE, "--workers", "1", "-q"]  # fmt: skip
