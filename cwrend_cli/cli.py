@@ -20,7 +20,7 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__, campaign, statistics, storage
+from cwrend_cli import __version__, campaign, recording, statistics, storage
 from cwrend_cli.config import (
     ARCHITECTURES,
     config_hash,
@@ -94,6 +94,14 @@ SetOption = Annotated[
         "(e.g. --set schedule.beta=0.5, --set degradation.windows.1.bias_km=[0,0,0]). "
         "Repeatable.",
         metavar="KEY=VALUE",
+    ),
+]
+
+RrdOption = Annotated[
+    bool,
+    typer.Option(
+        "--rrd/--no-rrd",
+        help="Write Rerun recordings (.rrd) of the trajectories; open with `rerun FILE`.",
     ),
 ]
 
@@ -188,14 +196,7 @@ def run(
     ] = None,
     set_: SetOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table on the console.")] = False,
-    rrd: Annotated[
-        bool,
-        typer.Option(
-            "--rrd/--no-rrd",
-            help="Also write recording.rrd (Rerun: all architectures and the references; "
-            "open with `rerun <out>/recording.rrd`).",
-        ),
-    ] = True,
+    rrd: RrdOption = True,
     spawn: Annotated[
         bool,
         typer.Option("--spawn", help="Open the recording in the Rerun viewer (needs a display)."),
@@ -213,6 +214,8 @@ def run(
         seed_ = 0 if seed is None else seed
         if spawn and not rrd:
             raise ConfigError("--spawn opens the recording: drop --no-rrd")
+        if rrd:  # refuse before computing, so an error never leaves half the files
+            recording.check_enabled()
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
@@ -223,8 +226,6 @@ def run(
             out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references
         )
         if rrd:
-            from cwrend_cli import recording
-
             rrd_path = recording.record_case(
                 Path(written) / "recording.rrd", case.runs, case.references,
                 cfg.degradation.windows, u_max_km_s2=cfg.scenario.u_max_km_s2,
@@ -279,13 +280,6 @@ ForceOption = Annotated[
 ]
 RetryOption = Annotated[bool, typer.Option("--retry-failed", help="Rerun the failed runs.")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or tables.")]
-RrdOption = Annotated[
-    bool,
-    typer.Option(
-        "--rrd/--no-rrd",
-        help="Write Rerun recordings (.rrd) of the trajectories; open with `rerun FILE`.",
-    ),
-]
 RrdSeedsOption = Annotated[
     int | None,
     typer.Option(
@@ -352,8 +346,6 @@ def _campaign(
             overrides.append(f"output.rrd_seeds={0 if not rrd else rrd_seeds}")
         cfg = load_config(file, overrides)
         if cfg.output.rrd_seeds != 0:
-            from cwrend_cli import recording
-
             recording.check_enabled()
         if executor not in ("local", "dask"):
             raise ConfigError(f"--executor {executor!r}: must be 'local' or 'dask'")

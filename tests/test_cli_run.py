@@ -144,6 +144,17 @@ def test_bad_input_exits_2_and_writes_nothing(args: list[str], needle: str, tmp_
     assert not out.exists()
 
 
+def test_disabled_rerun_exits_2_before_writing_anything(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("RERUN", "off")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(PAPER), "--out", str(out)])
+    assert result.exit_code == 2
+    assert "--no-rrd" in result.output
+    assert not out.exists()
+
+
 def test_missing_config_file_exits_2(tmp_path: Path) -> None:
     result = runner.invoke(app, ["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
