@@ -5,8 +5,8 @@ optional per-run dispersions. :func:`plan` turns a validated config into a
 tuple of :class:`Task` (batches of :class:`RunSpec`) without side effects;
 every run's resolved config is validated there, before anything runs.
 :func:`execute_task` runs one batch in a worker and writes its per-run
-Parquet files; :mod:`cwrend_cli.campaign_runner` drives the tasks through an
-executor and keeps the journal.
+Parquet files; :func:`run_campaign` drives the tasks through an executor and
+keeps the journal.
 
 Random streams are keyed by (noise.seed, realisation): the noise by
 ``(seed, 0)`` and the dispersion draws by ``(seed, 1)``, so every architecture
@@ -386,7 +386,6 @@ def execute_task(
     task: Task,
     base: Mapping[str, Any],
     out_dir: str,
-    write_steps: bool = True,
     record_seeds: tuple[int, ...] = (),
 ) -> TaskOutcome:
     """Run a task's runs, write their steps/solves files and return their outcomes.
@@ -408,6 +407,7 @@ def execute_task(
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
     by_seed: dict[int, list[tuple[CwrendConfig, simulation.RunResult]]] = {}
     configs: dict[Assignment, CwrendConfig] = {}
+    noises: dict[tuple[Assignment, int], np.ndarray] = {}  # shared by the archs of a seed
     for spec in task.runs:
         started = time.time()
         t0 = time.perf_counter()
@@ -416,7 +416,9 @@ def execute_task(
             if cfg is None:
                 cfg = configs[spec.overrides] = config_from_dict(apply(base, spec.overrides))
             refs = _references(cfg)
-            noise = standard_normal_for(cfg, spec.seed)
+            noise = noises.get((spec.overrides, spec.seed))
+            if noise is None:
+                noise = noises[spec.overrides, spec.seed] = standard_normal_for(cfg, spec.seed)
             result = simulation.simulate(cfg, ARCHITECTURES[spec.arch], noise, refs, spec.seed)
             metrics = storage.summary_row(result, refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))
@@ -429,24 +431,21 @@ def execute_task(
     files: list[str] = []
     digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
     limit = base["output"].get("steps_seeds")
-    if write_steps:
-        for arch, items in sorted(results.items()):
-            kept = [(s, r) for s, r in items if limit is None or s.seed < limit]
-            for kind, chosen in (("solves", items), ("steps", kept)):
-                if not chosen:
-                    continue
-                extra = {
-                    "run_key": [s.run_key for s, _ in chosen],
-                    "point": [s.point for s, _ in chosen],
-                }
-                build = (
-                    storage.campaign_steps_table
-                    if kind == "steps"
-                    else storage.campaign_solves_table
-                )
-                rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
-                storage.write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
-                files.append(rel)
+    for arch, items in sorted(results.items()):
+        kept = [(s, r) for s, r in items if limit is None or s.seed < limit]
+        for kind, chosen, build in (
+            ("solves", items, storage.campaign_solves_table),
+            ("steps", kept, storage.campaign_steps_table),
+        ):
+            if not chosen:
+                continue
+            extra = {
+                "run_key": [s.run_key for s, _ in chosen],
+                "point": [s.point for s, _ in chosen],
+            }
+            rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
+            storage.write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
+            files.append(rel)
     warnings: list[str] = []
     point = task.runs[0].point if task.runs else BASE_POINT
     for seed in record_seeds:
@@ -626,7 +625,6 @@ def run_campaign(
     force: bool = False,
     retry_failed: bool = False,
     progress: Progress | None = None,
-    write_steps: bool = True,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -674,7 +672,7 @@ def run_campaign(
             if executor_kind == "local":  # no pool larger than the work (one task: in-process)
                 workers = min(workers or default_workers(), len(tasks))
             with open_executor(executor_kind, workers, address) as (executor, parallel):
-                _drive(executor, parallel, tasks, plan_, out_dir, write_steps, progress)
+                _drive(executor, parallel, tasks, plan_, out_dir, progress)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -702,7 +700,6 @@ def _drive(
     tasks: Sequence[Task],
     plan_: CampaignPlan,
     out_dir: Path,
-    write_steps: bool,
     progress: Progress,
 ) -> None:
     """Submit tasks with a bounded number in flight; journal each as it completes."""
@@ -718,9 +715,7 @@ def _drive(
                 if task is None:
                     break
                 record = seeds_to_record(task, plan_.archs, rrd_limit)
-                future = executor.submit(
-                    execute_task, task, plan_.base, str(out_dir), write_steps, record
-                )
+                future = executor.submit(execute_task, task, plan_.base, str(out_dir), record)
                 in_flight[future] = task
             if not in_flight:
                 return
