@@ -434,6 +434,12 @@ class DegradationWindow(_FrozenModel):
     def _three_entries(cls, value: Any) -> Any:
         return _check_length(value, 3)
 
+    @property
+    def label(self) -> str:
+        """Short description, e.g. ``"R×300 + 17.5 m bias"``."""
+        bias_m = 1e3 * math.hypot(*self.bias_km)
+        return f"R×{self.r_scale:g}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
+
     @model_validator(mode="after")
     def _ordered(self) -> Self:
         if self.end_s < self.start_s:

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cwrend_cli.errors import CwrendError
+from cwrend_cli.sensors import in_window
 from cwrend_cli.storage import atomic_path
 
 if TYPE_CHECKING:
@@ -113,18 +114,13 @@ def cumulative_delta_v(t_s: np.ndarray, u_norm: np.ndarray) -> np.ndarray:
 
 
 def window_activity(t_s: np.ndarray, window: DegradationWindow) -> np.ndarray:
-    """1.0 where ``start_s ≤ t ≤ end_s`` (the window is active), else 0.0."""
-    t = np.asarray(t_s, dtype=float)
-    return ((t >= window.start_s) & (t <= window.end_s)).astype(float)
+    """1.0 where the window is active (``start_s ≤ t ≤ end_s``), else 0.0."""
+    return in_window(np.asarray(t_s, dtype=float), window).astype(float)
 
 
 def window_label(i: int, window: DegradationWindow) -> str:
-    """Short description of degradation window ``i``, e.g. ``window 1: R×300, bias 17.6 m``."""
-    text = f"window {i}: R×{window.r_scale:g}"
-    bias_m = 1e3 * float(np.linalg.norm(window.bias_km))
-    if bias_m > 0:
-        text += f", bias {bias_m:.3g} m"
-    return text
+    """Degradation window ``i`` for legends, e.g. ``window 1: R×300 + 17.5 m bias``."""
+    return f"window {i}: {window.label}"
 
 
 # ---------------------------------------------------------------------------

@@ -42,8 +42,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, NullFormatter
+from pydantic import ValidationError
 
-from cwrend_cli.config import ARCHITECTURES
+from cwrend_cli.config import ARCHITECTURES, DegradationWindow
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.recording import (
     DEGRADATION_COLOUR,
@@ -87,20 +88,6 @@ class ReportSummary:
 
 
 @dataclass
-class _Window:
-    start_s: float
-    end_s: float
-    r_scale: float
-    bias_km: tuple[float, float, float]
-
-    @property
-    def label(self) -> str:
-        text = f"R×{self.r_scale:g}"
-        bias_m = 1e3 * float(np.linalg.norm(self.bias_km))
-        return text + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
-
-
-@dataclass
 class _Data:
     """Everything the figures need, loaded from one results directory."""
 
@@ -109,7 +96,7 @@ class _Data:
     ref_summary: pd.DataFrame  # arch ("open_loop_<name>"), delta_v_km_s, miss_km
     steps: pd.DataFrame  # steps of the selected seed (and point), all architectures
     references: pd.DataFrame | None  # reference trajectories (reference, t_s, x_km, …)
-    windows: list[_Window]
+    windows: list[DegradationWindow]
     config: Mapping[str, Any]
     config_hash: str
     seed: int
@@ -177,20 +164,14 @@ def _group_label(slugs: Sequence[str]) -> str:
     return " = ".join(_arch_label(s) for s in slugs)
 
 
-def _windows(config: Mapping[str, Any]) -> list[_Window]:
+def _windows(config: Mapping[str, Any]) -> list[DegradationWindow]:
+    """The degradation windows of a saved config (ones that no longer validate are skipped)."""
     raw = (config.get("degradation") or {}).get("windows") or []
     out = []
     for w in raw:
         try:
-            out.append(
-                _Window(
-                    float(w["start_s"]),
-                    float(w["end_s"]),
-                    float(w.get("r_scale", 1.0)),
-                    tuple(float(b) for b in w.get("bias_km", (0.0, 0.0, 0.0))),  # type: ignore[arg-type]
-                )
-            )
-        except (KeyError, TypeError, ValueError):
+            out.append(DegradationWindow.model_validate(w))
+        except ValidationError:
             continue
     return out
 
@@ -470,13 +451,13 @@ def _figure(width: float, height: float) -> Figure:
     return fig
 
 
-def _shade(ax: Axes, windows: Sequence[_Window]) -> None:
+def _shade(ax: Axes, windows: Sequence[DegradationWindow]) -> None:
     alphas = (0.18, 0.32, 0.25, 0.4)
     for i, w in enumerate(windows):
         ax.axvspan(w.start_s, w.end_s, color=DEGRADATION_COLOUR, alpha=alphas[i % 4], lw=0)
 
 
-def _window_handles(windows: Sequence[_Window]) -> list[Patch]:
+def _window_handles(windows: Sequence[DegradationWindow]) -> list[Patch]:
     alphas = (0.18, 0.32, 0.25, 0.4)
     return [
         Patch(

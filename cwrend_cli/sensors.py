@@ -29,6 +29,11 @@ class Window(Protocol):
     bias_km: tuple[float, float, float]
 
 
+def in_window(times_s: np.ndarray, window: Window) -> np.ndarray:
+    """True where ``window`` is active: ``start_s ≤ t ≤ end_s`` (both ends included)."""
+    return (times_s >= window.start_s) & (times_s <= window.end_s)
+
+
 def active_windows(times_s: np.ndarray, windows: Sequence[Window]) -> np.ndarray:
     """Index of the window active at each time (−1 for none).
 
@@ -38,7 +43,7 @@ def active_windows(times_s: np.ndarray, windows: Sequence[Window]) -> np.ndarray
     """
     idx = np.full(times_s.shape, -1, dtype=np.int64)
     for i, w in enumerate(windows):
-        idx[(times_s >= w.start_s) & (times_s <= w.end_s)] = i
+        idx[in_window(times_s, w)] = i
     return idx
 
 
