@@ -42,6 +42,16 @@ def delta_v(t_s: np.ndarray, u: np.ndarray) -> float:
     return float(np.trapezoid(np.linalg.norm(u, axis=1), t_s))
 
 
+def cumulative_delta_v(t_s: np.ndarray, u_norm: np.ndarray) -> np.ndarray:
+    """Cumulative trapezoid of ‖u‖ over the grid [km/s]; its last value is :func:`delta_v`."""
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(u_norm, dtype=float)
+    out = np.zeros_like(a)
+    if a.size > 1:
+        out[1:] = np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))
+    return out
+
+
 def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLoopResult:
     """Energy-optimal reference: ``u = −Bᵀλ`` with ``λ(0)`` in closed form."""
     lam0 = guidance.energy_optimal_costate(problem)

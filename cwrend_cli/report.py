@@ -50,8 +50,8 @@ from cwrend_cli.recording import (
     DEGRADATION_COLOUR,
     REFERENCE_COLOURS,
     arch_colour,
-    cumulative_delta_v,
 )
+from cwrend_cli.references import cumulative_delta_v
 from cwrend_cli.storage import atomic_path
 
 REPORT_DIR = "report"
@@ -187,7 +187,7 @@ def _reference_summary(references: pd.DataFrame | None) -> pd.DataFrame:
                 {
                     "arch": f"open_loop_{name}",
                     "seed": -1,
-                    "delta_v_km_s": float(np.trapezoid(g["u_norm_km_s2"], g["t_s"])),
+                    "delta_v_km_s": float(cumulative_delta_v(g["t_s"], g["u_norm_km_s2"])[-1]),
                     "miss_km": float(np.linalg.norm([last["x_km"], last["y_km"], last["z_km"]])),
                 }
             )

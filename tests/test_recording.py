@@ -154,13 +154,6 @@ def test_scalar_values_round_trip(chunks: dict[str, list], case: CaseResult) -> 
     assert t_w[active == 1.0].min() == 250.0 and t_w[active == 1.0].max() == 325.0
 
 
-def test_cumulative_delta_v_matches_run(case: CaseResult) -> None:
-    for run in case.runs:
-        dv = recording.cumulative_delta_v(run.t_s, np.linalg.norm(run.u, axis=1))
-        assert dv[0] == 0.0 and np.all(np.diff(dv) >= 0)
-        assert dv[-1] == pytest.approx(run.delta_v_km_s, rel=1e-12)
-
-
 def test_write_is_atomic_and_replaces(tmp_path: Path, cfg: CwrendConfig, case: CaseResult) -> None:
     target = tmp_path / "r.rrd"
     target.write_bytes(b"old")

@@ -106,3 +106,12 @@ def test_energy_delta_v_is_trapezoid_of_costate_norm(paper_refs, paper_cfg, cw_m
     norms = np.array(norms)
     dv = float(np.sum(0.5 * (norms[1:] + norms[:-1])))
     assert paper_refs.energy.delta_v_km_s == pytest.approx(dv, rel=1e-12)  # 800 products
+
+
+def test_cumulative_delta_v_ends_at_the_delta_v(paper_refs) -> None:
+    """The running trapezoid starts at 0, never decreases and ends at ``delta_v`` (SPEC §2)."""
+    for ref in (paper_refs.energy, paper_refs.fuel):
+        dv = references.cumulative_delta_v(ref.t_s, np.linalg.norm(ref.u, axis=1))
+        assert dv[0] == 0.0 and np.all(np.diff(dv) >= 0)
+        # summation order differs from np.trapezoid: rounding only
+        assert dv[-1] == pytest.approx(ref.delta_v_km_s, rel=1e-12)
