@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from cwrend_cli import storage
+
 ARCH_ORDER = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
 
 
@@ -27,8 +29,8 @@ def tables(campaign: Path) -> str:
     """The two markdown tables of ``campaign`` (a ``cwrend sweep`` directory)."""
     stats = pd.read_parquet(campaign / "sweep.parquet")
     runs = pd.read_parquet(campaign / "runs.parquet")
-    params = [c for c in stats.columns if c.startswith("param.")]
-    names = [p.removeprefix("param.").split(".")[-1] for p in params]
+    params = storage.param_columns(stats.columns)
+    names = [p.removeprefix(storage.PARAM_PREFIX).split(".")[-1] for p in params]
     ok = runs[runs["status"] == "ok"]
     infeasible = ok.groupby([*params, "arch"], observed=True).apply(
         lambda g: g["n_infeasible"].sum() / g["n_solves"].sum(), include_groups=False

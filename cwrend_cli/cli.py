@@ -360,7 +360,8 @@ def _campaign(
             address=address, force=force, retry_failed=retry_failed, progress=progress,
         )  # fmt: skip
         runs = pd.read_parquet(out / storage.RUNS)
-        by = ["arch"] if command == "ablate" else ["point", *_param_columns(runs), "arch"]
+        swept = storage.param_columns(runs.columns)
+        by = ["arch"] if command == "ablate" else ["point", *swept, "arch"]
         stats = pd.concat(
             [
                 statistics.describe(runs, by, seed=cfg.noise.seed),
@@ -393,10 +394,6 @@ def _campaign(
                 "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
             )
             raise typer.Exit(code=1)
-
-
-def _param_columns(runs: pd.DataFrame) -> list[str]:
-    return [c for c in runs.columns if c.startswith("param.")]
 
 
 @app.command("ablate")

@@ -52,7 +52,7 @@ from cwrend_cli.recording import (
     arch_colour,
 )
 from cwrend_cli.references import cumulative_delta_v
-from cwrend_cli.storage import atomic_path
+from cwrend_cli.storage import PARAM_PREFIX, atomic_path, param_columns
 
 REPORT_DIR = "report"
 _DPI = 120
@@ -224,9 +224,9 @@ def _computed_references(
 
     row = runs.iloc[0]
     assignment = tuple(
-        (c.removeprefix("param."), _param_value(row[c]))
-        for c in runs.columns
-        if c.startswith("param.") and pd.notna(row[c])
+        (c.removeprefix(PARAM_PREFIX), _param_value(row[c]))
+        for c in param_columns(runs.columns)
+        if pd.notna(row[c])
     )
     try:
         cfg = config_from_dict(campaign.apply(config, assignment))
@@ -262,12 +262,12 @@ def _reported_point(runs: pd.DataFrame, config: Mapping[str, Any]) -> str | None
     ok = runs[runs["status"] == "ok"]
     if ok.empty:
         return None
-    params = [c for c in runs.columns if c.startswith("param.")]
+    params = param_columns(runs.columns)
     points = sorted(ok["point"].astype(str).unique())
     for point in points:
         row = ok[ok["point"].astype(str) == point].iloc[0]
         try:
-            base = [get_dotted(config, c.removeprefix("param.")) for c in params]
+            base = [get_dotted(config, c.removeprefix(PARAM_PREFIX)) for c in params]
         except (KeyError, IndexError, TypeError, ValueError):
             break
         values = [_param_value(row[c]) for c in params]
@@ -281,8 +281,8 @@ def _point_values(runs: pd.DataFrame) -> str:
     if runs.empty:
         return ""
     row = runs.iloc[0]
-    cols = [c for c in runs.columns if c.startswith("param.")]
-    return ", ".join(f"{c.removeprefix('param.')}={_param_value(row[c])}" for c in cols)
+    cols = param_columns(runs.columns)
+    return ", ".join(f"{c.removeprefix(PARAM_PREFIX)}={_param_value(row[c])}" for c in cols)
 
 
 def _pick_seed(runs: pd.DataFrame, seed: int | None) -> int:
@@ -341,11 +341,7 @@ def _load_campaign_dir(root: Path, seed: int | None) -> _Data:
     meta = _read_json(root / "manifest.json") if (root / "manifest.json").exists() else {}
     config = meta.get("config") or {}
     notes: list[str] = []
-    params = [
-        c
-        for c in runs.columns
-        if c.startswith("param.") and runs[c].dropna().astype(str).nunique() > 1
-    ]
+    params = [c for c in param_columns(runs.columns) if runs[c].dropna().astype(str).nunique() > 1]
     point = None
     if "point" in runs.columns and runs["point"].nunique() > 1:
         point = _reported_point(runs, config)
@@ -936,7 +932,7 @@ def fig_sweep(data: _Data, param: str, path: Path) -> Path:
     the title).
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
-    key = param.removeprefix("param.")
+    key = param.removeprefix(PARAM_PREFIX)
     x_all, numeric = _param_values(runs[param])
     runs["_x"] = x_all
     levels = np.sort(np.unique(x_all)) if numeric else sorted(set(x_all))
@@ -1079,7 +1075,7 @@ def _sweep_table(data: _Data) -> str:
     for param in data.params:
         runs[f"_{param}"] = _param_values(runs[param])[0]
         keys.append(f"_{param}")
-    header = [p.removeprefix("param.") for p in data.params] + [
+    header = [p.removeprefix(PARAM_PREFIX) for p in data.params] + [
         "architecture", "runs", "mean Δv [km/s]", "median miss [km]", "max miss [km]",
     ]  # fmt: skip
     rows = []

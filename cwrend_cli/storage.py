@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -418,6 +418,13 @@ def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
 
 
 _RUN_METRICS = [f for f in SUMMARY_SCHEMA if f.name not in ("arch", "seed")]
+#: Prefix of the ``runs.parquet`` columns holding a run's swept values.
+PARAM_PREFIX = "param."
+
+
+def param_columns(columns: Iterable[str]) -> list[str]:
+    """The swept-value columns (``param.<key>``) among ``columns``, in order."""
+    return [c for c in columns if c.startswith(PARAM_PREFIX)]
 
 
 def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]) -> pa.Table:
@@ -447,7 +454,7 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
     for f in _RUN_METRICS:
         cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
         fields.append(f)
-    for prefix, key in (("param", "params"), ("disp", "dispersed")):
+    for prefix, key in ((PARAM_PREFIX, "params"), ("disp.", "dispersed")):
         names = sorted({k for r in records for k in r.get(key, {})})
         for name in names:
             values = [r.get(key, {}).get(name) for r in records]
@@ -458,7 +465,7 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
                 arr = pa.array(values)
             else:
                 arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())
-            cols[f"{prefix}.{name}"] = arr
-            fields.append(pa.field(f"{prefix}.{name}", arr.type))
+            cols[prefix + name] = arr
+            fields.append(pa.field(prefix + name, arr.type))
     schema = pa.schema(fields).with_metadata(_metadata(metadata))
     return pa.table(cols, schema=schema)
