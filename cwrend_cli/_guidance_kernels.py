@@ -384,6 +384,14 @@ def quadrature_breaks(
 
 
 @njit(cache=True)
+def arc_bounds(arc: int, n_breaks: int, breaks: np.ndarray, t0: float, t1: float) -> tuple:
+    """``(a, b)`` of quadrature arc ``arc`` of ``[t0, t1]`` split at ``breaks[:n_breaks]``."""
+    a = t0 if arc == 0 else breaks[arc - 1]
+    b = t1 if arc == n_breaks else breaks[arc]
+    return a, b
+
+
+@njit(cache=True)
 def _regime_terms(p: float, eps: float) -> tuple:
     """``(φ, φ', Ψ)`` of the throttle at ``p`` (Eq. 10 and its integral)."""
     if eps < EPS_BANG_BANG:
@@ -438,8 +446,7 @@ def dual_evaluate(
     int_p = 0.0
     n_nodes = gl_x.shape[0]
     for arc in range(n_breaks + 1):
-        a = 0.0 if arc == 0 else breaks[arc - 1]
-        b = horizon if arc == n_breaks else breaks[arc]
+        a, b = arc_bounds(arc, n_breaks, breaks, 0.0, horizon)
         if b <= a:
             continue
         half = 0.5 * (b - a)

@@ -18,6 +18,7 @@ from numba import njit
 from cwrend_cli._guidance_kernels import (
     MAX_BREAKS,
     MAX_QUAD_BREAKS,
+    arc_bounds,
     control_from_costate,
     costate_at,
     quadrature_breaks,
@@ -71,8 +72,7 @@ def mean_control(
     acc1 = 0.0
     acc2 = 0.0
     for arc in range(n_breaks + 1):
-        a = 0.0 if arc == 0 else breaks[arc - 1]
-        b = dt if arc == n_breaks else breaks[arc]
+        a, b = arc_bounds(arc, n_breaks, breaks, 0.0, dt)
         if b <= a:
             continue
         half = 0.5 * (b - a)
