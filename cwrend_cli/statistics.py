@@ -139,16 +139,14 @@ def paired(runs: pd.DataFrame, by: Sequence[str] = (), seed: int = 0) -> pd.Data
                 {**base, "metric": "miss_km", "statistic": "frac_less",
                  "value": less / n, "ci_low": lo, "ci_high": hi}
             )  # fmt: skip
-            d_miss = (both[("miss_km", a)] - both[("miss_km", b)]).to_numpy()
-            lo, hi = bootstrap_ci(d_miss, np.median, rng)
-            rows.append(
-                {**base, "metric": "miss_km", "statistic": "median_diff",
-                 "value": float(np.median(d_miss)), "ci_low": lo, "ci_high": hi}
-            )  # fmt: skip
-            d_dv = (both[("delta_v_km_s", a)] - both[("delta_v_km_s", b)]).to_numpy()
-            lo, hi = bootstrap_ci(d_dv, np.mean, rng)
-            rows.append(
-                {**base, "metric": "delta_v_km_s", "statistic": "mean_diff",
-                 "value": float(np.mean(d_dv)), "ci_low": lo, "ci_high": hi}
-            )  # fmt: skip
+            for metric, name, fn in (
+                ("miss_km", "median_diff", np.median),
+                ("delta_v_km_s", "mean_diff", np.mean),
+            ):
+                diff = (both[(metric, a)] - both[(metric, b)]).to_numpy()
+                lo, hi = bootstrap_ci(diff, fn, rng)
+                rows.append(
+                    {**base, "metric": metric, "statistic": name,
+                     "value": float(fn(diff)), "ci_low": lo, "ci_high": hi}
+                )  # fmt: skip
     return pd.DataFrame(rows)
