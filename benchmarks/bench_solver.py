@@ -22,8 +22,9 @@ from collections import Counter
 import numpy as np
 
 from benchmarks.common import Row, capture_resolves, config_with, naive_solve
-from cwrend_cli import campaign, guidance, simulation
+from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.physics import guidance, simulation
 
 
 def warm_resolves(naive: int) -> list[Row]:

@@ -10,9 +10,10 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
-from cwrend_cli import campaign, guidance, simulation
+from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict, set_dotted
-from cwrend_cli.dynamics import cw_system
+from cwrend_cli.physics import guidance, simulation
+from cwrend_cli.physics.dynamics import cw_system
 
 #: Published MATLAB figures (Candan & Servadio, AAS 26-893), not measured here.
 PUBLISHED = {

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from cwrend_cli import storage
+from cwrend_cli.output import tables as storage
 
 ARCH_ORDER = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
 

@@ -20,7 +20,8 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__, campaign, recording, statistics, storage
+from cwrend_cli import __version__, campaign
+from cwrend_cli.campaign import statistics
 from cwrend_cli.config import (
     ARCHITECTURES,
     config_hash,
@@ -39,6 +40,8 @@ from cwrend_cli.console import (
     sweep_console_table,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.output import recording
+from cwrend_cli.output import tables as storage
 
 app = typer.Typer(
     name="cwrend",

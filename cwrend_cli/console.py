@@ -21,7 +21,7 @@ from rich.progress import (
 from rich.table import Table
 
 from cwrend_cli.campaign import CaseResult
-from cwrend_cli.storage import reference_row, summary_row
+from cwrend_cli.output.tables import reference_row, summary_row
 
 
 def _num(value: float, spec: str) -> str:

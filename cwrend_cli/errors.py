@@ -10,11 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from cwrend_cli.physics.errors import CwrendError, ScenarioError
 
-class CwrendError(Exception):
-    """Base class for errors caused by user input (CLI exit code 2)."""
-
-    exit_code: int = 2
+__all__ = ["ConfigError", "CwrendError", "InputDataError", "ScenarioError"]
 
 
 class ConfigError(CwrendError):
@@ -34,7 +32,3 @@ class ConfigError(CwrendError):
 
 class InputDataError(CwrendError):
     """A data file referenced by the configuration (e.g. a noise file) is unusable."""
-
-
-class ScenarioError(CwrendError):
-    """The scenario itself cannot be flown (e.g. no bounded control reaches the target)."""

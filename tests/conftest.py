@@ -14,8 +14,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from cwrend_cli import guidance, simulation
 from cwrend_cli.config import CwrendConfig
+from cwrend_cli.physics import guidance, simulation
 
 #: Homotopy parameters of the guidance tests, in continuation order (1 → 0).
 EPS_CONTINUATION = (1.0, 0.3, 0.05, 0.0)

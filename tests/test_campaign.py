@@ -15,10 +15,11 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from cwrend_cli import campaign, storage
+from cwrend_cli import campaign
 from cwrend_cli.cli import app
 from cwrend_cli.config import CwrendConfig, config_from_dict
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.output import tables as storage
 
 runner = CliRunner()
 # Wall-time columns differ between otherwise identical runs.

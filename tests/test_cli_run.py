@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
-from cwrend_cli.sensors import standard_normal_stream
+from cwrend_cli.physics.sensors import standard_normal_stream
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 RUN_FILES = (

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cwrend_cli import guidance
-from cwrend_cli._guidance_kernels import throttle
+from cwrend_cli.physics import guidance
+from cwrend_cli.physics.guidance._kernels import throttle
 
 U_MAX = 8e-4  # km/s², paper Table 1
 EPS_MACH = np.finfo(float).eps

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from cwrend_cli import dynamics
+from cwrend_cli.physics import dynamics
 
 N = dynamics.MEAN_MOTION_PAPER_RAD_S  # SPEC §1: n = 0.00104218449 rad/s
 EPS_MACH = np.finfo(float).eps

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cwrend_cli.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
-from cwrend_cli.estimation import kf_predict, kf_update
+from cwrend_cli.physics.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
+from cwrend_cli.physics.estimation import kf_predict, kf_update
 
 H = np.hstack([np.eye(3), np.zeros((3, 3))])  # Eq. (13)
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1 (1 m σ)

@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cwrend_cli import campaign, feasibility, guidance, simulation
+from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
-from cwrend_cli.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
+from cwrend_cli.physics import guidance, simulation
+from cwrend_cli.physics.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
+from cwrend_cli.physics.guidance import feasibility
 
 N = MEAN_MOTION_PAPER_RAD_S
 U_MAX = 8e-4  # km/s², paper Table 1

@@ -11,9 +11,10 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from cwrend_cli import campaign, recording
+from cwrend_cli import campaign
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.output import recording
 
 ARCH_ENTITIES = (
     "trajectory/true",

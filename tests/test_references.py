@@ -12,7 +12,7 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from cwrend_cli import references
+from cwrend_cli.physics import references
 
 DV_ENERGY_PAPER = 1.502386e-1  # km/s, AAS 26-893 Sec. Numerical Results
 DV_FUEL_PAPER = 1.128000e-1  # km/s, AAS 26-893 Sec. Numerical Results

@@ -12,9 +12,10 @@ import pyarrow as pa
 import pytest
 from typer.testing import CliRunner
 
-from cwrend_cli import campaign, storage
+from cwrend_cli import campaign
 from cwrend_cli.cli import app
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict, resolved_dict
+from cwrend_cli.output import tables as storage
 from cwrend_cli.report import write_report
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"

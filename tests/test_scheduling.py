@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cwrend_cli.scheduling import composite_score, eps_blend, eps_target, lowpass_score
+from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 
 M, KAPPA, SCORE_MAX = 3.0, 12.0, 50.0
 RHO_S, BETA, ALPHA = 0.85, 0.25, 0.10

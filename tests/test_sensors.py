@@ -11,9 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cwrend_cli import sensors
 from cwrend_cli.config import CwrendConfig, DegradationWindow
+from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.errors import InputDataError
+from cwrend_cli.physics import sensors
 
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1
 BIAS_KM = np.array([0.010, -0.008, 0.012])  # SPEC §6: [10, −8, 12] m
@@ -146,7 +147,7 @@ def test_load_noise_csv(tmp_path) -> None:
     frame = _frame(N_STEPS)
     path = tmp_path / "noise.csv"
     frame.to_csv(path, index=False)
-    np.testing.assert_array_equal(sensors.load_noise_file(path, N_STEPS), frame.to_numpy())
+    np.testing.assert_array_equal(load_noise_file(path, N_STEPS), frame.to_numpy())
 
 
 def test_load_noise_parquet(tmp_path) -> None:
@@ -154,7 +155,7 @@ def test_load_noise_parquet(tmp_path) -> None:
     frame = _frame(N_STEPS)
     path = tmp_path / "noise.parquet"
     frame.assign(extra=1.0)[["n3", "extra", "n1", "n2"]].to_parquet(path)
-    np.testing.assert_array_equal(sensors.load_noise_file(path, N_STEPS), frame.to_numpy())
+    np.testing.assert_array_equal(load_noise_file(path, N_STEPS), frame.to_numpy())
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
@@ -164,7 +165,7 @@ def test_load_noise_wrong_length(tmp_path, suffix: str) -> None:
     frame = _frame(N_STEPS - 1)
     frame.to_csv(path, index=False) if suffix == ".csv" else frame.to_parquet(path)
     with pytest.raises(InputDataError) as info:
-        sensors.load_noise_file(path, N_STEPS)
+        load_noise_file(path, N_STEPS)
     msg = str(info.value)
     assert "799 rows" in msg and "800" in msg and path.name in msg
 
@@ -174,7 +175,7 @@ def test_load_noise_missing_column(tmp_path) -> None:
     path = tmp_path / "noise.csv"
     _frame(N_STEPS).drop(columns="n2").to_csv(path, index=False)
     with pytest.raises(InputDataError, match=r"missing column\(s\) n2"):
-        sensors.load_noise_file(path, N_STEPS)
+        load_noise_file(path, N_STEPS)
 
 
 def test_load_noise_nan(tmp_path) -> None:
@@ -184,7 +185,7 @@ def test_load_noise_nan(tmp_path) -> None:
     path = tmp_path / "noise.parquet"
     frame.to_parquet(path)
     with pytest.raises(InputDataError, match=r"non-finite value in row 17"):
-        sensors.load_noise_file(path, N_STEPS)
+        load_noise_file(path, N_STEPS)
 
 
 def test_load_noise_non_numeric(tmp_path) -> None:
@@ -194,10 +195,10 @@ def test_load_noise_non_numeric(tmp_path) -> None:
     path = tmp_path / "noise.csv"
     frame.to_csv(path, index=False)
     with pytest.raises(InputDataError, match="numeric"):
-        sensors.load_noise_file(path, N_STEPS)
+        load_noise_file(path, N_STEPS)
 
 
 def test_load_noise_missing_file(tmp_path) -> None:
     """A missing file is an InputDataError (not a FileNotFoundError traceback)."""
     with pytest.raises(InputDataError, match="not found"):
-        sensors.load_noise_file(tmp_path / "absent.csv", N_STEPS)
+        load_noise_file(tmp_path / "absent.csv", N_STEPS)

@@ -11,9 +11,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cwrend_cli import campaign, sensors, simulation
+from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
-from cwrend_cli.dynamics import discretize
+from cwrend_cli.physics import sensors, simulation
+from cwrend_cli.physics.dynamics import discretize
 
 U_MAX = 8e-4  # km/s², paper Table 1
 N_STEPS = 800

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cwrend_cli import statistics
+from cwrend_cli.campaign import statistics
 
 
 def test_wilson_interval_reference_values() -> None:

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from cwrend_cli import guidance
-from cwrend_cli.dynamics import costate_stm, cw_system
-from cwrend_cli.errors import ScenarioError
+from cwrend_cli.physics import guidance
+from cwrend_cli.physics.dynamics import costate_stm, cw_system
+from cwrend_cli.physics.errors import ScenarioError
 
 #: ε sequence of the fuel-optimal continuation (SPEC §2).
 FUEL_CONTINUATION = tuple(round(1.0 - 0.1 * i, 1) for i in range(11))

@@ -23,7 +23,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from cwrend_cli.dynamics import input_matrix, stm
+from cwrend_cli.physics.dynamics import input_matrix, stm
 
 
 @dataclass(frozen=True)

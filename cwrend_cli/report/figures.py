@@ -46,13 +46,13 @@ from pydantic import ValidationError
 
 from cwrend_cli.config import ARCHITECTURES, DegradationWindow
 from cwrend_cli.errors import CwrendError
-from cwrend_cli.recording import (
+from cwrend_cli.output.recording import (
     DEGRADATION_COLOUR,
     REFERENCE_COLOURS,
     arch_colour,
 )
-from cwrend_cli.references import cumulative_delta_v
-from cwrend_cli.storage import PARAM_PREFIX, atomic_path, param_columns
+from cwrend_cli.output.tables import PARAM_PREFIX, atomic_path, param_columns
+from cwrend_cli.physics.references import cumulative_delta_v
 
 REPORT_DIR = "report"
 _DPI = 120
@@ -219,8 +219,10 @@ def _computed_references(
     functions of the scenario and solver settings, so they are recomputed here
     (about 0.1–0.3 s) with the grid values of the point applied.
     """
-    from cwrend_cli import campaign, simulation, storage
+    from cwrend_cli import campaign
     from cwrend_cli.config import config_from_dict
+    from cwrend_cli.output import tables as storage
+    from cwrend_cli.physics import simulation
 
     row = runs.iloc[0]
     assignment = tuple(

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cwrend_cli.dynamics import zoh_step
+from cwrend_cli.physics.dynamics import zoh_step
 
 #: Regularisation added to the innovation covariance before inversion (SPEC §3).
 GAIN_REGULARISATION = 1e-12

@@ -1,5 +1,7 @@
 """Measurement noise: degradation windows and standard-normal streams (SPEC §3, §6).
 
+No file I/O here: an external realisation is read by :mod:`cwrend_cli.config.io`.
+
 The truth is measured as ``y = H x + chol(R_true) n + b`` where ``n`` is one
 standard-normal 3-vector per step, shared by every architecture of a seed
 (fair comparison, SPEC §6), and ``R_true = r_scale · R_nominal`` and the bias
@@ -10,14 +12,9 @@ Units: km, km², s.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
-
-from cwrend_cli.errors import InputDataError
-
-NOISE_COLUMNS = ("n1", "n2", "n3")
 
 
 class Window(Protocol):
@@ -75,48 +72,3 @@ def standard_normal_stream(seed: np.random.SeedSequence | int, n_steps: int) -> 
     """One standard-normal realisation (n_steps, 3) from a ``SeedSequence``-keyed PCG64 stream."""
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     return np.random.Generator(np.random.PCG64(seq)).standard_normal((n_steps, 3))
-
-
-def load_noise_file(path: str | Path, n_steps: int) -> np.ndarray:
-    """Read an external standard-normal realisation (CSV or Parquet, columns n1, n2, n3).
-
-    Raises :class:`InputDataError` naming the file and the problem when the
-    file is unreadable, lacks a column, has the wrong number of rows (one per
-    step is required) or holds a non-finite value.
-    """
-    import pandas as pd
-
-    path = Path(path)
-    try:
-        if path.suffix.lower() in (".parquet", ".pq"):
-            frame = pd.read_parquet(path)
-        else:
-            frame = pd.read_csv(path)
-    except FileNotFoundError:
-        raise InputDataError(f"noise.file = {str(path)!r}: file not found") from None
-    except Exception as exc:  # pandas/pyarrow raise many types for unreadable files
-        raise InputDataError(f"noise.file = {str(path)!r}: cannot be read ({exc})") from None
-    missing = [c for c in NOISE_COLUMNS if c not in frame.columns]
-    if missing:
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: missing column(s) {', '.join(missing)}; "
-            f"expected columns n1, n2, n3 (found: {', '.join(map(str, frame.columns))})"
-        )
-    if len(frame) != n_steps:
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: has {len(frame)} rows, expected {n_steps} "
-            "(one row per step, horizon_s / dt_s)"
-        )
-    try:
-        values = frame[list(NOISE_COLUMNS)].to_numpy(dtype=float)
-    except (TypeError, ValueError):
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: columns n1, n2, n3 must be numeric"
-        ) from None
-    bad = ~np.isfinite(values)
-    if bad.any():
-        row = int(np.argwhere(bad)[0][0])
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: non-finite value in row {row} (all values must be finite)"
-        )
-    return np.ascontiguousarray(values)

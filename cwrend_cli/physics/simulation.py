@@ -2,9 +2,9 @@
 
 An architecture is estimator {plain, MTF} × schedule {fixed, adaptive}: the
 same loop with two switches. The step loop runs compiled
-(:mod:`cwrend_cli._simulation_kernels`) between re-solves; re-solves go through
+(:mod:`cwrend_cli.physics._loop_kernels`) between re-solves; re-solves go through
 :func:`cwrend_cli.guidance.solve`. Nothing here writes files: the result is a
-plain :class:`RunResult` that :mod:`cwrend_cli.storage` and the recorders consume.
+plain :class:`RunResult` that :mod:`cwrend_cli.output.tables` and the recorders consume.
 
 Re-solve timing (``guidance.resolve_timing``):
 
@@ -24,10 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cwrend_cli import _simulation_kernels as sk
-from cwrend_cli import feasibility, guidance, references, sensors
 from cwrend_cli.config import Architecture, CwrendConfig
-from cwrend_cli.dynamics import costate_stm, discretize
+from cwrend_cli.physics import _loop_kernels as sk
+from cwrend_cli.physics import guidance, references, sensors
+from cwrend_cli.physics.dynamics import costate_stm, discretize
+from cwrend_cli.physics.guidance import feasibility
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Compiled kernels of the shooting solver (private; see :mod:`cwrend_cli.guidance`).
+"""Compiled kernels of the shooting solver (private; see :mod:`cwrend_cli.physics.guidance`).
 
 Units: km, s, km/s, km/s², rad/s. Arrays and floats only, no config objects.
 
@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cwrend_cli.dynamics import costate_derivative, one_minus_cos, stm, x_minus_sin
+from cwrend_cli.physics.dynamics import costate_derivative, one_minus_cos, stm, x_minus_sin
 
 #: ε below this is exactly bang-bang (SPEC §1).
 EPS_BANG_BANG = 1e-12

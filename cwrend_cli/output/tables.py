@@ -23,8 +23,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cwrend_cli import __version__
-from cwrend_cli.references import OpenLoopResult
-from cwrend_cli.simulation import References, RunResult
+from cwrend_cli.physics.references import OpenLoopResult
+from cwrend_cli.physics.simulation import References, RunResult
 
 _AXES = ("x", "y", "z")
 _VEL = ("vx", "vy", "vz")

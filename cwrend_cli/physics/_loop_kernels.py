@@ -1,4 +1,4 @@
-"""Compiled step loop of the closed-loop simulation (private; see :mod:`cwrend_cli.simulation`).
+"""Compiled step loop of the closed loop (private; see :mod:`cwrend_cli.physics.simulation`).
 
 One step k (SPEC §5, authors' order): control from the current costate and ε
 → truth step → measurement (noise of the window at t_k) → KF predict →
@@ -15,7 +15,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cwrend_cli._guidance_kernels import (
+from cwrend_cli.physics.dynamics import zoh_step
+from cwrend_cli.physics.estimation import kf_predict, kf_update
+from cwrend_cli.physics.guidance._kernels import (
     MAX_BREAKS,
     MAX_QUAD_BREAKS,
     arc_bounds,
@@ -23,9 +25,7 @@ from cwrend_cli._guidance_kernels import (
     costate_at,
     quadrature_breaks,
 )
-from cwrend_cli.dynamics import zoh_step
-from cwrend_cli.estimation import kf_predict, kf_update
-from cwrend_cli.scheduling import composite_score, eps_blend, eps_target, lowpass_score
+from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 
 # Indices into the scalar state vector.
 EPS = 0

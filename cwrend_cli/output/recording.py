@@ -44,16 +44,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cwrend_cli.errors import CwrendError
-from cwrend_cli.references import cumulative_delta_v
-from cwrend_cli.sensors import in_window
-from cwrend_cli.storage import atomic_path
+from cwrend_cli.output.tables import atomic_path
+from cwrend_cli.physics.references import cumulative_delta_v
+from cwrend_cli.physics.sensors import in_window
 
 if TYPE_CHECKING:
     import rerun as rr
     import rerun.blueprint as rrb
 
     from cwrend_cli.config import DegradationWindow
-    from cwrend_cli.simulation import References, RunResult
+    from cwrend_cli.physics.simulation import References, RunResult
 
 
 class RecordingError(CwrendError):

@@ -32,7 +32,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from cwrend_cli import __version__, recording, sensors, simulation, storage
+from cwrend_cli import __version__
+from cwrend_cli.campaign.executors import ExecutorKind, default_workers, open_executor
 from cwrend_cli.config import (
     ARCHITECTURES,
     Architecture,
@@ -44,8 +45,11 @@ from cwrend_cli.config import (
     resolved_dict,
     set_dotted,
 )
+from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.errors import ConfigError, CwrendError
-from cwrend_cli.executors import ExecutorKind, default_workers, open_executor
+from cwrend_cli.output import recording
+from cwrend_cli.output import tables as storage
+from cwrend_cli.physics import sensors, simulation
 
 BASE_POINT = "base"
 
@@ -69,7 +73,7 @@ def standard_normal_for(cfg: CwrendConfig, seed: int) -> np.ndarray:
     """
     n_steps = cfg.scenario.n_steps
     if cfg.noise.file is not None:
-        return sensors.load_noise_file(cfg.noise.file, n_steps)
+        return load_noise_file(cfg.noise.file, n_steps)
     return sensors.standard_normal_stream(noise_seed_sequence(cfg.noise.seed, seed), n_steps)
 
 

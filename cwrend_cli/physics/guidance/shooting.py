@@ -1,6 +1,6 @@
 """Indirect minimum-fuel guidance: control law and the shooting re-solve (SPEC §1, §5).
 
-The typed API over the compiled kernels of :mod:`cwrend_cli._guidance_kernels`.
+The typed API over the compiled kernels of :mod:`cwrend_cli.physics.guidance._kernels`.
 One re-solve finds ``λ(0)`` so that the state reaches ``x_f`` at the remaining
 horizon under the smoothed control of Eq. (10) with homotopy parameter ε.
 
@@ -29,9 +29,9 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 
-from cwrend_cli import _guidance_kernels as kern
-from cwrend_cli import feasibility
-from cwrend_cli.dynamics import cw_system, stm
+from cwrend_cli.physics.dynamics import cw_system, stm
+from cwrend_cli.physics.guidance import _kernels as kern
+from cwrend_cli.physics.guidance import feasibility
 
 EPS_BANG_BANG = kern.EPS_BANG_BANG
 

@@ -1,0 +1,1 @@
+"""What cwrend writes: atomic files, Arrow/Parquet tables and Rerun recordings."""

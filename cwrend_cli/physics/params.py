@@ -1,0 +1,202 @@
+"""Typed parameters of the physics core: small frozen dataclasses, no validation, no I/O.
+
+These mirror the sections of the configuration field for field (same names,
+same units), so a dotted key such as ``scenario.x0.2`` or
+``degradation.windows.1.bias_km.0`` names the same value here as in a config
+file. The configuration layer (:mod:`cwrend_cli.config`) validates user input
+once and converts it into these types (:mod:`cwrend_cli.config.adapt`);
+nothing in :mod:`cwrend_cli.physics` ever sees a pydantic model.
+
+Units everywhere (SPEC): km, s, km/s, km/s², rad/s; covariances in the
+matching squared units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+#: A float64 array (shapes are given in docstrings).
+FloatArray = npt.NDArray[np.float64]
+
+Vec3 = tuple[float, float, float]
+Vec6 = tuple[float, float, float, float, float, float]
+#: A covariance as stored: its n diagonal entries, or the full n×n matrix (rows).
+Covariance = tuple[float, ...] | tuple[tuple[float, ...], ...]
+
+
+def covariance_matrix(value: Covariance) -> FloatArray:
+    """A fresh float64 matrix from a stored (diagonal or full) covariance."""
+    arr = np.array(value, dtype=np.float64)
+    return np.diag(arr) if arr.ndim == 1 else arr
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Rendezvous geometry and timing (SPEC §1, §6; paper Table 1)."""
+
+    mean_motion_rad_s: float = 0.00104218449  # CW mean motion n [rad/s]
+    horizon_s: float = 800.0  # rendezvous horizon T [s]
+    dt_s: float = 1.0  # simulation / filter / control-hold step Δt [s]
+    x0: Vec6 = (0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0)  # [km, km/s]
+    xf: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # target terminal state [km, km/s]
+    u_max_km_s2: float = 8e-4  # maximum control acceleration [km/s²]
+
+    @property
+    def n_steps(self) -> int:
+        """Number of steps N = T/Δt (the grid is t_k = k Δt, k = 0..N)."""
+        return round(self.horizon_s / self.dt_s)
+
+    def time_grid(self) -> FloatArray:
+        """Grid times t_k = k Δt, k = 0 … N [s]."""
+        return np.arange(self.n_steps + 1) * self.dt_s
+
+
+@dataclass(frozen=True)
+class Estimator:
+    """Kalman filter covariances and initial error (SPEC §3, §6)."""
+
+    r_nominal_km2: Covariance = (1e-6, 1e-6, 1e-6)  # nominal measurement covariance R [km²]
+    q_process: Covariance = (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14)  # Q [km², km²/s²]
+    p0: Covariance = (1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10)  # P0 [km², km²/s²]
+    initial_error: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x̂0 − x0 [km, km/s]
+
+    def r_nominal_matrix(self) -> FloatArray:
+        """R_nominal as a new 3×3 float64 array [km²]."""
+        return covariance_matrix(self.r_nominal_km2)
+
+    def q_matrix(self) -> FloatArray:
+        """Q as a new 6×6 float64 array [km², km²/s²]."""
+        return covariance_matrix(self.q_process)
+
+    def p0_matrix(self) -> FloatArray:
+        """P0 as a new 6×6 float64 array [km², km²/s²]."""
+        return covariance_matrix(self.p0)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Innovation-adaptive homotopy schedule (SPEC §4; paper Eqs. 24–26, Table 1)."""
+
+    beta: float = 0.25  # score-to-homotopy sensitivity β [1/score]
+    nis_offset: float = 3.0  # NIS offset m [-]
+    score_lowpass: float = 0.85  # low-pass coefficient ρ_s [-]
+    kappa_mtf: float = 12.0  # weight κ_MTF of the MTF ratio [-]
+    score_max: float = 50.0  # cap on the instantaneous score [-]
+    eps_min: float = 0.0  # ε_min [-]
+    eps_max: float = 1.0  # ε_max; adaptive runs start here [-]
+    alpha_eps: float = 0.10  # blending factor α_ε [-]
+    deadband: float = 0.0  # filtered score below which ε* = ε_min; 0 disables it [-]
+    eps_saturation: float | None = None  # upper clip of ε*; None disables it [-]
+    eps_fixed: float = 0.0  # ε of the fixed architectures (paper: 0, bang-bang) [-]
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """Receding-horizon re-solve settings (SPEC §5).
+
+    ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
+    remaining horizon T − t_{k+1}; ``"reference"`` reproduces the authors'
+    code (T − t_k, then the solved costate propagated one step). ``hold``:
+    the plan's control sampled at the start of each step (authors) or
+    averaged over the step.
+    """
+
+    t_resolve_s: float = 10.0  # re-solve interval [s]
+    t_min_rem_s: float = 20.0  # no re-solve once the remaining horizon is <= this [s]
+    resolve_timing: Literal["correct", "reference"] = "correct"
+    hold: Literal["sample", "mean"] = "sample"
+
+
+@dataclass(frozen=True)
+class Solver:
+    """Shooting-solver settings of a closed loop (SPEC §1, §5)."""
+
+    fallback: Literal["chain", "none"] = "chain"
+    on_infeasible: Literal["keep", "min_miss"] = "keep"
+    success_residual: float = 1e-4  # a solve succeeds when ‖x(T) − x_f‖ is below this
+    tol_pos_km: float = 1e-9  # Newton tolerance on the terminal position [km]
+    tol_vel_km_s: float = 1e-12  # Newton tolerance on the terminal velocity [km/s]
+    max_iter: int = 50  # Newton iterations per attempt [-]
+    quadrature_nodes: int = 12  # Gauss–Legendre nodes per arc [-]
+
+
+@dataclass(frozen=True)
+class Window:
+    """One sensor-degradation interval, active on ``start_s ≤ t ≤ end_s`` (SPEC §6).
+
+    While active the true measurement covariance is ``r_scale · R_nominal``
+    and ``bias_km`` is added to each measurement.
+    """
+
+    start_s: float
+    end_s: float
+    r_scale: float = 1.0
+    bias_km: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def label(self) -> str:
+        """Short description, e.g. ``"R×300 + 17.5 m bias"``."""
+        bias_m = 1e3 * math.hypot(*self.bias_km)
+        return f"R×{self.r_scale:g}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
+
+
+#: The paper's degradation windows (SPEC §6): R × 300 on [250, 325], then also a bias.
+PAPER_WINDOWS = (
+    Window(start_s=250.0, end_s=325.0, r_scale=300.0),
+    Window(start_s=325.0, end_s=400.0, r_scale=300.0, bias_km=(0.010, -0.008, 0.012)),
+)
+
+
+@dataclass(frozen=True)
+class Degradation:
+    """Measurement degradation schedule; later windows win where they overlap."""
+
+    windows: tuple[Window, ...] = PAPER_WINDOWS
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything one closed-loop case depends on except the noise realisation."""
+
+    scenario: Scenario = field(default_factory=Scenario)
+    estimator: Estimator = field(default_factory=Estimator)
+    schedule: Schedule = field(default_factory=Schedule)
+    guidance: Guidance = field(default_factory=Guidance)
+    solver: Solver = field(default_factory=Solver)
+    degradation: Degradation = field(default_factory=Degradation)
+
+
+@dataclass(frozen=True)
+class Architecture:
+    """One closed-loop architecture: estimator (plain/MTF KF) × schedule (fixed/adaptive ε)."""
+
+    slug: str
+    mtf: bool
+    adaptive: bool
+
+    @property
+    def label(self) -> str:
+        """Human-readable name, e.g. ``"MTF KF, adaptive ε"``."""
+        kf = "MTF KF" if self.mtf else "plain KF"
+        return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε"
+
+
+#: The ablation of SPEC §6, in the paper's order.
+ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+    {
+        a.slug: a
+        for a in (
+            Architecture("plain_fixed", mtf=False, adaptive=False),
+            Architecture("mtf_fixed", mtf=True, adaptive=False),
+            Architecture("plain_adaptive", mtf=False, adaptive=True),
+            Architecture("mtf_adaptive", mtf=True, adaptive=True),
+        )
+    }
+)
