@@ -24,13 +24,14 @@ import numpy as np
 from benchmarks.common import Row, capture_resolves, config_with, naive_solve
 from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
 
 
 def warm_resolves(naive: int) -> list[Row]:
     """Section 1: warm re-solve times at fixed ε, against the naive port."""
     rows = []
-    settings = simulation.solver_settings(CwrendConfig())
+    settings = simulation.solver_settings(problem_of(CwrendConfig()))
     for eps in (1.0, 0.3, 0.05, 0.0):
         probs = capture_resolves(config_with(schedule__eps_fixed=eps), "mtf_fixed", 0)
         times, statuses = [], []
@@ -81,7 +82,7 @@ def all_resolves(seeds: int) -> list[Row]:
     """Section 2: every re-solve of each architecture, chain vs no fallback."""
     rows = []
     base = CwrendConfig()
-    settings = simulation.solver_settings(base)
+    settings = simulation.solver_settings(problem_of(base))
     for slug in ARCHITECTURES:
         probs = [p for s in range(seeds) for p in capture_resolves(base, slug, s)]
         for fallback in ("chain", "none"):
@@ -138,11 +139,11 @@ def all_resolves(seeds: int) -> list[Row]:
 def fuel_continuation() -> list[Row]:
     """Section 3: the open-loop fuel-optimal continuation (11 solves)."""
     cfg = CwrendConfig()
-    simulation.open_loop_references(cfg)
+    simulation.open_loop_references(problem_of(cfg))
     solves, whole = [], []
     for _ in range(5):
         start = time.perf_counter()
-        refs = simulation.open_loop_references(cfg)
+        refs = simulation.open_loop_references(problem_of(cfg))
         whole.append(time.perf_counter() - start)
         solves.append(sum(s.wall_time_s for s in refs.fuel.solves))
     return [
@@ -154,15 +155,15 @@ def fuel_continuation() -> list[Row]:
 def closed_loop_runs() -> list[Row]:
     """Section 4: one 800-step closed-loop run per architecture (after compilation)."""
     cfg = CwrendConfig()
-    refs = simulation.open_loop_references(cfg)
+    refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, 0)
     rows = []
     for slug, arch in ARCHITECTURES.items():
-        simulation.simulate(cfg, arch, noise, refs)
+        simulation.simulate(problem_of(cfg), arch, noise, refs)
         times = []
         for _ in range(7):
             start = time.perf_counter()
-            simulation.simulate(cfg, arch, noise, refs)
+            simulation.simulate(problem_of(cfg), arch, noise, refs)
             times.append(time.perf_counter() - start)
         target = "<= 20" if arch.adaptive else "<= 200"
         rows.append(
@@ -183,7 +184,7 @@ def fixed_eps_miss(seeds: int) -> list[Row]:
     for timing in ("correct", "reference"):
         for hold in ("sample", "mean"):
             cfg = config_with(guidance__resolve_timing=timing, guidance__hold=hold)
-            refs = simulation.open_loop_references(cfg)
+            refs = simulation.open_loop_references(problem_of(cfg))
             miss, dv = [], []
             for seed in range(seeds):
                 case = campaign.run_case(

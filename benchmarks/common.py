@@ -12,6 +12,7 @@ from scipy.optimize import least_squares
 
 from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict, set_dotted
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
 from cwrend_cli.physics.dynamics import cw_system
 
@@ -80,11 +81,11 @@ def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
         captured.append(Captured(problem, np.array(guess, dtype=float)))
         return original(problem, guess, settings)
 
-    refs = simulation.open_loop_references(cfg)
+    refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, seed)
     guidance.solve = spy
     try:
-        simulation.simulate(cfg, ARCHITECTURES[slug], noise, refs, seed=seed)
+        simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], noise, refs, seed=seed)
     finally:
         guidance.solve = original
     return [c for c in captured if c.problem.horizon_s < cfg.scenario.horizon_s]

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from cwrend_cli.config import CwrendConfig
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
 
 #: Homotopy parameters of the guidance tests, in continuation order (1 → 0).
@@ -57,7 +58,7 @@ def paper_cfg() -> CwrendConfig:
 @pytest.fixture(scope="session")
 def paper_refs(paper_cfg: CwrendConfig) -> simulation.References:
     """Open-loop energy- and fuel-optimal references of the paper scenario (SPEC §2)."""
-    return simulation.open_loop_references(paper_cfg)
+    return simulation.open_loop_references(problem_of(paper_cfg))
 
 
 @pytest.fixture(scope="session")

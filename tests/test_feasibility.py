@@ -7,6 +7,7 @@ import pytest
 
 from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
 from cwrend_cli.physics.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
 from cwrend_cli.physics.guidance import feasibility
@@ -76,11 +77,11 @@ def test_min_miss_controls_reduce_an_unreachable_miss() -> None:
 def test_on_infeasible_min_miss_overrides_only_after_an_infeasible_resolve() -> None:
     base = CwrendConfig()
     alt = config_from_dict({"solver": {"on_infeasible": "min_miss"}})
-    refs = simulation.open_loop_references(base)
+    refs = simulation.open_loop_references(problem_of(base))
     noise = campaign.standard_normal_for(base, 0)
     arch = ARCHITECTURES["mtf_fixed"]
-    keep = simulation.simulate(base, arch, noise, refs)
-    steer = simulation.simulate(alt, arch, noise, refs)
+    keep = simulation.simulate(problem_of(base), arch, noise, refs)
+    steer = simulation.simulate(problem_of(alt), arch, noise, refs)
     infeasible = [s for s in keep.resolves if s.status == "infeasible"]
     assert infeasible, "the paper scenario has infeasible final-burn re-solves at ε = 0"
     first = infeasible[0].step + 1

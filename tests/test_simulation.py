@@ -13,6 +13,7 @@ import pytest
 
 from cwrend_cli import campaign
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import sensors, simulation
 from cwrend_cli.physics.dynamics import discretize
 
@@ -32,7 +33,10 @@ def standard_normal(seed: int) -> np.ndarray:
 
 def run_all(cfg: CwrendConfig, refs, seed: int) -> dict[str, simulation.RunResult]:
     z = standard_normal(seed)
-    return {slug: simulation.simulate(cfg, a, z, refs, seed) for slug, a in ARCHITECTURES.items()}
+    return {
+        slug: simulation.simulate(problem_of(cfg), a, z, refs, seed)
+        for slug, a in ARCHITECTURES.items()
+    }
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +57,9 @@ ARRAY_FIELDS = [
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_simulation_is_deterministic(slug: str, paper_cfg, paper_refs, runs_seed0) -> None:
     """Same config and seed → bitwise identical histories and solve outcomes."""
-    again = simulation.simulate(paper_cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs, 0)
+    again = simulation.simulate(
+        problem_of(paper_cfg), ARCHITECTURES[slug], standard_normal(0), paper_refs, 0
+    )
     first = runs_seed0[slug]
     for name in ARRAY_FIELDS:
         np.testing.assert_array_equal(getattr(again, name), getattr(first, name), err_msg=name)
@@ -68,7 +74,7 @@ def test_architectures_share_the_noise(paper_cfg, runs_seed0) -> None:
 
     It is chol(true R) n + bias of the window at the step's start (SPEC §5).
     """
-    t = simulation.time_grid(paper_cfg)
+    t = problem_of(paper_cfg).scenario.time_grid()
     expected, _ = sensors.measurement_noise(
         standard_normal(0), t[:-1], paper_cfg.estimator.r_nominal_matrix(),
         paper_cfg.degradation.windows,
@@ -81,7 +87,7 @@ def test_architectures_share_the_noise(paper_cfg, runs_seed0) -> None:
 def test_different_seeds_give_different_noise(paper_cfg, paper_refs, runs_seed0) -> None:
     """The realisation is seed-dependent."""
     other = simulation.simulate(
-        paper_cfg, ARCHITECTURES["mtf_adaptive"], standard_normal(1), paper_refs, 1
+        problem_of(paper_cfg), ARCHITECTURES["mtf_adaptive"], standard_normal(1), paper_refs, 1
     )
     assert not np.array_equal(other.y[1:], runs_seed0["mtf_adaptive"].y[1:])
 
@@ -132,7 +138,7 @@ def test_miss_is_final_true_position_norm(slug: str, runs_seed0) -> None:
 def test_resolve_steps_paper(timing: str) -> None:
     """78 re-solves for the paper scenario with either timing (SPEC §5)."""
     cfg = config_from_dict({"guidance": {"resolve_timing": timing}})
-    steps = simulation.resolve_steps(cfg)
+    steps = simulation.resolve_steps(problem_of(cfg))
     assert len(steps) == 78
     assert steps == PAPER_RESOLVE_STEPS
 
@@ -169,7 +175,9 @@ def test_fixed_eps_resolves_converged_or_infeasible(
     slug: str, seed: int, paper_cfg, paper_refs
 ) -> None:
     """SPEC §5: no re-solve fails; the infeasible ones are in the final braking burn (t ≥ 700 s)."""
-    run = simulation.simulate(paper_cfg, ARCHITECTURES[slug], standard_normal(seed), paper_refs)
+    run = simulation.simulate(
+        problem_of(paper_cfg), ARCHITECTURES[slug], standard_normal(seed), paper_refs
+    )
     statuses = [r.status for r in run.resolves]
     assert set(statuses) <= {"converged", "infeasible"}, statuses
     late = [r.t_s for r in run.resolves if r.status == "infeasible"]
@@ -187,7 +195,7 @@ def test_hold_mean_keeps_control_bounded(slug: str, paper_refs) -> None:
     Tolerance: a few ulp of the quadrature-weighted average (weights sum to 1 ± 1e-15).
     """
     cfg = config_from_dict({"guidance": {"hold": "mean"}})
-    run = simulation.simulate(cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs)
+    run = simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], standard_normal(0), paper_refs)
     assert np.linalg.norm(run.u, axis=1).max() <= U_MAX * (1.0 + 1e-14)
     assert np.isfinite(run.miss_km)
 
@@ -196,7 +204,7 @@ def test_hold_mean_keeps_control_bounded(slug: str, paper_refs) -> None:
 def test_reference_timing_runs(slug: str, paper_refs) -> None:
     """``resolve_timing = "reference"`` (authors' code): solve at t_{k+1} with horizon T − t_k."""
     cfg = config_from_dict({"guidance": {"resolve_timing": "reference"}})
-    run = simulation.simulate(cfg, ARCHITECTURES[slug], standard_normal(0), paper_refs)
+    run = simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], standard_normal(0), paper_refs)
     res = run.resolves
     assert [r.step for r in res] == PAPER_RESOLVE_STEPS
     assert all(r.t_s == r.step + 1.0 and r.horizon_s == 800.0 - r.step for r in res)

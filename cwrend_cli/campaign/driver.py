@@ -45,6 +45,7 @@ from cwrend_cli.config import (
     resolved_dict,
     set_dotted,
 )
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
@@ -95,8 +96,8 @@ def run_case(
 ) -> CaseResult:
     """Run ``archs`` on the noise of ``seed`` (references computed if not given)."""
     noise = standard_normal_for(cfg, seed)  # validate input before any computation
-    refs = refs if refs is not None else simulation.open_loop_references(cfg)
-    runs = tuple(simulation.simulate(cfg, a, noise, refs, seed=seed) for a in archs)
+    refs = refs if refs is not None else simulation.open_loop_references(problem_of(cfg))
+    runs = tuple(simulation.simulate(problem_of(cfg), a, noise, refs, seed=seed) for a in archs)
     return CaseResult(runs, refs)
 
 
@@ -360,7 +361,7 @@ def _references(cfg: CwrendConfig) -> simulation.References:
     if key not in _REFERENCES_CACHE:
         if len(_REFERENCES_CACHE) >= _CACHE_SIZE:
             _REFERENCES_CACHE.pop(next(iter(_REFERENCES_CACHE)))
-        _REFERENCES_CACHE[key] = simulation.open_loop_references(cfg)
+        _REFERENCES_CACHE[key] = simulation.open_loop_references(problem_of(cfg))
     return _REFERENCES_CACHE[key]
 
 
@@ -423,7 +424,9 @@ def execute_task(
             noise = noises.get((spec.overrides, spec.seed))
             if noise is None:
                 noise = noises[spec.overrides, spec.seed] = standard_normal_for(cfg, spec.seed)
-            result = simulation.simulate(cfg, ARCHITECTURES[spec.arch], noise, refs, spec.seed)
+            result = simulation.simulate(
+                problem_of(cfg), ARCHITECTURES[spec.arch], noise, refs, spec.seed
+            )
             metrics = storage.summary_row(result, refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))
             by_seed.setdefault(spec.seed, []).append((cfg, result))

@@ -7,10 +7,16 @@ innovation, NIS, MTF → update → score → ε → [re-solve, done by the call
 
 The loop runs in compiled code between re-solves; :func:`advance` stops right
 after the ε update of a step that has a re-solve due, and the Python driver
-performs the re-solve and sets the costate. Units: km, s, km/s, km/s².
+performs the re-solve and sets the costate. Its inputs are a few typed
+tuples (numba compiles NamedTuples of floats and arrays): the constant
+:class:`LoopModel` and :class:`ScheduleParams`, the :class:`LoopState` arrays
+it updates in place, the :class:`LoopScalars` it returns, and the
+:class:`StepLog` it fills. Units: km, s, km/s, km/s².
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -18,32 +24,83 @@ from numba import njit
 from cwrend_cli.physics.dynamics import zoh_step
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
-    MAX_BREAKS,
     MAX_QUAD_BREAKS,
+    Workspace,
     arc_bounds,
     control_from_costate,
     costate_at,
     quadrature_breaks,
+    workspace,
 )
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 
-# Indices into the scalar state vector.
-EPS = 0
-SCORE_FILTERED = 1
-FIRST = 2
 
-# Indices into the schedule parameter vector.
-P_NIS_OFFSET = 0
-P_KAPPA = 1
-P_SCORE_MAX = 2
-P_RHO_S = 3
-P_EPS_MIN = 4
-P_EPS_MAX = 5
-P_BETA = 6
-P_DEADBAND = 7
-P_EPS_SAT = 8
-P_ALPHA = 9
-N_SCHEDULE_PARAMS = 10
+class LoopModel(NamedTuple):
+    """What the step loop holds constant over a run."""
+
+    phi: np.ndarray  # (6, 6) Φ(Δt) = e^{AΔt}
+    gam: np.ndarray  # (6, 3) Γ(Δt) = ∫₀^Δt e^{Aτ}B dτ
+    lam_step: np.ndarray  # (6, 6) costate propagation e^{−AᵀΔt}
+    q: np.ndarray  # (6, 6) process-noise covariance Q
+    r_nominal: np.ndarray  # (3, 3) nominal measurement covariance R [km²]
+    noise: np.ndarray  # (N, 3) measurement noise of each step [km]
+    n: float  # mean motion [rad/s]
+    u_max: float  # [km/s²]
+    dt: float  # step Δt [s]
+    gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
+    gl_w: np.ndarray  # and weights
+    use_mtf: bool  # MTF inflation of the filter (SPEC §3)
+    adaptive: bool  # ε from the innovation score (SPEC §4), else held
+    hold_mean: bool  # control averaged over the step, else sampled at its start
+    u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
+    override: np.ndarray  # (N,) bool
+
+
+class ScheduleParams(NamedTuple):
+    """The homotopy schedule of SPEC §4 (Eqs. 24–26)."""
+
+    nis_offset: float  # m
+    kappa_mtf: float  # κ_MTF
+    score_max: float
+    score_lowpass: float  # ρ_s
+    eps_min: float
+    eps_max: float
+    beta: float  # β
+    deadband: float
+    eps_saturation: float  # NaN: no saturation
+    alpha_eps: float  # α_ε
+
+
+class LoopState(NamedTuple):
+    """The arrays the loop updates in place."""
+
+    x_true: np.ndarray  # (6,) true state
+    x_hat: np.ndarray  # (6,) estimate
+    p: np.ndarray  # (6, 6) estimate covariance
+    lam: np.ndarray  # (6,) costate of the current plan
+
+
+class LoopScalars(NamedTuple):
+    """The scalar loop state, returned by :func:`advance`."""
+
+    eps: float  # ε applied from the next step on
+    score_filtered: float  # s̄
+    first: bool  # no measurement processed yet (the low-pass starts at s̄ = s)
+
+
+class StepLog(NamedTuple):
+    """Per-step histories; row k + 1 receives the results of step k."""
+
+    x: np.ndarray  # (N+1, 6) true state
+    x_hat: np.ndarray  # (N+1, 6)
+    u: np.ndarray  # (N+1, 3) control applied over [t_k, t_{k+1}) (row k)
+    y: np.ndarray  # (N+1, 3) measurement
+    nis: np.ndarray  # (N+1,)
+    mtf_ratio: np.ndarray  # (N+1,)
+    score: np.ndarray  # (N+1,)
+    score_filtered: np.ndarray  # (N+1,)
+    eps: np.ndarray  # (N+1,)
+    trace_p: np.ndarray  # (N+1,)
 
 
 @njit(cache=True)
@@ -55,7 +112,7 @@ def mean_control(
     u_max: float,
     gl_x: np.ndarray,
     gl_w: np.ndarray,
-    work: np.ndarray,
+    ws: Workspace,
     out: np.ndarray,
 ) -> None:
     """Plan's control averaged over ``[0, dt]`` from costate ``lam`` (``guidance.hold = "mean"``).
@@ -63,10 +120,9 @@ def mean_control(
     Integrated exactly arc by arc between switching times, so its norm never
     exceeds ``u_max``.
     """
-    switches = work[8, :MAX_BREAKS]
     breaks = np.empty(MAX_QUAD_BREAKS)
-    _, n_breaks = quadrature_breaks(n, lam, 0.0, dt, eps, 1, switches, breaks, work)
-    lam_t = work[7, :6]
+    _, n_breaks = quadrature_breaks(n, lam, 0.0, dt, eps, 1, ws.switches, breaks, ws)
+    lam_t = ws.lam_t
     u = np.empty(3)
     acc0 = 0.0
     acc1 = 0.0
@@ -94,101 +150,78 @@ def advance(
     k_start: int,
     k_stop: int,
     n_steps: int,
-    phi: np.ndarray,
-    gam: np.ndarray,
-    lam_step: np.ndarray,
-    q: np.ndarray,
-    r_nominal: np.ndarray,
-    noise: np.ndarray,
-    use_mtf: bool,
-    adaptive: bool,
-    hold_mean: bool,
-    sched: np.ndarray,
-    n: float,
-    u_max: float,
-    dt: float,
-    gl_x: np.ndarray,
-    gl_w: np.ndarray,
-    u_override: np.ndarray,
-    override: np.ndarray,
-    x_true: np.ndarray,
-    x_hat: np.ndarray,
-    p: np.ndarray,
-    lam: np.ndarray,
-    scal: np.ndarray,
-    log_x: np.ndarray,
-    log_xhat: np.ndarray,
-    log_u: np.ndarray,
-    log_y: np.ndarray,
-    log_nis: np.ndarray,
-    log_rho: np.ndarray,
-    log_score: np.ndarray,
-    log_score_f: np.ndarray,
-    log_eps: np.ndarray,
-    log_trp: np.ndarray,
-) -> None:
+    model: LoopModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    scalars: LoopScalars,
+    log: StepLog,
+) -> LoopScalars:
     """Run steps ``k_start … k_stop``; the last one stops before its costate propagation.
 
-    When ``k_stop == n_steps`` every step up to the end runs in full. State
-    arrays (``x_true``, ``x_hat``, ``p``, ``lam``, ``scal``) are updated in
-    place; row ``k + 1`` of the logs receives the step's results.
+    When ``k_stop == n_steps`` every step up to the end runs in full. The
+    arrays of ``state`` are updated in place and row ``k + 1`` of ``log``
+    receives step k's results; the scalar state after the last step run is
+    returned.
     """
-    work = np.empty((9, MAX_BREAKS))
+    m = model
+    ws = workspace()
     u = np.empty(3)
     lam_next = np.empty(6)
+    x_true, x_hat, p, lam = state.x_true, state.x_hat, state.p, state.lam
+    eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     for k in range(k_start, min(k_stop + 1, n_steps)):
-        eps = scal[EPS]
+        eps_k = eps
         # control from the current costate and ε (Eqs. 8–10), held over the step
-        if override[k]:
-            u[:] = u_override[k]
-        elif hold_mean:
-            mean_control(n, lam, dt, eps, u_max, gl_x, gl_w, work, u)
+        if m.override[k]:
+            u[:] = m.u_override[k]
+        elif m.hold_mean:
+            mean_control(m.n, lam, m.dt, eps_k, m.u_max, m.gl_x, m.gl_w, ws, u)
         else:
-            control_from_costate(lam[3:6], eps, u_max, u)
-        log_u[k] = u
+            control_from_costate(lam[3:6], eps_k, m.u_max, u)
+        log.u[k] = u
         # truth step with zero-order hold: x_{k+1} = Φ x_k + Γ u_k (exact)
-        x_next = zoh_step(phi, gam, x_true, u)
+        x_next = zoh_step(m.phi, m.gam, x_true, u)
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
-        y = x_next[:3] + noise[k]
+        y = x_next[:3] + m.noise[k]
         # Kalman filter predict and update (Eqs. 11–23)
-        x_pred, p_pred = kf_predict(x_hat, p, phi, gam, u, q)
-        x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, r_nominal, use_mtf)
+        x_pred, p_pred = kf_predict(x_hat, p, m.phi, m.gam, u, m.q)
+        x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
         x_hat[:] = x_post
         p[:, :] = p_post
         # score and homotopy parameter (Eqs. 24–26)
-        score = composite_score(nis, rho, sched[P_NIS_OFFSET], sched[P_KAPPA], sched[P_SCORE_MAX])
-        sbar = lowpass_score(scal[SCORE_FILTERED], score, sched[P_RHO_S], scal[FIRST] > 0.5)
-        scal[SCORE_FILTERED] = sbar
-        scal[FIRST] = 0.0
-        if adaptive:
+        score = composite_score(nis, rho, sched.nis_offset, sched.kappa_mtf, sched.score_max)
+        sbar = lowpass_score(sbar, score, sched.score_lowpass, first)
+        first = False
+        if m.adaptive:
             target = eps_target(
                 sbar,
-                sched[P_EPS_MIN],
-                sched[P_EPS_MAX],
-                sched[P_BETA],
-                sched[P_DEADBAND],
-                sched[P_EPS_SAT],
+                sched.eps_min,
+                sched.eps_max,
+                sched.beta,
+                sched.deadband,
+                sched.eps_saturation,
             )
-            scal[EPS] = eps_blend(eps, target, sched[P_ALPHA])
+            eps = eps_blend(eps_k, target, sched.alpha_eps)
         row = k + 1
-        log_x[row] = x_next
-        log_xhat[row] = x_post
-        log_y[row] = y
-        log_nis[row] = nis
-        log_rho[row] = rho
-        log_score[row] = score
-        log_score_f[row] = sbar
-        log_eps[row] = scal[EPS]
-        log_trp[row] = (
+        log.x[row] = x_next
+        log.x_hat[row] = x_post
+        log.y[row] = y
+        log.nis[row] = nis
+        log.mtf_ratio[row] = rho
+        log.score[row] = score
+        log.score_filtered[row] = sbar
+        log.eps[row] = eps
+        log.trace_p[row] = (
             p_post[0, 0] + p_post[1, 1] + p_post[2, 2] + p_post[3, 3] + p_post[4, 4] + p_post[5, 5]
         )
         if k == k_stop:
-            return  # the caller re-solves and sets the costate
+            break  # the caller re-solves and sets the costate
         # costate propagated exactly by one step: λ ← e^{−AᵀΔt} λ
         for i in range(6):
             acc = 0.0
             for j in range(6):
-                acc += lam_step[i, j] * lam[j]
+                acc += m.lam_step[i, j] * lam[j]
             lam_next[i] = acc
         lam[:] = lam_next
+    return LoopScalars(eps, sbar, first)

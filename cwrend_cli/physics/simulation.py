@@ -23,12 +23,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
-from cwrend_cli.config import Architecture, CwrendConfig
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import guidance, references, sensors
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import feasibility
+from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
 
 
 @dataclass(frozen=True)
@@ -89,9 +90,9 @@ class References:
     fuel: references.OpenLoopResult
 
 
-def solver_settings(cfg: CwrendConfig) -> guidance.SolverSettings:
-    """Solver settings from the validated config."""
-    s = cfg.solver
+def solver_settings(problem: Problem) -> guidance.SolverSettings:
+    """The shooting solver's settings for a closed-loop problem."""
+    s = problem.solver
     return guidance.SolverSettings(
         tol_pos_km=s.tol_pos_km,
         tol_vel_km_s=s.tol_vel_km_s,
@@ -99,17 +100,14 @@ def solver_settings(cfg: CwrendConfig) -> guidance.SolverSettings:
         quadrature_nodes=s.quadrature_nodes,
         fallback=s.fallback,
         success_residual=s.success_residual,
-        dt_grid_s=cfg.scenario.dt_s,
+        dt_grid_s=problem.scenario.dt_s,
     )
 
 
-def time_grid(cfg: CwrendConfig) -> np.ndarray:
-    """Grid times t_k = k Δt, k = 0 … N [s]."""
-    return np.arange(cfg.scenario.n_steps + 1) * cfg.scenario.dt_s
-
-
-def _problem(cfg: CwrendConfig, x0: np.ndarray, horizon_s: float, eps: float):
-    sc = cfg.scenario
+def _shooting(
+    sc: Scenario, x0: FloatArray, horizon_s: float, eps: float
+) -> guidance.ShootingProblem:
+    """One re-solve of the scenario: reach ``sc.xf`` from ``x0`` in ``horizon_s`` at ``eps``."""
     return guidance.ShootingProblem(
         np.asarray(x0, dtype=float),
         float(horizon_s),
@@ -120,19 +118,20 @@ def _problem(cfg: CwrendConfig, x0: np.ndarray, horizon_s: float, eps: float):
     )
 
 
-def open_loop_references(cfg: CwrendConfig) -> References:
+def open_loop_references(problem: Problem) -> References:
     """Energy- and fuel-optimal open-loop references of the scenario (SPEC §2)."""
-    t = time_grid(cfg)
-    problem = _problem(cfg, np.asarray(cfg.scenario.x0), cfg.scenario.horizon_s, 0.0)
+    sc = problem.scenario
+    t = sc.time_grid()
+    first = _shooting(sc, np.asarray(sc.x0), sc.horizon_s, 0.0)
     return References(
-        energy=references.energy_optimal(problem, t),
-        fuel=references.fuel_optimal(problem, t, solver_settings(cfg)),
+        energy=references.energy_optimal(first, t),
+        fuel=references.fuel_optimal(first, t, solver_settings(problem)),
     )
 
 
-def resolve_steps(cfg: CwrendConfig) -> list[int]:
+def resolve_steps(problem: Problem) -> list[int]:
     """Steps k at which a re-solve is due (SPEC §5)."""
-    sc, gd = cfg.scenario, cfg.guidance
+    sc, gd = problem.scenario, problem.guidance
     every = round(gd.t_resolve_s / sc.dt_s)
     out = []
     for k in range(0, sc.n_steps, every):
@@ -142,7 +141,9 @@ def resolve_steps(cfg: CwrendConfig) -> list[int]:
     return out
 
 
-def _record(kind: str, step: int, t_s: float, result: guidance.SolveResult, threshold: float):
+def _record(
+    kind: str, step: int, t_s: float, result: guidance.SolveResult, threshold: float
+) -> SolveRecord:
     return SolveRecord(
         kind=kind,
         step=step,
@@ -158,24 +159,55 @@ def _record(kind: str, step: int, t_s: float, result: guidance.SolveResult, thre
     )
 
 
+def schedule_params(sch: Schedule) -> sk.ScheduleParams:
+    """The schedule as the compiled loop takes it (NaN: no ε saturation)."""
+    return sk.ScheduleParams(
+        nis_offset=sch.nis_offset,
+        kappa_mtf=sch.kappa_mtf,
+        score_max=sch.score_max,
+        score_lowpass=sch.score_lowpass,
+        eps_min=sch.eps_min,
+        eps_max=sch.eps_max,
+        beta=sch.beta,
+        deadband=sch.deadband,
+        eps_saturation=np.nan if sch.eps_saturation is None else sch.eps_saturation,
+        alpha_eps=sch.alpha_eps,
+    )
+
+
+def _empty_log(rows: int) -> sk.StepLog:
+    """Histories of ``rows`` grid times: NaN until written, zero control."""
+    return sk.StepLog(
+        x=np.full((rows, 6), np.nan),
+        x_hat=np.full((rows, 6), np.nan),
+        u=np.zeros((rows, 3)),
+        y=np.full((rows, 3), np.nan),
+        nis=np.full(rows, np.nan),
+        mtf_ratio=np.full(rows, np.nan),
+        score=np.full(rows, np.nan),
+        score_filtered=np.full(rows, np.nan),
+        eps=np.full(rows, np.nan),
+        trace_p=np.full(rows, np.nan),
+    )
+
+
 def simulate(
-    cfg: CwrendConfig,
+    problem: Problem,
     arch: Architecture,
-    standard_normal: np.ndarray,
+    standard_normal: FloatArray,
     refs: References,
     seed: int = 0,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3)."""
-    sc, est, sch, gd = cfg.scenario, cfg.estimator, cfg.schedule, cfg.guidance
+    sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
-    settings = solver_settings(cfg)
+    settings = solver_settings(problem)
     gl_x, gl_w = settings.quadrature()
-    t = time_grid(cfg)
+    t = sc.time_grid()
     phi, gam = discretize(n, dt)
-    lam_step = costate_stm(n, dt)
     r_nominal = est.r_nominal_matrix()
     noise, active = sensors.measurement_noise(
-        standard_normal, t[:-1], r_nominal, cfg.degradation.windows
+        standard_normal, t[:-1], r_nominal, problem.degradation.windows
     )
 
     x0 = np.asarray(sc.x0, dtype=float)
@@ -185,7 +217,7 @@ def simulate(
     if arch.adaptive:
         eps0 = sch.eps_max
         # initial solve at ε_max from the energy costate; on failure keep it (SPEC §4)
-        first = _problem(cfg, x_hat0, sc.horizon_s, eps0)
+        first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
         result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
@@ -193,110 +225,91 @@ def simulate(
         eps0 = sch.eps_fixed
         lam = refs.fuel.costate.copy()
 
-    sched = np.empty(sk.N_SCHEDULE_PARAMS)
-    sched[sk.P_NIS_OFFSET] = sch.nis_offset
-    sched[sk.P_KAPPA] = sch.kappa_mtf
-    sched[sk.P_SCORE_MAX] = sch.score_max
-    sched[sk.P_RHO_S] = sch.score_lowpass
-    sched[sk.P_EPS_MIN] = sch.eps_min
-    sched[sk.P_EPS_MAX] = sch.eps_max
-    sched[sk.P_BETA] = sch.beta
-    sched[sk.P_DEADBAND] = sch.deadband
-    sched[sk.P_EPS_SAT] = np.nan if sch.eps_saturation is None else sch.eps_saturation
-    sched[sk.P_ALPHA] = sch.alpha_eps
+    model = sk.LoopModel(
+        phi=phi,
+        gam=gam,
+        lam_step=costate_stm(n, dt),
+        q=est.q_matrix(),
+        r_nominal=r_nominal,
+        noise=noise,
+        n=n,
+        u_max=sc.u_max_km_s2,
+        dt=dt,
+        gl_x=gl_x,
+        gl_w=gl_w,
+        use_mtf=arch.mtf,
+        adaptive=arch.adaptive,
+        hold_mean=gd.hold == "mean",
+        u_override=np.zeros((n_steps, 3)),
+        override=np.zeros(n_steps, dtype=np.bool_),
+    )
+    sched = schedule_params(sch)
+    state = sk.LoopState(x_true=x0.copy(), x_hat=x_hat0.copy(), p=est.p0_matrix(), lam=lam)
+    scalars = sk.LoopScalars(eps=eps0, score_filtered=0.0, first=True)
+    log = _empty_log(n_steps + 1)
+    log.x[0] = state.x_true
+    log.x_hat[0] = state.x_hat
+    log.eps[0] = eps0
+    log.trace_p[0] = np.trace(state.p)
 
-    rows = n_steps + 1
-    log_x = np.full((rows, 6), np.nan)
-    log_xhat = np.full((rows, 6), np.nan)
-    log_u = np.zeros((rows, 3))
-    log_y = np.full((rows, 3), np.nan)
-    log_nis = np.full(rows, np.nan)
-    log_rho = np.full(rows, np.nan)
-    log_score = np.full(rows, np.nan)
-    log_sf = np.full(rows, np.nan)
-    log_eps = np.full(rows, np.nan)
-    log_trp = np.full(rows, np.nan)
-    x_true = x0.copy()
-    x_hat = x_hat0.copy()
-    p = est.p0_matrix()
-    q = est.q_matrix()
-    log_x[0] = x_true
-    log_xhat[0] = x_hat
-    log_eps[0] = eps0
-    log_trp[0] = np.trace(p)
-    scal = np.array([eps0, 0.0, 1.0])
-    u_override = np.zeros((n_steps, 3))
-    override = np.zeros(n_steps, dtype=np.bool_)
-
-    def run_until(k_start: int, k_stop: int) -> None:
-        sk.advance(
-            k_start, k_stop, n_steps, phi, gam, lam_step, q, r_nominal, noise,
-            arch.mtf, arch.adaptive, gd.hold == "mean", sched, n, sc.u_max_km_s2, dt,
-            gl_x, gl_w, u_override, override, x_true, x_hat, p, lam, scal,
-            log_x, log_xhat, log_u, log_y, log_nis, log_rho, log_score, log_sf, log_eps, log_trp,
-        )  # fmt: skip
-
-    schedule = resolve_steps(cfg)
+    schedule = resolve_steps(problem)
     correct = gd.resolve_timing == "correct"
     k_next = 0
     for i, k in enumerate(schedule):
-        run_until(k_next, k)
+        scalars = sk.advance(k_next, k, n_steps, model, sched, state, scalars, log)
         k_next = k + 1
         t_est = (k + 1) * dt
         horizon = sc.horizon_s - (t_est if correct else k * dt)
-        eps = scal[sk.EPS]
-        lam_next = lam_step @ lam
-        problem = _problem(cfg, x_hat, horizon, eps)
-        result = guidance.solve(problem, lam_next if correct else lam, settings)
+        lam_next = model.lam_step @ lam
+        shooting = _shooting(sc, state.x_hat, horizon, scalars.eps)
+        result = guidance.solve(shooting, lam_next if correct else lam, settings)
         rec = _record("resolve", k, t_est, result, settings.success_residual)
         solves.append(rec)
         if rec.success:
-            lam[:] = result.costate if correct else lam_step @ result.costate
+            lam[:] = result.costate if correct else model.lam_step @ result.costate
         else:
             lam[:] = lam_next
-        if (
-            result.status is guidance.SolveStatus.INFEASIBLE
-            and cfg.solver.on_infeasible == "min_miss"
+        if result.status is guidance.SolveStatus.INFEASIBLE and problem.solver.on_infeasible == (
+            "min_miss"
         ):
             stop = schedule[i + 1] if i + 1 < len(schedule) else n_steps - 1
-            _apply_min_miss(cfg, x_hat, t_est, k + 1, stop, u_override, override)
-    run_until(k_next, n_steps)
+            _apply_min_miss(sc, state.x_hat, t_est, k + 1, stop, model.u_override, model.override)
+    sk.advance(k_next, n_steps, n_steps, model, sched, state, scalars, log)
 
-    miss = float(np.linalg.norm(log_x[-1, :3] - np.asarray(sc.xf[:3])))
-    window = np.full(rows, -1, dtype=np.int64)
+    miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
+    window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
     return RunResult(
         arch=arch.slug,
         seed=seed,
         t_s=t,
-        x_true=log_x,
-        x_hat=log_xhat,
-        u=log_u,
-        y=log_y,
-        nis=log_nis,
-        mtf_ratio=log_rho,
-        score=log_score,
-        score_filtered=log_sf,
-        eps=log_eps,
-        trace_p=log_trp,
+        x_true=log.x,
+        x_hat=log.x_hat,
+        u=log.u,
+        y=log.y,
+        nis=log.nis,
+        mtf_ratio=log.mtf_ratio,
+        score=log.score,
+        score_filtered=log.score_filtered,
+        eps=log.eps,
+        trace_p=log.trace_p,
         window=window,
         solves=tuple(solves),
-        delta_v_km_s=references.delta_v(t, log_u),
+        delta_v_km_s=references.delta_v(t, log.u),
         miss_km=miss,
     )
 
 
 def _apply_min_miss(
-    cfg: CwrendConfig,
-    x_hat: np.ndarray,
+    sc: Scenario,
+    x_hat: FloatArray,
     t_est: float,
     k_first: int,
     k_last: int,
-    u_override: np.ndarray,
-    override: np.ndarray,
+    u_override: FloatArray,
+    override: npt.NDArray[np.bool_],
 ) -> None:
     """Hold the bounded controls minimising the terminal miss for steps ``k_first … k_last``."""
-    sc = cfg.scenario
     g = feasibility.grid_problem(
         sc.mean_motion_rad_s, x_hat, np.asarray(sc.xf, dtype=float),
         sc.horizon_s - t_est, sc.dt_s, sc.u_max_km_s2,

@@ -31,6 +31,8 @@ gains a jump term ``−u_max W q̂ q̂ᵀ Wᵀ / |ṗ|`` at each switching time.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -46,6 +48,56 @@ MIN_SWITCH_RATE = 1e-10
 STATUS_CONVERGED = 0
 STATUS_INFEASIBLE = 1
 STATUS_FAILED = 2
+
+
+class NewtonSettings(NamedTuple):
+    """Settings of :func:`newton_ascent`; the defaults are the values it was tuned with.
+
+    Stopping: ``‖Δr(T)‖ ≤ tol_pos_km`` and ``‖Δv(T)‖ ≤ tol_vel_km_s``, or
+    ``max_iter`` iterations. Each iteration tries up to ``max_damping_tries``
+    Levenberg–Marquardt dampings ``μ`` (grown by ``damping_growth`` from
+    ``damping_start_indefinite`` when the damped Hessian is not definite, from
+    ``damping_start_search`` when the line search failed), each with up to
+    ``max_halvings`` step halvings against the Armijo condition
+    ``D(λ + αs) ≥ D(λ) + armijo·α·∇Dᵀs``. A full step that leaves ``D``
+    unchanged to ``flat_rtol`` (relative) is accepted when it reduces the
+    terminal residual. After a full step ``μ`` shrinks by ``damping_shrink``,
+    to 0 below ``damping_off``; ``damping_floor`` keeps the metric term
+    positive.
+    """
+
+    tol_pos_km: float = 1e-9
+    tol_vel_km_s: float = 1e-12
+    max_iter: int = 50
+    max_damping_tries: int = 40
+    max_halvings: int = 8
+    armijo: float = 1e-4
+    flat_rtol: float = 1e-13
+    damping_floor: float = 1e-13
+    damping_growth: float = 10.0
+    damping_start_indefinite: float = 1e-10
+    damping_start_search: float = 1e-6
+    damping_shrink: float = 0.1
+    damping_off: float = 1e-12
+
+
+class Workspace(NamedTuple):
+    """Scratch arrays shared by the kernels of one evaluation, named by what they hold."""
+
+    lam: np.ndarray  # (6,) λ(t) at the last time evaluated (read back after _speed_and_rate)
+    d1: np.ndarray  # (6,) λ̇(t)
+    d2: np.ndarray  # (6,) λ̈(t)
+    d3: np.ndarray  # (6,) third derivative of λ(t)
+    lam_t: np.ndarray  # (6,) λ at a quadrature node (step-mean control)
+    switches: np.ndarray  # (MAX_BREAKS,) switching times of the current evaluation
+
+
+@njit(cache=True)
+def workspace() -> Workspace:
+    """A fresh :class:`Workspace`."""
+    return Workspace(
+        np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(MAX_BREAKS)
+    )
 
 
 @njit(cache=True)
@@ -115,10 +167,10 @@ def control_from_costate(lam_v: np.ndarray, eps: float, u_max: float, out: np.nd
 
 
 @njit(cache=True)
-def _speed_and_rate(n: float, t: float, lam0: np.ndarray, work: np.ndarray) -> tuple:
-    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``work[0]`` holds λ(t) afterwards."""
-    lam = work[0]
-    d1 = work[1]
+def _speed_and_rate(n: float, t: float, lam0: np.ndarray, ws: Workspace) -> tuple:
+    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws.lam`` holds λ(t) afterwards."""
+    lam = ws.lam
+    d1 = ws.d1
     costate_at(n, t, lam0, lam)
     costate_derivative(n, lam, d1)
     p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
@@ -128,12 +180,12 @@ def _speed_and_rate(n: float, t: float, lam0: np.ndarray, work: np.ndarray) -> t
 
 
 @njit(cache=True)
-def _switch_derivs(n: float, lam0: np.ndarray, t: float, work: np.ndarray) -> tuple:
+def _switch_derivs(n: float, lam0: np.ndarray, t: float, ws: Workspace) -> tuple:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
-    lam = work[0]
-    d1 = work[1]
-    d2 = work[2]
-    d3 = work[3]
+    lam = ws.lam
+    d1 = ws.d1
+    d2 = ws.d2
+    d3 = ws.d3
     costate_at(n, t, lam0, lam)
     costate_derivative(n, lam, d1)
     costate_derivative(n, d1, d2)
@@ -151,9 +203,9 @@ def _switch_derivs(n: float, lam0: np.ndarray, t: float, work: np.ndarray) -> tu
 
 
 @njit(cache=True)
-def _g(n: float, lam0: np.ndarray, t: float, order: int, level: float, work: np.ndarray) -> tuple:
+def _g(n: float, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace) -> tuple:
     """Value and derivative of ``f⁽ᵒʳᵈᵉʳ⁾(t) − level`` (level only for order 0)."""
-    f0, f1, f2, f3 = _switch_derivs(n, lam0, t, work)
+    f0, f1, f2, f3 = _switch_derivs(n, lam0, t, ws)
     if order == 0:
         return f0 - level, f1
     if order == 1:
@@ -171,7 +223,7 @@ def _bracketed_root(
     gb: float,
     order: int,
     level: float,
-    work: np.ndarray,
+    ws: Workspace,
 ) -> float:
     """Root of ``f⁽ᵒʳᵈᵉʳ⁾ − level`` in ``[a, b]`` with ``ga·gb ≤ 0``.
 
@@ -187,7 +239,7 @@ def _bracketed_root(
         x = 0.5 * (a + b)
     prev_width = b - a
     for _ in range(100):
-        gx, dx = _g(n, lam0, x, order, level, work)
+        gx, dx = _g(n, lam0, x, order, level, ws)
         if gx == 0.0:
             return x
         if (gx < 0.0) == (ga < 0.0):
@@ -220,7 +272,7 @@ def find_switches(
     n_cells: int,
     breaks: np.ndarray,
     minima: np.ndarray,
-    work: np.ndarray,
+    ws: Workspace,
 ) -> tuple:
     """Switching times in ``(t0, t1)``, sorted, written into ``breaks``.
 
@@ -252,10 +304,10 @@ def find_switches(
     is_min = np.zeros(4, dtype=np.bool_)
     h = (t1 - t0) / n_cells
     a = t0
-    fa0, fa1, fa2, _ = _switch_derivs(n, lam0, a, work)
+    fa0, fa1, fa2, _ = _switch_derivs(n, lam0, a, ws)
     for cell in range(n_cells):
         b = t1 if cell == n_cells - 1 else t0 + (cell + 1) * h
-        fb0, fb1, fb2, _ = _switch_derivs(n, lam0, b, work)
+        fb0, fb1, fb2, _ = _switch_derivs(n, lam0, b, ws)
         # Split points: an inflection (f'' = 0) where f' may change sign twice,
         # then the extrema (f' = 0) on each side of it.
         pieces[0] = a
@@ -263,21 +315,21 @@ def find_switches(
         is_min[:] = False
         inflect = -1.0
         if (fa2 < 0.0) != (fb2 < 0.0):
-            inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, 2, 0.0, work)
+            inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, 2, 0.0, ws)
         if inflect > a and inflect < b:
-            _, fi1, _, _ = _switch_derivs(n, lam0, inflect, work)
+            _, fi1, _, _ = _switch_derivs(n, lam0, inflect, ws)
             if (fa1 < 0.0) != (fi1 < 0.0):
-                pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, 1, 0.0, work)
+                pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, 1, 0.0, ws)
                 is_min[n_pieces] = fa1 < 0.0
                 n_pieces += 1
             pieces[n_pieces] = inflect
             n_pieces += 1
             if (fi1 < 0.0) != (fb1 < 0.0):
-                pieces[n_pieces] = _bracketed_root(n, lam0, inflect, b, fi1, fb1, 1, 0.0, work)
+                pieces[n_pieces] = _bracketed_root(n, lam0, inflect, b, fi1, fb1, 1, 0.0, ws)
                 is_min[n_pieces] = fi1 < 0.0
                 n_pieces += 1
         elif (fa1 < 0.0) != (fb1 < 0.0):
-            pieces[n_pieces] = _bracketed_root(n, lam0, a, b, fa1, fb1, 1, 0.0, work)
+            pieces[n_pieces] = _bracketed_root(n, lam0, a, b, fa1, fb1, 1, 0.0, ws)
             is_min[n_pieces] = fa1 < 0.0
             n_pieces += 1
         for k in range(1, n_pieces):
@@ -290,7 +342,7 @@ def find_switches(
         for k in range(1, n_pieces + 1):
             if k < n_pieces:
                 v = pieces[k]
-                fv0, _, _, _ = _switch_derivs(n, lam0, v, work)
+                fv0, _, _, _ = _switch_derivs(n, lam0, v, ws)
             else:
                 v = b
                 fv0 = fb0
@@ -302,7 +354,7 @@ def find_switches(
                     ga = fu0 - lv
                     gb = fv0 - lv
                     if (ga < 0.0) != (gb < 0.0) and count < breaks.shape[0]:
-                        breaks[count] = _bracketed_root(n, lam0, u, v, ga, gb, 0, lv, work)
+                        breaks[count] = _bracketed_root(n, lam0, u, v, ga, gb, 0, lv, ws)
                         count += 1
             u = v
             fu0 = fv0
@@ -332,7 +384,7 @@ def quadrature_breaks(
     n_cells: int,
     switches: np.ndarray,
     breaks: np.ndarray,
-    work: np.ndarray,
+    ws: Workspace,
 ) -> tuple:
     """Switching times, and the breakpoints of the arc-by-arc quadrature.
 
@@ -348,24 +400,24 @@ def quadrature_breaks(
     ``‖λ_v‖`` a geometric refinement down to ``w``).
     """
     minima = np.empty(MAX_BREAKS // 4 + 2)
-    n_sw, n_min = find_switches(n, lam0, t0, t1, eps, n_cells, switches, minima, work)
+    n_sw, n_min = find_switches(n, lam0, t0, t1, eps, n_cells, switches, minima, ws)
     nb = 0
     for i in range(n_sw):
         breaks[nb] = switches[i]
         nb += 1
     # the ends are minima of ‖λ_v‖ on the interval when it grows away from them
-    _, f1, _, _ = _switch_derivs(n, lam0, t0, work)
+    _, f1, _, _ = _switch_derivs(n, lam0, t0, ws)
     if f1 > 0.0:
         minima[n_min] = t0
         n_min += 1
-    _, f1, _, _ = _switch_derivs(n, lam0, t1, work)
+    _, f1, _, _ = _switch_derivs(n, lam0, t1, ws)
     if f1 < 0.0:
         minima[n_min] = t1
         n_min += 1
     span = t1 - t0
     for i in range(n_min):
         tm = minima[i]
-        p, _, r = _speed_and_rate(n, tm, lam0, work)
+        p, _, r = _speed_and_rate(n, tm, lam0, ws)
         if r <= 0.0 or p >= span * r:
             continue  # singularities farther than the interval is long: one arc is accurate
         w = max(p / r, 1e-9)
@@ -422,7 +474,7 @@ def dual_evaluate(
     want_hess: bool,
     grad: np.ndarray,
     hess: np.ndarray,
-    work: np.ndarray,
+    ws: Workspace,
 ) -> tuple:
     """Dual value ``D``, gradient ``G = ∫W u dτ − d`` and Hessian ``∂G/∂λ₀`` at ``λ₀``.
 
@@ -430,10 +482,10 @@ def dual_evaluate(
     ``c = −λ₀ᵀd − u_max ∫‖W(τ)ᵀλ₀‖ dτ`` (positive ⇒ no bounded control reaches
     ``x_f``) and the number of switching times found.
     """
-    switches = work[8, :MAX_BREAKS]
+    switches = ws.switches
     breaks = np.empty(MAX_QUAD_BREAKS)
     n_switches, n_breaks = quadrature_breaks(
-        n, lam0, 0.0, horizon, eps, n_cells, switches, breaks, work
+        n, lam0, 0.0, horizon, eps, n_cells, switches, breaks, ws
     )
     w = np.empty((6, 3))
     wq = np.empty(6)
@@ -483,10 +535,10 @@ def dual_evaluate(
                         hess[i, j] += val
     if want_hess and eps < EPS_BANG_BANG:
         # Jump terms at ε = 0: −u_max W q̂q̂ᵀWᵀ/|ṗ| at each switching time.
-        lam = work[0]
+        lam = ws.lam  # λ(t_s), written by _speed_and_rate below
         for s in range(n_switches):
             ts = switches[s]
-            p, pdot, _ = _speed_and_rate(n, ts, lam0, work)
+            p, pdot, _ = _speed_and_rate(n, ts, lam0, ws)
             rate = max(abs(pdot), MIN_SWITCH_RATE)
             input_kernel(n, ts, w)
             for i in range(6):
@@ -564,9 +616,7 @@ def newton_ascent(
     gl_x: np.ndarray,
     gl_w: np.ndarray,
     n_cells: int,
-    tol_pos: float,
-    tol_vel: float,
-    max_iter: int,
+    settings: NewtonSettings,
     lam_out: np.ndarray,
 ) -> tuple:
     """Solve one shooting problem by damped Newton / Levenberg–Marquardt ascent on ``D``.
@@ -575,6 +625,8 @@ def newton_ascent(
     written to ``lam_out``. Status: 0 converged, 1 infeasible (certificate
     found), 2 failed (iteration limit or stalled line search).
     """
+    tol_pos = settings.tol_pos_km
+    tol_vel = settings.tol_vel_km_s
     pf = stm(n, -horizon)
     d = np.empty(6)
     for i in range(6):
@@ -582,7 +634,7 @@ def newton_ascent(
         for j in range(6):
             acc += pf[i, j] * xf[j]
         d[i] = acc - x0[i]
-    work = np.empty((9, max(6, MAX_BREAKS)))
+    ws = workspace()
     grad = np.empty(6)
     hess = np.empty((6, 6))
     grad_t = np.empty(6)
@@ -598,34 +650,34 @@ def newton_ascent(
         metric[i] = u_max * horizon**3 / 3.0
         metric[i + 3] = u_max * horizon
     value, cert, _ = dual_evaluate(
-        n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, work
+        n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, ws
     )
     mu = 0.0
     rp, rv = terminal_residual(n, horizon, grad, res)
-    for it in range(max_iter + 1):
+    for it in range(settings.max_iter + 1):
         if rp <= tol_pos and rv <= tol_vel:
             lam_out[:] = lam
             return STATUS_CONVERGED, it, rp, rv
         if cert > 0.0:
             lam_out[:] = lam
             return STATUS_INFEASIBLE, it, rp, rv
-        if it == max_iter:
+        if it == settings.max_iter:
             break
         merit = (rp / tol_pos) ** 2 + (rv / tol_vel) ** 2
         accepted = False
-        for _attempt in range(40):
+        for _attempt in range(settings.max_damping_tries):
             for i in range(6):
                 for j in range(6):
                     mat[i, j] = -hess[i, j]
-                mat[i, i] += max(mu, 1e-13) * metric[i]
+                mat[i, i] += max(mu, settings.damping_floor) * metric[i]
             if not _cholesky_solve(mat, grad, step):
-                mu = max(10.0 * mu, 1e-10)
+                mu = max(settings.damping_growth * mu, settings.damping_start_indefinite)
                 continue
             slope = 0.0
             for i in range(6):
                 slope += grad[i] * step[i]
             alpha = 1.0
-            for _ls in range(8):
+            for _ls in range(settings.max_halvings):
                 for i in range(6):
                     lam_t[i] = lam[i] + alpha * step[i]
                 value_t, cert_t, _ = dual_evaluate(
@@ -641,12 +693,12 @@ def newton_ascent(
                     True,
                     grad_t,
                     hess_t,
-                    work,
+                    ws,
                 )
                 rp_t, rv_t = terminal_residual(n, horizon, grad_t, res)
-                if value_t >= value + 1e-4 * alpha * slope:
+                if value_t >= value + settings.armijo * alpha * slope:
                     accepted = True
-                elif alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300):
+                elif alpha == 1.0 and value_t >= value - settings.flat_rtol * (abs(value) + 1e-300):
                     # D is flat to rounding near the optimum: accept a full step
                     # that reduces the terminal residual.
                     merit_t = (rp_t / tol_pos) ** 2 + (rv_t / tol_vel) ** 2
@@ -656,7 +708,7 @@ def newton_ascent(
                 alpha *= 0.5
             if accepted:
                 break
-            mu = max(10.0 * mu, 1e-6)
+            mu = max(settings.damping_growth * mu, settings.damping_start_search)
         if not accepted:
             break
         for i in range(6):
@@ -669,6 +721,6 @@ def newton_ascent(
         rp = rp_t
         rv = rv_t
         if alpha == 1.0:
-            mu = mu * 0.1 if mu > 1e-12 else 0.0
+            mu = mu * settings.damping_shrink if mu > settings.damping_off else 0.0
     lam_out[:] = lam
     return STATUS_FAILED, it, rp, rv

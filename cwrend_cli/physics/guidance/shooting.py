@@ -86,6 +86,12 @@ class SolverSettings:
     )
     dt_grid_s: float = 1.0  # zero-order-hold grid of the convex checks
 
+    def newton(self) -> kern.NewtonSettings:
+        """Settings of the compiled Newton ascent (its other constants at their defaults)."""
+        return kern.NewtonSettings(
+            tol_pos_km=self.tol_pos_km, tol_vel_km_s=self.tol_vel_km_s, max_iter=self.max_iter
+        )
+
     def quadrature(self) -> tuple[np.ndarray, np.ndarray]:
         """Gauss–Legendre nodes and weights on [−1, 1]."""
         return _gauss_legendre(self.quadrature_nodes)
@@ -164,9 +170,7 @@ def _newton(
         gl_x,
         gl_w,
         n_cells(problem.horizon_s),
-        settings.tol_pos_km,
-        settings.tol_vel_km_s,
-        settings.max_iter,
+        settings.newton(),
         out,
     )
     return _STATUS[status], out, iters, float(np.hypot(rp, rv))
@@ -286,7 +290,7 @@ def _evaluate(
     gl_x, gl_w = _gauss_legendre(nodes)
     grad = np.empty(6)
     hess = np.empty((6, 6))
-    work = np.empty((9, kern.MAX_BREAKS))
+    ws = kern.workspace()
     kern.dual_evaluate(
         problem.mean_motion_rad_s,
         np.ascontiguousarray(costate, dtype=float),
@@ -300,7 +304,7 @@ def _evaluate(
         want_hess,
         grad,
         hess,
-        work,
+        ws,
     )
     phi = stm(problem.mean_motion_rad_s, problem.horizon_s)
     return phi @ grad, phi @ hess
@@ -323,7 +327,7 @@ def switching_times(
     t1 = problem.horizon_s if t1 is None else t1
     breaks = np.empty(kern.MAX_BREAKS)
     minima = np.empty(kern.MAX_BREAKS)
-    work = np.empty((9, kern.MAX_BREAKS))
+    ws = kern.workspace()
     count, _ = kern.find_switches(
         problem.mean_motion_rad_s,
         np.ascontiguousarray(costate, dtype=float),
@@ -333,7 +337,7 @@ def switching_times(
         n_cells(t1 - t0),
         breaks,
         minima,
-        work,
+        ws,
     )
     return breaks[:count].copy()
 
