@@ -12,7 +12,7 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from cwrend_cli.physics import references
+from cwrend_cli.physics import metrics, references
 
 DV_ENERGY_PAPER = 1.502386e-1  # km/s, AAS 26-893 Sec. Numerical Results
 DV_FUEL_PAPER = 1.128000e-1  # km/s, AAS 26-893 Sec. Numerical Results
@@ -111,7 +111,7 @@ def test_energy_delta_v_is_trapezoid_of_costate_norm(paper_refs, paper_cfg, cw_m
 def test_cumulative_delta_v_ends_at_the_delta_v(paper_refs) -> None:
     """The running trapezoid starts at 0, never decreases and ends at ``delta_v`` (SPEC §2)."""
     for ref in (paper_refs.energy, paper_refs.fuel):
-        dv = references.cumulative_delta_v(ref.t_s, np.linalg.norm(ref.u, axis=1))
+        dv = metrics.cumulative_delta_v(ref.t_s, np.linalg.norm(ref.u, axis=1))
         assert dv[0] == 0.0 and np.all(np.diff(dv) >= 0)
         # summation order differs from np.trapezoid: rounding only
         assert dv[-1] == pytest.approx(ref.delta_v_km_s, rel=1e-12)

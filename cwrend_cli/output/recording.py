@@ -45,7 +45,7 @@ import numpy as np
 
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.tables import atomic_path
-from cwrend_cli.physics.references import cumulative_delta_v
+from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.sensors import in_window
 
 if TYPE_CHECKING:

@@ -9,6 +9,7 @@ directory and moved into place with :func:`os.replace`, so a reader (or a
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import tempfile
@@ -23,6 +24,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cwrend_cli import __version__
+from cwrend_cli.physics.metrics import reference_metrics, run_metrics
 from cwrend_cli.physics.references import OpenLoopResult
 from cwrend_cli.physics.simulation import References, RunResult
 
@@ -199,42 +201,15 @@ SUMMARY_SCHEMA = pa.schema(
 
 
 def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
-    """Metrics of one run; solve statistics are over the re-solves (SPEC §7 convention)."""
-    rs = result.resolves
-    times = np.array([s.wall_time_ms for s in rs]) if rs else np.array([np.nan])
-    return {
-        "arch": result.arch,
-        "seed": result.seed,
-        "delta_v_km_s": result.delta_v_km_s,
-        "miss_km": result.miss_km,
-        "fuel_penalty_pct": 100.0 * (result.delta_v_km_s / fuel_delta_v_km_s - 1.0),
-        "n_solves": len(rs),
-        "n_converged": sum(s.status == "converged" for s in rs),
-        "n_infeasible": sum(s.status == "infeasible" for s in rs),
-        "n_failed": sum(s.status == "failed" for s in rs),
-        "solve_success_pct": 100.0 * sum(s.success for s in rs) / len(rs) if rs else float("nan"),
-        "solve_mean_ms": float(np.mean(times)),
-        "solve_max_ms": float(np.max(times)),
-    }
+    """A ``summary.parquet`` / ``runs.parquet`` row of one run (metrics: SPEC §7 convention)."""
+    metrics = run_metrics(result, fuel_delta_v_km_s)
+    return {"arch": result.arch, "seed": result.seed, **dataclasses.asdict(metrics)}
 
 
 def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
     """Summary row of an open-loop reference (``arch`` = ``open_loop_<name>``)."""
-    times = [s.wall_time_s * 1e3 for s in ref.solves] or [float("nan")]
-    return {
-        "arch": f"open_loop_{ref.name}",
-        "seed": -1,
-        "delta_v_km_s": ref.delta_v_km_s,
-        "miss_km": ref.miss_km,
-        "fuel_penalty_pct": 100.0 * (ref.delta_v_km_s / fuel_delta_v_km_s - 1.0),
-        "n_solves": len(ref.solves),
-        "n_converged": sum(s.converged for s in ref.solves),
-        "n_infeasible": 0,
-        "n_failed": sum(not s.converged for s in ref.solves),
-        "solve_success_pct": 100.0 if ref.solves else float("nan"),
-        "solve_mean_ms": float(np.mean(times)),
-        "solve_max_ms": float(np.max(times)),
-    }
+    metrics = reference_metrics(ref, fuel_delta_v_km_s)
+    return {"arch": f"open_loop_{ref.name}", "seed": -1, **dataclasses.asdict(metrics)}
 
 
 def summary_table(

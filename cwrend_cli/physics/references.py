@@ -3,8 +3,8 @@
 Energy-optimal: unbounded ``min ∫½‖u‖²`` solved in closed form. Fuel-optimal:
 ε-continuation 1.0, 0.9, …, 0.0 of the shooting problem, each solve
 warm-started from the previous one, the first from the energy costate.
-Δv is the trapezoid of ‖u‖ sampled on the 1 s grid t = 0 … T (SPEC §2);
-the miss is that of the continuous plan, ``‖r(T) − r_f‖``.
+Δv (:func:`~cwrend_cli.physics.metrics.delta_v`) is the trapezoid of ‖u‖ sampled
+on the grid; the miss is that of the continuous plan, ``‖r(T) − r_f‖``.
 Units: km, s, km/s, km/s².
 """
 
@@ -18,6 +18,7 @@ import scipy.linalg
 from cwrend_cli.physics import guidance
 from cwrend_cli.physics.dynamics import costate_stm, cw_system
 from cwrend_cli.physics.errors import ScenarioError
+from cwrend_cli.physics.metrics import delta_v
 
 #: ε sequence of the fuel-optimal continuation (SPEC §2).
 FUEL_CONTINUATION = tuple(round(1.0 - 0.1 * i, 1) for i in range(11))
@@ -35,21 +36,6 @@ class OpenLoopResult:
     delta_v_km_s: float
     miss_km: float
     solves: tuple[guidance.SolveResult, ...] = ()
-
-
-def delta_v(t_s: np.ndarray, u: np.ndarray) -> float:
-    """Δv [km/s]: trapezoid of ‖u‖ over the grid (SPEC §2)."""
-    return float(np.trapezoid(np.linalg.norm(u, axis=1), t_s))
-
-
-def cumulative_delta_v(t_s: np.ndarray, u_norm: np.ndarray) -> np.ndarray:
-    """Cumulative trapezoid of ‖u‖ over the grid [km/s]; its last value is :func:`delta_v`."""
-    t = np.asarray(t_s, dtype=float)
-    a = np.asarray(u_norm, dtype=float)
-    out = np.zeros_like(a)
-    if a.size > 1:
-        out[1:] = np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))
-    return out
 
 
 def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLoopResult:

@@ -29,6 +29,7 @@ from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import guidance, references, sensors
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import feasibility
+from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
 
 
@@ -295,7 +296,7 @@ def simulate(
         trace_p=log.trace_p,
         window=window,
         solves=tuple(solves),
-        delta_v_km_s=references.delta_v(t, log.u),
+        delta_v_km_s=delta_v(t, log.u),
         miss_km=miss,
     )
 

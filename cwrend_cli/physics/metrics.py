@@ -1,0 +1,100 @@
+"""What a run is judged by: Δv, miss, fuel penalty and its re-solve statistics (SPEC §2, §7).
+
+Δv is the trapezoid of ‖u‖ sampled on the grid t = 0 … T (SPEC §2; in closed
+loop no control is computed at t = T, so that sample is 0); the miss is the
+distance ‖r(T) − r_f‖; the fuel penalty is Δv relative to the open-loop
+fuel-optimal Δv. Solve statistics are over the receding-horizon re-solves,
+not the initial solve (the convention of the paper's Table 2, SPEC §7).
+Units: km, s, km/s, km/s².
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cwrend_cli.physics.params import FloatArray
+
+if TYPE_CHECKING:  # types only: simulation and references import this module
+    from cwrend_cli.physics.references import OpenLoopResult
+    from cwrend_cli.physics.simulation import RunResult
+
+
+def delta_v(t_s: FloatArray, u: FloatArray) -> float:
+    """Δv [km/s]: trapezoid of ‖u‖ over the grid (SPEC §2)."""
+    return float(np.trapezoid(np.linalg.norm(u, axis=1), t_s))
+
+
+def cumulative_delta_v(t_s: FloatArray, u_norm: FloatArray) -> FloatArray:
+    """Cumulative trapezoid of ‖u‖ over the grid [km/s]; its last value is :func:`delta_v`."""
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(u_norm, dtype=float)
+    out = np.zeros_like(a)
+    if a.size > 1:
+        out[1:] = np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))
+    return out
+
+
+def fuel_penalty_pct(delta_v_km_s: float, fuel_delta_v_km_s: float) -> float:
+    """Δv above the open-loop fuel optimum [%] (paper Table 2's "fuel penalty")."""
+    return 100.0 * (delta_v_km_s / fuel_delta_v_km_s - 1.0)
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """The figures of merit of one closed-loop run or open-loop reference."""
+
+    delta_v_km_s: float
+    miss_km: float
+    fuel_penalty_pct: float
+    n_solves: int
+    n_converged: int
+    n_infeasible: int
+    n_failed: int
+    solve_success_pct: float  # converged with ‖residual‖ below the threshold (SPEC §5)
+    solve_mean_ms: float  # wall time per solve
+    solve_max_ms: float
+
+
+def _times(times_ms: Sequence[float]) -> tuple[float, float]:
+    """Mean and max of solve wall times [ms] (NaN when there is none)."""
+    arr = np.array(times_ms) if times_ms else np.array([np.nan])
+    return float(np.mean(arr)), float(np.max(arr))
+
+
+def run_metrics(result: RunResult, fuel_delta_v_km_s: float) -> RunMetrics:
+    """Metrics of a closed-loop run; solve statistics over its re-solves."""
+    rs = result.resolves
+    mean_ms, max_ms = _times([s.wall_time_ms for s in rs])
+    return RunMetrics(
+        delta_v_km_s=result.delta_v_km_s,
+        miss_km=result.miss_km,
+        fuel_penalty_pct=fuel_penalty_pct(result.delta_v_km_s, fuel_delta_v_km_s),
+        n_solves=len(rs),
+        n_converged=sum(s.status == "converged" for s in rs),
+        n_infeasible=sum(s.status == "infeasible" for s in rs),
+        n_failed=sum(s.status == "failed" for s in rs),
+        solve_success_pct=100.0 * sum(s.success for s in rs) / len(rs) if rs else float("nan"),
+        solve_mean_ms=mean_ms,
+        solve_max_ms=max_ms,
+    )
+
+
+def reference_metrics(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> RunMetrics:
+    """Metrics of an open-loop reference; solve statistics over its continuation solves."""
+    mean_ms, max_ms = _times([s.wall_time_s * 1e3 for s in ref.solves])
+    return RunMetrics(
+        delta_v_km_s=ref.delta_v_km_s,
+        miss_km=ref.miss_km,
+        fuel_penalty_pct=fuel_penalty_pct(ref.delta_v_km_s, fuel_delta_v_km_s),
+        n_solves=len(ref.solves),
+        n_converged=sum(s.converged for s in ref.solves),
+        n_infeasible=0,
+        n_failed=sum(not s.converged for s in ref.solves),
+        solve_success_pct=100.0 if ref.solves else float("nan"),
+        solve_mean_ms=mean_ms,
+        solve_max_ms=max_ms,
+    )
