@@ -11,10 +11,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cwrend_cli.config import CwrendConfig, DegradationWindow
+from cwrend_cli.config import CwrendConfig
+from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.errors import InputDataError
 from cwrend_cli.physics import sensors
+from cwrend_cli.physics.params import Window
 
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1
 BIAS_KM = np.array([0.010, -0.008, 0.012])  # SPEC §6: [10, −8, 12] m
@@ -26,7 +28,7 @@ REL_TOL = 1e-14
 
 @pytest.fixture(scope="module")
 def paper_windows():
-    return CwrendConfig().degradation.windows
+    return windows_of(CwrendConfig())
 
 
 def spec_expected_noise(n: np.ndarray, t: float, r_nom: np.ndarray) -> np.ndarray:
@@ -81,7 +83,7 @@ def test_no_windows_is_nominal_everywhere() -> None:
 def test_noise_scaled_by_cholesky_of_full_covariance() -> None:
     """v = chol(c R) n + b for a non-diagonal R (so the Cholesky factor matters)."""
     r_full = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]]) * 1e-6
-    window = DegradationWindow(start_s=10.0, end_s=19.0, r_scale=50.0, bias_km=(1e-3, 0.0, -2e-3))
+    window = Window(start_s=10.0, end_s=19.0, r_scale=50.0, bias_km=(1e-3, 0.0, -2e-3))
     times = np.arange(30, dtype=float)
     std = np.random.default_rng(7).standard_normal((30, 3))
     noise, _ = sensors.measurement_noise(std, times, r_full, (window,))
@@ -98,7 +100,7 @@ def test_noise_scaled_by_cholesky_of_full_covariance() -> None:
 def test_noise_covariance_is_true_r() -> None:
     """Statistically: 200 000 draws have covariance 300 R (to 1.5 % of the largest entry)."""
     r_full = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]]) * 1e-6
-    window = DegradationWindow(start_s=0.0, end_s=1e6, r_scale=300.0)
+    window = Window(start_s=0.0, end_s=1e6, r_scale=300.0)
     m = 200_000
     std = np.random.default_rng(11).standard_normal((m, 3))
     noise, _ = sensors.measurement_noise(std, np.zeros(m), r_full, (window,))

@@ -19,9 +19,7 @@ from cwrend_cli.physics import params
 
 def window_of(w: DegradationWindow) -> params.Window:
     """One degradation window as the physics core's :class:`~params.Window`."""
-    return params.Window(
-        start_s=w.start_s, end_s=w.end_s, r_scale=w.r_scale, bias_km=tuple(w.bias_km)
-    )
+    return params.Window(start_s=w.start_s, end_s=w.end_s, r_scale=w.r_scale, bias_km=w.bias_km)
 
 
 def windows_of(cfg: CwrendConfig) -> tuple[params.Window, ...]:

@@ -46,13 +46,13 @@ import numpy as np
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.tables import atomic_path
 from cwrend_cli.physics.metrics import cumulative_delta_v
+from cwrend_cli.physics.params import Window
 from cwrend_cli.physics.sensors import in_window
 
 if TYPE_CHECKING:
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from cwrend_cli.config import DegradationWindow
     from cwrend_cli.physics.simulation import References, RunResult
 
 
@@ -104,12 +104,12 @@ def rgb(hex_colour: str) -> tuple[int, int, int]:
     return int(h[0:2], 16), int(h[2:4], 16), int(h[4:6], 16)
 
 
-def window_activity(t_s: np.ndarray, window: DegradationWindow) -> np.ndarray:
+def window_activity(t_s: np.ndarray, window: Window) -> np.ndarray:
     """1.0 where the window is active (``start_s ≤ t ≤ end_s``), else 0.0."""
     return in_window(np.asarray(t_s, dtype=float), window).astype(float)
 
 
-def window_label(i: int, window: DegradationWindow) -> str:
+def window_label(i: int, window: Window) -> str:
     """Degradation window ``i`` for legends, e.g. ``window 1: R×300 + 17.5 m bias``."""
     return f"window {i}: {window.label}"
 
@@ -262,7 +262,7 @@ def _send_path(
 def _about(
     runs: Sequence[RunResult],
     refs: References,
-    windows: Sequence[DegradationWindow],
+    windows: Sequence[Window],
     arrow_scale_s2: float,
     u_max_km_s2: float,
 ) -> str:
@@ -296,7 +296,7 @@ def _log_case(
     rec: rr.RecordingStream,
     runs: Sequence[RunResult],
     refs: References,
-    windows: Sequence[DegradationWindow],
+    windows: Sequence[Window],
     u_max_km_s2: float,
 ) -> None:
     import rerun as rr
@@ -431,7 +431,7 @@ def record_case(
     path: Path,
     runs: Sequence[RunResult],
     refs: References,
-    windows: Sequence[DegradationWindow],
+    windows: Sequence[Window],
     *,
     application_id: str = "cwrend",
     recording_id: str | None = None,

@@ -43,7 +43,7 @@ def cw_system(n: float) -> tuple[np.ndarray, np.ndarray]:
 def one_minus_cos(x: float) -> float:
     """``1 − cos x`` without cancellation for small ``x``."""
     h = np.sin(0.5 * x)
-    return 2.0 * h * h
+    return float(2.0 * h * h)
 
 
 @njit(cache=True)
@@ -60,7 +60,7 @@ def x_minus_sin(x: float) -> float:
             total += term
             k += 2
         return total
-    return x - np.sin(x)
+    return float(x - np.sin(x))
 
 
 @njit(cache=True)

@@ -34,7 +34,7 @@ Covariance = tuple[float, ...] | tuple[tuple[float, ...], ...]
 def covariance_matrix(value: Covariance) -> FloatArray:
     """A fresh float64 matrix from a stored (diagonal or full) covariance."""
     arr = np.array(value, dtype=np.float64)
-    return np.diag(arr) if arr.ndim == 1 else arr
+    return np.asarray(np.diag(arr) if arr.ndim == 1 else arr, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class Scenario:
 
     def time_grid(self) -> FloatArray:
         """Grid times t_k = k Δt, k = 0 … N [s]."""
-        return np.arange(self.n_steps + 1) * self.dt_s
+        return np.asarray(np.arange(self.n_steps + 1) * self.dt_s, dtype=np.float64)
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,7 @@ def eps_target(
     target = eps_min + (eps_max - eps_min) * (1.0 - np.exp(-beta * s))
     if not np.isnan(eps_saturation) and target > eps_saturation:
         target = eps_saturation
-    return target
+    return float(target)
 
 
 @njit(cache=True)

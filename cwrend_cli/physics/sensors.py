@@ -12,18 +12,10 @@ Units: km, km², s.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
 
 import numpy as np
 
-
-class Window(Protocol):
-    """A degradation window (``config.DegradationWindow`` satisfies it)."""
-
-    start_s: float
-    end_s: float
-    r_scale: float
-    bias_km: tuple[float, float, float]
+from cwrend_cli.physics.params import Window
 
 
 def in_window(times_s: np.ndarray, window: Window) -> np.ndarray:

@@ -167,7 +167,9 @@ def control_from_costate(lam_v: np.ndarray, eps: float, u_max: float, out: np.nd
 
 
 @njit(cache=True)
-def _speed_and_rate(n: float, t: float, lam0: np.ndarray, ws: Workspace) -> tuple:
+def _speed_and_rate(
+    n: float, t: float, lam0: np.ndarray, ws: Workspace
+) -> tuple[float, float, float]:
     """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws.lam`` holds λ(t) afterwards."""
     lam = ws.lam
     d1 = ws.d1
@@ -180,7 +182,9 @@ def _speed_and_rate(n: float, t: float, lam0: np.ndarray, ws: Workspace) -> tupl
 
 
 @njit(cache=True)
-def _switch_derivs(n: float, lam0: np.ndarray, t: float, ws: Workspace) -> tuple:
+def _switch_derivs(
+    n: float, lam0: np.ndarray, t: float, ws: Workspace
+) -> tuple[float, float, float, float]:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
     lam = ws.lam
     d1 = ws.d1
@@ -203,7 +207,9 @@ def _switch_derivs(n: float, lam0: np.ndarray, t: float, ws: Workspace) -> tuple
 
 
 @njit(cache=True)
-def _g(n: float, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace) -> tuple:
+def _g(
+    n: float, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace
+) -> tuple[float, float]:
     """Value and derivative of ``f⁽ᵒʳᵈᵉʳ⁾(t) − level`` (level only for order 0)."""
     f0, f1, f2, f3 = _switch_derivs(n, lam0, t, ws)
     if order == 0:
@@ -273,7 +279,7 @@ def find_switches(
     breaks: np.ndarray,
     minima: np.ndarray,
     ws: Workspace,
-) -> tuple:
+) -> tuple[int, int]:
     """Switching times in ``(t0, t1)``, sorted, written into ``breaks``.
 
     Returns ``(count, n_minima)``; the interior local minima of ``‖λ_v‖`` met
@@ -385,7 +391,7 @@ def quadrature_breaks(
     switches: np.ndarray,
     breaks: np.ndarray,
     ws: Workspace,
-) -> tuple:
+) -> tuple[int, int]:
     """Switching times, and the breakpoints of the arc-by-arc quadrature.
 
     Returns ``(n_switches, n_breaks)``. The integrand of the control integral
@@ -436,7 +442,9 @@ def quadrature_breaks(
 
 
 @njit(cache=True)
-def arc_bounds(arc: int, n_breaks: int, breaks: np.ndarray, t0: float, t1: float) -> tuple:
+def arc_bounds(
+    arc: int, n_breaks: int, breaks: np.ndarray, t0: float, t1: float
+) -> tuple[float, float]:
     """``(a, b)`` of quadrature arc ``arc`` of ``[t0, t1]`` split at ``breaks[:n_breaks]``."""
     a = t0 if arc == 0 else breaks[arc - 1]
     b = t1 if arc == n_breaks else breaks[arc]
@@ -444,7 +452,7 @@ def arc_bounds(arc: int, n_breaks: int, breaks: np.ndarray, t0: float, t1: float
 
 
 @njit(cache=True)
-def _regime_terms(p: float, eps: float) -> tuple:
+def _regime_terms(p: float, eps: float) -> tuple[float, float, float]:
     """``(φ, φ', Ψ)`` of the throttle at ``p`` (Eq. 10 and its integral)."""
     if eps < EPS_BANG_BANG:
         if p > 1.0:
@@ -475,7 +483,7 @@ def dual_evaluate(
     grad: np.ndarray,
     hess: np.ndarray,
     ws: Workspace,
-) -> tuple:
+) -> tuple[float, float, int]:
     """Dual value ``D``, gradient ``G = ∫W u dτ − d`` and Hessian ``∂G/∂λ₀`` at ``λ₀``.
 
     Also returns the infeasibility certificate value
@@ -591,7 +599,9 @@ def _cholesky_solve(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def terminal_residual(n: float, horizon: float, grad: np.ndarray, out: np.ndarray) -> tuple:
+def terminal_residual(
+    n: float, horizon: float, grad: np.ndarray, out: np.ndarray
+) -> tuple[float, float]:
     """``x(T) − x_f = Φ(T) G``; returns (‖Δr‖ [km], ‖Δv‖ [km/s])."""
     p = stm(n, horizon)
     for i in range(6):
@@ -618,7 +628,7 @@ def newton_ascent(
     n_cells: int,
     settings: NewtonSettings,
     lam_out: np.ndarray,
-) -> tuple:
+) -> tuple[int, int, float, float]:
     """Solve one shooting problem by damped Newton / Levenberg–Marquardt ascent on ``D``.
 
     Returns ``(status, iterations, ‖Δr(T)‖, ‖Δv(T)‖)``; the costate is

@@ -18,6 +18,7 @@ terminal rows by the horizon so that the conic solver sees O(1) numbers.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import clarabel
 import numpy as np
@@ -55,7 +56,9 @@ def grid_problem(
     return GridProblem(blocks, rhs, row_scale, dt_s, u_max_km_s2)
 
 
-def _solve(p, q, a, b, cones) -> clarabel.DefaultSolution:
+def _solve(
+    p: sp.csc_matrix, q: np.ndarray, a: sp.csc_matrix, b: np.ndarray, cones: list[Any]
+) -> Any:
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.tol_gap_abs = 1e-10
@@ -65,8 +68,8 @@ def _solve(p, q, a, b, cones) -> clarabel.DefaultSolution:
     return solver.solve()
 
 
-def _solved(sol) -> bool:
-    return sol.status in (clarabel.SolverStatus.Solved, clarabel.SolverStatus.AlmostSolved)
+def _solved(sol: Any) -> bool:
+    return bool(sol.status in (clarabel.SolverStatus.Solved, clarabel.SolverStatus.AlmostSolved))
 
 
 def _terminal_rows(g: GridProblem, n_vars: int) -> tuple[sp.csc_matrix, np.ndarray]:
@@ -150,7 +153,8 @@ def min_fuel_costate(g: GridProblem, n: float) -> np.ndarray | None:
     # Clarabel: q + Aᵀz = 0 with objective Σ t̃ = Σ Δt‖u‖/(Δt u_max); undo both scalings.
     z_eq = np.asarray(sol.z[:6]) * g.row_scale * g.dt_s * g.u_max_km_s2
     horizon = steps * g.dt_s
-    return stm(n, horizon).T @ z_eq
+    costate: np.ndarray = stm(n, horizon).T @ z_eq
+    return costate
 
 
 def min_miss_controls(g: GridProblem, velocity_weight_s: float) -> np.ndarray | None:
