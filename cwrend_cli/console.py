@@ -14,6 +14,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    TaskID,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -67,7 +68,7 @@ class RichProgress:
         self._label = label
         self._quiet = quiet
         self._bar: Progress | None = None
-        self._task = None
+        self._task: TaskID | None = None
         self._done = 0
         self._failed = 0
         self._total = 0
@@ -102,7 +103,7 @@ class RichProgress:
         self._failed += failed
         if self._quiet:
             return
-        if self._bar is not None:
+        if self._bar is not None and self._task is not None:
             self._bar.update(self._task, advance=ok + failed, failed=self._failed)
             return
         elapsed = time.monotonic() - self._t0
