@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from cwrend_cli import campaign
 from cwrend_cli.cli import app
-from cwrend_cli.config import CwrendConfig, config_from_dict
+from cwrend_cli.config import CwrendConfig, config_from_dict, expand_grid, parse_param
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output import tables as storage
 
@@ -51,15 +51,15 @@ def _steps(out: Path) -> pd.DataFrame:
 
 
 def test_param_list_values_are_read_as_toml() -> None:
-    assert campaign.parse_param("schedule.beta=0.1,0.5") == ("schedule.beta", (0.1, 0.5))
-    assert campaign.parse_param("guidance.hold=sample,mean") == (
+    assert parse_param("schedule.beta=0.1,0.5") == ("schedule.beta", (0.1, 0.5))
+    assert parse_param("guidance.hold=sample,mean") == (
         "guidance.hold",
         ("sample", "mean"),
     )
 
 
 def test_param_range_is_start_stop_num() -> None:
-    key, values = campaign.parse_param("schedule.beta=0.1:0.5:5")
+    key, values = parse_param("schedule.beta=0.1:0.5:5")
     assert key == "schedule.beta"
     assert values == pytest.approx((0.1, 0.2, 0.3, 0.4, 0.5))
 
@@ -67,11 +67,11 @@ def test_param_range_is_start_stop_num() -> None:
 @pytest.mark.parametrize("text", ["schedule.beta", "schedule.beta=0.1,,0.2", "x=1:2:zero"])
 def test_malformed_param_is_refused(text: str) -> None:
     with pytest.raises(ConfigError):
-        campaign.parse_param(text)
+        parse_param(text)
 
 
 def test_grid_is_the_cartesian_product_and_cli_wins() -> None:
-    grid = campaign.expand_grid(
+    grid = expand_grid(
         {"schedule.beta": (0.1, 0.2), "guidance.hold": ("sample",)},
         ["guidance.hold=sample,mean", "schedule.kappa_mtf=6,12,24"],
     )

@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from cwrend_cli.config import (
     ARCHITECTURES,
+    Architecture,
     CwrendConfig,
     OutputConfig,
     config_from_dict,
     config_hash,
+    format_validation_error,
     load_config,
     parse_arch,
     parse_override,
@@ -21,6 +25,7 @@ from cwrend_cli.config import (
     to_toml,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.physics import params
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER_TOML = REPO / "campaigns" / "paper.toml"
@@ -426,9 +431,29 @@ def test_parse_arch_unknown_lists_allowed() -> None:
         parse_arch("mtf")
 
 
+def test_architecture_is_the_physics_one_and_pickles() -> None:
+    # The config re-exports the physics core's dataclass: one class under both
+    # names, equal by value, and unchanged through pickling (workers get it so).
+    arch = parse_arch("plain_adaptive")
+    assert Architecture is params.Architecture
+    assert ARCHITECTURES is params.ARCHITECTURES
+    assert arch == params.Architecture("plain_adaptive", mtf=False, adaptive=True)
+    assert hash(arch) == hash(params.Architecture("plain_adaptive", mtf=False, adaptive=True))
+    assert pickle.loads(pickle.dumps(arch)) == arch
+    assert pickle.loads(pickle.dumps(dict(ARCHITECTURES))) == dict(ARCHITECTURES)
+
+
 def test_missing_required_window_key_is_named() -> None:
     msg = config_error({"degradation": {"windows": [{"start_s": 1.0}]}})
     assert "degradation.windows.0.end_s: missing required key" in msg
+
+
+def test_format_validation_error_defaults_to_the_whole_config() -> None:
+    with pytest.raises(ValidationError) as info:
+        CwrendConfig.model_validate({"schedule": {"bta": 1.0}})
+    lines = format_validation_error(info.value)
+    assert lines == format_validation_error(info.value, CwrendConfig)
+    assert lines[0].startswith("schedule.bta: unknown key (allowed: beta, nis_offset,")
 
 
 def test_override_in_output_keeps_stem_name(tmp_path: Path) -> None:

@@ -41,12 +41,11 @@ from cwrend_cli.config import (
     Dispersion,
     config_from_dict,
     config_hash,
-    parse_override,
     resolved_dict,
-    set_dotted,
 )
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.config.io import load_noise_file
+from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
 from cwrend_cli.output import tables as storage
@@ -150,52 +149,6 @@ class CampaignPlan:
         return tuple(r for t in self.tasks for r in t.runs)
 
 
-def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
-    """``key=v1,v2,v3`` or ``key=start:stop:num`` into ``(key, values)``.
-
-    Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
-    word is a string. A range gives ``num`` evenly spaced floats.
-    """
-    key, raw = parse_override(text)
-    raw_text = text.split("=", 1)[1].strip()
-    if isinstance(raw, str) and raw.count(":") == 2 and "," not in raw_text:
-        return key, _range_values(key, raw)
-    parts = [p.strip() for p in raw_text.split(",")]
-    if any(not p for p in parts):
-        raise ConfigError(f"--param {text!r}: empty value in the list")
-    return key, tuple(parse_override(f"{key}={p}")[1] for p in parts)
-
-
-def _range_values(key: str, spec: str) -> tuple[float, ...]:
-    try:
-        start, stop, num = spec.split(":")
-        count = int(num)
-        values = np.linspace(float(start), float(stop), count)
-    except ValueError:
-        raise ConfigError(
-            f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
-        ) from None
-    if count < 1:
-        raise ConfigError(f"sweep {key} = {spec!r}: num must be at least 1")
-    return tuple(float(v) for v in values)
-
-
-def expand_grid(
-    sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
-) -> tuple[tuple[str, tuple[Any, ...]], ...]:
-    """The swept keys and their values: ``[sweep]`` table, then ``--param`` (which wins)."""
-    grid: dict[str, tuple[Any, ...]] = {}
-    for key, values in sweep.items():
-        grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
-    for text in cli_params:
-        key, values = parse_param(text)
-        grid[key] = values
-    for key, values in grid.items():
-        if not values:
-            raise ConfigError(f"sweep {key}: needs at least one value")
-    return tuple(grid.items())
-
-
 def grid_points(grid: Sequence[tuple[str, Sequence[Any]]]) -> tuple[tuple[str, Assignment], ...]:
     """Cartesian product of the grid as ``(point_id, assignment)`` pairs.
 
@@ -223,22 +176,6 @@ def point_id(assignment: Assignment) -> str:
 def run_key(point: str, arch: str, seed: int) -> str:
     """Unique, stable key of a run."""
     return f"{point}.{arch}.s{seed:06d}"
-
-
-def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
-    """Value at a dotted key of a JSON tree (integer components index arrays)."""
-    node: Any = tree
-    for part in key.split("."):
-        node = node[part] if isinstance(node, Mapping) else node[int(part)]
-    return node
-
-
-def apply(base: Mapping[str, Any], assignment: Assignment) -> dict[str, Any]:
-    """``base`` with every ``(key, value)`` of ``assignment`` set."""
-    tree = dict(base)
-    for key, value in assignment:
-        tree = set_dotted(tree, key, value)
-    return tree
 
 
 def draw_dispersions(

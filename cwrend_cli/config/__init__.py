@@ -2,12 +2,30 @@
 
 ``schema`` holds the models, ``messages`` the error texts, ``overrides`` every
 dotted-key operation, ``io`` files (TOML, noise) and ``adapt`` the conversion
-into the physics core's typed parameters.
+into the physics core's typed parameters. The names below are the public API;
+:class:`Architecture` and :data:`ARCHITECTURES` are the physics core's
+(:mod:`cwrend_cli.physics.params`), re-exported here for the user-facing code.
 """
 
+from cwrend_cli.config.io import (
+    config_from_dict,
+    config_hash,
+    load_config,
+    resolved_dict,
+    to_json,
+    to_toml,
+)
+from cwrend_cli.config.messages import format_validation_error
+from cwrend_cli.config.overrides import (
+    apply,
+    expand_grid,
+    get_dotted,
+    parse_arch,
+    parse_override,
+    parse_param,
+    set_dotted,
+)
 from cwrend_cli.config.schema import (
-    ARCHITECTURES,
-    Architecture,
     CwrendConfig,
     DegradationConfig,
     DegradationWindow,
@@ -19,17 +37,8 @@ from cwrend_cli.config.schema import (
     ScenarioConfig,
     ScheduleConfig,
     SolverConfig,
-    config_from_dict,
-    config_hash,
-    format_validation_error,
-    load_config,
-    parse_arch,
-    parse_override,
-    resolved_dict,
-    set_dotted,
-    to_json,
-    to_toml,
 )
+from cwrend_cli.physics.params import ARCHITECTURES, Architecture
 
 __all__ = [
     "ARCHITECTURES",
@@ -45,12 +54,16 @@ __all__ = [
     "ScenarioConfig",
     "ScheduleConfig",
     "SolverConfig",
+    "apply",
     "config_from_dict",
     "config_hash",
+    "expand_grid",
     "format_validation_error",
+    "get_dotted",
     "load_config",
     "parse_arch",
     "parse_override",
+    "parse_param",
     "resolved_dict",
     "set_dotted",
     "to_json",

@@ -1,19 +1,159 @@
 """Reading and writing what the user gives: TOML configs and noise files.
 
+Loading (:func:`load_config` reads a TOML file and applies ``--set``
+overrides, :func:`config_from_dict` validates a raw tree), serialisation and
+provenance (:func:`resolved_dict`, :func:`config_hash`, :func:`to_toml`,
+:func:`to_json`) and the external noise realisation (:func:`load_noise_file`).
+
 Units: the noise file holds standard-normal draws (dimensionless), one row
 per step, scaled by chol(R_true) at use (SPEC §6).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import re
+import tomllib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import tomli_w
+from pydantic import ValidationError
 
-from cwrend_cli.errors import InputDataError
+from cwrend_cli.config.messages import format_validation_error
+from cwrend_cli.config.overrides import parse_override, set_dotted
+from cwrend_cli.config.schema import CwrendConfig
+from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.physics.params import FloatArray
 
+__all__ = [
+    "NOISE_COLUMNS",
+    "config_from_dict",
+    "config_hash",
+    "load_config",
+    "load_noise_file",
+    "resolved_dict",
+    "to_json",
+    "to_toml",
+]
+
 NOISE_COLUMNS = ("n1", "n2", "n3")
+
+# ---------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------
+
+
+def config_from_dict(
+    data: Mapping[str, Any], base_dir: Path | None = None, *, source: str | None = None
+) -> CwrendConfig:
+    """Validate a raw config tree into a :class:`CwrendConfig`.
+
+    ``base_dir`` resolves relative paths (the noise file); without it they are
+    resolved against the working directory. ``source`` only labels errors.
+    Raises :class:`ConfigError` with one line per problem.
+    """
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"configuration must be a table, not {type(data).__name__}")
+    try:
+        return CwrendConfig.model_validate(data, context={"base_dir": base_dir})
+    except ValidationError as exc:
+        header = f"invalid configuration ({source})" if source else "invalid configuration"
+        raise ConfigError(header, format_validation_error(exc, CwrendConfig)) from None
+
+
+def _safe_stem(path: Path) -> str:
+    """The file stem made into a valid ``output.name``."""
+    stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-")
+    return stem[:128] or "cwrend"
+
+
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig:
+    """Read a TOML config, apply ``dotted.key=value`` overrides, validate.
+
+    ``output.name`` defaults to the file's stem. A relative ``noise.file`` from
+    the file is resolved against the file's directory; one given as an override
+    against the working directory. Raises :class:`ConfigError` for a missing or
+    unreadable file, malformed TOML, a malformed override or invalid values.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"config file not found: {path}")
+    if not path.is_file():
+        raise ConfigError(f"config path is not a file: {path}")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        data: dict[str, Any] = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: malformed TOML: {exc}") from None
+
+    for text_override in overrides:
+        key, value = parse_override(text_override)
+        if key == "noise.file" and isinstance(value, str) and value.strip():
+            given = Path(value).expanduser()
+            value = str(given if given.is_absolute() else Path.cwd() / given)
+        data = set_dotted(data, key, value)
+
+    output = data.get("output")
+    if output is None:
+        data["output"] = {"name": _safe_stem(path)}
+    elif isinstance(output, dict) and output.get("name") is None:
+        output["name"] = _safe_stem(path)
+
+    return config_from_dict(data, base_dir=path.resolve().parent, source=str(path))
+
+
+# ---------------------------------------------------------------------------
+# Serialisation and provenance
+# ---------------------------------------------------------------------------
+
+
+def resolved_dict(cfg: CwrendConfig) -> dict[str, Any]:
+    """The fully resolved config as a JSON-ready dict (valid input to :func:`config_from_dict`)."""
+    return cfg.model_dump(mode="json")
+
+
+def config_hash(cfg: CwrendConfig) -> str:
+    """SHA-256 hex digest of the canonical JSON of the resolved config.
+
+    Canonical: ``model_dump(mode="json")``, keys sorted, compact separators.
+    Covariances are stored in canonical form, so a diagonal written as a full
+    matrix hashes like its diagonal.
+    """
+    canonical = json.dumps(resolved_dict(cfg), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def _drop_none(value: Any) -> Any:
+    """Remove ``None`` values from tables (TOML has no null; unset means default)."""
+    if isinstance(value, dict):
+        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list):
+        return [_drop_none(v) for v in value]
+    return value
+
+
+def to_toml(cfg: CwrendConfig) -> str:
+    """The resolved config as TOML text that :func:`load_config` reads back unchanged."""
+    return tomli_w.dumps(_drop_none(resolved_dict(cfg)))
+
+
+def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
+    """The resolved config as JSON text."""
+    return json.dumps(resolved_dict(cfg), indent=indent)
+
+
+# ---------------------------------------------------------------------------
+# Noise files
+# ---------------------------------------------------------------------------
 
 
 def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:

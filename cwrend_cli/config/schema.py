@@ -1,13 +1,18 @@
-"""The cwrend configuration: one pydantic model, validated once at the boundary.
+"""The cwrend configuration models: one pydantic model, validated once at the boundary.
 
 A run is described by a TOML file whose tables mirror :class:`CwrendConfig`
 (``[scenario]``, ``[estimator]``, ``[schedule]``, ``[guidance]``, ``[solver]``,
 ``[degradation]``, ``[noise]``, ``[output]``). Every field has a default equal to
 the paper's scenario (Candan & Servadio, AAS 26-893, Table 1; SPEC §6), so an
-empty file is the paper scenario. The file is read by :func:`load_config`,
-``--set key=value`` overrides are applied, and the result is validated into
+empty file is the paper scenario. The file is read by
+:func:`~cwrend_cli.config.io.load_config`, ``--set key=value`` overrides are
+applied (:mod:`cwrend_cli.config.overrides`), and the result is validated into
 frozen model objects that the rest of the package receives; nothing downstream
 re-reads or re-validates raw dictionaries.
+
+This module holds the models only, with the validators they use (field
+lengths, covariance normalisation, cross-field rules); the texts of their
+errors are built in :mod:`cwrend_cli.config.messages`.
 
 Units everywhere (SPEC): km, s, km/s, km/s²; covariances in the matching
 squared units. Field names carry their unit (``horizon_s``, ``u_max_km_s2``).
@@ -15,37 +20,25 @@ squared units. Field names carry their unit (``horizon_s``, ``u_max_km_s2``).
 
 from __future__ import annotations
 
-import copy
-import hashlib
-import json
 import math
 import re
-import tomllib
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
-from typing import Annotated, Any, Literal, Self, get_args, get_origin
+from typing import Annotated, Any, Literal, Self
 
 import numpy as np
-import tomli_w
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
     Strict,
-    ValidationError,
     ValidationInfo,
     field_validator,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
-from cwrend_cli.errors import ConfigError
+from cwrend_cli.config.messages import fmt_num, rules_error
 
 __all__ = [
-    "ARCHITECTURES",
-    "Architecture",
     "CwrendConfig",
     "DegradationConfig",
     "DegradationWindow",
@@ -57,16 +50,6 @@ __all__ = [
     "ScenarioConfig",
     "ScheduleConfig",
     "SolverConfig",
-    "config_from_dict",
-    "config_hash",
-    "format_validation_error",
-    "load_config",
-    "parse_arch",
-    "parse_override",
-    "resolved_dict",
-    "set_dotted",
-    "to_json",
-    "to_toml",
 ]
 
 # Numbers are strict: a TOML string "1e-3" or a boolean is not silently turned
@@ -88,49 +71,6 @@ class _FrozenModel(BaseModel):
     """Base of every config model: unknown keys rejected, immutable, finite floats."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-# ---------------------------------------------------------------------------
-# Errors raised from validators. Model-level rules report the field they are
-# about (possibly several), so the message names ``schedule.eps_min`` rather
-# than just ``schedule``.
-# ---------------------------------------------------------------------------
-
-_RULES_ERROR = "cwrend_rules"
-
-
-def _rules_error(problems: Sequence[tuple[str, Any, str]]) -> PydanticCustomError:
-    """Build one validation error carrying ``(field, value, message)`` problems.
-
-    ``field`` is a dotted path relative to the model raising the error.
-    """
-    summary = "; ".join(f"{f} = {_fmt_value(v)}: {m}" for f, v, m in problems)
-    return PydanticCustomError(
-        _RULES_ERROR,
-        "{summary}",
-        {"summary": summary, "problems": tuple((f, _fmt_value(v), m) for f, v, m in problems)},
-    )
-
-
-def _fmt_num(x: float) -> str:
-    """Shortest faithful text for a number (``1`` rather than ``1.0``)."""
-    if isinstance(x, float) and x.is_integer() and abs(x) < 1e15:
-        return str(int(x))
-    return repr(x)
-
-
-def _fmt_value(value: Any, limit: int = 80) -> str:
-    """Render an offending value compactly, TOML/JSON style, truncated to ``limit``."""
-    if isinstance(value, float):
-        text = _fmt_num(value)
-    else:
-        try:
-            text = json.dumps(value, default=repr, allow_nan=True)
-        except (TypeError, ValueError):
-            text = repr(value)
-    if len(text) > limit:
-        text = text[: limit - 3] + "..."
-    return text
 
 
 def _is_whole_multiple(value: float, step: float) -> bool:
@@ -177,12 +117,12 @@ class ScenarioConfig(_FrozenModel):
     @model_validator(mode="after")
     def _horizon_on_grid(self) -> Self:
         if not _is_whole_multiple(self.horizon_s, self.dt_s):
-            raise _rules_error(
+            raise rules_error(
                 [
                     (
                         "horizon_s",
                         self.horizon_s,
-                        f"must be a whole multiple of dt_s ({_fmt_num(self.dt_s)})",
+                        f"must be a whole multiple of dt_s ({fmt_num(self.dt_s)})",
                     )
                 ]
             )
@@ -350,7 +290,7 @@ class ScheduleConfig(_FrozenModel):
         problems: list[tuple[str, Any, str]] = []
         if self.eps_min > self.eps_max:
             problems.append(
-                ("eps_min", self.eps_min, f"must be <= eps_max ({_fmt_num(self.eps_max)})")
+                ("eps_min", self.eps_min, f"must be <= eps_max ({fmt_num(self.eps_max)})")
             )
         sat = self.eps_saturation
         if sat is not None and not (self.eps_min <= sat <= self.eps_max):
@@ -359,11 +299,11 @@ class ScheduleConfig(_FrozenModel):
                     "eps_saturation",
                     sat,
                     f"must lie in [eps_min, eps_max] = "
-                    f"[{_fmt_num(self.eps_min)}, {_fmt_num(self.eps_max)}]",
+                    f"[{fmt_num(self.eps_min)}, {fmt_num(self.eps_max)}]",
                 )
             )
         if problems:
-            raise _rules_error(problems)
+            raise rules_error(problems)
         return self
 
 
@@ -443,8 +383,8 @@ class DegradationWindow(_FrozenModel):
     @model_validator(mode="after")
     def _ordered(self) -> Self:
         if self.end_s < self.start_s:
-            raise _rules_error(
-                [("end_s", self.end_s, f"must be >= start_s ({_fmt_num(self.start_s)})")]
+            raise rules_error(
+                [("end_s", self.end_s, f"must be >= start_s ({fmt_num(self.start_s)})")]
             )
         return self
 
@@ -563,12 +503,12 @@ class Dispersion(_FrozenModel):
     @model_validator(mode="after")
     def _parameters_present(self) -> Self:
         if self.dist == "normal" and self.std is None:
-            raise _rules_error([("std", None, "required for dist = 'normal'")])
+            raise rules_error([("std", None, "required for dist = 'normal'")])
         if self.dist == "uniform":
             if self.low is None or self.high is None:
-                raise _rules_error([("low", None, "low and high required for dist = 'uniform'")])
+                raise rules_error([("low", None, "low and high required for dist = 'uniform'")])
             if self.high < self.low:
-                raise _rules_error([("high", self.high, f"must be >= low ({self.low})")])
+                raise rules_error([("high", self.high, f"must be >= low ({self.low})")])
         return self
 
 
@@ -612,7 +552,7 @@ class CwrendConfig(_FrozenModel):
                         f"degradation.windows.{i}.end_s",
                         w.end_s,
                         f"window must lie within [0, scenario.horizon_s] = "
-                        f"[0, {_fmt_num(sc.horizon_s)}]",
+                        f"[0, {fmt_num(sc.horizon_s)}]",
                     )
                 )
         if not _is_whole_multiple(self.guidance.t_resolve_s, sc.dt_s):
@@ -620,7 +560,7 @@ class CwrendConfig(_FrozenModel):
                 (
                     "guidance.t_resolve_s",
                     self.guidance.t_resolve_s,
-                    f"must be a whole multiple of scenario.dt_s ({_fmt_num(sc.dt_s)})",
+                    f"must be a whole multiple of scenario.dt_s ({fmt_num(sc.dt_s)})",
                 )
             )
         if self.guidance.t_min_rem_s >= sc.horizon_s:
@@ -628,348 +568,9 @@ class CwrendConfig(_FrozenModel):
                 (
                     "guidance.t_min_rem_s",
                     self.guidance.t_min_rem_s,
-                    f"must be < scenario.horizon_s ({_fmt_num(sc.horizon_s)})",
+                    f"must be < scenario.horizon_s ({fmt_num(sc.horizon_s)})",
                 )
             )
         if problems:
-            raise _rules_error(problems)
+            raise rules_error(problems)
         return self
-
-
-# ---------------------------------------------------------------------------
-# Architectures (the ablation of SPEC §6)
-# ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Architecture:
-    """One closed-loop architecture: estimator (plain/MTF KF) × schedule (fixed/adaptive ε)."""
-
-    slug: str
-    mtf: bool
-    adaptive: bool
-
-    @property
-    def label(self) -> str:
-        """Human-readable name, e.g. ``"MTF KF, adaptive ε"``."""
-        kf = "MTF KF" if self.mtf else "plain KF"
-        return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε"
-
-
-ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
-    {
-        a.slug: a
-        for a in (
-            Architecture("plain_fixed", mtf=False, adaptive=False),
-            Architecture("mtf_fixed", mtf=True, adaptive=False),
-            Architecture("plain_adaptive", mtf=False, adaptive=True),
-            Architecture("mtf_adaptive", mtf=True, adaptive=True),
-        )
-    }
-)
-
-
-def parse_arch(slug: str) -> Architecture:
-    """Return the architecture named ``slug``; :class:`ConfigError` lists the valid slugs."""
-    try:
-        return ARCHITECTURES[slug.strip()]
-    except KeyError:
-        allowed = ", ".join(ARCHITECTURES)
-        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed})") from None
-
-
-# ---------------------------------------------------------------------------
-# Validation-error formatting
-# ---------------------------------------------------------------------------
-
-
-def _model_at(loc: Sequence[str | int]) -> type[BaseModel] | None:
-    """The config model class found at ``loc`` inside :class:`CwrendConfig`, if any."""
-    tp: Any = CwrendConfig
-    for part in loc:
-        if isinstance(part, int):
-            args = get_args(tp)
-            if get_origin(tp) is tuple and args:
-                tp = args[0]
-                continue
-            return None
-        if isinstance(tp, type) and issubclass(tp, BaseModel) and part in tp.model_fields:
-            tp = tp.model_fields[part].annotation
-        else:
-            return None
-    return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
-
-
-def _describe(err: Mapping[str, Any]) -> str:
-    """What is allowed, in words, for one pydantic error dict."""
-    kind = err["type"]
-    ctx = err.get("ctx") or {}
-    bounds = {
-        "greater_than": ("gt", ">"),
-        "greater_than_equal": ("ge", ">="),
-        "less_than": ("lt", "<"),
-        "less_than_equal": ("le", "<="),
-    }
-    if kind in bounds:
-        key, op = bounds[kind]
-        return f"must be {op} {_fmt_num(ctx[key])}"
-    simple = {
-        "finite_number": "must be a finite number",
-        "float_type": "must be a number",
-        "float_parsing": "must be a number",
-        "int_type": "must be an integer",
-        "int_parsing": "must be an integer",
-        "int_from_float": "must be an integer",
-        "bool_type": "must be true or false",
-        "bool_parsing": "must be true or false",
-        "string_type": "must be a string",
-        "tuple_type": "must be an array",
-        "list_type": "must be an array",
-        "model_type": "must be a table",
-        "model_attributes_type": "must be a table",
-        "dict_type": "must be a table",
-    }
-    if kind in simple:
-        return simple[kind]
-    if kind == "literal_error":
-        return f"must be one of {ctx.get('expected', '')}"
-    if kind in ("too_short", "too_long"):
-        n = ctx.get("min_length", ctx.get("max_length"))
-        return f"must have {n} entries (got {ctx.get('actual_length')})"
-    if kind == "string_too_short":
-        return "must not be empty"
-    msg = str(err.get("msg", kind))
-    return msg.removeprefix("Value error, ")
-
-
-def format_validation_error(exc: ValidationError) -> list[str]:
-    """One line per problem: ``dotted.path = value: what is allowed``."""
-    lines: list[str] = []
-    for err in exc.errors(include_url=False):
-        loc = tuple(err["loc"])
-        path = ".".join(str(p) for p in loc)
-        kind = err["type"]
-        if kind == _RULES_ERROR:
-            for field, value, message in err["ctx"]["problems"]:
-                full = f"{path}.{field}" if path else field
-                lines.append(f"{full} = {value}: {message}")
-        elif kind == "extra_forbidden":
-            model = _model_at(loc[:-1])
-            allowed = f" (allowed: {', '.join(model.model_fields)})" if model else ""
-            lines.append(f"{path}: unknown key{allowed}")
-        elif kind == "missing":
-            lines.append(f"{path}: missing required key")
-        else:
-            where = path or "<config>"
-            lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}")
-    return lines
-
-
-# ---------------------------------------------------------------------------
-# Overrides (``--set dotted.key=value``)
-# ---------------------------------------------------------------------------
-
-
-def _parse_value(raw: str) -> Any:
-    """A TOML value (``1e-3``, ``"mean"``, ``[1, 2]``, ``true``), else the bare string."""
-    try:
-        parsed = tomllib.loads(f"v = {raw}")
-    except tomllib.TOMLDecodeError:
-        return raw
-    return parsed["v"] if parsed.keys() == {"v"} else raw
-
-
-def _split_key(key: str) -> list[str]:
-    """Split a dotted key, rejecting empty components."""
-    parts = [p.strip() for p in key.split(".")]
-    if not key.strip() or any(not p for p in parts):
-        raise ConfigError(f"malformed key {key!r}: empty key component")
-    return parts
-
-
-def parse_override(text: str) -> tuple[str, Any]:
-    """Parse ``dotted.key=value`` into ``(key, value)``; the value is read as TOML.
-
-    Raises :class:`ConfigError` when there is no ``=`` or the key is empty.
-    """
-    if "=" not in text:
-        raise ConfigError(
-            f"malformed override {text!r}: expected KEY=VALUE, e.g. schedule.beta=0.5"
-        )
-    key, raw = text.split("=", 1)
-    key = key.strip()
-    if not key:
-        raise ConfigError(f"malformed override {text!r}: empty key")
-    _split_key(key)
-    return key, _parse_value(raw.strip())
-
-
-def _thaw(value: Any) -> Any:
-    """Deep copy into plain dicts and lists so the tree can be edited in place."""
-    if isinstance(value, Mapping):
-        return {k: _thaw(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_thaw(v) for v in value]
-    return copy.deepcopy(value)
-
-
-def _default_tree() -> dict[str, Any]:
-    """The defaults as a plain JSON-style tree (lists, dicts)."""
-    return CwrendConfig().model_dump(mode="json")
-
-
-def _index(part: str, seq: list[Any], prefix: str) -> int:
-    """A non-negative list index from a key component, range-checked."""
-    if not part.isdigit():
-        raise ConfigError(f"{prefix}: is an array, use an integer index instead of {part!r}")
-    idx = int(part)
-    if idx >= len(seq):
-        raise ConfigError(f"{prefix}: index {idx} out of range ({len(seq)} entries)")
-    return idx
-
-
-def set_dotted(data: Mapping[str, Any], key: str, value: Any) -> dict[str, Any]:
-    """Return a copy of ``data`` with ``value`` set at dotted ``key``.
-
-    Integer components index arrays (``degradation.windows.1.bias_km``). A
-    missing table on the way is created; a missing array is first filled with
-    its default, so indexing the default degradation windows works on an empty
-    file. No validation happens here: an unknown key ends up in the tree and is
-    rejected by :func:`config_from_dict` like an unknown key in the file.
-    """
-    parts = _split_key(key)
-    root = _thaw(data)
-    node: Any = root
-    default: Any = _default_tree()
-    for i, part in enumerate(parts):
-        last = i == len(parts) - 1
-        if isinstance(node, dict):
-            default = default.get(part) if isinstance(default, dict) else None
-            if last:
-                node[part] = _thaw(value)
-                break
-            if part not in node:
-                # Arrays are filled from the defaults so they can be indexed;
-                # tables start empty so omitted keys keep meaning "default".
-                node[part] = _thaw(default) if isinstance(default, list) else {}
-            node = node[part]
-        elif isinstance(node, list):
-            idx = _index(part, node, ".".join(parts[:i]))
-            default = default[idx] if isinstance(default, list) and idx < len(default) else None
-            if last:
-                node[idx] = _thaw(value)
-                break
-            node = node[idx]
-        else:
-            parent = ".".join(parts[:i])
-            raise ConfigError(f"cannot set {key}: {parent} is a value, not a table")
-    return root
-
-
-# ---------------------------------------------------------------------------
-# Loading
-# ---------------------------------------------------------------------------
-
-
-def config_from_dict(
-    data: Mapping[str, Any], base_dir: Path | None = None, *, source: str | None = None
-) -> CwrendConfig:
-    """Validate a raw config tree into a :class:`CwrendConfig`.
-
-    ``base_dir`` resolves relative paths (the noise file); without it they are
-    resolved against the working directory. ``source`` only labels errors.
-    Raises :class:`ConfigError` with one line per problem.
-    """
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"configuration must be a table, not {type(data).__name__}")
-    try:
-        return CwrendConfig.model_validate(data, context={"base_dir": base_dir})
-    except ValidationError as exc:
-        header = f"invalid configuration ({source})" if source else "invalid configuration"
-        raise ConfigError(header, format_validation_error(exc)) from None
-
-
-def _safe_stem(path: Path) -> str:
-    """The file stem made into a valid ``output.name``."""
-    stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-")
-    return stem[:128] or "cwrend"
-
-
-def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig:
-    """Read a TOML config, apply ``dotted.key=value`` overrides, validate.
-
-    ``output.name`` defaults to the file's stem. A relative ``noise.file`` from
-    the file is resolved against the file's directory; one given as an override
-    against the working directory. Raises :class:`ConfigError` for a missing or
-    unreadable file, malformed TOML, a malformed override or invalid values.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"config file not found: {path}")
-    if not path.is_file():
-        raise ConfigError(f"config path is not a file: {path}")
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise ConfigError(f"cannot read config file {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    try:
-        data: dict[str, Any] = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: malformed TOML: {exc}") from None
-
-    for text_override in overrides:
-        key, value = parse_override(text_override)
-        if key == "noise.file" and isinstance(value, str) and value.strip():
-            given = Path(value).expanduser()
-            value = str(given if given.is_absolute() else Path.cwd() / given)
-        data = set_dotted(data, key, value)
-
-    output = data.get("output")
-    if output is None:
-        data["output"] = {"name": _safe_stem(path)}
-    elif isinstance(output, dict) and output.get("name") is None:
-        output["name"] = _safe_stem(path)
-
-    return config_from_dict(data, base_dir=path.resolve().parent, source=str(path))
-
-
-# ---------------------------------------------------------------------------
-# Serialisation and provenance
-# ---------------------------------------------------------------------------
-
-
-def resolved_dict(cfg: CwrendConfig) -> dict[str, Any]:
-    """The fully resolved config as a JSON-ready dict (valid input to :func:`config_from_dict`)."""
-    return cfg.model_dump(mode="json")
-
-
-def config_hash(cfg: CwrendConfig) -> str:
-    """SHA-256 hex digest of the canonical JSON of the resolved config.
-
-    Canonical: ``model_dump(mode="json")``, keys sorted, compact separators.
-    Covariances are stored in canonical form, so a diagonal written as a full
-    matrix hashes like its diagonal.
-    """
-    canonical = json.dumps(resolved_dict(cfg), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
-
-
-def _drop_none(value: Any) -> Any:
-    """Remove ``None`` values from tables (TOML has no null; unset means default)."""
-    if isinstance(value, dict):
-        return {k: _drop_none(v) for k, v in value.items() if v is not None}
-    if isinstance(value, list):
-        return [_drop_none(v) for v in value]
-    return value
-
-
-def to_toml(cfg: CwrendConfig) -> str:
-    """The resolved config as TOML text that :func:`load_config` reads back unchanged."""
-    return tomli_w.dumps(_drop_none(resolved_dict(cfg)))
-
-
-def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
-    """The resolved config as JSON text."""
-    return json.dumps(resolved_dict(cfg), indent=indent)

@@ -1,0 +1,164 @@
+"""Error texts of the configuration: what a user reads when a value is refused.
+
+Validators of :mod:`cwrend_cli.config.schema` raise :func:`rules_error` for
+rules that span fields; :func:`format_validation_error` turns a pydantic
+:class:`~pydantic.ValidationError` into one line per problem,
+``dotted.path = value: what is allowed``. Numbers are written by
+:func:`fmt_num` (``1`` rather than ``1.0``).
+
+This module imports no config model, so the schema can import it; the model
+used to list the allowed keys of a table is passed in (``root_model``).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any, get_args, get_origin
+
+from pydantic import BaseModel, ValidationError
+from pydantic_core import PydanticCustomError
+
+__all__ = ["fmt_num", "format_validation_error", "rules_error"]
+
+# ---------------------------------------------------------------------------
+# Errors raised from validators. Model-level rules report the field they are
+# about (possibly several), so the message names ``schedule.eps_min`` rather
+# than just ``schedule``.
+# ---------------------------------------------------------------------------
+
+_RULES_ERROR = "cwrend_rules"
+
+
+def rules_error(problems: Sequence[tuple[str, Any, str]]) -> PydanticCustomError:
+    """Build one validation error carrying ``(field, value, message)`` problems.
+
+    ``field`` is a dotted path relative to the model raising the error.
+    """
+    summary = "; ".join(f"{f} = {_fmt_value(v)}: {m}" for f, v, m in problems)
+    return PydanticCustomError(
+        _RULES_ERROR,
+        "{summary}",
+        {"summary": summary, "problems": tuple((f, _fmt_value(v), m) for f, v, m in problems)},
+    )
+
+
+def fmt_num(x: float) -> str:
+    """Shortest faithful text for a number (``1`` rather than ``1.0``)."""
+    if isinstance(x, float) and x.is_integer() and abs(x) < 1e15:
+        return str(int(x))
+    return repr(x)
+
+
+def _fmt_value(value: Any, limit: int = 80) -> str:
+    """Render an offending value compactly, TOML/JSON style, truncated to ``limit``."""
+    if isinstance(value, float):
+        text = fmt_num(value)
+    else:
+        try:
+            text = json.dumps(value, default=repr, allow_nan=True)
+        except (TypeError, ValueError):
+            text = repr(value)
+    if len(text) > limit:
+        text = text[: limit - 3] + "..."
+    return text
+
+
+# ---------------------------------------------------------------------------
+# Validation-error formatting
+# ---------------------------------------------------------------------------
+
+
+def _model_at(root_model: type[BaseModel], loc: Sequence[str | int]) -> type[BaseModel] | None:
+    """The config model class found at ``loc`` inside ``root_model``, if any."""
+    tp: Any = root_model
+    for part in loc:
+        if isinstance(part, int):
+            args = get_args(tp)
+            if get_origin(tp) is tuple and args:
+                tp = args[0]
+                continue
+            return None
+        if isinstance(tp, type) and issubclass(tp, BaseModel) and part in tp.model_fields:
+            tp = tp.model_fields[part].annotation
+        else:
+            return None
+    return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+
+
+def _describe(err: Mapping[str, Any]) -> str:
+    """What is allowed, in words, for one pydantic error dict."""
+    kind = err["type"]
+    ctx = err.get("ctx") or {}
+    bounds = {
+        "greater_than": ("gt", ">"),
+        "greater_than_equal": ("ge", ">="),
+        "less_than": ("lt", "<"),
+        "less_than_equal": ("le", "<="),
+    }
+    if kind in bounds:
+        key, op = bounds[kind]
+        return f"must be {op} {fmt_num(ctx[key])}"
+    simple = {
+        "finite_number": "must be a finite number",
+        "float_type": "must be a number",
+        "float_parsing": "must be a number",
+        "int_type": "must be an integer",
+        "int_parsing": "must be an integer",
+        "int_from_float": "must be an integer",
+        "bool_type": "must be true or false",
+        "bool_parsing": "must be true or false",
+        "string_type": "must be a string",
+        "tuple_type": "must be an array",
+        "list_type": "must be an array",
+        "model_type": "must be a table",
+        "model_attributes_type": "must be a table",
+        "dict_type": "must be a table",
+    }
+    if kind in simple:
+        return simple[kind]
+    if kind == "literal_error":
+        return f"must be one of {ctx.get('expected', '')}"
+    if kind in ("too_short", "too_long"):
+        n = ctx.get("min_length", ctx.get("max_length"))
+        return f"must have {n} entries (got {ctx.get('actual_length')})"
+    if kind == "string_too_short":
+        return "must not be empty"
+    msg = str(err.get("msg", kind))
+    return msg.removeprefix("Value error, ")
+
+
+def format_validation_error(
+    exc: ValidationError, root_model: type[BaseModel] | None = None
+) -> list[str]:
+    """One line per problem: ``dotted.path = value: what is allowed``.
+
+    ``root_model`` is the model that was validated; it names the allowed keys
+    of a table holding an unknown key. It defaults to
+    :class:`~cwrend_cli.config.schema.CwrendConfig`.
+    """
+    if root_model is None:
+        # Imported here, not at the top: the schema imports this module for
+        # rules_error and fmt_num, so a top-level import would be circular.
+        from cwrend_cli.config.schema import CwrendConfig
+
+        root_model = CwrendConfig
+    lines: list[str] = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(err["loc"])
+        path = ".".join(str(p) for p in loc)
+        kind = err["type"]
+        if kind == _RULES_ERROR:
+            for field, value, message in err["ctx"]["problems"]:
+                full = f"{path}.{field}" if path else field
+                lines.append(f"{full} = {value}: {message}")
+        elif kind == "extra_forbidden":
+            model = _model_at(root_model, loc[:-1])
+            allowed = f" (allowed: {', '.join(model.model_fields)})" if model else ""
+            lines.append(f"{path}: unknown key{allowed}")
+        elif kind == "missing":
+            lines.append(f"{path}: missing required key")
+        else:
+            where = path or "<config>"
+            lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}")
+    return lines

@@ -1,0 +1,216 @@
+"""Every dotted-key operation on a configuration tree, and the names the user types.
+
+A dotted key such as ``schedule.beta`` or ``degradation.windows.1.bias_km``
+names one value of a config tree (integer components index arrays). Here:
+``--set key=value`` overrides (:func:`parse_override`, :func:`set_dotted`),
+reading a value (:func:`get_dotted`), campaign grids (``--param`` and the
+``[sweep]`` table: :func:`parse_param`, :func:`expand_grid`) and applying an
+assignment of values to a tree (:func:`apply`), plus architecture slugs
+(:func:`parse_arch`). The trees are plain JSON-style dicts and lists; nothing
+is validated here (see :func:`cwrend_cli.config.io.config_from_dict`).
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from cwrend_cli.config.schema import CwrendConfig
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.params import ARCHITECTURES, Architecture
+
+__all__ = [
+    "apply",
+    "expand_grid",
+    "get_dotted",
+    "parse_arch",
+    "parse_override",
+    "parse_param",
+    "set_dotted",
+]
+
+# ---------------------------------------------------------------------------
+# Overrides (``--set dotted.key=value``)
+# ---------------------------------------------------------------------------
+
+
+def _parse_value(raw: str) -> Any:
+    """A TOML value (``1e-3``, ``"mean"``, ``[1, 2]``, ``true``), else the bare string."""
+    try:
+        parsed = tomllib.loads(f"v = {raw}")
+    except tomllib.TOMLDecodeError:
+        return raw
+    return parsed["v"] if parsed.keys() == {"v"} else raw
+
+
+def _split_key(key: str) -> list[str]:
+    """Split a dotted key, rejecting empty components."""
+    parts = [p.strip() for p in key.split(".")]
+    if not key.strip() or any(not p for p in parts):
+        raise ConfigError(f"malformed key {key!r}: empty key component")
+    return parts
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse ``dotted.key=value`` into ``(key, value)``; the value is read as TOML.
+
+    Raises :class:`ConfigError` when there is no ``=`` or the key is empty.
+    """
+    if "=" not in text:
+        raise ConfigError(
+            f"malformed override {text!r}: expected KEY=VALUE, e.g. schedule.beta=0.5"
+        )
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if not key:
+        raise ConfigError(f"malformed override {text!r}: empty key")
+    _split_key(key)
+    return key, _parse_value(raw.strip())
+
+
+def _thaw(value: Any) -> Any:
+    """Deep copy into plain dicts and lists so the tree can be edited in place."""
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_thaw(v) for v in value]
+    return copy.deepcopy(value)
+
+
+def _default_tree() -> dict[str, Any]:
+    """The defaults as a plain JSON-style tree (lists, dicts)."""
+    return CwrendConfig().model_dump(mode="json")
+
+
+def _index(part: str, seq: list[Any], prefix: str) -> int:
+    """A non-negative list index from a key component, range-checked."""
+    if not part.isdigit():
+        raise ConfigError(f"{prefix}: is an array, use an integer index instead of {part!r}")
+    idx = int(part)
+    if idx >= len(seq):
+        raise ConfigError(f"{prefix}: index {idx} out of range ({len(seq)} entries)")
+    return idx
+
+
+def set_dotted(data: Mapping[str, Any], key: str, value: Any) -> dict[str, Any]:
+    """Return a copy of ``data`` with ``value`` set at dotted ``key``.
+
+    Integer components index arrays (``degradation.windows.1.bias_km``). A
+    missing table on the way is created; a missing array is first filled with
+    its default, so indexing the default degradation windows works on an empty
+    file. No validation happens here: an unknown key ends up in the tree and is
+    rejected by :func:`~cwrend_cli.config.io.config_from_dict` like an unknown
+    key in the file.
+    """
+    parts = _split_key(key)
+    root: dict[str, Any] = _thaw(data)
+    node: Any = root
+    default: Any = _default_tree()
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, dict):
+            default = default.get(part) if isinstance(default, dict) else None
+            if last:
+                node[part] = _thaw(value)
+                break
+            if part not in node:
+                # Arrays are filled from the defaults so they can be indexed;
+                # tables start empty so omitted keys keep meaning "default".
+                node[part] = _thaw(default) if isinstance(default, list) else {}
+            node = node[part]
+        elif isinstance(node, list):
+            idx = _index(part, node, ".".join(parts[:i]))
+            default = default[idx] if isinstance(default, list) and idx < len(default) else None
+            if last:
+                node[idx] = _thaw(value)
+                break
+            node = node[idx]
+        else:
+            parent = ".".join(parts[:i])
+            raise ConfigError(f"cannot set {key}: {parent} is a value, not a table")
+    return root
+
+
+def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
+    """Value at a dotted key of a JSON tree (integer components index arrays)."""
+    node: Any = tree
+    for part in key.split("."):
+        node = node[part] if isinstance(node, Mapping) else node[int(part)]
+    return node
+
+
+def apply(base: Mapping[str, Any], assignment: Iterable[tuple[str, Any]]) -> dict[str, Any]:
+    """``base`` with every ``(key, value)`` of ``assignment`` set."""
+    tree = dict(base)
+    for key, value in assignment:
+        tree = set_dotted(tree, key, value)
+    return tree
+
+
+# ---------------------------------------------------------------------------
+# Campaign grids (``--param`` and the ``[sweep]`` table)
+# ---------------------------------------------------------------------------
+
+
+def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
+    """``key=v1,v2,v3`` or ``key=start:stop:num`` into ``(key, values)``.
+
+    Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
+    word is a string. A range gives ``num`` evenly spaced floats.
+    """
+    key, raw = parse_override(text)
+    raw_text = text.split("=", 1)[1].strip()
+    if isinstance(raw, str) and raw.count(":") == 2 and "," not in raw_text:
+        return key, _range_values(key, raw)
+    parts = [p.strip() for p in raw_text.split(",")]
+    if any(not p for p in parts):
+        raise ConfigError(f"--param {text!r}: empty value in the list")
+    return key, tuple(parse_override(f"{key}={p}")[1] for p in parts)
+
+
+def _range_values(key: str, spec: str) -> tuple[float, ...]:
+    try:
+        start, stop, num = spec.split(":")
+        count = int(num)
+        values = np.linspace(float(start), float(stop), count)
+    except ValueError:
+        raise ConfigError(
+            f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
+        ) from None
+    if count < 1:
+        raise ConfigError(f"sweep {key} = {spec!r}: num must be at least 1")
+    return tuple(float(v) for v in values)
+
+
+def expand_grid(
+    sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
+) -> tuple[tuple[str, tuple[Any, ...]], ...]:
+    """The swept keys and their values: ``[sweep]`` table, then ``--param`` (which wins)."""
+    grid: dict[str, tuple[Any, ...]] = {}
+    for key, values in sweep.items():
+        grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
+    for text in cli_params:
+        key, values = parse_param(text)
+        grid[key] = values
+    for key, values in grid.items():
+        if not values:
+            raise ConfigError(f"sweep {key}: needs at least one value")
+    return tuple(grid.items())
+
+
+# ---------------------------------------------------------------------------
+# Architectures (the ablation of SPEC §6)
+# ---------------------------------------------------------------------------
+
+
+def parse_arch(slug: str) -> Architecture:
+    """Return the architecture named ``slug``; :class:`ConfigError` lists the valid slugs."""
+    try:
+        return ARCHITECTURES[slug.strip()]
+    except KeyError:
+        allowed = ", ".join(ARCHITECTURES)
+        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed})") from None
