@@ -459,3 +459,11 @@ def test_format_validation_error_defaults_to_the_whole_config() -> None:
 def test_override_in_output_keeps_stem_name(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, "", name="stem.toml"), ["output.dir=out"])
     assert (cfg.output.dir, cfg.output.name) == ("out", "stem")
+
+
+def test_defaults_are_the_physics_paper_scenario() -> None:
+    """The config's defaults and the physics parameters' defaults are one definition (SPEC §6)."""
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics.params import Problem
+
+    assert problem_of(CwrendConfig()) == Problem()

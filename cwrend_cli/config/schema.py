@@ -37,6 +37,8 @@ from pydantic import (
 )
 
 from cwrend_cli.config.messages import fmt_num, rules_error
+from cwrend_cli.physics import params
+from cwrend_cli.physics.params import covariance_matrix
 
 __all__ = [
     "CwrendConfig",
@@ -60,6 +62,10 @@ Vec3 = tuple[Float, Float, Float]
 Vec6 = tuple[Float, Float, Float, Float, Float, Float]
 # A covariance as given: n diagonal entries, or a full n×n matrix (rows).
 Covariance = tuple[Float, ...] | tuple[tuple[Float, ...], ...]
+
+#: The defaults of every section: the paper's scenario (SPEC §6, paper Table 1),
+#: defined once with the physics parameters.
+_PAPER = params.Problem()
 
 # Tolerance for "a whole multiple of dt" (SPEC: integer number of 1 s steps).
 _MULTIPLE_TOL = 1e-9
@@ -95,19 +101,27 @@ class ScenarioConfig(_FrozenModel):
     """Rendezvous geometry and timing (SPEC §1, §6; paper Table 1)."""
 
     mean_motion_rad_s: Float = Field(
-        0.00104218449, gt=0, description="CW mean motion n of the target orbit [rad/s]"
+        _PAPER.scenario.mean_motion_rad_s,
+        gt=0,
+        description="CW mean motion n of the target orbit [rad/s]",
     )
-    horizon_s: Float = Field(800.0, gt=0, description="rendezvous horizon T [s]")
-    dt_s: Float = Field(1.0, gt=0, description="simulation / filter / control-hold step Δt [s]")
+    horizon_s: Float = Field(
+        _PAPER.scenario.horizon_s, gt=0, description="rendezvous horizon T [s]"
+    )
+    dt_s: Float = Field(
+        _PAPER.scenario.dt_s, gt=0, description="simulation / filter / control-hold step Δt [s]"
+    )
     x0: Vec6 = Field(
-        (0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0),
+        _PAPER.scenario.x0,
         description="initial relative state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
     )
     xf: Vec6 = Field(
-        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        _PAPER.scenario.xf,
         description="target terminal state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
     )
-    u_max_km_s2: Float = Field(8e-4, gt=0, description="maximum control acceleration [km/s²]")
+    u_max_km_s2: Float = Field(
+        _PAPER.scenario.u_max_km_s2, gt=0, description="maximum control acceleration [km/s²]"
+    )
 
     @field_validator("x0", "xf", mode="before")
     @classmethod
@@ -182,12 +196,6 @@ def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple
     return tuple(tuple(float(e) for e in row) for row in mat)
 
 
-def _covariance_matrix(value: tuple[float, ...] | tuple[tuple[float, ...], ...]) -> np.ndarray:
-    """A fresh float64 matrix from the stored (diagonal or full) covariance."""
-    arr = np.array(value, dtype=np.float64)
-    return np.diag(arr) if arr.ndim == 1 else arr
-
-
 class EstimatorConfig(_FrozenModel):
     """Kalman filter covariances (SPEC §3, §6).
 
@@ -196,15 +204,15 @@ class EstimatorConfig(_FrozenModel):
     """
 
     r_nominal_km2: Covariance = Field(
-        (1e-6, 1e-6, 1e-6),
+        _PAPER.estimator.r_nominal_km2,
         description="nominal measurement covariance R (3, or 3x3) [km²]; 1e-6 is a 1 m σ",
     )
     q_process: Covariance = Field(
-        (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14),
+        _PAPER.estimator.q_process,
         description="discrete process-noise covariance Q (6, or 6x6) [km², km²/s²]",
     )
     p0: Covariance = Field(
-        (1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10),
+        _PAPER.estimator.p0,
         description="initial estimate covariance P0 (6, or 6x6) [km², km²/s²]",
     )
 
@@ -219,7 +227,7 @@ class EstimatorConfig(_FrozenModel):
         return _normalise_covariance(value, 6)
 
     initial_error: Vec6 = Field(
-        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        _PAPER.estimator.initial_error,
         description="initial estimate minus true initial state [km, km/s]; the paper's "
         "filter starts at the truth (zeros). A dispersion target for initial errors.",
     )
@@ -231,15 +239,15 @@ class EstimatorConfig(_FrozenModel):
 
     def r_nominal_matrix(self) -> np.ndarray:
         """R_nominal as a new 3×3 float64 array [km²]."""
-        return _covariance_matrix(self.r_nominal_km2)
+        return covariance_matrix(self.r_nominal_km2)
 
     def q_matrix(self) -> np.ndarray:
         """Q as a new 6×6 float64 array [km², km²/s²]."""
-        return _covariance_matrix(self.q_process)
+        return covariance_matrix(self.q_process)
 
     def p0_matrix(self) -> np.ndarray:
         """P0 as a new 6×6 float64 array [km², km²/s²]."""
-        return _covariance_matrix(self.p0)
+        return covariance_matrix(self.p0)
 
 
 class ScheduleConfig(_FrozenModel):
@@ -252,37 +260,55 @@ class ScheduleConfig(_FrozenModel):
     ``ε_k = (1 - alpha_eps) ε_{k-1} + alpha_eps ε*``.
     """
 
-    beta: Float = Field(0.25, gt=0, description="score-to-homotopy sensitivity β [1/score]")
+    beta: Float = Field(
+        _PAPER.schedule.beta, gt=0, description="score-to-homotopy sensitivity β [1/score]"
+    )
     nis_offset: Float = Field(
-        3.0,
+        _PAPER.schedule.nis_offset,
         ge=0,
         description="NIS offset m subtracted before scoring [-] (paper: measurement dimension)",
     )
     score_lowpass: Float = Field(
-        0.85, ge=0, lt=1, description="score low-pass coefficient ρ_s, in [0, 1) [-]"
+        _PAPER.schedule.score_lowpass,
+        ge=0,
+        lt=1,
+        description="score low-pass coefficient ρ_s, in [0, 1) [-]",
     )
     kappa_mtf: Float = Field(
-        12.0, ge=0, description="weight κ_MTF of the MTF ratio in the score [-]"
+        _PAPER.schedule.kappa_mtf,
+        ge=0,
+        description="weight κ_MTF of the MTF ratio in the score [-]",
     )
-    score_max: Float = Field(50.0, gt=0, description="cap on the instantaneous score [-]")
-    eps_min: Float = Field(0.0, ge=0, description="lower end ε_min of the homotopy map [-]")
+    score_max: Float = Field(
+        _PAPER.schedule.score_max, gt=0, description="cap on the instantaneous score [-]"
+    )
+    eps_min: Float = Field(
+        _PAPER.schedule.eps_min, ge=0, description="lower end ε_min of the homotopy map [-]"
+    )
     eps_max: Float = Field(
-        1.0, gt=0, description="upper end ε_max of the map; adaptive runs start here [-]"
+        _PAPER.schedule.eps_max,
+        gt=0,
+        description="upper end ε_max of the map; adaptive runs start here [-]",
     )
     alpha_eps: Float = Field(
-        0.10, gt=0, le=1, description="blending factor α_ε of the applied ε, in (0, 1] [-]"
+        _PAPER.schedule.alpha_eps,
+        gt=0,
+        le=1,
+        description="blending factor α_ε of the applied ε, in (0, 1] [-]",
     )
     deadband: Float = Field(
-        0.0,
+        _PAPER.schedule.deadband,
         ge=0,
         description="filtered score below which ε* = eps_min; 0 disables it [-]",
     )
     eps_saturation: Float | None = Field(
-        None,
+        _PAPER.schedule.eps_saturation,
         description="upper clip of ε*, within [eps_min, eps_max]; unset disables it [-]",
     )
     eps_fixed: Float = Field(
-        0.0, ge=0, description="ε held by the fixed architectures (paper: 0, bang-bang) [-]"
+        _PAPER.schedule.eps_fixed,
+        ge=0,
+        description="ε held by the fixed architectures (paper: 0, bang-bang) [-]",
     )
 
     @model_validator(mode="after")
@@ -317,15 +343,21 @@ class GuidanceConfig(_FrozenModel):
     or averaged over the step.
     """
 
-    t_resolve_s: Float = Field(10.0, gt=0, description="re-solve interval [s]")
+    t_resolve_s: Float = Field(
+        _PAPER.guidance.t_resolve_s, gt=0, description="re-solve interval [s]"
+    )
     t_min_rem_s: Float = Field(
-        20.0, ge=0, description="no re-solve once the remaining horizon is <= this [s]"
+        _PAPER.guidance.t_min_rem_s,
+        ge=0,
+        description="no re-solve once the remaining horizon is <= this [s]",
     )
     resolve_timing: Literal["correct", "reference"] = Field(
-        "correct", description="re-solve timing: 'correct' or the authors' 'reference'"
+        _PAPER.guidance.resolve_timing,
+        description="re-solve timing: 'correct' or the authors' 'reference'",
     )
     hold: Literal["sample", "mean"] = Field(
-        "sample", description="control hold over a step: 'sample' (start) or 'mean' (average)"
+        _PAPER.guidance.hold,
+        description="control hold over a step: 'sample' (start) or 'mean' (average)",
     )
 
 
@@ -333,21 +365,33 @@ class SolverConfig(_FrozenModel):
     """Shooting solver settings (SPEC §1, §5)."""
 
     fallback: Literal["chain", "none"] = Field(
-        "chain", description="on failure of the primary solver: try the fallback chain or not"
+        _PAPER.solver.fallback,
+        description="on failure of the primary solver: try the fallback chain or not",
     )
     on_infeasible: Literal["keep", "min_miss"] = Field(
-        "keep",
+        _PAPER.solver.on_infeasible,
         description="when the convex check says x_f is unreachable: keep the propagated "
         "costate, or steer to the minimum-miss solution",
     )
     success_residual: Float = Field(
-        1e-4, gt=0, description="a solve succeeds when ||x(T) - x_f|| is below this [km, km/s]"
+        _PAPER.solver.success_residual,
+        gt=0,
+        description="a solve succeeds when ||x(T) - x_f|| is below this [km, km/s]",
     )
-    tol_pos_km: Float = Field(1e-9, gt=0, description="solver tolerance on position [km]")
-    tol_vel_km_s: Float = Field(1e-12, gt=0, description="solver tolerance on velocity [km/s]")
-    max_iter: Int = Field(50, ge=1, description="maximum solver iterations per solve [-]")
+    tol_pos_km: Float = Field(
+        _PAPER.solver.tol_pos_km, gt=0, description="solver tolerance on position [km]"
+    )
+    tol_vel_km_s: Float = Field(
+        _PAPER.solver.tol_vel_km_s, gt=0, description="solver tolerance on velocity [km/s]"
+    )
+    max_iter: Int = Field(
+        _PAPER.solver.max_iter, ge=1, description="maximum solver iterations per solve [-]"
+    )
     quadrature_nodes: Int = Field(
-        12, ge=4, le=64, description="quadrature nodes per step for the control integral [-]"
+        _PAPER.solver.quadrature_nodes,
+        ge=4,
+        le=64,
+        description="quadrature nodes per step for the control integral [-]",
     )
 
 
@@ -389,9 +433,9 @@ class DegradationWindow(_FrozenModel):
         return self
 
 
-_PAPER_WINDOWS = (
-    DegradationWindow(start_s=250.0, end_s=325.0, r_scale=300.0),
-    DegradationWindow(start_s=325.0, end_s=400.0, r_scale=300.0, bias_km=(0.010, -0.008, 0.012)),
+_PAPER_WINDOWS = tuple(
+    DegradationWindow(start_s=w.start_s, end_s=w.end_s, r_scale=w.r_scale, bias_km=w.bias_km)
+    for w in _PAPER.degradation.windows
 )
 
 
