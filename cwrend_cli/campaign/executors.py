@@ -22,18 +22,21 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
-from typing import Any, Literal
+from typing import Literal, ParamSpec, TypeVar
 
 from cwrend_cli.errors import ConfigError
 
 ExecutorKind = Literal["local", "dask"]
 
+_T = TypeVar("_T")
+_P = ParamSpec("_P")
+
 
 class InlineExecutor(Executor):
     """Runs each submitted call at once in this process (``--workers 1``)."""
 
-    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        future: Future = Future()
+    def submit(self, fn: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs) -> Future[_T]:
+        future: Future[_T] = Future()
         try:
             future.set_result(fn(*args, **kwargs))
         except BaseException as exc:
@@ -94,20 +97,20 @@ def open_executor(
     cluster = None
     if address:
         try:
-            client = Client(address, timeout="20s")
+            client = Client(address, timeout="20s")  # type: ignore[no-untyped-call]
         except OSError as exc:
             raise ConfigError(
                 f"--address {address}: cannot reach the Dask scheduler ({exc})"
             ) from None
     else:
-        cluster = LocalCluster(
+        cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None
         )
-        client = Client(cluster)
+        client = Client(cluster)  # type: ignore[no-untyped-call]
     try:
         parallelism = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
-        yield client.get_executor(pure=False), max(parallelism, 1)
+        yield client.get_executor(pure=False), max(parallelism, 1)  # type: ignore[no-untyped-call]
     finally:
-        client.close()
+        client.close()  # type: ignore[no-untyped-call]
         if cluster is not None:
             cluster.close()

@@ -28,7 +28,8 @@ PAIRS = (
 
 
 def _p95(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.percentile(x, 95, axis=axis)
+    p95: np.ndarray = np.percentile(x, 95, axis=axis)
+    return p95
 
 
 STATISTICS: dict[str, Callable[..., np.ndarray]] = {
