@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from cwrend_cli.output import tables as storage
+from cwrend_cli.output.tables import PARAM_PREFIX, param_columns
 
 ARCH_ORDER = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
 
@@ -29,8 +29,8 @@ def tables(campaign: Path) -> str:
     """The two markdown tables of ``campaign`` (a ``cwrend sweep`` directory)."""
     stats = pd.read_parquet(campaign / "sweep.parquet")
     runs = pd.read_parquet(campaign / "runs.parquet")
-    params = storage.param_columns(stats.columns)
-    names = [p.removeprefix(storage.PARAM_PREFIX).split(".")[-1] for p in params]
+    params = param_columns(stats.columns)
+    names = [p.removeprefix(PARAM_PREFIX).split(".")[-1] for p in params]
     ok = runs[runs["status"] == "ok"]
     infeasible = ok.groupby([*params, "arch"], observed=True).apply(
         lambda g: g["n_infeasible"].sum() / g["n_solves"].sum(), include_groups=False

@@ -12,18 +12,18 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
-import pandas as pd
-import pyarrow as pa
 import typer
 from pydantic import ValidationError
 from rich.console import Console
 
 from cwrend_cli import __version__, campaign
-from cwrend_cli.campaign import statistics
+from cwrend_cli.campaign import ExecutorKind
 from cwrend_cli.config import (
     ARCHITECTURES,
+    Architecture,
+    CwrendConfig,
     config_hash,
     format_validation_error,
     load_config,
@@ -32,6 +32,7 @@ from cwrend_cli.config import (
     to_json,
     to_toml,
 )
+from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.console import (
     RichProgress,
     ablation_console_table,
@@ -41,7 +42,7 @@ from cwrend_cli.console import (
 )
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
-from cwrend_cli.output import tables as storage
+from cwrend_cli.output.files import write_run
 
 app = typer.Typer(
     name="cwrend",
@@ -162,7 +163,7 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
         typer.echo(f"OK {config_hash(cfg)}")
 
 
-def _parse_archs(text: str) -> tuple:
+def _parse_archs(text: str) -> tuple[Architecture, ...]:
     """``all`` or a comma-separated list of architecture slugs."""
     if text.strip() == "all":
         return tuple(ARCHITECTURES.values())
@@ -225,13 +226,11 @@ def run(
         console = Console(stderr=True, highlight=False)
         with console.status("compiling kernels and running…", spinner="dots"):
             case = campaign.run_case(cfg, archs, seed_)
-        written = storage.write_run(
-            out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references
-        )
+        written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:
             rrd_path = recording.record_case(
                 Path(written) / "recording.rrd", case.runs, case.references,
-                cfg.degradation.windows, u_max_km_s2=cfg.scenario.u_max_km_s2,
+                windows_of(cfg), u_max_km_s2=cfg.scenario.u_max_km_s2,
                 recording_name=f"cwrend run · {Path(written).name}",
             )  # fmt: skip
             if spawn and not recording.open_in_viewer(rrd_path):
@@ -312,7 +311,7 @@ def _seeds(seeds: int | None, seed_list: str | None) -> list[int]:
     return values
 
 
-def _campaign_dir(cfg, name: str | None) -> Path:
+def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     base = Path(cfg.output.dir)
     out = (base / (cfg.output.name or "campaign")).resolve()
     if not out.is_relative_to(base.resolve()) or out == base.resolve():
@@ -321,7 +320,7 @@ def _campaign_dir(cfg, name: str | None) -> Path:
 
 
 def _campaign(
-    command: str,
+    command: Literal["ablate", "sweep"],
     file: Path,
     set_: list[str] | None,
     params: list[str],
@@ -352,6 +351,7 @@ def _campaign(
             recording.check_enabled()
         if executor not in ("local", "dask"):
             raise ConfigError(f"--executor {executor!r}: must be 'local' or 'dask'")
+        executor_kind: ExecutorKind = "dask" if executor == "dask" else "local"
         if address and executor != "dask":
             raise ConfigError("--address needs --executor dask")
         archs = [a.slug for a in _parse_archs(arch)]
@@ -359,22 +359,11 @@ def _campaign(
         out = _campaign_dir(cfg, name)
         progress = RichProgress(err, f"{command} {out.name}", quiet=quiet)
         summary = campaign.run_campaign(
-            plan, out, command=command, executor_kind=executor, workers=workers,
+            plan, out, command=command, executor_kind=executor_kind, workers=workers,
             address=address, force=force, retry_failed=retry_failed, progress=progress,
         )  # fmt: skip
-        runs = pd.read_parquet(out / storage.RUNS)
-        swept = storage.param_columns(runs.columns)
-        by = ["arch"] if command == "ablate" else ["point", *swept, "arch"]
-        stats = pd.concat(
-            [
-                statistics.describe(runs, by, seed=cfg.noise.seed),
-                statistics.paired(runs, by[:-1], seed=cfg.noise.seed),
-            ],
-            ignore_index=True,
-        )
-        stats_file = out / ("ablation.parquet" if command == "ablate" else "sweep.parquet")
-        if not stats.empty:
-            storage.write_parquet(pa.Table.from_pandas(stats, preserve_index=False), stats_file)
+        statistics = campaign.write_statistics(out, command, plan.root_seed)
+        stats = statistics.frame
         if not quiet and not stats.empty:
             stdout = Console(highlight=False)
             if command == "ablate":
@@ -383,7 +372,8 @@ def _campaign(
                 if pairs is not None:
                     stdout.print(pairs)
             else:
-                stdout.print(sweep_console_table(stats, by[:-1], f"cwrend sweep · {out.name}"))
+                title = f"cwrend sweep · {out.name}"
+                stdout.print(sweep_console_table(stats, list(statistics.groups), title))
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
             f"holds {summary.ok} ok, {summary.failed} failed → {out}",

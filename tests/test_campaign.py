@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -9,17 +10,23 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
+from pydantic import BaseModel
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
+from cwrend_cli.campaign import journal
 from cwrend_cli.cli import app
-from cwrend_cli.config import CwrendConfig, config_from_dict, expand_grid, parse_param
+from cwrend_cli.config import CwrendConfig, config_from_dict, expand_grid, load_config, parse_param
+from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output import tables as storage
+from cwrend_cli.output.tables import references_table
+from cwrend_cli.physics import simulation
 
 runner = CliRunner()
 # Wall-time columns differ between otherwise identical runs.
@@ -150,6 +157,50 @@ def test_noise_of_a_seed_does_not_depend_on_anything_else() -> None:
     assert not np.array_equal(a, campaign.standard_normal_for(cfg, 4))
 
 
+def test_plan_validates_each_point_and_each_dispersed_run_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    cfg = _dispersed_config()
+    validated = []
+    validate = CwrendConfig.model_validate
+
+    def counting(*args: Any, **kwargs: Any) -> CwrendConfig:
+        validated.append(args[0])
+        return validate(*args, **kwargs)
+
+    monkeypatch.setattr(CwrendConfig, "model_validate", counting)
+    plan = campaign.plan(cfg, ["mtf_adaptive", "plain_fixed"], [0, 1, 2], ["schedule.beta=0.2,0.4"])
+    assert len(plan.runs) == 2 * 2 * 3
+    assert len(validated) == 2 + 2 * 3  # the grid points, then each point's dispersed seeds
+
+
+def test_the_worker_builds_no_pydantic_model(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Tasks carry typed parameters; a run's dispersion is applied without validation."""
+    task = campaign.plan(_dispersed_config(), ["mtf_adaptive"], [0, 1]).tasks[0]
+    refs = simulation.open_loop_references(task.problem)
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the worker built a pydantic model")
+
+    for name in (
+        "model_validate",
+        "model_validate_json",
+        "model_validate_strings",
+        "model_construct",
+    ):
+        monkeypatch.setattr(BaseModel, name, classmethod(refuse))
+    monkeypatch.setattr(BaseModel, "__init__", refuse)
+    monkeypatch.setattr(BaseModel, "model_copy", refuse)
+    with pytest.raises(AssertionError, match="pydantic model"):
+        CwrendConfig()  # the trap is set
+    outcome = campaign.execute_task(task, refs, str(tmp_path))
+    assert [o.status for o in outcome.outcomes] == ["ok", "ok"], [o.error for o in outcome.outcomes]
+    # scenario.x0 is dispersed: each run computed its own references, in the worker
+    assert all(o.spec.dispersed for o in outcome.outcomes)
+
+
 # --- end to end -------------------------------------------------------------
 
 
@@ -187,8 +238,8 @@ def test_only_seeds_with_every_arch_in_the_task_are_recorded() -> None:
     task = campaign.plan(cfg, archs, [0, 1, 2]).tasks[0]
     assert campaign.seeds_to_record(task, archs, None) == (0, 1, 2)
     assert campaign.seeds_to_record(task, archs, 2) == (0, 1)
-    retry = campaign.Task(task.task_key, tuple(r for r in task.runs if r.run_key[-1] != "0"
-                                              or r.arch == "mtf_adaptive"))  # fmt: skip
+    retry = dataclasses.replace(task, runs=tuple(r for r in task.runs if r.run_key[-1] != "0"
+                                                 or r.arch == "mtf_adaptive"))  # fmt: skip
     assert campaign.seeds_to_record(retry, archs, None) == (1, 2)  # seed 0 only partly rerun
 
 
@@ -260,6 +311,28 @@ def test_changed_config_is_refused_unless_forced(small_ablation: Path) -> None:
     assert "--force" in refused.output
 
 
+def test_campaign_writes_the_references_of_each_point(tmp_path: Path) -> None:
+    """references/<point>.parquet: the open-loop references of the point, kept on resume."""
+    cfg_file = _write_config(tmp_path / "c.toml", "refs")
+    args = ["sweep", str(cfg_file), "--param", "scenario.u_max_km_s2=8e-4,9e-4", "--arch",
+            "mtf_adaptive", "--seeds", "1", "--workers", "1", "--no-rrd", "-q"]  # fmt: skip
+    assert _cli(*args).exit_code == 0
+    out = tmp_path / "results" / "refs"
+    names = []
+    for u_max in (8e-4, 9e-4):
+        point = campaign.point_id((("scenario.u_max_km_s2", u_max),))
+        names.append(f"{point}.parquet")
+        problem = problem_of(load_config(cfg_file, [f"scenario.u_max_km_s2={u_max}"]))
+        expected = references_table(simulation.open_loop_references(problem))
+        stored = pq.read_table(out / "references" / f"{point}.parquet")
+        assert stored.schema == expected.schema
+        assert stored.equals(expected)
+    assert _cli(*args).exit_code == 0  # a resume with nothing to do keeps them
+    assert sorted(p.name for p in (out / "references").iterdir()) == sorted(names)
+    journal.wipe(out)  # what --force removes
+    assert not (out / "references").exists()
+
+
 def test_path_traversal_name_is_refused(tmp_path: Path) -> None:
     cfg = _write_config(tmp_path / "c.toml", "ok")
     result = _cli("ablate", str(cfg), "--name", "../escape", "-q")
@@ -305,7 +378,7 @@ def test_failing_runs_are_isolated_and_retried(tmp_path: Path) -> None:
     assert (failed["param.scenario.u_max_km_s2"] == 1e-5).all()
     retry = _cli(*args, "--retry-failed")
     assert retry.exit_code == 1
-    events = storage.read_events(out / "events.jsonl")
+    events = journal.read_events(out / "events.jsonl")
     finished = [e for e in events if e["event"] == "run_finished"]
     failed_events = [e for e in events if e["event"] == "run_failed"]
     assert len(finished) == 2  # the good runs were not recomputed
@@ -315,7 +388,7 @@ def test_failing_runs_are_isolated_and_retried(tmp_path: Path) -> None:
 def _events_done(path: Path) -> int:
     if not path.exists():
         return 0
-    return sum(e["event"] == "task_done" for e in storage.read_events(path))
+    return sum(e["event"] == "task_done" for e in journal.read_events(path))
 
 
 def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:

@@ -1,7 +1,87 @@
-"""Campaigns: a pure plan of runs, workers that execute tasks of it, and the driver.
+"""Campaigns: a pure plan of runs, workers that execute tasks of it, the journal and the driver.
 
-The driver fans tasks out through an executor (process pool or Dask),
-journals every finished task and writes the statistics files.
+* :mod:`~cwrend_cli.campaign.plan` (pure): the grid, the runs and their tasks,
+  every run's config validated once; tasks carry typed physics parameters.
+* :mod:`~cwrend_cli.campaign.worker`: noise streams, the single case of
+  ``cwrend run`` and the execution of one task (in a worker process).
+* :mod:`~cwrend_cli.campaign.journal`: the campaign directory's layout,
+  events, manifest, resume and ``--force``.
+* :mod:`~cwrend_cli.campaign.driver`: fans tasks out through an executor
+  (:mod:`~cwrend_cli.campaign.executors`), journals every finished task,
+  writes the open-loop references and the statistics files
+  (:mod:`~cwrend_cli.campaign.statistics`).
+
+The names below are the public API.
 """
 
-from cwrend_cli.campaign.driver import *  # noqa: F403  (split into plan/worker/journal next)
+from cwrend_cli.campaign.driver import (
+    CampaignStatistics,
+    CampaignSummary,
+    Progress,
+    run_campaign,
+    write_statistics,
+)
+from cwrend_cli.campaign.executors import ExecutorKind
+from cwrend_cli.campaign.plan import (
+    BASE_POINT,
+    Assignment,
+    CampaignPlan,
+    Grid,
+    NoiseSource,
+    RunSpec,
+    Task,
+    campaign_hash,
+    dispersion_seed_sequence,
+    draw_dispersions,
+    grid_points,
+    noise_source,
+    plan,
+    point_id,
+    run_key,
+)
+from cwrend_cli.campaign.worker import (
+    CaseResult,
+    RunOutcome,
+    TaskOutcome,
+    execute_task,
+    noise_seed_sequence,
+    recording_path,
+    run_case,
+    seeds_to_record,
+    standard_normal,
+    standard_normal_for,
+)
+
+__all__ = [
+    "BASE_POINT",
+    "Assignment",
+    "CampaignPlan",
+    "CampaignStatistics",
+    "CampaignSummary",
+    "CaseResult",
+    "ExecutorKind",
+    "Grid",
+    "NoiseSource",
+    "Progress",
+    "RunOutcome",
+    "RunSpec",
+    "Task",
+    "TaskOutcome",
+    "campaign_hash",
+    "dispersion_seed_sequence",
+    "draw_dispersions",
+    "execute_task",
+    "grid_points",
+    "noise_seed_sequence",
+    "noise_source",
+    "plan",
+    "point_id",
+    "recording_path",
+    "run_campaign",
+    "run_case",
+    "run_key",
+    "seeds_to_record",
+    "standard_normal",
+    "standard_normal_for",
+    "write_statistics",
+]

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cwrend_cli.errors import CwrendError
-from cwrend_cli.output.tables import atomic_path
+from cwrend_cli.output.files import atomic_path
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.physics.sensors import in_window
@@ -413,7 +413,9 @@ def _log_case(
 
 
 def _require_enabled(rec: rr.RecordingStream) -> None:
-    if not rec.is_enabled():
+    import rerun as rr
+
+    if not rr.is_enabled(rec):
         # RERUN=off in the environment would silently write an empty file
         raise RecordingError(
             "Rerun logging is disabled by the RERUN environment variable; unset it or pass --no-rrd"

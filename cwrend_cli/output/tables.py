@@ -1,27 +1,23 @@
-"""Parquet and JSON output of runs (I/O at the edge; nothing here computes physics).
+"""Arrow schemas and table builders of everything cwrend writes (nothing here writes a file).
 
 Tables carry their units in the column names (``t_s``, ``miss_km``,
 ``u_norm_km_s2``) and explicit Arrow schemas so that typed columns never
-drift between files. Every file is written to a temporary name in the same
-directory and moved into place with :func:`os.replace`, so a reader (or a
-``kill -9``) never sees a half-written file.
+drift between files: the per-run ``steps``/``solves``/``summary`` tables and
+the open-loop ``references`` of ``cwrend run``, their campaign variants (the
+hive-partitioned ``steps/`` and ``solves/`` datasets) and ``runs.parquet``.
+Files are written by :mod:`cwrend_cli.output.files`; the campaign directory
+and its journal are :mod:`cwrend_cli.campaign.journal`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import tempfile
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass
-from pathlib import Path
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from cwrend_cli import __version__
 from cwrend_cli.physics.metrics import reference_metrics, run_metrics
@@ -30,47 +26,6 @@ from cwrend_cli.physics.simulation import References, RunResult
 
 _AXES = ("x", "y", "z")
 _VEL = ("vx", "vy", "vz")
-
-
-@contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; move it onto ``path`` on success.
-
-    The one way cwrend writes a file: readers (and a resumed campaign) see
-    either nothing or the complete file, never a partial one.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        with open(tmp_path, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp_path, 0o644)  # mkstemp creates 0600; results are ordinary files
-        os.replace(tmp_path, path)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
-
-
-def write_parquet(table: pa.Table, path: str | Path) -> Path:
-    """Write ``table`` to ``path`` atomically (temp file + rename)."""
-    path = Path(path)
-    # Dictionary encoding pays off for the repeated strings only; on float columns it
-    # costs half the write time and makes the file larger.
-    strings = [f.name for f in table.schema if pa.types.is_string(f.type)]
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd", use_dictionary=strings)
-    return path
-
-
-def write_json(data: Any, path: str | Path) -> Path:
-    """Write ``data`` as indented JSON to ``path`` atomically."""
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    return path
 
 
 def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
@@ -248,48 +203,9 @@ def references_table(refs: References, metadata: Mapping[str, Any] | None = None
     return pa.concat_tables(parts).replace_schema_metadata(_metadata(metadata or {}))
 
 
-def write_run(
-    out_dir: str | Path,
-    resolved_config: Mapping[str, Any],
-    config_hash: str,
-    results: Sequence[RunResult],
-    refs: References,
-) -> Path:
-    """Write the files of ``cwrend run`` into ``out_dir``.
-
-    ``config.json`` (resolved config and its hash), ``summary.parquet``,
-    ``steps.parquet``, ``solves.parquet`` and ``references.parquet``. The
-    config is written last, so its presence marks a complete output.
-    """
-    out = Path(out_dir)
-    meta = {"config_hash": config_hash}
-    fuel_dv = refs.fuel.delta_v_km_s
-    rows = [reference_row(refs.energy, fuel_dv), reference_row(refs.fuel, fuel_dv)]
-    rows += [summary_row(r, fuel_dv) for r in results]
-    write_parquet(summary_table(rows, meta), out / "summary.parquet")
-    write_parquet(pa.concat_tables([steps_table(r, meta) for r in results]), out / "steps.parquet")
-    write_parquet(
-        pa.concat_tables([solves_table(r, meta) for r in results]), out / "solves.parquet"
-    )
-    write_parquet(references_table(refs, meta), out / "references.parquet")
-    write_json(
-        {"cwrend_version": __version__, "config_hash": config_hash, "config": resolved_config},
-        out / "config.json",
-    )
-    return out
-
-
 # ---------------------------------------------------------------------------
-# Campaign layout: results/<name>/{manifest.json, runs.parquet, events.jsonl,
-# steps/arch=<slug>/*.parquet, solves/arch=<slug>/*.parquet}
+# Campaign datasets: steps/arch=<slug>/*.parquet, solves/arch=<slug>/*.parquet
 # ---------------------------------------------------------------------------
-
-MANIFEST = "manifest.json"
-RUNS = "runs.parquet"
-EVENTS = "events.jsonl"
-RECORDINGS = "recordings"
-#: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
-DATASETS = ("steps", "solves", RECORDINGS)
 
 CAMPAIGN_STEPS_SCHEMA = pa.schema(
     [f for f in STEPS_SCHEMA if f.name != "arch"]
@@ -314,82 +230,18 @@ def _with_run_columns(
     return pa.concat_tables(parts)
 
 
-def campaign_steps_table(results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]):
+def campaign_steps_table(
+    results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]
+) -> pa.Table:
     """Steps of several runs for the hive-partitioned ``steps/`` dataset."""
     return _with_run_columns([steps_table(r) for r in results], extra, CAMPAIGN_STEPS_SCHEMA)
 
 
-def campaign_solves_table(results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]):
+def campaign_solves_table(
+    results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]
+) -> pa.Table:
     """Solves of several runs for the hive-partitioned ``solves/`` dataset."""
     return _with_run_columns([solves_table(r) for r in results], extra, CAMPAIGN_SOLVES_SCHEMA)
-
-
-def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None:
-    """Append JSON lines in one write and fsync (a ``kill -9`` can only tear the last line)."""
-    text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
-    with open(path, "a", encoding="utf-8") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
-def read_events(path: str | Path) -> list[dict[str, Any]]:
-    """All complete events of a journal; a torn (unparsable) line is dropped."""
-    path = Path(path)
-    if not path.exists():
-        return []
-    events = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            events.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return events
-
-
-@dataclass(frozen=True)
-class JournalState:
-    """What a campaign directory holds according to its journal."""
-
-    runs: Mapping[str, Mapping[str, Any]]  # run_key -> its latest complete outcome event
-    files: frozenset[str]  # data files written by completed task executions
-
-
-def load_journal(path: str | Path) -> JournalState:
-    """Runs and files of every task execution that completed (its ``task_done`` was written)."""
-    events = read_events(path)
-    done_tasks = {e["execution"]: e for e in events if e.get("event") == "task_done"}
-    runs: dict[str, Mapping[str, Any]] = {}
-    for e in events:
-        if e.get("event") in ("run_finished", "run_failed") and e.get("execution") in done_tasks:
-            runs[e["run_key"]] = e
-    files = frozenset(f for e in done_tasks.values() for f in e.get("files", ()))
-    return JournalState(runs, files)
-
-
-def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
-    """Delete data files (and temp files) not written by a completed task execution."""
-    root = Path(root)
-    removed = []
-    for dataset in DATASETS:
-        base = root / dataset
-        if not base.exists():
-            continue
-        for path in sorted(base.rglob("*")):
-            if path.is_file():
-                rel = path.relative_to(root).as_posix()
-                if rel not in keep:
-                    path.unlink()
-                    removed.append(rel)
-    return removed
 
 
 _RUN_METRICS = [f for f in SUMMARY_SCHEMA if f.name not in ("arch", "seed")]

@@ -1,0 +1,267 @@
+"""What a campaign directory holds, and its journal.
+
+Layout of ``<output.dir>/<name>/``::
+
+    manifest.json                   what ran: config, grid, seeds, archs, hashes, status
+    events.jsonl                    the journal: one JSON event per line, appended per task
+    runs.parquet                    one row per run (output.tables.runs_table), from the journal
+    ablation.parquet | sweep.parquet  statistics (written by the driver)
+    steps/arch=<slug>/*.parquet     per-step data of each task execution (hive-partitioned)
+    solves/arch=<slug>/*.parquet    per-solve data, likewise
+    recordings/<point>.s<seed>.rrd  Rerun recordings
+    references/<point>.parquet      open-loop references of each grid point
+                                    (output.tables.references_table)
+
+The journal is the truth: a task execution counts once its ``task_done``
+event (written in the same append as its run events) is in
+``events.jsonl``; data files of executions that never completed are
+orphans, removed on resume. References are deterministic functions of their
+grid point, rewritten whenever needed, so they are never orphans. Here: the
+names, appending and reading events, the journal's state, orphan removal,
+the manifest check and the manifest, and ``--force``'s wipe.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cwrend_cli import __version__
+from cwrend_cli.campaign.plan import CampaignPlan
+from cwrend_cli.errors import ConfigError
+
+if TYPE_CHECKING:  # the worker imports this module's names
+    from cwrend_cli.campaign.worker import TaskOutcome
+
+__all__ = [
+    "ABLATION_STATS",
+    "DATASETS",
+    "EVENTS",
+    "MANIFEST",
+    "RECORDINGS",
+    "REFERENCES",
+    "RUNS",
+    "SOLVES",
+    "STATS_FILES",
+    "STEPS",
+    "SWEEP_STATS",
+    "JournalState",
+    "append_events",
+    "check_same_campaign",
+    "events_of",
+    "iso",
+    "load_journal",
+    "new_manifest",
+    "read_events",
+    "references_path",
+    "remove_orphan_files",
+    "wipe",
+]
+
+MANIFEST = "manifest.json"
+RUNS = "runs.parquet"
+EVENTS = "events.jsonl"
+STEPS = "steps"
+SOLVES = "solves"
+RECORDINGS = "recordings"
+REFERENCES = "references"
+#: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
+DATASETS = (STEPS, SOLVES, RECORDINGS)
+#: The statistics files of ``cwrend ablate`` and ``cwrend sweep``.
+ABLATION_STATS = "ablation.parquet"
+SWEEP_STATS = "sweep.parquet"
+STATS_FILES = (ABLATION_STATS, SWEEP_STATS)
+
+
+def references_path(point: str) -> str:
+    """Where the open-loop references of grid point ``point`` go (relative)."""
+    return f"{REFERENCES}/{point}.parquet"
+
+
+def iso(unix: float) -> str:
+    """A UNIX time as an ISO 8601 UTC timestamp with milliseconds."""
+    return datetime.fromtimestamp(unix, tz=UTC).isoformat(timespec="milliseconds")
+
+
+# ---------------------------------------------------------------------------
+# Events
+# ---------------------------------------------------------------------------
+
+
+def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None:
+    """Append JSON lines in one write and fsync (a ``kill -9`` can only tear the last line)."""
+    text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def read_events(path: str | Path) -> list[dict[str, Any]]:
+    """All complete events of a journal; a torn (unparsable) line is dropped."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    events = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str, Any]]:
+    """The journal events of one task execution, ``task_done`` last (``now``: UNIX time)."""
+    events: list[dict[str, Any]] = []
+    for o in outcome.outcomes:
+        s = o.spec
+        common = {
+            "run_key": s.run_key,
+            "execution": outcome.execution,
+            "campaign_hash": campaign,
+        }
+        events.append({"event": "run_started", "time": iso(o.started_at), **common})
+        events.append(
+            {
+                "event": "run_finished" if o.status == "ok" else "run_failed",
+                "time": iso(o.started_at + o.duration_s),
+                **common,
+                "point": s.point,
+                "arch": s.arch,
+                "seed": s.seed,
+                "params": dict(s.params),
+                "dispersed": dict(s.dispersed),
+                "status": o.status,
+                "metrics": dict(o.metrics),
+                "error": o.error,
+                "duration_s": o.duration_s,
+            }
+        )
+    events.extend(
+        {"event": "recording_failed", "time": iso(now), "error": w} for w in outcome.warnings
+    )
+    events.append(
+        {
+            "event": "task_done",
+            "time": iso(now),
+            "execution": outcome.execution,
+            "files": list(outcome.files),
+            "campaign_hash": campaign,
+        }
+    )
+    return events
+
+
+@dataclass(frozen=True)
+class JournalState:
+    """What a campaign directory holds according to its journal."""
+
+    runs: Mapping[str, Mapping[str, Any]]  # run_key -> its latest complete outcome event
+    files: frozenset[str]  # data files written by completed task executions
+
+
+def load_journal(path: str | Path) -> JournalState:
+    """Runs and files of every task execution that completed (its ``task_done`` was written)."""
+    events = read_events(path)
+    done_tasks = {e["execution"]: e for e in events if e.get("event") == "task_done"}
+    runs: dict[str, Mapping[str, Any]] = {}
+    for e in events:
+        if e.get("event") in ("run_finished", "run_failed") and e.get("execution") in done_tasks:
+            runs[e["run_key"]] = e
+    files = frozenset(f for e in done_tasks.values() for f in e.get("files", ()))
+    return JournalState(runs, files)
+
+
+def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
+    """Delete data files (and temp files) not written by a completed task execution.
+
+    The references are not journaled and stay, except for the temporary file
+    of an interrupted write.
+    """
+    root = Path(root)
+    removed = []
+    for dataset in DATASETS:
+        base = root / dataset
+        if not base.exists():
+            continue
+        for path in sorted(base.rglob("*")):
+            if path.is_file():
+                rel = path.relative_to(root).as_posix()
+                if rel not in keep:
+                    path.unlink()
+                    removed.append(rel)
+    if (root / REFERENCES).is_dir():
+        for path in sorted((root / REFERENCES).glob(".*.tmp")):
+            path.unlink()
+            removed.append(path.relative_to(root).as_posix())
+    return removed
+
+
+# ---------------------------------------------------------------------------
+# The manifest and --force
+# ---------------------------------------------------------------------------
+
+
+def wipe(out_dir: Path) -> None:
+    """Remove what a campaign writes (``--force``), nothing else."""
+    for name in (MANIFEST, RUNS, EVENTS, *STATS_FILES):
+        (out_dir / name).unlink(missing_ok=True)
+    for dataset in (*DATASETS, REFERENCES):
+        if (out_dir / dataset).exists():
+            shutil.rmtree(out_dir / dataset)
+
+
+def check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> None:
+    """Refuse a directory holding another campaign (other config or grid), unless empty."""
+    manifest = out_dir / MANIFEST
+    if not manifest.exists():
+        return
+    try:
+        previous = json.loads(manifest.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        raise ConfigError(
+            f"{manifest}: unreadable manifest; use --force to start the campaign over"
+        ) from None
+    if previous.get("campaign_hash") != plan_.campaign_hash:
+        raise ConfigError(
+            f"{out_dir} holds a campaign with a different configuration or grid "
+            f"(hash {str(previous.get('campaign_hash'))[:12]}… vs {plan_.campaign_hash[:12]}…); "
+            "use --force to start over, or another output.name"
+        )
+
+
+def new_manifest(
+    plan_: CampaignPlan, *, command: str, executor: Mapping[str, Any], started: float
+) -> dict[str, Any]:
+    """The manifest of a campaign invocation that starts now (``status`` = running)."""
+    return {
+        "cwrend_version": __version__,
+        "command": command,
+        "campaign_hash": plan_.campaign_hash,
+        "config": plan_.base,
+        "config_hash": plan_.config_hash,
+        "grid": {k: list(v) for k, v in plan_.grid},
+        "seeds": list(plan_.seeds),
+        "root_seed": plan_.root_seed,
+        "archs": list(plan_.archs),
+        "executor": dict(executor),
+        "started_at": iso(started),
+        "status": "running",
+    }

@@ -1,0 +1,270 @@
+"""Executing runs: a campaign task in a worker process, and the single case of ``cwrend run``.
+
+:func:`execute_task` receives a :class:`~cwrend_cli.campaign.plan.Task` (the
+grid point's typed problem, its noise source and the runs) and the point's
+open-loop references, computed once by the driver. For each run it applies
+the run's dispersed values to the typed problem
+(:func:`~cwrend_cli.config.adapt.with_values`), draws the seed's noise and
+simulates; it never validates a configuration nor builds a pydantic model
+(the plan validated every run). A dispersed run whose scenario or solver
+differs from its point's computes its own references, kept in a dict local to
+the task (there is no module-level cache). The worker writes the task's
+per-architecture ``steps``/``solves`` Parquet files and the Rerun recordings
+of the seeds it is asked to record, and returns small outcomes that the
+driver journals.
+
+The noise of realisation ``seed`` is the stream ``SeedSequence(noise.seed,
+spawn_key=(seed, 0))`` (or ``noise.file`` replayed), so realisation ``seed``
+is the same in a single run, an ablation and a sweep, whatever worker
+computes it. All architectures of a seed share it (SPEC §6).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cwrend_cli.campaign.journal import RECORDINGS, SOLVES, STEPS
+from cwrend_cli.campaign.plan import Assignment, NoiseSource, RunSpec, Task, noise_source
+from cwrend_cli.config import CwrendConfig
+from cwrend_cli.config.adapt import problem_of, with_values
+from cwrend_cli.config.io import load_noise_file
+from cwrend_cli.errors import CwrendError
+from cwrend_cli.output import recording
+from cwrend_cli.output.files import write_parquet
+from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
+from cwrend_cli.physics import sensors, simulation
+from cwrend_cli.physics.params import ARCHITECTURES, Architecture, FloatArray, Problem, Scenario
+from cwrend_cli.physics.params import Solver as SolverParams
+
+__all__ = [
+    "CaseResult",
+    "ReferencesKey",
+    "RunOutcome",
+    "TaskOutcome",
+    "execute_task",
+    "noise_seed_sequence",
+    "recording_path",
+    "references_key",
+    "run_case",
+    "seeds_to_record",
+    "standard_normal",
+    "standard_normal_for",
+]
+
+#: What the open-loop references of a problem depend on.
+ReferencesKey = tuple[Scenario, SolverParams]
+
+
+def references_key(problem: Problem) -> ReferencesKey:
+    """The part of ``problem`` its open-loop references depend on: scenario and solver."""
+    return (problem.scenario, problem.solver)
+
+
+# ---------------------------------------------------------------------------
+# Noise and the single case
+# ---------------------------------------------------------------------------
+
+
+def noise_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the measurement noise of realisation ``seed``."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 0))
+
+
+def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
+    """The standard-normal realisation (N, 3) of ``seed`` from ``noise``.
+
+    ``noise.file`` is replayed (validated for length and finiteness);
+    otherwise the stream :func:`noise_seed_sequence` of the root seed.
+    """
+    if noise.file is not None:
+        return load_noise_file(noise.file, n_steps)
+    return sensors.standard_normal_stream(noise_seed_sequence(noise.root_seed, seed), n_steps)
+
+
+def standard_normal_for(cfg: CwrendConfig, seed: int) -> FloatArray:
+    """The standard-normal realisation (N, 3) of one seed of a validated config."""
+    return standard_normal(noise_source(cfg), seed, cfg.scenario.n_steps)
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """The closed-loop runs of one seed and the scenario's open-loop references."""
+
+    runs: tuple[simulation.RunResult, ...]
+    references: simulation.References
+
+
+def run_case(
+    cfg: CwrendConfig,
+    archs: Sequence[Architecture],
+    seed: int,
+    refs: simulation.References | None = None,
+) -> CaseResult:
+    """Run ``archs`` on the noise of ``seed`` (references computed if not given)."""
+    noise = standard_normal_for(cfg, seed)  # validate input before any computation
+    problem = problem_of(cfg)
+    refs = refs if refs is not None else simulation.open_loop_references(problem)
+    runs = tuple(simulation.simulate(problem, a, noise, refs, seed=seed) for a in archs)
+    return CaseResult(runs, refs)
+
+
+# ---------------------------------------------------------------------------
+# Executing one task (in a worker process)
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What a worker returns for one run: small, whatever the run's length."""
+
+    spec: RunSpec
+    status: str  # "ok" or "failed"
+    metrics: dict[str, Any]  # output.tables.summary_row fields (empty when failed)
+    error: str
+    started_at: float  # UNIX time
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class TaskOutcome:
+    """A task's run outcomes and the files it wrote (relative to the campaign dir)."""
+
+    execution: str  # task key and a digest of the runs executed
+    outcomes: tuple[RunOutcome, ...]
+    files: tuple[str, ...]
+    warnings: tuple[str, ...] = ()  # e.g. a recording that could not be written
+
+
+def execute_task(
+    task: Task,
+    refs: simulation.References | None,
+    out_dir: str,
+    record_seeds: tuple[int, ...] = (),
+    steps_seeds: int | None = None,
+) -> TaskOutcome:
+    """Run a task's runs, write their steps/solves files and return their outcomes.
+
+    ``refs`` are the open-loop references of the task's point (``None``: each
+    run computes them, as when the driver could not). A run that raises is
+    returned as ``failed`` with its traceback; the other runs of the task go
+    on. Files are written per task execution and architecture, as
+    ``steps/arch=<slug>/<task_key>-<digest>.parquet`` (only seeds below
+    ``steps_seeds`` when set), where the digest names the set of runs
+    executed: rerunning the same runs overwrites the same files (atomically),
+    so nothing is ever duplicated.
+
+    For each seed of ``record_seeds`` (the driver passes only seeds whose
+    every architecture runs in this task) a Rerun recording overlaying the
+    architectures and the references is written to
+    ``recordings/<point>.s<seed>.rrd``. A recording that cannot be written is
+    reported in the outcome's ``warnings``; the runs stay valid.
+    """
+    outcomes: list[RunOutcome] = []
+    results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
+    by_seed: dict[int, list[tuple[Problem, simulation.RunResult]]] = {}
+    # What this task computes once: the problem of each set of dispersed values,
+    # the references of each (scenario, solver), the noise of each seed.
+    problems: dict[Assignment, Problem] = {}
+    references: dict[ReferencesKey, simulation.References] = {}
+    if refs is not None:
+        references[references_key(task.problem)] = refs
+    noises: dict[tuple[Assignment, int], FloatArray] = {}  # shared by the archs of a seed
+    for spec in task.runs:
+        started = time.time()
+        t0 = time.perf_counter()
+        try:
+            problem = problems.get(spec.dispersed)
+            if problem is None:
+                problem = problems[spec.dispersed] = with_values(task.problem, spec.dispersed)
+            run_refs = _references(problem, references)
+            noise = noises.get((spec.dispersed, spec.seed))
+            if noise is None:
+                n_steps = problem.scenario.n_steps
+                noise = noises[spec.dispersed, spec.seed] = standard_normal(
+                    task.noise, spec.seed, n_steps
+                )
+            result = simulation.simulate(
+                problem, ARCHITECTURES[spec.arch], noise, run_refs, spec.seed
+            )
+            metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
+            results.setdefault(spec.arch, []).append((spec, result))
+            by_seed.setdefault(spec.seed, []).append((problem, result))
+            outcomes.append(RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0))
+        except Exception as exc:  # failure isolation: the campaign goes on
+            kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
+            text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
+            outcomes.append(RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0))
+    files: list[str] = []
+    digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
+    for arch, items in sorted(results.items()):
+        kept = [(s, r) for s, r in items if steps_seeds is None or s.seed < steps_seeds]
+        for kind, chosen, build in (
+            (SOLVES, items, campaign_solves_table),
+            (STEPS, kept, campaign_steps_table),
+        ):
+            if not chosen:
+                continue
+            extra = {
+                "run_key": [s.run_key for s, _ in chosen],
+                "point": [s.point for s, _ in chosen],
+            }
+            rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
+            write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
+            files.append(rel)
+    warnings: list[str] = []
+    for seed in record_seeds:
+        cases = by_seed.get(seed, [])
+        if not cases:
+            continue
+        rel = recording_path(task.point, seed)
+        problem = cases[0][0]
+        try:
+            recording.record_case(
+                Path(out_dir) / rel,
+                [r for _, r in cases],
+                _references(problem, references),
+                problem.degradation.windows,
+                u_max_km_s2=problem.scenario.u_max_km_s2,
+                recording_name=f"cwrend {task.point} seed {seed}",
+            )
+            files.append(rel)
+        except Exception as exc:  # a recording never costs the runs
+            warnings.append(f"{rel}: recording not written ({type(exc).__name__}: {exc})")
+    return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files), tuple(warnings))
+
+
+def _references(
+    problem: Problem, known: dict[ReferencesKey, simulation.References]
+) -> simulation.References:
+    """The references of ``problem``: from ``known``, else computed and added to it."""
+    key = references_key(problem)
+    refs = known.get(key)
+    if refs is None:
+        refs = known[key] = simulation.open_loop_references(problem)
+    return refs
+
+
+def recording_path(point: str, seed: int) -> str:
+    """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
+    return f"{RECORDINGS}/{point}.s{seed:06d}.rrd"
+
+
+def seeds_to_record(task: Task, archs: Sequence[str], limit: int | None) -> tuple[int, ...]:
+    """Seeds of ``task`` below ``limit`` (None = all) whose every architecture runs in it.
+
+    A resumed or retried task that reruns only some architectures of a seed
+    leaves that seed's existing recording alone rather than overwrite it with
+    a partial one.
+    """
+    counts: dict[int, int] = {}
+    for r in task.runs:
+        counts[r.seed] = counts.get(r.seed, 0) + 1
+    return tuple(s for s, n in counts.items() if n == len(archs) and (limit is None or s < limit))
