@@ -1,11 +1,20 @@
-"""``cwrend report``: the paper's figures and a markdown report from stored results."""
+"""``cwrend report``: the paper's figures and a markdown report from stored results.
 
-from cwrend_cli.report.figures import (
-    ReportError,
-    ReportSummary,
-    load_results,
-    markdown_table,
-    write_report,
-)
+``load`` builds typed report data from a run or campaign directory (with the
+config model; it never recomputes physics), ``figures`` draws it (pure data →
+Figure, one registry of figures and captions), ``markdown`` writes the tables
+and ``report.md``, ``write`` saves them all into ``RESULTS_DIR/report/``.
+"""
 
-__all__ = ["ReportError", "ReportSummary", "load_results", "markdown_table", "write_report"]
+from cwrend_cli.report.load import ReportData, ReportError, load_results
+from cwrend_cli.report.markdown import markdown_table
+from cwrend_cli.report.write import ReportSummary, write_report
+
+__all__ = [
+    "ReportData",
+    "ReportError",
+    "ReportSummary",
+    "load_results",
+    "markdown_table",
+    "write_report",
+]

@@ -1,0 +1,400 @@
+"""Typed report data, loaded from a results directory (never recomputing physics).
+
+Reads either layout that cwrend writes:
+
+* a ``cwrend run`` directory: ``summary.parquet``, ``steps.parquet``,
+  ``solves.parquet``, ``references.parquet``, ``config.json``;
+* a campaign directory: ``runs.parquet`` (one row per run: ``run_key``,
+  ``point``, ``arch``, ``seed``, ``status``, the summary metrics, swept values
+  as ``param.<key>``), the hive dataset ``steps/arch=<slug>/…`` (steps columns
+  plus ``run_key`` and ``point``), ``references/<point>.parquet`` (the open-loop
+  references of each grid point, with the schema of a run's
+  ``references.parquet``) and ``manifest.json`` (``config`` = the resolved base
+  config).
+
+The stored configuration is validated with the config model
+(:func:`~cwrend_cli.config.config_from_dict`); the figures and tables read
+typed values from it. A campaign written before campaigns stored their
+references is reported without them, with a note.
+
+Units: km, s, km/s, km/s² (as in the Parquet files).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from cwrend_cli.config import (
+    ARCHITECTURES,
+    CwrendConfig,
+    DegradationWindow,
+    config_from_dict,
+    get_dotted,
+    resolved_dict,
+    set_dotted,
+)
+from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
+from cwrend_cli.physics.metrics import cumulative_delta_v
+
+#: Directory of a campaign holding ``<point>.parquet``, the open-loop references of each point
+#: (the layout of :mod:`cwrend_cli.campaign.journal`, which the report does not import).
+REFERENCES_DIR = "references"
+
+Layout = Literal["run", "campaign"]
+
+
+class ReportError(CwrendError):
+    """The results directory cannot be reported on (missing, incomplete or unreadable)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReportData:
+    """Everything the figures and tables need, loaded from one results directory.
+
+    Tables keep the stored column names and units. ``config`` is the stored
+    configuration validated by the config model, or ``None`` when the
+    directory holds none that validates (then no degradation window, thrust
+    limit or NIS offset is drawn, and ``notes`` says why).
+    """
+
+    layout: Layout
+    runs: pd.DataFrame  # one row per closed-loop run: arch, seed, status, metrics, param.*
+    ref_summary: pd.DataFrame  # arch ("open_loop_<name>"), seed, delta_v_km_s, miss_km, …
+    steps: pd.DataFrame  # steps of the selected seed (and point), all architectures
+    references: pd.DataFrame | None  # reference trajectories (reference, t_s, x_km, …)
+    config: CwrendConfig | None
+    config_hash: str
+    seed: int  # noise realisation of the per-seed figures
+    point: str | None  # grid point of the per-seed figures (campaigns with several points)
+    archs: tuple[str, ...]  # in canonical order
+    params: tuple[str, ...] = ()  # swept param columns with > 1 value
+    notes: tuple[str, ...] = ()
+
+    @property
+    def windows(self) -> tuple[DegradationWindow, ...]:
+        """The degradation windows of the configuration (none without one)."""
+        return self.config.degradation.windows if self.config is not None else ()
+
+    @property
+    def u_max_km_s2(self) -> float | None:
+        """Thrust limit of the scenario [km/s²] (``None`` without a configuration)."""
+        return self.config.scenario.u_max_km_s2 if self.config is not None else None
+
+    @property
+    def nis_offset(self) -> float | None:
+        """NIS offset ``m`` of the score (``None`` without a configuration)."""
+        return self.config.schedule.nis_offset if self.config is not None else None
+
+    def ok_runs(self) -> pd.DataFrame:
+        """The successful runs of the reported grid point (every run of a single point)."""
+        runs = self.runs[self.runs["status"] == "ok"]
+        if self.point is not None and "point" in runs.columns:
+            runs = runs[runs["point"].astype(str) == self.point]
+        return runs
+
+    def multi_seed(self) -> bool:
+        """More than one successful seed for some architecture (distributions apply)."""
+        ok = self.ok_runs()
+        return not ok.empty and int(ok.groupby("arch")["seed"].nunique().max()) > 1
+
+
+# ---------------------------------------------------------------------------
+# Stored values
+# ---------------------------------------------------------------------------
+
+
+def arch_label(slug: str) -> str:
+    """Display name of an architecture (the slug itself if unknown)."""
+    arch = ARCHITECTURES.get(slug)
+    return arch.label if arch is not None else slug
+
+
+def param_value(value: Any) -> Any:
+    """A ``param.<key>`` cell as the value that was applied (JSON text for mixed kinds)."""
+    if isinstance(value, str):
+        try:
+            return json.loads(value)
+        except json.JSONDecodeError:
+            return value
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def param_values(series: pd.Series) -> tuple[np.ndarray, bool]:
+    """A ``param.<key>`` column as floats if every value is numeric, else as strings."""
+    numeric = pd.to_numeric(series, errors="coerce")
+    if numeric.notna().all():
+        return numeric.to_numpy(dtype=float), True
+    return series.astype(str).to_numpy(), False
+
+
+def point_values(runs: pd.DataFrame) -> str:
+    """``key=value, …`` of the swept parameters of one point's runs."""
+    if runs.empty:
+        return ""
+    row = runs.iloc[0]
+    cols = param_columns(runs.columns)
+    return ", ".join(f"{c.removeprefix(PARAM_PREFIX)}={param_value(row[c])}" for c in cols)
+
+
+# ---------------------------------------------------------------------------
+# Reading
+# ---------------------------------------------------------------------------
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ReportError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise ReportError(f"{path}: unreadable (not a JSON object)")
+    return data
+
+
+def _read_parquet(path: Path, **kwargs: Any) -> pd.DataFrame:
+    try:
+        return pd.read_parquet(path, **kwargs)
+    except (OSError, ValueError) as exc:
+        raise ReportError(f"{path}: unreadable Parquet ({exc})") from None
+
+
+def _read_references(path: Path) -> pd.DataFrame:
+    """Reference trajectories (schema of :func:`~cwrend_cli.output.tables.references_table`)."""
+    references = _read_parquet(path)
+    missing = set(REFERENCE_SCHEMA.names) - set(references.columns)
+    if missing:
+        raise ReportError(f"{path}: missing columns {', '.join(sorted(missing))}")
+    return references
+
+
+def _stored_config(raw: Any, source: Path, notes: list[str]) -> CwrendConfig | None:
+    """The configuration stored with the results, validated by the config model.
+
+    A ``noise.file`` that is no longer where it was does not stop the report
+    (which never reads the noise realisation): the config is then validated
+    without it. ``None``, with a note, when no configuration is stored or it
+    does not validate with this version of cwrend.
+    """
+    unused = "degradation windows, thrust limit and NIS offset are not drawn"
+    if not isinstance(raw, Mapping) or not raw:
+        notes.append(f"`{source.name}` holds no configuration: {unused}.")
+        return None
+    try:
+        return config_from_dict(raw, source=source.name)
+    except ConfigError as exc:
+        error = exc
+    if isinstance(raw.get("noise"), Mapping) and raw["noise"].get("file") is not None:
+        try:
+            return config_from_dict(set_dotted(raw, "noise.file", None), source=source.name)
+        except ConfigError:
+            pass
+    problems = "; ".join(error.problems) or str(error)
+    notes.append(f"The configuration in `{source.name}` does not validate ({problems}): {unused}.")
+    return None
+
+
+def _order_archs(names: Iterable[object]) -> tuple[str, ...]:
+    present = {str(n) for n in names}
+    known = [a for a in ARCHITECTURES if a in present]
+    return (*known, *sorted(present - set(known)))
+
+
+def _reference_summary(references: pd.DataFrame | None) -> pd.DataFrame:
+    """Δv (trapezoid of ‖u‖) and final distance of each reference trajectory."""
+    rows = []
+    if references is not None:
+        for name, g in references.groupby("reference", sort=False, observed=True):
+            g = g.sort_values("t_s")
+            last = g.iloc[-1]
+            dv = cumulative_delta_v(g["t_s"].to_numpy(), g["u_norm_km_s2"].to_numpy())[-1]
+            rows.append(
+                {
+                    "arch": f"open_loop_{name}",
+                    "seed": -1,
+                    "delta_v_km_s": float(dv),
+                    "miss_km": float(np.linalg.norm([last["x_km"], last["y_km"], last["z_km"]])),
+                }
+            )
+    out = pd.DataFrame(rows, columns=["arch", "seed", "delta_v_km_s", "miss_km"])
+    fuel = out.loc[out["arch"] == "open_loop_fuel", "delta_v_km_s"]
+    if not fuel.empty:
+        out["fuel_penalty_pct"] = 100.0 * (out["delta_v_km_s"] / float(fuel.iloc[0]) - 1.0)
+    return out
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    try:
+        return bool(np.isclose(float(a), float(b), rtol=1e-12, atol=0.0))
+    except (TypeError, ValueError):
+        return str(a) == str(b)
+
+
+def _reported_point(runs: pd.DataFrame, config: CwrendConfig | None) -> str | None:
+    """The grid point of the per-seed figures: the one at the base config's values, else the first.
+
+    Points are tried in sorted order; only points with a successful run qualify.
+    """
+    ok = runs[runs["status"] == "ok"]
+    if ok.empty:
+        return None
+    params = param_columns(runs.columns)
+    points: list[str] = sorted(ok["point"].astype(str).unique())
+    tree = resolved_dict(config) if config is not None else {}
+    for point in points:
+        row = ok[ok["point"].astype(str) == point].iloc[0]
+        try:
+            base = [get_dotted(tree, c.removeprefix(PARAM_PREFIX)) for c in params]
+        except (KeyError, IndexError, TypeError, ValueError):
+            break
+        values = [param_value(row[c]) for c in params]
+        if all(_same_value(v, b) for v, b in zip(values, base, strict=True)):
+            return point
+    return points[0]
+
+
+def _pick_seed(runs: pd.DataFrame, seed: int | None) -> int:
+    ok = runs[runs["status"] == "ok"]
+    if ok.empty:
+        raise ReportError("no successful run to report on (every run failed)")
+    seeds = sorted(int(s) for s in ok["seed"].unique())
+    if seed is None:
+        return seeds[0]
+    if seed not in seeds:
+        shown = ", ".join(map(str, seeds[:10])) + (" …" if len(seeds) > 10 else "")
+        raise ReportError(f"--seed {seed}: no successful run with that seed (available: {shown})")
+    return seed
+
+
+# ---------------------------------------------------------------------------
+# The two layouts
+# ---------------------------------------------------------------------------
+
+
+def _load_run_dir(root: Path, seed: int | None) -> ReportData:
+    for name in ("summary.parquet", "steps.parquet", "config.json"):
+        if not (root / name).exists():
+            raise ReportError(f"{root}: not a complete cwrend results directory (no {name})")
+    meta = _read_json(root / "config.json")
+    notes: list[str] = []
+    config = _stored_config(meta.get("config"), root / "config.json", notes)
+    summary = _read_parquet(root / "summary.parquet")
+    is_ref = summary["arch"].astype(str).str.startswith("open_loop_")
+    runs = summary[~is_ref].copy()
+    runs["arch"] = runs["arch"].astype(str)
+    runs["status"] = "ok"
+    chosen = _pick_seed(runs, seed)
+    steps = _read_parquet(root / "steps.parquet")
+    steps = steps[steps["seed"] == chosen].copy()
+    references = (
+        _read_references(root / "references.parquet")
+        if (root / "references.parquet").exists()
+        else None
+    )
+    return ReportData(
+        layout="run",
+        runs=runs,
+        ref_summary=summary[is_ref].copy(),
+        steps=steps,
+        references=references,
+        config=config,
+        config_hash=str(meta.get("config_hash", "")),
+        seed=chosen,
+        point=None,
+        archs=_order_archs(runs["arch"].unique()),
+        notes=tuple(notes),
+    )
+
+
+def _campaign_references(root: Path, point: str | None, notes: list[str]) -> pd.DataFrame | None:
+    """The stored open-loop references of grid point ``point`` (absent: ``None`` and a note)."""
+    rel = f"{REFERENCES_DIR}/{point}.parquet"
+    if point is not None and (root / rel).exists():
+        return _read_references(root / rel)
+    notes.append(
+        f"Open-loop references are not drawn: this campaign does not store them (no `{rel}`; "
+        "campaigns written by older versions of cwrend lack them). Rerun the campaign to "
+        "store them."
+    )
+    return None
+
+
+def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
+    runs = _read_parquet(root / "runs.parquet")
+    missing = {"arch", "seed", "status", "delta_v_km_s", "miss_km"} - set(runs.columns)
+    if missing:
+        raise ReportError(f"{root / 'runs.parquet'}: missing columns {', '.join(sorted(missing))}")
+    runs["arch"] = runs["arch"].astype(str)
+    manifest = root / "manifest.json"
+    meta = _read_json(manifest) if manifest.exists() else {}
+    notes: list[str] = []
+    config = _stored_config(meta.get("config"), manifest, notes)
+    params = [c for c in param_columns(runs.columns) if runs[c].dropna().astype(str).nunique() > 1]
+    point = None
+    if "point" in runs.columns and runs["point"].nunique() > 1:
+        point = _reported_point(runs, config)
+    selected = runs if point is None else runs[runs["point"].astype(str) == point]
+    chosen = _pick_seed(selected, seed)
+    if point is not None:
+        notes.append(
+            f"Per-seed figures, the seed table and the distributions use grid point `{point}` "
+            f"({point_values(selected)}); the sweep tables and figures use every point."
+        )
+    steps_dir = root / "steps"
+    if not steps_dir.exists():
+        raise ReportError(f"{root}: campaign without a steps/ dataset (was it run with steps off?)")
+    filters: list[tuple[str, str, Any]] = [("seed", "==", chosen)]
+    steps = _read_parquet(steps_dir, filters=filters)
+    if point is not None and "point" in steps.columns:
+        steps = steps[steps["point"].astype(str) == point]
+    if steps.empty:
+        raise ReportError(f"{steps_dir}: no steps for seed {chosen}")
+    steps["arch"] = steps["arch"].astype(str)
+    ref_point = point
+    if ref_point is None and "point" in selected.columns and not selected.empty:
+        ref_point = str(selected["point"].iloc[0])
+    references = _campaign_references(root, ref_point, notes)
+    return ReportData(
+        layout="campaign",
+        runs=runs,
+        ref_summary=_reference_summary(references),
+        steps=steps,
+        references=references,
+        config=config,
+        config_hash=str(meta.get("config_hash", meta.get("campaign_hash", ""))),
+        seed=chosen,
+        point=point,
+        archs=_order_archs(runs["arch"].unique()),
+        params=tuple(params),
+        notes=tuple(notes),
+    )
+
+
+def load_results(results_dir: Path, seed: int | None = None) -> ReportData:
+    """Load a run or campaign directory (raises :class:`ReportError` if it is neither).
+
+    ``seed`` selects the noise realisation of the per-seed data (default: the
+    first seed with a successful run).
+    """
+    root = Path(results_dir)
+    if not root.exists():
+        raise ReportError(f"{root}: no such directory")
+    if not root.is_dir():
+        raise ReportError(f"{root}: not a directory")
+    if (root / "runs.parquet").exists():
+        return _load_campaign_dir(root, seed)
+    if (root / "summary.parquet").exists():
+        return _load_run_dir(root, seed)
+    raise ReportError(
+        f"{root}: no cwrend results here (expected summary.parquet from `cwrend run` "
+        "or runs.parquet from a campaign)"
+    )

@@ -1,0 +1,74 @@
+"""``cwrend report``: draw the registered figures and write ``report.md`` for a results directory.
+
+Writes into ``RESULTS_DIR/report/`` (each file atomically): the figures of
+:data:`~cwrend_cli.report.figures.FIGURES` that apply, as PNG, then
+``report.md`` with the tables and the figures with their captions. This is
+the one place where the report writes files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib as mpl
+from matplotlib.figure import Figure
+
+from cwrend_cli.output.files import atomic_path
+from cwrend_cli.report.figures import DPI, STYLE, planned_figures
+from cwrend_cli.report.load import Layout, load_results
+from cwrend_cli.report.markdown import report_md
+
+REPORT_DIR = "report"
+
+
+@dataclass(frozen=True)
+class ReportSummary:
+    """What :func:`write_report` wrote."""
+
+    results_dir: Path
+    out_dir: Path
+    layout: Layout  # "run" or "campaign"
+    seed: int  # noise realisation of the per-seed figures
+    point: str | None  # grid point of the per-seed figures (campaigns)
+    files: tuple[Path, ...]  # figures and report.md, in the order written
+    notes: tuple[str, ...] = ()
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png")
+    return path
+
+
+def write_report(results_dir: Path, seed: int | None = None) -> ReportSummary:
+    """Write the figures and ``report.md`` of a run or campaign directory.
+
+    ``seed`` selects the noise realisation of the per-seed figures (default:
+    the first seed with a successful run). Raises
+    :class:`~cwrend_cli.report.load.ReportError` (a
+    :class:`~cwrend_cli.errors.CwrendError`) for a missing or unreadable
+    directory or an unknown seed.
+    """
+    results_dir = Path(results_dir)
+    data = load_results(results_dir, seed)
+    out = results_dir / REPORT_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    planned = planned_figures(data)
+    figures: list[Path] = []
+    with mpl.rc_context(STYLE):
+        for figure in planned:
+            figures.append(_save(figure.draw(), out / figure.file))
+    md = out / "report.md"
+    text = report_md(data, results_dir, [(f.file, f.caption) for f in planned])
+    with atomic_path(md) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return ReportSummary(
+        results_dir=results_dir,
+        out_dir=out,
+        layout=data.layout,
+        seed=data.seed,
+        point=data.point,
+        files=(*figures, md),
+        notes=data.notes,
+    )
