@@ -60,6 +60,10 @@ def _worker_init() -> None:
     threading.Thread(target=watch, name="cwrend-parent-watch", daemon=True).start()
 
 
+def _started() -> None:
+    """Nothing: submitting it makes the pool start a worker process."""
+
+
 def default_workers() -> int:
     """All cores available to this process."""
     try:
@@ -83,6 +87,8 @@ def open_executor(
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_worker_init,
         )
+        for _ in range(n):  # start the workers now, while the driver prepares the first tasks
+            pool.submit(_started)
         try:
             yield pool, n
         finally:
