@@ -43,6 +43,7 @@ from cwrend_cli.console import (
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_run
+from cwrend_cli.output.layout import RUN_RECORDING
 
 app = typer.Typer(
     name="cwrend",
@@ -229,7 +230,7 @@ def run(
         written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:
             rrd_path = recording.record_case(
-                Path(written) / "recording.rrd", case.runs, case.references,
+                Path(written) / RUN_RECORDING, case.runs, case.references,
                 windows_of(cfg), u_max_km_s2=cfg.scenario.u_max_km_s2,
                 recording_name=f"cwrend run · {Path(written).name}",
             )  # fmt: skip

@@ -28,18 +28,12 @@ import pyarrow as pa
 from cwrend_cli.campaign import statistics
 from cwrend_cli.campaign.executors import ExecutorKind, default_workers, open_executor
 from cwrend_cli.campaign.journal import (
-    ABLATION_STATS,
-    EVENTS,
-    MANIFEST,
-    RUNS,
-    SWEEP_STATS,
     append_events,
     check_same_campaign,
     events_of,
     iso,
     load_journal,
     new_manifest,
-    references_path,
     remove_orphan_files,
     wipe,
 )
@@ -53,6 +47,14 @@ from cwrend_cli.campaign.worker import (
     seeds_to_record,
 )
 from cwrend_cli.output.files import write_json, write_parquet
+from cwrend_cli.output.layout import (
+    ABLATION_STATS,
+    EVENTS,
+    MANIFEST,
+    RUNS,
+    SWEEP_STATS,
+    references_path,
+)
 from cwrend_cli.output.tables import param_columns, references_table, runs_table
 from cwrend_cli.physics import simulation
 

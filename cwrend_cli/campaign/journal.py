@@ -30,29 +30,29 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from cwrend_cli import __version__
 from cwrend_cli.campaign.plan import CampaignPlan
+from cwrend_cli.campaign.worker import TaskOutcome
 from cwrend_cli.errors import ConfigError
-
-if TYPE_CHECKING:  # the worker imports this module's names
-    from cwrend_cli.campaign.worker import TaskOutcome
+from cwrend_cli.output.layout import (
+    ABLATION_STATS,
+    EVENTS,
+    MANIFEST,
+    RECORDINGS,
+    REFERENCES,
+    RUNS,
+    SOLVES,
+    STEPS,
+    SWEEP_STATS,
+)
 
 __all__ = [
-    "ABLATION_STATS",
     "DATASETS",
-    "EVENTS",
-    "MANIFEST",
-    "RECORDINGS",
-    "REFERENCES",
-    "RUNS",
-    "SOLVES",
     "STATS_FILES",
-    "STEPS",
-    "SWEEP_STATS",
     "JournalState",
     "append_events",
     "check_same_campaign",
@@ -61,29 +61,14 @@ __all__ = [
     "load_journal",
     "new_manifest",
     "read_events",
-    "references_path",
     "remove_orphan_files",
     "wipe",
 ]
 
-MANIFEST = "manifest.json"
-RUNS = "runs.parquet"
-EVENTS = "events.jsonl"
-STEPS = "steps"
-SOLVES = "solves"
-RECORDINGS = "recordings"
-REFERENCES = "references"
 #: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
 DATASETS = (STEPS, SOLVES, RECORDINGS)
 #: The statistics files of ``cwrend ablate`` and ``cwrend sweep``.
-ABLATION_STATS = "ablation.parquet"
-SWEEP_STATS = "sweep.parquet"
 STATS_FILES = (ABLATION_STATS, SWEEP_STATS)
-
-
-def references_path(point: str) -> str:
-    """Where the open-loop references of grid point ``point`` go (relative)."""
-    return f"{REFERENCES}/{point}.parquet"
 
 
 def iso(unix: float) -> str:

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from cwrend_cli.campaign.journal import RECORDINGS, SOLVES, STEPS
 from cwrend_cli.campaign.plan import Assignment, NoiseSource, RunSpec, Task, noise_source
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of, with_values
@@ -39,6 +38,7 @@ from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_parquet
+from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
 from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
 from cwrend_cli.physics import sensors, simulation
 from cwrend_cli.physics.params import ARCHITECTURES, Architecture, FloatArray, Problem, Scenario
@@ -51,7 +51,6 @@ __all__ = [
     "TaskOutcome",
     "execute_task",
     "noise_seed_sequence",
-    "recording_path",
     "references_key",
     "run_case",
     "seeds_to_record",
@@ -250,11 +249,6 @@ def _references(
     if refs is None:
         refs = known[key] = simulation.open_loop_references(problem)
     return refs
-
-
-def recording_path(point: str, seed: int) -> str:
-    """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
-    return f"{RECORDINGS}/{point}.s{seed:06d}.rrd"
 
 
 def seeds_to_record(task: Task, archs: Sequence[str], limit: int | None) -> tuple[int, ...]:

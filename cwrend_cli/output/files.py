@@ -22,6 +22,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cwrend_cli import __version__
+from cwrend_cli.output.layout import (
+    RUN_CONFIG,
+    RUN_REFERENCES,
+    RUN_SOLVES,
+    RUN_STEPS,
+    RUN_SUMMARY,
+)
 from cwrend_cli.output.tables import (
     reference_row,
     references_table,
@@ -94,14 +101,12 @@ def write_run(
     fuel_dv = refs.fuel.delta_v_km_s
     rows = [reference_row(refs.energy, fuel_dv), reference_row(refs.fuel, fuel_dv)]
     rows += [summary_row(r, fuel_dv) for r in results]
-    write_parquet(summary_table(rows, meta), out / "summary.parquet")
-    write_parquet(pa.concat_tables([steps_table(r, meta) for r in results]), out / "steps.parquet")
-    write_parquet(
-        pa.concat_tables([solves_table(r, meta) for r in results]), out / "solves.parquet"
-    )
-    write_parquet(references_table(refs, meta), out / "references.parquet")
+    write_parquet(summary_table(rows, meta), out / RUN_SUMMARY)
+    write_parquet(pa.concat_tables([steps_table(r, meta) for r in results]), out / RUN_STEPS)
+    write_parquet(pa.concat_tables([solves_table(r, meta) for r in results]), out / RUN_SOLVES)
+    write_parquet(references_table(refs, meta), out / RUN_REFERENCES)
     write_json(
         {"cwrend_version": __version__, "config_hash": config_hash, "config": resolved_config},
-        out / "config.json",
+        out / RUN_CONFIG,
     )
     return out

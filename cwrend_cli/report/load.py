@@ -41,12 +41,18 @@ from cwrend_cli.config import (
     set_dotted,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.output.layout import (
+    MANIFEST,
+    RUN_CONFIG,
+    RUN_REFERENCES,
+    RUN_STEPS,
+    RUN_SUMMARY,
+    RUNS,
+    STEPS,
+    references_path,
+)
 from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
 from cwrend_cli.physics.metrics import cumulative_delta_v
-
-#: Directory of a campaign holding ``<point>.parquet``, the open-loop references of each point
-#: (the layout of :mod:`cwrend_cli.campaign.journal`, which the report does not import).
-REFERENCES_DIR = "references"
 
 Layout = Literal["run", "campaign"]
 
@@ -281,24 +287,22 @@ def _pick_seed(runs: pd.DataFrame, seed: int | None) -> int:
 
 
 def _load_run_dir(root: Path, seed: int | None) -> ReportData:
-    for name in ("summary.parquet", "steps.parquet", "config.json"):
+    for name in (RUN_SUMMARY, RUN_STEPS, RUN_CONFIG):
         if not (root / name).exists():
             raise ReportError(f"{root}: not a complete cwrend results directory (no {name})")
-    meta = _read_json(root / "config.json")
+    meta = _read_json(root / RUN_CONFIG)
     notes: list[str] = []
-    config = _stored_config(meta.get("config"), root / "config.json", notes)
-    summary = _read_parquet(root / "summary.parquet")
+    config = _stored_config(meta.get("config"), root / RUN_CONFIG, notes)
+    summary = _read_parquet(root / RUN_SUMMARY)
     is_ref = summary["arch"].astype(str).str.startswith("open_loop_")
     runs = summary[~is_ref].copy()
     runs["arch"] = runs["arch"].astype(str)
     runs["status"] = "ok"
     chosen = _pick_seed(runs, seed)
-    steps = _read_parquet(root / "steps.parquet")
+    steps = _read_parquet(root / RUN_STEPS)
     steps = steps[steps["seed"] == chosen].copy()
     references = (
-        _read_references(root / "references.parquet")
-        if (root / "references.parquet").exists()
-        else None
+        _read_references(root / RUN_REFERENCES) if (root / RUN_REFERENCES).exists() else None
     )
     return ReportData(
         layout="run",
@@ -317,7 +321,7 @@ def _load_run_dir(root: Path, seed: int | None) -> ReportData:
 
 def _campaign_references(root: Path, point: str | None, notes: list[str]) -> pd.DataFrame | None:
     """The stored open-loop references of grid point ``point`` (absent: ``None`` and a note)."""
-    rel = f"{REFERENCES_DIR}/{point}.parquet"
+    rel = references_path(str(point))
     if point is not None and (root / rel).exists():
         return _read_references(root / rel)
     notes.append(
@@ -329,12 +333,12 @@ def _campaign_references(root: Path, point: str | None, notes: list[str]) -> pd.
 
 
 def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
-    runs = _read_parquet(root / "runs.parquet")
+    runs = _read_parquet(root / RUNS)
     missing = {"arch", "seed", "status", "delta_v_km_s", "miss_km"} - set(runs.columns)
     if missing:
-        raise ReportError(f"{root / 'runs.parquet'}: missing columns {', '.join(sorted(missing))}")
+        raise ReportError(f"{root / RUNS}: missing columns {', '.join(sorted(missing))}")
     runs["arch"] = runs["arch"].astype(str)
-    manifest = root / "manifest.json"
+    manifest = root / MANIFEST
     meta = _read_json(manifest) if manifest.exists() else {}
     notes: list[str] = []
     config = _stored_config(meta.get("config"), manifest, notes)
@@ -349,7 +353,7 @@ def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
             f"Per-seed figures, the seed table and the distributions use grid point `{point}` "
             f"({point_values(selected)}); the sweep tables and figures use every point."
         )
-    steps_dir = root / "steps"
+    steps_dir = root / STEPS
     if not steps_dir.exists():
         raise ReportError(f"{root}: campaign without a steps/ dataset (was it run with steps off?)")
     filters: list[tuple[str, str, Any]] = [("seed", "==", chosen)]
@@ -390,9 +394,9 @@ def load_results(results_dir: Path, seed: int | None = None) -> ReportData:
         raise ReportError(f"{root}: no such directory")
     if not root.is_dir():
         raise ReportError(f"{root}: not a directory")
-    if (root / "runs.parquet").exists():
+    if (root / RUNS).exists():
         return _load_campaign_dir(root, seed)
-    if (root / "summary.parquet").exists():
+    if (root / RUN_SUMMARY).exists():
         return _load_run_dir(root, seed)
     raise ReportError(
         f"{root}: no cwrend results here (expected summary.parquet from `cwrend run` "

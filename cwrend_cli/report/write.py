@@ -15,11 +15,10 @@ import matplotlib as mpl
 from matplotlib.figure import Figure
 
 from cwrend_cli.output.files import atomic_path
+from cwrend_cli.output.layout import REPORT_DIR
 from cwrend_cli.report.figures import DPI, STYLE, planned_figures
 from cwrend_cli.report.load import Layout, load_results
 from cwrend_cli.report.markdown import report_md
-
-REPORT_DIR = "report"
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,44 @@
+"""The names of everything cwrend writes: one place for the layout of a results directory.
+
+A ``cwrend run`` directory holds :data:`RUN_CONFIG`, :data:`RUN_SUMMARY`,
+:data:`RUN_STEPS`, :data:`RUN_SOLVES`, :data:`RUN_REFERENCES` and
+:data:`RUN_RECORDING`. A campaign directory (``cwrend ablate`` / ``sweep``)
+holds :data:`MANIFEST`, :data:`RUNS`, :data:`EVENTS`, the statistics file,
+and the datasets :data:`STEPS`, :data:`SOLVES` (``<dir>/arch=<slug>/*.parquet``),
+:data:`RECORDINGS` (:func:`recording_path`) and :data:`REFERENCES`
+(:func:`references_path`). The campaign writes them, the report reads them.
+"""
+
+from __future__ import annotations
+
+# A single run (``cwrend run``)
+RUN_CONFIG = "config.json"
+RUN_SUMMARY = "summary.parquet"
+RUN_STEPS = "steps.parquet"
+RUN_SOLVES = "solves.parquet"
+RUN_REFERENCES = "references.parquet"
+RUN_RECORDING = "recording.rrd"
+
+# A campaign (``cwrend ablate`` / ``cwrend sweep``)
+MANIFEST = "manifest.json"
+RUNS = "runs.parquet"
+EVENTS = "events.jsonl"
+STEPS = "steps"
+SOLVES = "solves"
+RECORDINGS = "recordings"
+REFERENCES = "references"
+ABLATION_STATS = "ablation.parquet"
+SWEEP_STATS = "sweep.parquet"
+
+#: Where ``cwrend report`` writes its figures and report.md, inside a results directory.
+REPORT_DIR = "report"
+
+
+def references_path(point: str) -> str:
+    """Where the open-loop references of grid point ``point`` go (relative)."""
+    return f"{REFERENCES}/{point}.parquet"
+
+
+def recording_path(point: str, seed: int) -> str:
+    """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
+    return f"{RECORDINGS}/{point}.s{seed:06d}.rrd"
