@@ -13,6 +13,7 @@ is validated here (see :func:`cwrend_cli.config.io.config_from_dict`).
 from __future__ import annotations
 
 import copy
+import functools
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
@@ -81,8 +82,13 @@ def _thaw(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
+@functools.cache
 def _default_tree() -> dict[str, Any]:
-    """The defaults as a plain JSON-style tree (lists, dicts)."""
+    """The defaults as a plain JSON-style tree (lists, dicts), built once.
+
+    Shared between calls: readers walk it and copy (``_thaw``) what they keep,
+    never modify it.
+    """
     return CwrendConfig().model_dump(mode="json")
 
 
