@@ -80,12 +80,6 @@ def test_default_degradation_windows_are_the_paper_windows() -> None:
     assert w2.bias_km == (0.010, -0.008, 0.012)
 
 
-def test_window_label_names_scale_and_bias() -> None:
-    # ‖(10, −8, 12) m‖ = √308 m = 17.5 m (3 significant digits)
-    w1, w2 = CwrendConfig().degradation.windows
-    assert (w1.label, w2.label) == ("R×300", "R×300 + 17.5 m bias")
-
-
 def test_empty_file_is_the_paper_scenario(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, ""))
     assert cfg.model_copy(update={"output": OutputConfig()}) == CwrendConfig()

@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 from cwrend_cli import campaign
 from cwrend_cli.cli import app
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, apply, config_from_dict, resolved_dict
+from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
@@ -316,5 +317,5 @@ def test_report_with_an_unusable_stored_config(ablation_dir: Path, tmp_path: Pat
     md = (summary.out_dir / "report.md").read_text(encoding="utf-8")
     assert "Degradation windows" not in md
     good = load_results(ablation_dir)
-    assert good.config is not None and good.windows == good.config.degradation.windows
+    assert good.config is not None and good.windows == windows_of(good.config)
     assert len(good.windows) == 2

@@ -204,3 +204,9 @@ def test_load_noise_missing_file(tmp_path) -> None:
     """A missing file is an InputDataError (not a FileNotFoundError traceback)."""
     with pytest.raises(InputDataError, match="not found"):
         load_noise_file(tmp_path / "absent.csv", N_STEPS)
+
+
+def test_window_label_names_scale_and_bias(paper_windows) -> None:
+    # ‖(10, −8, 12) m‖ = √308 m = 17.5 m (3 significant digits)
+    w1, w2 = paper_windows
+    assert (w1.label, w2.label) == ("R×300", "R×300 + 17.5 m bias")

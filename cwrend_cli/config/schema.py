@@ -2,7 +2,7 @@
 
 A run is described by a TOML file whose tables mirror :class:`CwrendConfig`
 (``[scenario]``, ``[estimator]``, ``[schedule]``, ``[guidance]``, ``[solver]``,
-``[degradation]``, ``[noise]``, ``[output]``). Every field has a default equal to
+``[degradation]``, ``[truth]``, ``[noise]``, ``[output]``). Every field has a default equal to
 the paper's scenario (Candan & Servadio, AAS 26-893, Table 1; SPEC §6), so an
 empty file is the paper scenario. The file is read by
 :func:`~cwrend_cli.config.io.load_config`, ``--set key=value`` overrides are
@@ -39,6 +39,7 @@ from pydantic import (
 from cwrend_cli.config.messages import fmt_num, rules_error
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
+from cwrend_cli.physics.truth import R_EARTH_KM, semi_major_axis_km
 
 __all__ = [
     "CwrendConfig",
@@ -52,6 +53,7 @@ __all__ = [
     "ScenarioConfig",
     "ScheduleConfig",
     "SolverConfig",
+    "TruthConfig",
 ]
 
 # Numbers are strict: a TOML string "1e-3" or a boolean is not silently turned
@@ -418,12 +420,6 @@ class DegradationWindow(_FrozenModel):
     def _three_entries(cls, value: Any) -> Any:
         return _check_length(value, 3)
 
-    @property
-    def label(self) -> str:
-        """Short description, e.g. ``"R×300 + 17.5 m bias"``."""
-        bias_m = 1e3 * math.hypot(*self.bias_km)
-        return f"R×{self.r_scale:g}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
-
     @model_validator(mode="after")
     def _ordered(self) -> Self:
         if self.end_s < self.start_s:
@@ -445,6 +441,43 @@ class DegradationConfig(_FrozenModel):
     windows: tuple[DegradationWindow, ...] = Field(
         _PAPER_WINDOWS,
         description="degradation windows; later entries win where they overlap",
+    )
+
+
+class TruthConfig(_FrozenModel):
+    """The dynamics the true relative state obeys (issue 15); guidance and filter keep CW.
+
+    ``model``: ``"cw"`` (the design model itself, the paper's setting),
+    ``"two_body"`` (exact nonlinear relative motion about a Keplerian chief,
+    in its rotating local-vertical frame) or ``"j2"`` (both spacecraft under
+    two-body + J2 of EGM2008, integrated in an inertial frame). The chief's
+    osculating orbit at t = 0: semi-major axis a = (μ/n²)^{1/3} from
+    ``scenario.mean_motion_rad_s`` and the elements below (default: circular,
+    equatorial). Axes: x radial, y along-track, z cross-track.
+    """
+
+    model: Literal["cw", "two_body", "j2"] = Field(
+        _PAPER.truth.model,
+        description="truth dynamics: 'cw' (the design model), 'two_body' or 'j2'",
+    )
+    eccentricity: Float = Field(
+        _PAPER.truth.eccentricity, ge=0, lt=1, description="chief eccentricity e, in [0, 1) [-]"
+    )
+    true_anomaly_deg: Float = Field(
+        _PAPER.truth.true_anomaly_deg, description="chief true anomaly f at t = 0 [deg]"
+    )
+    inclination_deg: Float = Field(
+        _PAPER.truth.inclination_deg,
+        ge=0,
+        le=180,
+        description="chief inclination i, in [0, 180] [deg]",
+    )
+    raan_deg: Float = Field(
+        _PAPER.truth.raan_deg, description="chief right ascension of the ascending node Ω [deg]"
+    )
+    arg_latitude_deg: Float = Field(
+        _PAPER.truth.arg_latitude_deg,
+        description="chief argument of latitude u = ω + f at t = 0 [deg]",
     )
 
 
@@ -575,6 +608,9 @@ class CwrendConfig(_FrozenModel):
     degradation: DegradationConfig = Field(
         default_factory=DegradationConfig, description="sensor degradation windows"
     )
+    truth: TruthConfig = Field(
+        default_factory=TruthConfig, description="truth dynamics (guidance and filter: CW)"
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str] = Field(
@@ -607,6 +643,18 @@ class CwrendConfig(_FrozenModel):
                     f"must be a whole multiple of scenario.dt_s ({fmt_num(sc.dt_s)})",
                 )
             )
+        if self.truth.model != "cw":
+            perigee = semi_major_axis_km(sc.mean_motion_rad_s) * (1.0 - self.truth.eccentricity)
+            if perigee <= R_EARTH_KM:
+                problems.append(
+                    (
+                        "truth.eccentricity",
+                        self.truth.eccentricity,
+                        f"the chief's perigee radius a(1 - e) = {perigee:.1f} km "
+                        f"(a from scenario.mean_motion_rad_s) must exceed Earth's radius "
+                        f"({fmt_num(R_EARTH_KM)} km)",
+                    )
+                )
         if self.guidance.t_min_rem_s >= sc.horizon_s:
             problems.append(
                 (

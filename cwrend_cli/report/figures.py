@@ -40,10 +40,11 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, NullFormatter
 from matplotlib.typing import RcKeyType
 
-from cwrend_cli.config import ARCHITECTURES, DegradationWindow
+from cwrend_cli.config import ARCHITECTURES
 from cwrend_cli.output.recording import DEGRADATION_COLOUR, REFERENCE_COLOURS, arch_colour
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.metrics import cumulative_delta_v
+from cwrend_cli.physics.params import Window
 from cwrend_cli.report.load import ReportData, arch_label, param_value, param_values
 
 #: Resolution of the saved PNG files [dots per inch].
@@ -132,12 +133,12 @@ def _group_label(slugs: Sequence[str]) -> str:
     return " = ".join(arch_label(s) for s in slugs)
 
 
-def _shade(ax: Axes, windows: Sequence[DegradationWindow]) -> None:
+def _shade(ax: Axes, windows: Sequence[Window]) -> None:
     for i, w in enumerate(windows):
         ax.axvspan(w.start_s, w.end_s, color=DEGRADATION_COLOUR, alpha=_WINDOW_ALPHAS[i % 4], lw=0)
 
 
-def _window_handles(windows: Sequence[DegradationWindow]) -> list[Patch]:
+def _window_handles(windows: Sequence[Window]) -> list[Patch]:
     return [
         Patch(
             color=DEGRADATION_COLOUR,

@@ -34,12 +34,12 @@ import pandas as pd
 from cwrend_cli.config import (
     ARCHITECTURES,
     CwrendConfig,
-    DegradationWindow,
     config_from_dict,
     get_dotted,
     resolved_dict,
     set_dotted,
 )
+from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output.layout import (
     MANIFEST,
@@ -53,6 +53,7 @@ from cwrend_cli.output.layout import (
 )
 from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
 from cwrend_cli.physics.metrics import cumulative_delta_v
+from cwrend_cli.physics.params import Window
 
 Layout = Literal["run", "campaign"]
 
@@ -85,9 +86,9 @@ class ReportData:
     notes: tuple[str, ...] = ()
 
     @property
-    def windows(self) -> tuple[DegradationWindow, ...]:
+    def windows(self) -> tuple[Window, ...]:
         """The degradation windows of the configuration (none without one)."""
-        return self.config.degradation.windows if self.config is not None else ()
+        return windows_of(self.config) if self.config is not None else ()
 
     @property
     def u_max_km_s2(self) -> float | None:
