@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader
 from cwrend_cli import campaign
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.output import recording
 
 ARCH_ENTITIES = (
@@ -58,7 +59,7 @@ def rrd(
         out,
         case.runs,
         case.references,
-        cfg.degradation.windows,
+        windows_of(cfg),
         recording_id=recording_id,
         u_max_km_s2=cfg.scenario.u_max_km_s2,
     )
@@ -114,6 +115,85 @@ def test_blueprint_names_the_paper_views(rrd: Path) -> None:
         assert view in joined, view
 
 
+def _blueprint_views(rrd: Path) -> dict[str, dict[str, pa.Array]]:
+    """Blueprint of a recording: view id -> {"class": ..., "<Archetype>:<field>": value}.
+
+    Values are the last logged component value (an Arrow array of one
+    element, so unions keep their tags).
+    """
+    reader = RrdReader(rrd)
+    views: dict[str, dict[str, pa.Array]] = defaultdict(dict)
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        parts = chunk.entity_path.strip("/").split("/")
+        if parts[0] != "view" or len(parts) < 2:
+            continue
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if ":" in name:
+                column = batch.column(name)
+                views[parts[1]][name] = column[len(column) - 1].values
+    return views
+
+
+def _is_infinite(boundary: pa.Array) -> bool:
+    """A TimeRangeBoundary (dense union of one element) is the Infinite variant."""
+    assert isinstance(boundary, pa.UnionArray) and len(boundary) == 1
+    tag = boundary.type_codes[0].as_py()
+    return bool(boundary.type.field(boundary.type.type_codes.index(tag)).name == "Infinite")
+
+
+def test_every_time_series_view_shows_the_whole_run(rrd: Path) -> None:
+    views = _blueprint_views(rrd)
+    series = [
+        v for v in views.values() if v["ViewBlueprint:class_identifier"][0].as_py() == "TimeSeries"
+    ]
+    assert len(series) == 9
+    for view in series:
+        name = view["ViewBlueprint:display_name"][0].as_py()
+        ranges = view["VisibleTimeRanges:ranges"]  # queried data: the whole timeline
+        assert len(ranges) == 1 and ranges[0]["timeline"].as_py() == "sim_time", name
+        bounds = ranges.field("range")
+        assert _is_infinite(bounds.field("start")) and _is_infinite(bounds.field("end")), name
+        axis = view["TimeAxis:view_range"]  # the x axis shown: the whole timeline too
+        assert _is_infinite(axis.field("start")) and _is_infinite(axis.field("end")), name
+
+
+def test_time_series_views_have_no_legend_over_the_data(rrd: Path) -> None:
+    views = _blueprint_views(rrd)
+    series = [
+        v for v in views.values() if v["ViewBlueprint:class_identifier"][0].as_py() == "TimeSeries"
+    ]
+    assert series and all(v["PlotLegend:visible"].to_pylist() == [False] for v in series)
+    about = [c for c in RrdReader(rrd).stream() if c.entity_path == "/about"]
+    text = about[0].to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    for key in ("green mtf_adaptive", "red plain_fixed", "grey open-loop fuel"):
+        assert key in text  # the colours are explained once
+
+
+def test_3d_view_is_framed_on_the_trajectories_and_the_target(rrd: Path, case: CaseResult) -> None:
+    views = _blueprint_views(rrd)
+    (spatial,) = [
+        v for v in views.values() if v["ViewBlueprint:class_identifier"][0].as_py() == "3D"
+    ]
+    lo, hi = recording.scene_bounds(case.runs, case.references)
+    assert np.all(lo <= 0.0) and np.all(hi >= 0.0)  # the target is in the box
+    target = np.array(spatial["EyeControls3D:look_target"][0].as_py())
+    np.testing.assert_allclose(target, 0.5 * (lo + hi), rtol=1e-6, atol=1e-6)
+    eye = np.array(spatial["EyeControls3D:position"][0].as_py())
+    distance = float(np.linalg.norm(eye - target))
+    assert float(np.max(hi - lo)) <= distance <= 2.0 * float(np.max(hi - lo))
+
+
+def test_no_text_labels_on_the_paths_in_3d(chunks: dict[str, list]) -> None:
+    labelled = {
+        path
+        for path, cs in chunks.items()
+        for c in cs
+        if any(n.endswith(":labels") for n in c.to_record_batch().schema.names)
+    }
+    assert labelled == {"/target"}
+
+
 def test_expected_entity_paths(chunks: dict[str, list], case: CaseResult) -> None:
     for run in case.runs:
         for name in ARCH_ENTITIES:
@@ -158,7 +238,7 @@ def test_scalar_values_round_trip(chunks: dict[str, list], case: CaseResult) -> 
 def test_write_is_atomic_and_replaces(tmp_path: Path, cfg: CwrendConfig, case: CaseResult) -> None:
     target = tmp_path / "r.rrd"
     target.write_bytes(b"old")
-    recording.record_case(target, case.runs[:1], case.references, cfg.degradation.windows)
+    recording.record_case(target, case.runs[:1], case.references, windows_of(cfg))
     assert target.read_bytes()[:4] != b"old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.rrd"]  # no temp file left
     paths = {c.entity_path for c in RrdReader(target).stream()}
@@ -170,7 +250,7 @@ def test_fresh_recording_id_by_default(tmp_path: Path, cfg: CwrendConfig, case: 
     ids = set()
     for name in ("a.rrd", "b.rrd"):
         path = recording.record_case(
-            tmp_path / name, case.runs[:1], case.references, cfg.degradation.windows
+            tmp_path / name, case.runs[:1], case.references, windows_of(cfg)
         )
         ids.add(RrdReader(path).recordings()[0].recording_id)
     assert len(ids) == 2
@@ -181,9 +261,7 @@ def test_disabled_rerun_is_a_user_error(
 ) -> None:
     monkeypatch.setenv("RERUN", "off")
     with pytest.raises(recording.RecordingError, match="RERUN"):
-        recording.record_case(
-            tmp_path / "x.rrd", case.runs[:1], case.references, cfg.degradation.windows
-        )
+        recording.record_case(tmp_path / "x.rrd", case.runs[:1], case.references, windows_of(cfg))
     assert not (tmp_path / "x.rrd").exists()
 
 

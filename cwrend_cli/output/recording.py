@@ -75,6 +75,20 @@ REFERENCE_COLOURS: Mapping[str, str] = {
 #: Colour of the degradation-window series and shading (hex).
 DEGRADATION_COLOUR = "#bcbd22"
 _FALLBACK = ("#17becf", "#e377c2", "#8c564b", "#7f7f7f")
+#: Names of the colours above, for the colour key of the about panel.
+COLOUR_NAMES: Mapping[str, str] = {
+    "#d62728": "red",
+    "#ff7f0e": "orange",
+    "#1f77b4": "blue",
+    "#2ca02c": "green",
+    "#9467bd": "purple",
+    "#8c8c8c": "grey",
+    "#bcbd22": "olive",
+    "#17becf": "cyan",
+    "#e377c2": "pink",
+    "#8c564b": "brown",
+    "#7f7f7f": "dark grey",
+}
 
 TIMELINE = "sim_time"
 
@@ -119,25 +133,88 @@ def window_label(i: int, window: Window) -> str:
 # ---------------------------------------------------------------------------
 
 
-def _series_view(
-    rrb: Any, name: str, paths: Sequence[str], *, y_range: tuple[float, float] | None = None
-) -> Any:
-    kwargs: dict[str, Any] = {}
-    if y_range is not None:
-        kwargs["axis_y"] = rrb.ScalarAxis(range=y_range, zoom_lock=False)
+def _series_view(rrb: Any, name: str, paths: Sequence[str]) -> Any:
+    """A time-series view of the whole run, without a legend (colours: see the about panel).
+
+    The visible time range runs from the start to the end of ``sim_time``
+    (both boundaries infinite), so the view shows the whole history wherever
+    the time cursor is, instead of Rerun's default window around the cursor.
+    """
     return rrb.TimeSeriesView(
         name=name,
         origin="/",
         contents=list(paths),
-        plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop, visible=True),
-        **kwargs,
+        plot_legend=rrb.PlotLegend(visible=False),
+        time_ranges=full_time_range(rrb),
+        axis_x=rrb.TimeAxis(view_range=_whole_timeline()),
+    )
+
+
+def _whole_timeline() -> Any:
+    """A time range from the start to the end of the timeline (both boundaries infinite)."""
+    import rerun as rr
+
+    return rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
+
+
+def full_time_range(rrb: Any) -> Any:
+    """The visible time range from the start to the end of the ``sim_time`` timeline."""
+    return rrb.VisibleTimeRange(TIMELINE, range=_whole_timeline())
+
+
+def scene_bounds(runs: Sequence[RunResult], refs: References) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) corner [km] of the box holding every trajectory and the target."""
+    stacked = np.concatenate(
+        [r.x_true[:, :3] for r in runs]
+        + [r.x_hat[:, :3] for r in runs]
+        + [refs.energy.x[:, :3], refs.fuel.x[:, :3], np.zeros((1, 3))]
+    )
+    stacked = stacked[np.isfinite(stacked).all(axis=1)]
+    return stacked.min(axis=0), stacked.max(axis=0)
+
+
+def _eye(rrb: Any, bounds: tuple[np.ndarray, np.ndarray]) -> Any:
+    """An orbital eye framing the box ``bounds``.
+
+    It looks at the box centre across its thinnest axis (tilted a little off
+    it, so the view stays three-dimensional), with the longest axis up, from
+    far enough that the longest side fits the view.
+    """
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    centre = 0.5 * (lo + hi)
+    size = np.maximum(hi - lo, 1e-9)
+    order = np.argsort(size)  # thinnest, middle, longest
+    direction = np.zeros(3)
+    direction[order[0]] = 1.0
+    direction[order[1]] = -0.35
+    direction[order[2]] = 0.25
+    direction /= np.linalg.norm(direction)
+    up = np.zeros(3)
+    up[order[2]] = 1.0
+    distance = 1.1 * float(size[order[2]])
+    return rrb.EyeControls3D(
+        kind="Orbital",
+        position=(centre + distance * direction).tolist(),
+        look_target=centre.tolist(),
+        eye_up=up.tolist(),
     )
 
 
 def build_blueprint(
-    slugs: Sequence[str], reference_names: Sequence[str], n_windows: int
+    slugs: Sequence[str],
+    reference_names: Sequence[str],
+    n_windows: int,
+    *,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> rrb.Blueprint:
-    """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors)."""
+    """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors).
+
+    Readable as opened at 1600×1000: the side panels collapsed, every
+    time-series view showing the whole run with no legend (the about panel
+    gives the colours once), and, given ``bounds`` (see :func:`scene_bounds`),
+    the 3D view framed on the trajectories and the target. The time cursor
+    starts at the end of the run, where the 3D view shows the final positions.
+    """
     import rerun.blueprint as rrb
 
     def arch(name: str) -> list[str]:
@@ -156,30 +233,31 @@ def build_blueprint(
             *[f"/reference/{r}/trajectory" for r in reference_names],
             "/target",
         ],
+        eye_controls=_eye(rrb, bounds) if bounds is not None else None,
     )
     left = rrb.Vertical(
         spatial,
-        rrb.TextDocumentView(name="about", origin="/about"),
-        row_shares=[5, 1],
+        rrb.TextDocumentView(name="about: colours, arrows, results", origin="/about"),
+        row_shares=[3, 1],
     )
     middle = rrb.Vertical(
         _series_view(rrb, "thrust ‖u‖ [km/s²]", arch("u_norm") + ref("u_norm")),
         _series_view(rrb, "cumulative Δv [km/s]", arch("dv_cum") + ref("dv_cum")),
-        _series_view(
-            rrb, "homotopy ε [-] and degradation windows (1 = active)", arch("eps") + windows
-        ),
+        _series_view(rrb, "homotopy ε [-], windows (1 = on)", arch("eps") + windows),
         _series_view(rrb, "score s [-]", arch("score") + arch("score_filtered")),
-        _series_view(rrb, "re-solve success [1 = converged]", arch("resolve_success")),
+        _series_view(rrb, "re-solve success [1 = ok]", arch("resolve_success")),
     )
     right = rrb.Vertical(
-        _series_view(rrb, "position error to target [km]", arch("pos_err_km") + ref("pos_err_km")),
+        _series_view(rrb, "position error ‖r‖ [km]", arch("pos_err_km") + ref("pos_err_km")),
         _series_view(rrb, "estimation error [km]", arch("est_err_km")),
         _series_view(rrb, "NIS [-]", arch("nis")),
         _series_view(rrb, "MTF ratio ρ [-]", arch("mtf_ratio")),
     )
     return rrb.Blueprint(
         rrb.Horizontal(left, middle, right, column_shares=[2, 1, 1]),
-        rrb.TimePanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE, play_state="following"),
         collapse_panels=False,
     )
 
@@ -234,24 +312,22 @@ def _send_path(
     positions: np.ndarray,
     *,
     colour: str,
-    label: str,
     line_radius: float,
     point_radius: float,
 ) -> None:
-    """The whole path as a static line strip and the current point over time."""
+    """The whole path as a static line strip and the current point over time.
+
+    No text labels: at the start and at the target every path meets the
+    others, and their labels piled up into an unreadable clump; the about
+    panel names the colours instead.
+    """
     import rerun as rr
 
     pos = np.asarray(positions, dtype=float)
     finite = np.isfinite(pos).all(axis=1)
     c = rgb(colour)
-    rec.log(
-        path,
-        rr.LineStrips3D([pos[finite]], colors=[c], radii=[line_radius], labels=[label]),
-        static=True,
-    )
-    rec.log(
-        path, rr.Points3D.from_fields(colors=[c], radii=[point_radius], labels=[label]), static=True
-    )
+    rec.log(path, rr.LineStrips3D([pos[finite]], colors=[c], radii=[line_radius]), static=True)
+    rec.log(path, rr.Points3D.from_fields(colors=[c], radii=[point_radius]), static=True)
     rec.send_columns(
         path,
         indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=float)[finite])],
@@ -266,8 +342,20 @@ def _about(
     arrow_scale_s2: float,
     u_max_km_s2: float,
 ) -> str:
+    def name(hex_colour: str) -> str:
+        return COLOUR_NAMES.get(hex_colour, hex_colour)
+
+    key = [f"{name(arch_colour(r.arch, i))} {r.arch}" for i, r in enumerate(runs)]
+    key += [
+        f"{name(REFERENCE_COLOURS.get(ref.name, _FALLBACK[-1]))} open-loop {ref.name}"
+        for ref in (refs.energy, refs.fuel)
+    ]
+    if windows:
+        key.append(f"{name(DEGRADATION_COLOUR)} degradation windows")
     lines = [
-        "# cwrend recording",
+        "**Colours** (every view): " + ", ".join(key) + ". "
+        "3D: thick line true path, thin line filter estimate, white dot the target; "
+        "score: thin line filtered score s̄.",
         "",
         f"Noise realisation (seed): {', '.join(sorted({str(r.seed) for r in runs})) or '-'}. "
         "Timeline `sim_time` in seconds; positions in km (CW frame, target at the origin).",
@@ -332,12 +420,11 @@ def _log_case(
         t = run.t_s
         _send_path(
             rec, f"{base}/trajectory/true", t, run.x_true[:, :3],
-            colour=colour, label=run.arch, line_radius=line_r, point_radius=point_r,
+            colour=colour, line_radius=line_r, point_radius=point_r,
         )  # fmt: skip
         _send_path(
             rec, f"{base}/trajectory/estimate", t, run.x_hat[:, :3],
-            colour=colour, label=f"{run.arch} estimate",
-            line_radius=0.5 * line_r, point_radius=0.6 * point_r,
+            colour=colour, line_radius=0.5 * line_r, point_radius=0.6 * point_r,
         )  # fmt: skip
         rec.log(
             f"{base}/thrust",
@@ -384,7 +471,7 @@ def _log_case(
         label = f"open-loop {ref.name}"
         _send_path(
             rec, f"{base}/trajectory", ref.t_s, ref.x[:, :3],
-            colour=colour, label=label, line_radius=line_r, point_radius=0.7 * point_r,
+            colour=colour, line_radius=line_r, point_radius=0.7 * point_r,
         )  # fmt: skip
         u_norm = np.linalg.norm(ref.u, axis=1)
         ref_series = {
@@ -461,7 +548,9 @@ def record_case(
     )
     _require_enabled(rec)
     slugs = [r.arch for r in runs]
-    blueprint = build_blueprint(slugs, ("energy", "fuel"), len(windows))
+    blueprint = build_blueprint(
+        slugs, ("energy", "fuel"), len(windows), bounds=scene_bounds(runs, refs)
+    )
     with atomic_path(path) as tmp:
         rec.save(tmp, default_blueprint=blueprint)
         seeds = sorted({r.seed for r in runs})
