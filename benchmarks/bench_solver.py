@@ -1,6 +1,6 @@
 """Shooting solver and closed loop (run by hand, never in CI).
 
-    python -m benchmarks.bench_solver [--seeds 20] [--naive 3]
+    python -m benchmarks.bench_solver [--seeds 20] [--naive 3] [--truth-only]
 
 1. warm re-solves met in closed loops of the paper scenario at fixed
    ε ∈ {1, 0.3, 0.05, 0} (``schedule.eps_fixed``), timed for cwrend and for a
@@ -10,7 +10,9 @@
    ones, share certified infeasible and where, time, the step that succeeded;
 3. the open-loop fuel continuation (11 solves);
 4. one 800-step closed-loop run per architecture (median of 7);
-5. the fixed-ε miss for both ``resolve_timing`` and both ``hold`` settings.
+5. the same run per truth model (``truth.model`` = two_body, j2) beside the CW
+   run, interleaved in the same loop, with their ratio (issue 15);
+6. the fixed-ε miss for both ``resolve_timing`` and both ``hold`` settings.
 """
 
 from __future__ import annotations
@@ -178,8 +180,59 @@ def closed_loop_runs() -> list[Row]:
     return rows
 
 
+#: Closed-loop cost targets per truth model, relative to the CW run (issue 15, item 1).
+TRUTH_COST_TARGETS = {"two_body": "<= 1.5", "j2": "<= 2"}
+
+
+def truth_model_runs(repeats: int = 7) -> list[Row]:
+    """Section 5: one closed-loop run per architecture and truth model, beside the CW run.
+
+    The chief is the default one (circular, equatorial, a from n); for J2 an
+    inclined chief (51.6°) so that every J2 term acts. The three truths are
+    timed in turn within each repetition (so drifts of a shared machine hit
+    them alike); the ratio is median(truth) / median(CW) of the same
+    architecture. Guidance and filter are CW in all three, so the runs also
+    differ by their re-solves (different states), which is part of the cost.
+    """
+    models = {
+        "cw": config_with(),
+        "two_body": config_with(truth__model="two_body"),
+        "j2": config_with(truth__model="j2", truth__inclination_deg=51.6),
+    }
+    problems = {m: problem_of(c) for m, c in models.items()}
+    refs = simulation.open_loop_references(problems["cw"])  # the truth does not enter them
+    noise = campaign.standard_normal_for(models["cw"], 0)
+    rows = []
+    for slug, arch in ARCHITECTURES.items():
+        times: dict[str, list[float]] = {m: [] for m in models}
+        for m in models:
+            simulation.simulate(problems[m], arch, noise, refs)  # compile / load cache
+        for _ in range(repeats):
+            for m in models:
+                start = time.perf_counter()
+                simulation.simulate(problems[m], arch, noise, refs)
+                times[m].append(time.perf_counter() - start)
+        cw_ms = float(np.median(times["cw"])) * 1e3
+        rows.append(
+            Row("truth models", f"{slug}, truth=cw: one run (median of {repeats})", cw_ms, "ms")
+        )
+        for m, target in TRUTH_COST_TARGETS.items():
+            ms = float(np.median(times[m])) * 1e3
+            rows.append(
+                Row(
+                    "truth models",
+                    f"{slug}, truth={m}: run time / CW run time",
+                    ms / cw_ms,
+                    "×",
+                    target=target,
+                    note=f"{ms:.1f} ms vs {cw_ms:.1f} ms (medians of {repeats}, same loop)",
+                )
+            )
+    return rows
+
+
 def fixed_eps_miss(seeds: int) -> list[Row]:
-    """Section 5: fixed-ε miss for both timings and both holds (paper: ≈ 160 m)."""
+    """Section 6: fixed-ε miss for both timings and both holds (paper: ≈ 160 m)."""
     rows = []
     for timing in ("correct", "reference"):
         for hold in ("sample", "mean"):
@@ -213,6 +266,7 @@ def run(seeds: int = 20, naive: int = 3) -> list[Row]:
         *all_resolves(seeds),
         *fuel_continuation(),
         *closed_loop_runs(),
+        *truth_model_runs(),
         *fixed_eps_miss(seeds),
     ]
 
@@ -221,10 +275,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--naive", type=int, default=3)
+    parser.add_argument(
+        "--truth-only", action="store_true", help="only section 5 (run time per truth model)"
+    )
     args = parser.parse_args()
     from benchmarks.__main__ import print_rows
 
-    print_rows(run(args.seeds, args.naive))
+    print_rows(truth_model_runs() if args.truth_only else run(args.seeds, args.naive))
 
 
 if __name__ == "__main__":

@@ -37,6 +37,7 @@ from cwrend_cli.config.schema import (
     ScenarioConfig,
     ScheduleConfig,
     SolverConfig,
+    TruthConfig,
 )
 from cwrend_cli.physics.params import ARCHITECTURES, Architecture
 
@@ -54,6 +55,7 @@ __all__ = [
     "ScenarioConfig",
     "ScheduleConfig",
     "SolverConfig",
+    "TruthConfig",
     "apply",
     "config_from_dict",
     "config_hash",

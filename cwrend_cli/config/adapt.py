@@ -74,6 +74,7 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
             quadrature_nodes=so.quadrature_nodes,
         ),
         degradation=params.Degradation(windows=windows_of(cfg)),
+        truth=params.Truth(**cfg.truth.model_dump()),
     )
 
 

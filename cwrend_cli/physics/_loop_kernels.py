@@ -9,7 +9,8 @@ The loop runs in compiled code between re-solves; :func:`advance` stops right
 after the ε update of a step that has a re-solve due, and the Python driver
 performs the re-solve and sets the costate. Its inputs are a few typed
 tuples (numba compiles NamedTuples of floats and arrays): the constant
-:class:`LoopModel` and :class:`ScheduleParams`, the :class:`LoopState` arrays
+:class:`LoopModel`, :class:`~cwrend_cli.physics.truth.TruthModel` and
+:class:`ScheduleParams`, the :class:`LoopState` arrays
 it updates in place, the :class:`LoopScalars` it returns, and the
 :class:`StepLog` it fills. Units: km, s, km/s, km/s².
 """
@@ -33,6 +34,7 @@ from cwrend_cli.physics.guidance._kernels import (
     workspace,
 )
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
+from cwrend_cli.physics.truth import TRUTH_CW, TruthModel, truth_step
 
 
 class LoopModel(NamedTuple):
@@ -78,6 +80,7 @@ class LoopState(NamedTuple):
     x_hat: np.ndarray  # (6,) estimate
     p: np.ndarray  # (6, 6) estimate covariance
     lam: np.ndarray  # (6,) costate of the current plan
+    chief: np.ndarray  # (6,) the truth's chief state (truth.initial_chief; unused for CW)
 
 
 class LoopScalars(NamedTuple):
@@ -151,6 +154,7 @@ def advance(
     k_stop: int,
     n_steps: int,
     model: LoopModel,
+    truth: TruthModel,
     sched: ScheduleParams,
     state: LoopState,
     scalars: LoopScalars,
@@ -179,8 +183,12 @@ def advance(
         else:
             control_from_costate(lam[3:6], eps_k, m.u_max, u)
         log.u[k] = u
-        # truth step with zero-order hold: x_{k+1} = Φ x_k + Γ u_k (exact)
-        x_next = zoh_step(m.phi, m.gam, x_true, u)
+        # truth step with zero-order hold: CW x_{k+1} = Φ x_k + Γ u_k (exact), or the
+        # nonlinear truth integrated over the step (truth.py)
+        if truth.kind == TRUTH_CW:
+            x_next = zoh_step(m.phi, m.gam, x_true, u)
+        else:
+            x_next = truth_step(truth, state.chief, x_true, u)
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
         y = x_next[:3] + m.noise[k]

@@ -162,6 +162,30 @@ class Degradation:
 
 
 @dataclass(frozen=True)
+class Truth:
+    """The dynamics the true relative state obeys (issue 15; :mod:`cwrend_cli.physics.truth`).
+
+    The guidance and the filter always use the CW model; ``model`` chooses
+    the truth: ``"cw"`` (the same model, stepped exactly), ``"two_body"``
+    (exact nonlinear relative motion about a Keplerian chief, in its rotating
+    local-vertical frame) or ``"j2"`` (both spacecraft under two-body + J2,
+    integrated in an inertial frame). The chief's osculating orbit at t = 0
+    has semi-major axis a = (μ/n²)^{1/3} from ``scenario.mean_motion_rad_s``
+    (μ of EGM2008, :data:`cwrend_cli.physics.truth.MU_EARTH_KM3_S2`) and the
+    elements below; the default is a circular equatorial orbit. Axes: x
+    radial, y along-track, z cross-track (along the chief's orbital angular
+    momentum).
+    """
+
+    model: Literal["cw", "two_body", "j2"] = "cw"
+    eccentricity: float = 0.0  # chief eccentricity e, in [0, 1) [-]
+    true_anomaly_deg: float = 0.0  # chief true anomaly f at t = 0 [deg]
+    inclination_deg: float = 0.0  # chief inclination i, in [0, 180] [deg]
+    raan_deg: float = 0.0  # right ascension of the ascending node Ω [deg]
+    arg_latitude_deg: float = 0.0  # argument of latitude u = ω + f at t = 0 [deg]
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -171,6 +195,7 @@ class Problem:
     guidance: Guidance = field(default_factory=Guidance)
     solver: Solver = field(default_factory=Solver)
     degradation: Degradation = field(default_factory=Degradation)
+    truth: Truth = field(default_factory=Truth)
 
 
 @dataclass(frozen=True)

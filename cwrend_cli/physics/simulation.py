@@ -6,6 +6,10 @@ same loop with two switches. The step loop runs compiled
 :func:`cwrend_cli.guidance.solve`. Nothing here writes files: the result is a
 plain :class:`RunResult` that :mod:`cwrend_cli.output.tables` and the recorders consume.
 
+The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
+CW, exact two-body or two-body + J2 relative motion); the filter and the
+guidance always use the CW model.
+
 Re-solve timing (``guidance.resolve_timing``):
 
 * ``"correct"`` (default): the re-solve of step k starts from the estimate at
@@ -26,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import guidance, references, sensors
+from cwrend_cli.physics import guidance, references, sensors, truth
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import feasibility
 from cwrend_cli.physics.metrics import delta_v
@@ -245,7 +249,15 @@ def simulate(
         override=np.zeros(n_steps, dtype=np.bool_),
     )
     sched = schedule_params(sch)
-    state = sk.LoopState(x_true=x0.copy(), x_hat=x_hat0.copy(), p=est.p0_matrix(), lam=lam)
+    # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
+    truth_model = truth.truth_model(problem.truth, sc)
+    state = sk.LoopState(
+        x_true=x0.copy(),
+        x_hat=x_hat0.copy(),
+        p=est.p0_matrix(),
+        lam=lam,
+        chief=truth.initial_chief(problem.truth, sc),
+    )
     scalars = sk.LoopScalars(eps=eps0, score_filtered=0.0, first=True)
     log = _empty_log(n_steps + 1)
     log.x[0] = state.x_true
@@ -257,7 +269,7 @@ def simulate(
     correct = gd.resolve_timing == "correct"
     k_next = 0
     for i, k in enumerate(schedule):
-        scalars = sk.advance(k_next, k, n_steps, model, sched, state, scalars, log)
+        scalars = sk.advance(k_next, k, n_steps, model, truth_model, sched, state, scalars, log)
         k_next = k + 1
         t_est = (k + 1) * dt
         horizon = sc.horizon_s - (t_est if correct else k * dt)
@@ -275,7 +287,7 @@ def simulate(
         ):
             stop = schedule[i + 1] if i + 1 < len(schedule) else n_steps - 1
             _apply_min_miss(sc, state.x_hat, t_est, k + 1, stop, model.u_override, model.override)
-    sk.advance(k_next, n_steps, n_steps, model, sched, state, scalars, log)
+    sk.advance(k_next, n_steps, n_steps, model, truth_model, sched, state, scalars, log)
 
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
