@@ -43,7 +43,7 @@ from cwrend_cli.console import (
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_run
-from cwrend_cli.output.layout import RUN_RECORDING
+from cwrend_cli.output.layout import ABLATION_STATS, RUN_RECORDING, SWEEP_STATS
 
 app = typer.Typer(
     name="cwrend",
@@ -52,9 +52,14 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_show_locals=False,
+    # plain help: Rich's help panels took "[sweep]" for markup and cut option help with "…"
+    rich_markup_mode=None,
 )
 config_app = typer.Typer(
-    help="Inspect and check configuration files.", no_args_is_help=True, add_completion=False
+    help="Inspect and check configuration files.",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,
 )
 app.add_typer(config_app, name="config")
 
@@ -88,7 +93,9 @@ def user_errors() -> Iterator[None]:
 # Shared option/argument declarations for commands that take a config file.
 ConfigFile = Annotated[
     Path,
-    typer.Argument(help="TOML config file (an empty file is the paper scenario)."),
+    typer.Argument(
+        help="TOML config file (an empty file is the paper scenario).", metavar="CONFIG"
+    ),
 ]
 SetOption = Annotated[
     list[str] | None,
@@ -136,29 +143,38 @@ def main(
     """cwrend: batch campaigns for robust low-thrust rendezvous."""
 
 
-@config_app.command("show")
+@config_app.command("show", short_help="Print the resolved configuration and its hash.")
 def config_show(
     file: ConfigFile,
     set_: SetOption = None,
     fmt: Annotated[
-        OutputFormat, typer.Option("--format", "-f", help="Output format.")
+        OutputFormat,
+        typer.Option(
+            "--format",
+            "-f",
+            help="Output format. TOML lists unset optional fields as comments "
+            "('# key = (unset)'); JSON as null.",
+        ),
     ] = OutputFormat.toml,
 ) -> None:
-    """Print the resolved configuration (defaults and overrides applied) and its hash."""
+    """Print the resolved configuration (defaults and overrides applied) and its hash.
+
+    Every field is listed, unset optional ones too.
+    """
     with user_errors():
         cfg = load_config(file, set_ or ())
         digest = config_hash(cfg)
         if fmt is OutputFormat.toml:
             typer.echo(f"# config_hash = {digest}\n")
-            typer.echo(to_toml(cfg), nl=False)
+            typer.echo(to_toml(cfg, show_unset=True), nl=False)
         else:
             typer.echo(to_json(cfg))
             typer.echo(f"config_hash: {digest}", err=True)
 
 
-@config_app.command("validate")
+@config_app.command("validate", short_help="Check a configuration: 'OK <hash>' or the errors.")
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
-    """Check a configuration; print ``OK <hash>`` or the problems (exit code 2)."""
+    """Check a configuration; print 'OK <hash>' or the problems (exit code 2)."""
     with user_errors():
         cfg = load_config(file, set_ or ())
         typer.echo(f"OK {config_hash(cfg)}")
@@ -174,7 +190,7 @@ def _parse_archs(text: str) -> tuple[Architecture, ...]:
     return archs
 
 
-@app.command("run")
+@app.command("run", short_help="One seed of the chosen architectures and the references.")
 def run(
     file: ConfigFile,
     arch: Annotated[
@@ -185,11 +201,17 @@ def run(
             help="Architecture slug(s), comma-separated, or 'all': "
             + ", ".join(ARCHITECTURES)
             + ".",
+            metavar="ARCHS",
         ),
     ] = "mtf_adaptive",
     seed: Annotated[
         int | None,
-        typer.Option("--seed", min=0, help="Noise realisation (default 0; root: noise.seed)."),
+        typer.Option(
+            "--seed",
+            min=0,
+            help="Noise realisation (default 0; root: noise.seed).",
+            metavar="N",
+        ),
     ] = None,
     out: Annotated[
         Path | None,
@@ -197,10 +219,13 @@ def run(
             "--out",
             "-o",
             help="Output directory (default: <output.dir>/<output.name>/run-<arch>-seed<N>).",
+            metavar="DIR",
         ),
     ] = None,
     set_: SetOption = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table on the console.")] = False,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="Print nothing but warnings and errors.")
+    ] = False,
     rrd: RrdOption = True,
     spawn: Annotated[
         bool,
@@ -225,8 +250,11 @@ def run(
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
         console = Console(stderr=True, highlight=False)
-        with console.status("compiling kernels and running…", spinner="dots"):
+        if quiet:
             case = campaign.run_case(cfg, archs, seed_)
+        else:
+            with console.status("compiling kernels and running…", spinner="dots"):
+                case = campaign.run_case(cfg, archs, seed_)
         written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:
             rrd_path = recording.record_case(
@@ -243,7 +271,7 @@ def run(
             Console(highlight=False).print(
                 summary_console_table(case, title=f"cwrend run · {file}")
             )
-        console.print(f"results written to {written}", soft_wrap=True)
+            console.print(f"results written to {written}", soft_wrap=True, markup=False)
 
 
 # ---------------------------------------------------------------------------
@@ -251,43 +279,64 @@ def run(
 # ---------------------------------------------------------------------------
 
 SeedsOption = Annotated[
-    int | None, typer.Option("--seeds", "-n", min=1, help="Seeds 0 … N−1 (default 1).")
+    int | None,
+    typer.Option("--seeds", "-n", min=1, help="Seeds 0 to N−1 (default 1).", metavar="N"),
 ]
 SeedListOption = Annotated[
-    str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 0,5,9.")
+    str | None,
+    typer.Option("--seed-list", help="Explicit seeds, e.g. 0,5,9.", metavar="LIST"),
 ]
 ArchsOption = Annotated[
     str,
-    typer.Option("--arch", "-a", help="Architectures, comma-separated, or 'all'."),
+    typer.Option(
+        "--arch",
+        "-a",
+        help="Architectures, comma-separated, or 'all': " + ", ".join(ARCHITECTURES) + ".",
+        metavar="ARCHS",
+    ),
 ]
 WorkersOption = Annotated[
     int | None,
     typer.Option(
-        "--workers", "-w", min=1, help="Parallel workers (default: all cores; 1 = in-process)."
+        "--workers",
+        "-w",
+        min=1,
+        help="Parallel workers (default: all cores; 1 = in-process).",
+        metavar="N",
     ),
 ]
 ExecutorOption = Annotated[
-    str, typer.Option("--executor", help="'local' (process pool) or 'dask'.")
+    str,
+    typer.Option("--executor", help="'local' (process pool) or 'dask'.", metavar="local|dask"),
 ]
 AddressOption = Annotated[
-    str | None, typer.Option("--address", help="Dask scheduler, e.g. tcp://host:8786 (dask only).")
+    str | None,
+    typer.Option(
+        "--address", help="Dask scheduler, e.g. tcp://host:8786 (dask only).", metavar="URL"
+    ),
 ]
 NameOption = Annotated[
     str | None,
     typer.Option(
-        "--name", help="Campaign name: results go to <output.dir>/<name> (default output.name)."
+        "--name",
+        help="Campaign name: results go to <output.dir>/<name> (default output.name).",
+        metavar="NAME",
     ),
 ]
 ForceOption = Annotated[
     bool, typer.Option("--force", help="Start over: discard what the campaign directory holds.")
 ]
 RetryOption = Annotated[bool, typer.Option("--retry-failed", help="Rerun the failed runs.")]
-QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or tables.")]
+QuietOption = Annotated[
+    bool,
+    typer.Option(
+        "--quiet", "-q", help="Print nothing but errors (no progress, tables or summary)."
+    ),
+]
 RrdSeedsOption = Annotated[
     int | None,
     typer.Option(
         "--rrd-seeds",
-        "--rrd-steps",
         min=0,
         help="Record seeds below K only (one .rrd per seed and grid point, all architectures; "
         "default output.rrd_seeds = 3).",
@@ -364,6 +413,18 @@ def _campaign(
             address=address, force=force, retry_failed=retry_failed, progress=progress,
         )  # fmt: skip
         statistics = campaign.write_statistics(out, command, plan.root_seed)
+        asked = {r.run_key for r in plan.runs}
+        held = campaign.held_run_keys(out)
+        if held - asked and not quiet:
+            # a re-run naming fewer seeds, architectures or points than the directory holds:
+            # report on exactly the runs asked for; the statistics file covers them all
+            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
+            stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
+            err.print(
+                f"note: the tables cover the {len(asked & held)} run(s) this command names; "
+                f"the directory holds {len(held)} and {stats_file} covers them all",
+                markup=False,
+            )
         stats = statistics.frame
         if not quiet and not stats.empty:
             stdout = Console(highlight=False)
@@ -375,11 +436,13 @@ def _campaign(
             else:
                 title = f"cwrend sweep · {out.name}"
                 stdout.print(sweep_console_table(stats, list(statistics.groups), title))
-        err.print(
-            f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
-            f"holds {summary.ok} ok, {summary.failed} failed → {out}",
-            soft_wrap=True,  # a path must stay copyable
-        )
+        if not quiet:
+            err.print(
+                f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
+                f"holds {summary.ok} ok, {summary.failed} failed → {out}",
+                soft_wrap=True,  # a path must stay copyable
+                markup=False,
+            )
         if summary.interrupted:
             err.print("interrupted: completed runs are kept; run the same command to resume")
             raise typer.Exit(code=130)
@@ -390,7 +453,7 @@ def _campaign(
             raise typer.Exit(code=1)
 
 
-@app.command("ablate")
+@app.command("ablate", short_help="Compare the architectures on the same noise per seed.")
 def ablate(
     file: ConfigFile,
     seeds: SeedsOption = None,
@@ -419,7 +482,7 @@ def ablate(
               name, force, retry_failed, quiet, rrd, rrd_seeds)  # fmt: skip
 
 
-@app.command("sweep")
+@app.command("sweep", short_help="Grid × architectures × seeds, [dispersions] per run.")
 def sweep(
     file: ConfigFile,
     param: Annotated[
@@ -460,16 +523,22 @@ def sweep(
 # ---------------------------------------------------------------------------
 
 
-@app.command("report")
+@app.command("report", short_help="Figures (PNG) and report.md into RESULTS_DIR/report/.")
 def report(
     results_dir: Annotated[
         Path,
-        typer.Argument(help="Output of `cwrend run` or a campaign directory (ablate/sweep)."),
+        typer.Argument(
+            help="Output of `cwrend run` or a campaign directory (ablate/sweep).",
+            metavar="RESULTS_DIR",
+        ),
     ],
     seed: Annotated[
         int | None,
         typer.Option(
-            "--seed", min=0, help="Noise seed of the per-seed figures 1–5 (default: the first)."
+            "--seed",
+            min=0,
+            help="Noise seed of the per-seed figures 1–5 (default: the first).",
+            metavar="N",
         ),
     ] = None,
 ) -> None:

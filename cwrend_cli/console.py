@@ -38,25 +38,38 @@ def _solves(r: Mapping[str, Any]) -> str:
 
 
 def summary_console_table(case: CaseResult, title: str = "") -> Table:
-    """Compact table: one row per open-loop reference and closed-loop run."""
+    """Compact table: one row per open-loop reference and closed-loop run (fits 80 columns).
+
+    The seed (one per case) goes into the title, not into a column.
+    """
     fuel = case.references.fuel.delta_v_km_s
     rows = [reference_row(case.references.energy, fuel), reference_row(case.references.fuel, fuel)]
     rows += [summary_row(r, fuel) for r in case.runs]
-    table = Table(title=title or None, title_style="bold", header_style="bold cyan")
-    table.add_column("case", no_wrap=True, min_width=14)
-    for name in ("seed", "Δv km/s", "miss km", "vs fuel", "converged", "solve ms"):
-        table.add_column(name, justify="right", no_wrap=True)
+    seeds = sorted({int(r["seed"]) for r in rows if r["seed"] >= 0})
+    if seeds:
+        title = f"{title} · seed {', '.join(map(str, seeds))}" if title else f"seed {seeds[0]}"
+    table = Table(
+        title=title or None,
+        title_style="bold",
+        header_style="bold cyan",
+        box=box.SIMPLE_HEAD,
+        show_edge=False,
+        padding=(0, 0, 0, 1),  # with the column separator: two spaces between columns
+    )
+    table.add_column("case", no_wrap=True)
+    for name in ("Δv km/s", "miss km", "vs fuel", "converged", "solve ms"):
+        # fold rather than cut a number that does not fit (never an ellipsis)
+        table.add_column(name, justify="right", overflow="fold")
     for r in rows:
         table.add_row(
             r["arch"].replace("open_loop_", "open-loop "),
-            "–" if r["seed"] < 0 else str(r["seed"]),
             f"{r['delta_v_km_s']:.5f}",
             f"{r['miss_km']:.2e}",
             _num(r["fuel_penalty_pct"], "+.1f") + "%",
             _solves(r),
             f"{_num(r['solve_mean_ms'], '.2f')}/{_num(r['solve_max_ms'], '.1f')}",
         )
-    table.caption = "solve ms: mean/max wall time per re-solve; inf.: certified infeasible"
+    table.caption = "solve ms: mean/max per re-solve; inf.: certified infeasible"
     return table
 
 
@@ -123,13 +136,34 @@ class RichProgress:
             self._bar = None
 
 
-def _ci(row: pd.Series, spec: str, scale: float = 1.0) -> str:
-    """Value, and its 95 % interval on a second (dim) line."""
+#: Below this many seeds a percentile-bootstrap interval is too narrow to trust
+#: (with 1 seed it is a single point); the console marks such intervals.
+MIN_BOOTSTRAP_N = 10
+UNRELIABLE_MARK = "*"
+UNRELIABLE_NOTE = (
+    f"{UNRELIABLE_MARK} fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable"
+)
+
+
+def _unreliable(row: pd.Series) -> bool:
+    """A bootstrap interval from fewer than :data:`MIN_BOOTSTRAP_N` samples."""
+    return not math.isnan(row["ci_low"]) and int(row["n"]) < MIN_BOOTSTRAP_N
+
+
+def _ci(row: pd.Series, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> str:
+    """Value, and its 95 % interval on a second (dim) line, marked when unreliable."""
     value = row["value"] * scale
     if math.isnan(row["ci_low"]):
         return f"{value:{spec}}"
     lo, hi = row["ci_low"] * scale, row["ci_high"] * scale
-    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}[/dim]"
+    mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
+    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}{mark}[/dim]"
+
+
+def _caption(text: str, rows: pd.DataFrame) -> str:
+    """``text``, plus the note on unreliable intervals when a bootstrap row has few seeds."""
+    flagged = rows.apply(_unreliable, axis=1) if not rows.empty else pd.Series(dtype=bool)
+    return f"{text}\n{UNRELIABLE_NOTE}" if bool(flagged.any()) else text
 
 
 def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
@@ -159,7 +193,7 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
             f"{get[('solve_mean_ms', 'mean')]['value']:.2f}/"
             f"{get[('solve_max_ms', 'max')]['value']:.1f}",
         )
-    table.caption = "means, 95 % bootstrap interval below"
+    table.caption = _caption("means, 95 % bootstrap interval below", marginal)
     return table
 
 
@@ -179,11 +213,14 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
         table.add_row(
             f"{a}\nvs {b}",
             str(int(get["frac_less"]["n"])),
-            _ci(get["frac_less"], ".2f"),
+            _ci(get["frac_less"], ".2f", bootstrap=False),
             _ci(get["median_diff"], ".2f", 1e3),
             _ci(get["mean_diff"], ".4f"),
         )
-    table.caption = "Δ = A − B; 95 % interval below (Wilson for P, bootstrap otherwise)"
+    table.caption = _caption(
+        "Δ = A − B; 95 % interval below (Wilson for P, bootstrap otherwise)",
+        pairs[pairs["statistic"] != "frac_less"],
+    )
     return table
 
 
@@ -206,5 +243,7 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
             _ci(get[("delta_v_km_s", "mean")], ".4f"),
             _ci(get[("miss_km", "mean")], ".2f", 1e3),
         )
-    table.caption = "means, 95 % bootstrap interval below; all statistics in sweep.parquet"
+    table.caption = _caption(
+        "means, 95 % bootstrap interval below; all statistics in sweep.parquet", marginal
+    )
     return table

@@ -18,7 +18,9 @@ from cwrend_cli.campaign.driver import (
     CampaignStatistics,
     CampaignSummary,
     Progress,
+    held_run_keys,
     run_campaign,
+    subset_statistics,
     write_statistics,
 )
 from cwrend_cli.campaign.executors import ExecutorKind
@@ -71,6 +73,7 @@ __all__ = [
     "draw_dispersions",
     "execute_task",
     "grid_points",
+    "held_run_keys",
     "noise_seed_sequence",
     "noise_source",
     "plan",
@@ -81,5 +84,6 @@ __all__ = [
     "seeds_to_record",
     "standard_normal",
     "standard_normal_for",
+    "subset_statistics",
     "write_statistics",
 ]

@@ -16,7 +16,7 @@ protocol.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -272,18 +272,9 @@ class CampaignStatistics:
     path: Path | None  # the file written (None when there was nothing to write)
 
 
-def write_statistics(
-    out_dir: Path, command: Literal["ablate", "sweep"], root_seed: int
-) -> CampaignStatistics:
-    """Compute the statistics of ``runs.parquet`` and write them beside it.
-
-    ``ablate``: per architecture, into ``ablation.parquet``; ``sweep``: per
-    grid point (with its swept values) and architecture, into
-    ``sweep.parquet``. Each with its paired comparisons; the bootstrap is
-    seeded from ``root_seed``. Nothing is written when there are no
-    statistics.
-    """
-    runs = pd.read_parquet(out_dir / RUNS)
+def _statistics(
+    runs: pd.DataFrame, command: Literal["ablate", "sweep"], root_seed: int
+) -> tuple[pd.DataFrame, tuple[str, ...]]:
     groups = () if command == "ablate" else ("point", *param_columns(runs.columns))
     by = [*groups, "arch"]
     frame = pd.concat(
@@ -293,8 +284,46 @@ def write_statistics(
         ],
         ignore_index=True,
     )
+    return frame, groups
+
+
+def write_statistics(
+    out_dir: Path, command: Literal["ablate", "sweep"], root_seed: int
+) -> CampaignStatistics:
+    """Compute the statistics of ``runs.parquet`` and write them beside it.
+
+    ``ablate``: per architecture, into ``ablation.parquet``; ``sweep``: per
+    grid point (with its swept values) and architecture, into
+    ``sweep.parquet``. Each with its paired comparisons; the bootstrap is
+    seeded from ``root_seed``. Nothing is written when there are no
+    statistics. The file always covers every run the directory holds.
+    """
+    runs = pd.read_parquet(out_dir / RUNS)
+    frame, groups = _statistics(runs, command, root_seed)
     if frame.empty:
         return CampaignStatistics(frame, groups, None)
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
     write_parquet(pa.Table.from_pandas(frame, preserve_index=False), path)
     return CampaignStatistics(frame, groups, path)
+
+
+def held_run_keys(out_dir: Path) -> set[str]:
+    """Keys of the runs (any status) that ``runs.parquet`` of a campaign directory holds."""
+    return {str(k) for k in pd.read_parquet(out_dir / RUNS, columns=["run_key"])["run_key"]}
+
+
+def subset_statistics(
+    out_dir: Path,
+    command: Literal["ablate", "sweep"],
+    root_seed: int,
+    run_keys: Collection[str],
+) -> CampaignStatistics:
+    """The statistics of the runs ``run_keys`` of the directory only; nothing is written.
+
+    What a re-run naming fewer seeds, architectures or grid points reports;
+    computed as for the whole directory (same groups, bootstrap seeded from
+    ``root_seed``).
+    """
+    runs = pd.read_parquet(out_dir / RUNS)
+    frame, groups = _statistics(runs[runs["run_key"].isin(set(run_keys))], command, root_seed)
+    return CampaignStatistics(frame, groups, None)

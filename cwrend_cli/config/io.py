@@ -141,9 +141,48 @@ def _drop_none(value: Any) -> Any:
     return value
 
 
-def to_toml(cfg: CwrendConfig) -> str:
-    """The resolved config as TOML text that :func:`load_config` reads back unchanged."""
-    return tomli_w.dumps(_drop_none(resolved_dict(cfg)))
+#: How :func:`to_toml` shows an unset optional field (TOML has no null).
+UNSET_COMMENT = "# {key} = (unset)"
+
+
+def _unset_keys(tree: Mapping[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Dotted paths (through tables, not arrays) of the ``None`` values of ``tree``."""
+    found: list[tuple[str, ...]] = []
+    for key, value in tree.items():
+        if value is None:
+            found.append((*prefix, key))
+        elif isinstance(value, Mapping):
+            found += _unset_keys(value, (*prefix, key))
+    return found
+
+
+def _with_unset_comments(text: str, unset: Sequence[tuple[str, ...]]) -> str:
+    """Insert ``# key = (unset)`` lines into TOML ``text``, each in its own table."""
+    lines = text.splitlines()
+    by_table: dict[tuple[str, ...], list[str]] = {}
+    for path in unset:
+        by_table.setdefault(path[:-1], []).append(UNSET_COMMENT.format(key=path[-1]))
+    top = by_table.pop((), [])
+    for table, comments in by_table.items():
+        header = "[" + ".".join(table) + "]"
+        if header in lines:
+            at = lines.index(header) + 1
+            lines[at:at] = comments
+        else:  # every field of the table unset: tomli_w wrote no header
+            lines += ["", header, *comments]
+    return "\n".join(top + lines) + "\n"
+
+
+def to_toml(cfg: CwrendConfig, *, show_unset: bool = False) -> str:
+    """The resolved config as TOML text that :func:`load_config` reads back unchanged.
+
+    TOML has no null, so unset optional fields are left out; with
+    ``show_unset`` each appears as a comment line in its table, e.g.
+    ``# eps_saturation = (unset)``, so every field is listed.
+    """
+    tree = resolved_dict(cfg)
+    text = tomli_w.dumps(_drop_none(tree))
+    return _with_unset_comments(text, _unset_keys(tree)) if show_unset else text
 
 
 def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
