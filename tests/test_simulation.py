@@ -74,10 +74,11 @@ def test_architectures_share_the_noise(paper_cfg, runs_seed0) -> None:
 
     It is chol(true R) n + bias of the window at the step's start (SPEC §5).
     """
-    t = problem_of(paper_cfg).scenario.time_grid()
+    problem = problem_of(paper_cfg)
+    t = problem.scenario.time_grid()
     expected, _ = sensors.measurement_noise(
-        standard_normal(0), t[:-1], paper_cfg.estimator.r_nominal_matrix(),
-        paper_cfg.degradation.windows,
+        standard_normal(0), t[:-1], problem.estimator.r_nominal_matrix(),
+        problem.degradation.windows,
     )  # fmt: skip
     for slug, run in runs_seed0.items():
         noise = run.y[1:] - run.x_true[1:, :3]
