@@ -13,7 +13,8 @@ the point's typed parameters (:func:`~cwrend_cli.config.adapt.with_values`).
 Here too: the grid points and their ids, run keys, the campaign hash and the
 dispersion draws. Random streams are keyed by (noise.seed, realisation): the
 dispersion draws by ``(seed, 1)`` (:func:`dispersion_seed_sequence`), the
-noise by ``(seed, 0)`` (:mod:`cwrend_cli.campaign.worker`), so every
+noise by ``(seed, 0)`` and the per-step actuator errors by ``(seed, 2)``
+(:mod:`cwrend_cli.campaign.worker`), so every
 architecture and grid point of a seed sees the same noise and the same
 dispersed values (common random numbers), and the numbers do not depend on
 the worker count or the executor.

@@ -17,6 +17,15 @@ The noise of realisation ``seed`` is the stream ``SeedSequence(noise.seed,
 spawn_key=(seed, 0))`` (or ``noise.file`` replayed), so realisation ``seed``
 is the same in a single run, an ablation and a sweep, whatever worker
 computes it. All architectures of a seed share it (SPEC §6).
+
+Every other random draw of a run has its own child of the realisation's
+seed: ``(seed, 1)`` the dispersions (:mod:`cwrend_cli.campaign.plan`),
+``(seed, 2)`` the per-step actuator errors (:func:`actuator_seed_sequence`;
+magnitude and pointing from its children 0 and 1,
+:func:`cwrend_cli.physics.actuator.draw`). They are drawn here, outside the
+physics, and only when the run's actuator has per-step noise; switching one
+on changes no other draw, and a run with the actuator ideal gets exactly the
+numbers it had before actuators existed.
 """
 
 from __future__ import annotations
@@ -40,7 +49,7 @@ from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
 from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
-from cwrend_cli.physics import sensors, simulation
+from cwrend_cli.physics import actuator, sensors, simulation
 from cwrend_cli.physics.params import ARCHITECTURES, Architecture, FloatArray, Problem, Scenario
 from cwrend_cli.physics.params import Solver as SolverParams
 
@@ -49,6 +58,8 @@ __all__ = [
     "ReferencesKey",
     "RunOutcome",
     "TaskOutcome",
+    "actuator_draws",
+    "actuator_seed_sequence",
     "execute_task",
     "noise_seed_sequence",
     "references_key",
@@ -75,6 +86,18 @@ def references_key(problem: Problem) -> ReferencesKey:
 def noise_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
     """Stream of the measurement noise of realisation ``seed``."""
     return np.random.SeedSequence(root_seed, spawn_key=(seed, 0))
+
+
+def actuator_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the per-step actuator errors of realisation ``seed`` (independent of the noise)."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 2))
+
+
+def actuator_draws(problem: Problem, root_seed: int, seed: int) -> actuator.ActuatorDraws | None:
+    """The actuator draws of realisation ``seed``, or ``None`` when ``problem`` needs none."""
+    if not problem.actuator.noisy:
+        return None
+    return actuator.draw(actuator_seed_sequence(root_seed, seed), problem.scenario.n_steps)
 
 
 def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
@@ -111,7 +134,10 @@ def run_case(
     noise = standard_normal_for(cfg, seed)  # validate input before any computation
     problem = problem_of(cfg)
     refs = refs if refs is not None else simulation.open_loop_references(problem)
-    runs = tuple(simulation.simulate(problem, a, noise, refs, seed=seed) for a in archs)
+    draws = actuator_draws(problem, cfg.noise.seed, seed)
+    runs = tuple(
+        simulation.simulate(problem, a, noise, refs, seed=seed, actuator_draws=draws) for a in archs
+    )
     return CaseResult(runs, refs)
 
 
@@ -191,7 +217,12 @@ def execute_task(
                     task.noise, spec.seed, n_steps
                 )
             result = simulation.simulate(
-                problem, ARCHITECTURES[spec.arch], noise, run_refs, spec.seed
+                problem,
+                ARCHITECTURES[spec.arch],
+                noise,
+                run_refs,
+                spec.seed,
+                actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
             )
             metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))

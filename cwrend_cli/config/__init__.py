@@ -26,6 +26,7 @@ from cwrend_cli.config.overrides import (
     set_dotted,
 )
 from cwrend_cli.config.schema import (
+    ActuatorConfig,
     CwrendConfig,
     DegradationConfig,
     DegradationWindow,
@@ -43,6 +44,7 @@ from cwrend_cli.physics.params import ARCHITECTURES, Architecture
 
 __all__ = [
     "ARCHITECTURES",
+    "ActuatorConfig",
     "Architecture",
     "CwrendConfig",
     "DegradationConfig",

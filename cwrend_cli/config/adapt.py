@@ -75,6 +75,7 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
         ),
         degradation=params.Degradation(windows=windows_of(cfg)),
         truth=params.Truth(**cfg.truth.model_dump()),
+        actuator=params.Actuator(**cfg.actuator.model_dump()),
     )
 
 

@@ -2,9 +2,9 @@
 
 A run is described by a TOML file whose tables mirror :class:`CwrendConfig`
 (``[scenario]``, ``[estimator]``, ``[schedule]``, ``[guidance]``, ``[solver]``,
-``[degradation]``, ``[truth]``, ``[noise]``, ``[output]``). Every field has a default equal to
-the paper's scenario (Candan & Servadio, AAS 26-893, Table 1; SPEC §6), so an
-empty file is the paper scenario. The file is read by
+``[degradation]``, ``[truth]``, ``[actuator]``, ``[noise]``, ``[output]``). Every
+field has a default equal to the paper's scenario (Candan & Servadio, AAS
+26-893, Table 1; SPEC §6), so an empty file is the paper scenario. The file is read by
 :func:`~cwrend_cli.config.io.load_config`, ``--set key=value`` overrides are
 applied (:mod:`cwrend_cli.config.overrides`), and the result is validated into
 frozen model objects that the rest of the package receives; nothing downstream
@@ -42,6 +42,7 @@ from cwrend_cli.physics.params import covariance_matrix
 from cwrend_cli.physics.truth import R_EARTH_KM, semi_major_axis_km
 
 __all__ = [
+    "ActuatorConfig",
     "CwrendConfig",
     "DegradationConfig",
     "DegradationWindow",
@@ -62,6 +63,7 @@ Float = Annotated[float, Strict()]
 Int = Annotated[int, Strict()]
 Vec3 = tuple[Float, Float, Float]
 Vec6 = tuple[Float, Float, Float, Float, Float, Float]
+Angle = Annotated[float, Strict(), Field(ge=-180, le=180)]
 # A covariance as given: n diagonal entries, or a full n×n matrix (rows).
 Covariance = tuple[Float, ...] | tuple[tuple[Float, ...], ...]
 
@@ -481,6 +483,58 @@ class TruthConfig(_FrozenModel):
     )
 
 
+class ActuatorConfig(_FrozenModel):
+    """Actuator errors between the commanded and the applied control (issue 15); all off by default.
+
+    The truth receives the applied control, the filter predicts with the
+    command. For step k, with the command c of ``delay_steps`` steps earlier
+    (zero before): nothing if ‖c‖ < ``min_thrust_km_s2``; otherwise magnitude
+    ‖c‖ (1 + ``magnitude_bias`` + ``magnitude_sigma`` z_k), clipped to
+    [0, u_max (1 + ``magnitude_bias``)], direction rotated by the fixed
+    misalignment R = R_z(γ) R_y(β) R_x(α) (``misalignment_deg`` = (α, β, γ)
+    about x radial, y along-track, z cross-track) and then tilted by a
+    random angle with two N(0, ``pointing_sigma_deg``²) components
+    perpendicular to the thrust (:class:`cwrend_cli.physics.params.Actuator`).
+    The per-step draws come from their own stream, ``SeedSequence(noise.seed,
+    spawn_key=(seed, 2))``.
+    """
+
+    magnitude_bias: Float = Field(
+        _PAPER.actuator.magnitude_bias,
+        gt=-1,
+        description="fixed thrust-magnitude scale error, a fraction (0.01 = +1 %), > -1 [-]",
+    )
+    magnitude_sigma: Float = Field(
+        _PAPER.actuator.magnitude_sigma,
+        ge=0,
+        description="per-step thrust-magnitude noise σ, a fraction of the command [-]",
+    )
+    misalignment_deg: tuple[Angle, Angle, Angle] = Field(
+        _PAPER.actuator.misalignment_deg,
+        description="fixed misalignment: rotation angles about x, y, z, applied x then y then z "
+        "(R = Rz Ry Rx), each in [-180, 180] [deg]",
+    )
+    pointing_sigma_deg: Float = Field(
+        _PAPER.actuator.pointing_sigma_deg,
+        ge=0,
+        le=180,
+        description="per-step pointing noise σ per axis perpendicular to the thrust [deg]",
+    )
+    min_thrust_km_s2: Float = Field(
+        _PAPER.actuator.min_thrust_km_s2,
+        ge=0,
+        description="commands below this magnitude produce no thrust [km/s²]",
+    )
+    delay_steps: Int = Field(
+        _PAPER.actuator.delay_steps, ge=0, description="actuation delay in whole steps [-]"
+    )
+
+    @field_validator("misalignment_deg", mode="before")
+    @classmethod
+    def _three_angles(cls, value: Any) -> Any:
+        return _check_length(value, 3)
+
+
 class NoiseConfig(_FrozenModel):
     """Measurement-noise realisation (SPEC §6).
 
@@ -611,6 +665,9 @@ class CwrendConfig(_FrozenModel):
     truth: TruthConfig = Field(
         default_factory=TruthConfig, description="truth dynamics (guidance and filter: CW)"
     )
+    actuator: ActuatorConfig = Field(
+        default_factory=ActuatorConfig, description="actuator errors (the truth gets them)"
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str] = Field(
@@ -655,6 +712,23 @@ class CwrendConfig(_FrozenModel):
                         f"({fmt_num(R_EARTH_KM)} km)",
                     )
                 )
+        act = self.actuator
+        if act.delay_steps >= sc.n_steps:
+            problems.append(
+                (
+                    "actuator.delay_steps",
+                    act.delay_steps,
+                    f"must be < the number of steps ({sc.n_steps})",
+                )
+            )
+        if act.min_thrust_km_s2 > sc.u_max_km_s2:
+            problems.append(
+                (
+                    "actuator.min_thrust_km_s2",
+                    act.min_thrust_km_s2,
+                    f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
+                )
+            )
         if self.guidance.t_min_rem_s >= sc.horizon_s:
             problems.append(
                 (

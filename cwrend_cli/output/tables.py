@@ -77,6 +77,7 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
         cols[f"{a}_hat_km"] = result.x_hat[:, i]
     for i, a in enumerate(_VEL):
         cols[f"{a}_hat_km_s"] = result.x_hat[:, 3 + i]
+    # the control the actuator applied (RunResult.u; the command is RunResult.u_cmd)
     for i, a in enumerate(_AXES):
         cols[f"u{a}_km_s2"] = result.u[:, i]
     cols["u_norm_km_s2"] = np.linalg.norm(result.u, axis=1)

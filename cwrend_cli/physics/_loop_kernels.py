@@ -1,15 +1,17 @@
 """Compiled step loop of the closed loop (private; see :mod:`cwrend_cli.physics.simulation`).
 
 One step k (SPEC §5, authors' order): control from the current costate and ε
-→ truth step → measurement (noise of the window at t_k) → KF predict →
-innovation, NIS, MTF → update → score → ε → [re-solve, done by the caller]
-→ costate propagated by Δt.
+→ actuator (the applied control, :mod:`cwrend_cli.physics.actuator`) → truth
+step → measurement (noise of the window at t_k) → KF predict (with the
+commanded control) → innovation, NIS, MTF → update → score → ε → [re-solve,
+done by the caller] → costate propagated by Δt.
 
 The loop runs in compiled code between re-solves; :func:`advance` stops right
 after the ε update of a step that has a re-solve due, and the Python driver
 performs the re-solve and sets the costate. Its inputs are a few typed
 tuples (numba compiles NamedTuples of floats and arrays): the constant
-:class:`LoopModel`, :class:`~cwrend_cli.physics.truth.TruthModel` and
+:class:`LoopModel`, :class:`~cwrend_cli.physics.truth.TruthModel`,
+:class:`~cwrend_cli.physics.actuator.ActuatorModel` and
 :class:`ScheduleParams`, the :class:`LoopState` arrays
 it updates in place, the :class:`LoopScalars` it returns, and the
 :class:`StepLog` it fills. Units: km, s, km/s, km/s².
@@ -22,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import zoh_step
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
@@ -96,7 +99,8 @@ class StepLog(NamedTuple):
 
     x: np.ndarray  # (N+1, 6) true state
     x_hat: np.ndarray  # (N+1, 6)
-    u: np.ndarray  # (N+1, 3) control applied over [t_k, t_{k+1}) (row k)
+    u: np.ndarray  # (N+1, 3) control applied (actuated) over [t_k, t_{k+1}) (row k)
+    u_cmd: np.ndarray  # (N+1, 3) control commanded at t_k (row k): what the filter uses
     y: np.ndarray  # (N+1, 3) measurement
     nis: np.ndarray  # (N+1,)
     mtf_ratio: np.ndarray  # (N+1,)
@@ -155,6 +159,7 @@ def advance(
     n_steps: int,
     model: LoopModel,
     truth: TruthModel,
+    act: ActuatorModel,
     sched: ScheduleParams,
     state: LoopState,
     scalars: LoopScalars,
@@ -170,6 +175,7 @@ def advance(
     m = model
     ws = workspace()
     u = np.empty(3)
+    u_applied = np.empty(3)
     lam_next = np.empty(6)
     x_true, x_hat, p, lam = state.x_true, state.x_hat, state.p, state.lam
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
@@ -182,17 +188,27 @@ def advance(
             mean_control(m.n, lam, m.dt, eps_k, m.u_max, m.gl_x, m.gl_w, ws, u)
         else:
             control_from_costate(lam[3:6], eps_k, m.u_max, u)
-        log.u[k] = u
+        log.u_cmd[k] = u
+        # the actuator: what the truth receives (the command delayed by act.delay steps,
+        # then its errors); an ideal actuator applies the command itself
+        if act.ideal:
+            u_applied[:] = u
+        elif k >= act.delay:
+            actuate(act, k, log.u_cmd[k - act.delay], u_applied)
+        else:
+            u_applied[:] = 0.0
+        log.u[k] = u_applied
         # truth step with zero-order hold: CW x_{k+1} = Φ x_k + Γ u_k (exact), or the
         # nonlinear truth integrated over the step (truth.py)
         if truth.kind == TRUTH_CW:
-            x_next = zoh_step(m.phi, m.gam, x_true, u)
+            x_next = zoh_step(m.phi, m.gam, x_true, u_applied)
         else:
-            x_next = truth_step(truth, state.chief, x_true, u)
+            x_next = truth_step(truth, state.chief, x_true, u_applied)
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
         y = x_next[:3] + m.noise[k]
-        # Kalman filter predict and update (Eqs. 11–23)
+        # Kalman filter predict (with the commanded control: the filter does not
+        # know the actuator errors) and update (Eqs. 11–23)
         x_pred, p_pred = kf_predict(x_hat, p, m.phi, m.gam, u, m.q)
         x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
         x_hat[:] = x_post

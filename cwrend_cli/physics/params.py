@@ -186,6 +186,55 @@ class Truth:
 
 
 @dataclass(frozen=True)
+class Actuator:
+    """Errors of the thruster between the commanded and the applied control (issue 15, item 2).
+
+    All off by default (an ideal actuator: the applied control is the
+    command, bit for bit). The guidance and the filter see only the command;
+    the truth receives the applied control :math:`u_a` of step k, built from
+    the command :math:`c = u_{k-d}` of ``delay_steps`` = d steps earlier
+    (zero for k < d) as (:func:`cwrend_cli.physics.actuator.actuate`)::
+
+        ‖c‖ < min_thrust_km_s2        → u_a = 0           (the thruster does not fire)
+        a   = ‖c‖ (1 + magnitude_bias + magnitude_sigma · z_k),  z_k ~ N(0, 1)
+        u_a = min(max(a, 0), u_max (1 + magnitude_bias)) · P_k R ĉ
+
+    ``R`` is the fixed misalignment, ``R = R_z(γ) R_y(β) R_x(α)`` with
+    ``misalignment_deg = (α, β, γ)``: active right-handed rotations about the
+    x (radial), y (along-track) and z (cross-track) axes of the frame the
+    control is expressed in, applied in the order x, then y, then z
+    (Diebel 2006, "Representing attitude", the 3-2-1 / z-y-x Euler sequence).
+    ``P_k`` is the per-step pointing error: a rotation by the vector
+    ``ω = σ_p (w − (w·d) d)``, ``w ~ N(0, I₃)``, d = R ĉ, i.e. two independent
+    N(0, σ_p²) tilts about axes perpendicular to the thrust, so the angle
+    between d and P_k d is ‖ω‖ with ‖ω‖²/σ_p² ~ χ²(2). The magnitude is
+    clipped at what the actuator can give, ``u_max (1 + magnitude_bias)``:
+    the scale error scales the whole throttle range, the noise never pushes
+    the thrust above that ceiling, and never below zero (with no magnitude
+    error, a factor of exactly 1, the command passes unchanged: the guidance
+    bounds it by u_max). The threshold and the draws of step k apply to the
+    delayed command.
+    """
+
+    magnitude_bias: float = 0.0  # fixed scale error b of the thrust magnitude, a fraction [-]
+    magnitude_sigma: float = 0.0  # per-step magnitude noise σ_m, a fraction of ‖c‖ [-]
+    misalignment_deg: Vec3 = (0.0, 0.0, 0.0)  # fixed rotation angles (α, β, γ) about x, y, z [deg]
+    pointing_sigma_deg: float = 0.0  # per-step pointing noise σ_p per perpendicular axis [deg]
+    min_thrust_km_s2: float = 0.0  # commands with ‖c‖ below this produce nothing [km/s²]
+    delay_steps: int = 0  # actuation delay d in whole steps [-]
+
+    @property
+    def ideal(self) -> bool:
+        """True when every error is off: the applied control is the command."""
+        return self == Actuator()
+
+    @property
+    def noisy(self) -> bool:
+        """True when a per-step random error is on (the run needs actuator draws)."""
+        return self.magnitude_sigma > 0.0 or self.pointing_sigma_deg > 0.0
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -196,6 +245,7 @@ class Problem:
     solver: Solver = field(default_factory=Solver)
     degradation: Degradation = field(default_factory=Degradation)
     truth: Truth = field(default_factory=Truth)
+    actuator: Actuator = field(default_factory=Actuator)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,12 @@ plain :class:`RunResult` that :mod:`cwrend_cli.output.tables` and the recorders 
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model.
+guidance always use the CW model. The truth receives the control the
+actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
+scale error, noise, misalignment, minimum thrust, delay); the filter predicts
+with the commanded control, which it knows, not the errors. The per-step
+actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
+made by the caller, like the measurement noise, so nothing here is random.
 
 Re-solve timing (``guidance.resolve_timing``):
 
@@ -30,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import guidance, references, sensors, truth
+from cwrend_cli.physics import actuator, guidance, references, sensors, truth
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import feasibility
 from cwrend_cli.physics.metrics import delta_v
@@ -59,7 +64,9 @@ class RunResult:
     """Per-step histories of one closed-loop run; row k is time ``t_s[k]``.
 
     Row k holds the state at t_k, the control applied over ``[t_k, t_{k+1})``
-    (zero in the last row), and the quantities of the measurement taken at
+    (``u``: what the actuator gave the truth; ``u_cmd``: what the guidance
+    commanded and the filter used; equal for an ideal actuator; zero in the
+    last row), and the quantities of the measurement taken at
     t_k (NaN in row 0, where there is none) including the ε that results.
     """
 
@@ -68,7 +75,7 @@ class RunResult:
     t_s: np.ndarray
     x_true: np.ndarray
     x_hat: np.ndarray
-    u: np.ndarray
+    u: np.ndarray  # applied control (Δv is computed from it)
     y: np.ndarray
     nis: np.ndarray
     mtf_ratio: np.ndarray
@@ -78,8 +85,9 @@ class RunResult:
     trace_p: np.ndarray
     window: np.ndarray  # index of the degradation window that corrupted the measurement, −1 none
     solves: tuple[SolveRecord, ...]
-    delta_v_km_s: float
+    delta_v_km_s: float  # trapezoid of ‖u‖ (applied) over the grid (SPEC §2)
     miss_km: float
+    u_cmd: np.ndarray  # commanded control (the filter's input)
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -186,6 +194,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         x=np.full((rows, 6), np.nan),
         x_hat=np.full((rows, 6), np.nan),
         u=np.zeros((rows, 3)),
+        u_cmd=np.zeros((rows, 3)),
         y=np.full((rows, 3), np.nan),
         nis=np.full(rows, np.nan),
         mtf_ratio=np.full(rows, np.nan),
@@ -202,8 +211,14 @@ def simulate(
     standard_normal: FloatArray,
     refs: References,
     seed: int = 0,
+    actuator_draws: actuator.ActuatorDraws | None = None,
 ) -> RunResult:
-    """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3)."""
+    """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
+
+    ``actuator_draws``: the standard-normal draws of the per-step actuator
+    errors (required when ``problem.actuator`` has per-step noise; ignored
+    where its σ is zero).
+    """
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
     settings = solver_settings(problem)
@@ -251,6 +266,7 @@ def simulate(
     sched = schedule_params(sch)
     # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
     truth_model = truth.truth_model(problem.truth, sc)
+    act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
     state = sk.LoopState(
         x_true=x0.copy(),
         x_hat=x_hat0.copy(),
@@ -269,7 +285,9 @@ def simulate(
     correct = gd.resolve_timing == "correct"
     k_next = 0
     for i, k in enumerate(schedule):
-        scalars = sk.advance(k_next, k, n_steps, model, truth_model, sched, state, scalars, log)
+        scalars = sk.advance(
+            k_next, k, n_steps, model, truth_model, act, sched, state, scalars, log
+        )
         k_next = k + 1
         t_est = (k + 1) * dt
         horizon = sc.horizon_s - (t_est if correct else k * dt)
@@ -287,7 +305,7 @@ def simulate(
         ):
             stop = schedule[i + 1] if i + 1 < len(schedule) else n_steps - 1
             _apply_min_miss(sc, state.x_hat, t_est, k + 1, stop, model.u_override, model.override)
-    sk.advance(k_next, n_steps, n_steps, model, truth_model, sched, state, scalars, log)
+    sk.advance(k_next, n_steps, n_steps, model, truth_model, act, sched, state, scalars, log)
 
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
@@ -310,6 +328,7 @@ def simulate(
         solves=tuple(solves),
         delta_v_km_s=delta_v(t, log.u),
         miss_km=miss,
+        u_cmd=log.u_cmd,
     )
 
 
