@@ -31,7 +31,7 @@ gains a jump term ``−u_max W q̂ q̂ᵀ Wᵀ / |ṗ|`` at each switching time.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -81,23 +81,25 @@ class NewtonSettings(NamedTuple):
     damping_off: float = 1e-12
 
 
-class Workspace(NamedTuple):
-    """Scratch arrays shared by the kernels of one evaluation, named by what they hold."""
+#: Scratch rows shared by the kernels of one evaluation (see :func:`workspace`).
+WS_LAM = 0  # λ(t) at the last time evaluated (read back after _speed_and_rate)
+WS_D1 = 1  # λ̇(t)
+WS_D2 = 2  # λ̈(t)
+WS_D3 = 3  # third derivative of λ(t)
+WS_LAM_T = 4  # λ at a quadrature node (step-mean control)
+WS_SWITCHES = 5  # switching times of the current evaluation (MAX_BREAKS entries)
+WS_ROWS = 6
 
-    lam: np.ndarray  # (6,) λ(t) at the last time evaluated (read back after _speed_and_rate)
-    d1: np.ndarray  # (6,) λ̇(t)
-    d2: np.ndarray  # (6,) λ̈(t)
-    d3: np.ndarray  # (6,) third derivative of λ(t)
-    lam_t: np.ndarray  # (6,) λ at a quadrature node (step-mean control)
-    switches: np.ndarray  # (MAX_BREAKS,) switching times of the current evaluation
+#: The scratch of one evaluation: a (WS_ROWS, MAX_BREAKS) array, one row per WS_* name.
+#: One array rather than a NamedTuple of six: it is passed through the hot root-finding
+#: calls, and a tuple of six arrays made the ε = 0 re-solves 20 % slower (measured).
+Workspace = np.ndarray
 
 
 @njit(cache=True)
 def workspace() -> Workspace:
-    """A fresh :class:`Workspace`."""
-    return Workspace(
-        np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(MAX_BREAKS)
-    )
+    """A fresh :data:`Workspace` (its rows are named by the ``WS_*`` constants)."""
+    return np.empty((WS_ROWS, MAX_BREAKS))
 
 
 @njit(cache=True)
@@ -170,9 +172,9 @@ def control_from_costate(lam_v: np.ndarray, eps: float, u_max: float, out: np.nd
 def _speed_and_rate(
     n: float, t: float, lam0: np.ndarray, ws: Workspace
 ) -> tuple[float, float, float]:
-    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws.lam`` holds λ(t) afterwards."""
-    lam = ws.lam
-    d1 = ws.d1
+    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM]`` holds λ(t) afterwards."""
+    lam = ws[WS_LAM]
+    d1 = ws[WS_D1]
     costate_at(n, t, lam0, lam)
     costate_derivative(n, lam, d1)
     p = np.sqrt(lam[3] ** 2 + lam[4] ** 2 + lam[5] ** 2)
@@ -186,10 +188,10 @@ def _switch_derivs(
     n: float, lam0: np.ndarray, t: float, ws: Workspace
 ) -> tuple[float, float, float, float]:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
-    lam = ws.lam
-    d1 = ws.d1
-    d2 = ws.d2
-    d3 = ws.d3
+    lam = ws[WS_LAM]
+    d1 = ws[WS_D1]
+    d2 = ws[WS_D2]
+    d3 = ws[WS_D3]
     costate_at(n, t, lam0, lam)
     costate_derivative(n, lam, d1)
     costate_derivative(n, d1, d2)
@@ -490,7 +492,7 @@ def dual_evaluate(
     ``c = −λ₀ᵀd − u_max ∫‖W(τ)ᵀλ₀‖ dτ`` (positive ⇒ no bounded control reaches
     ``x_f``) and the number of switching times found.
     """
-    switches = ws.switches
+    switches = ws[WS_SWITCHES]
     breaks = np.empty(MAX_QUAD_BREAKS)
     n_switches, n_breaks = quadrature_breaks(
         n, lam0, 0.0, horizon, eps, n_cells, switches, breaks, ws
@@ -543,7 +545,7 @@ def dual_evaluate(
                         hess[i, j] += val
     if want_hess and eps < EPS_BANG_BANG:
         # Jump terms at ε = 0: −u_max W q̂q̂ᵀWᵀ/|ṗ| at each switching time.
-        lam = ws.lam  # λ(t_s), written by _speed_and_rate below
+        lam = ws[WS_LAM]  # λ(t_s), written by _speed_and_rate below
         for s in range(n_switches):
             ts = switches[s]
             p, pdot, _ = _speed_and_rate(n, ts, lam0, ws)
@@ -626,15 +628,18 @@ def newton_ascent(
     gl_x: np.ndarray,
     gl_w: np.ndarray,
     n_cells: int,
-    settings: NewtonSettings,
+    settings_t: tuple[Any, ...],
     lam_out: np.ndarray,
 ) -> tuple[int, int, float, float]:
     """Solve one shooting problem by damped Newton / Levenberg–Marquardt ascent on ``D``.
 
     Returns ``(status, iterations, ‖Δr(T)‖, ‖Δv(T)‖)``; the costate is
     written to ``lam_out``. Status: 0 converged, 1 infeasible (certificate
-    found), 2 failed (iteration limit or stalled line search).
+    found), 2 failed (iteration limit or stalled line search). ``settings_t``
+    holds the fields of a :class:`NewtonSettings` as a plain tuple (numba
+    resolves a NamedTuple argument several times slower; named again here).
     """
+    settings = NewtonSettings(*settings_t)
     tol_pos = settings.tol_pos_km
     tol_vel = settings.tol_vel_km_s
     pf = stm(n, -horizon)

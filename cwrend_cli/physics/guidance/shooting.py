@@ -21,10 +21,11 @@ Units: km, s, km/s, km/s², rad/s.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.linalg
@@ -91,6 +92,11 @@ class SolverSettings:
         return kern.NewtonSettings(
             tol_pos_km=self.tol_pos_km, tol_vel_km_s=self.tol_vel_km_s, max_iter=self.max_iter
         )
+
+    @functools.cached_property
+    def newton_fields(self) -> tuple[Any, ...]:
+        """:meth:`newton` as the plain tuple the kernel takes, built once per settings."""
+        return tuple(self.newton())
 
     def quadrature(self) -> tuple[np.ndarray, np.ndarray]:
         """Gauss–Legendre nodes and weights on [−1, 1]."""
@@ -170,7 +176,7 @@ def _newton(
         gl_x,
         gl_w,
         n_cells(problem.horizon_s),
-        settings.newton(),
+        settings.newton_fields,
         out,
     )
     return _STATUS[status], out, iters, float(np.hypot(rp, rv))
