@@ -11,71 +11,44 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from cwrend_cli.config.schema import CwrendConfig, DegradationWindow
+from pydantic import BaseModel
+
+from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.physics import params
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
-def window_of(w: DegradationWindow) -> params.Window:
-    """One degradation window as the physics core's :class:`~params.Window`."""
-    return params.Window(start_s=w.start_s, end_s=w.end_s, r_scale=w.r_scale, bias_km=w.bias_km)
+_Params = TypeVar("_Params", bound="DataclassInstance")
+
+
+def _mirror(cls: type[_Params], section: BaseModel) -> _Params:
+    """The physics dataclass ``cls`` holding the same-named fields of a config section.
+
+    Every field of ``cls`` must exist on ``section`` (an AttributeError here
+    means the two have drifted apart; ``tests/test_config.py`` compares them).
+    """
+    return cls(**{f.name: getattr(section, f.name) for f in dataclasses.fields(cls)})
 
 
 def windows_of(cfg: CwrendConfig) -> tuple[params.Window, ...]:
     """The configured degradation windows, in order (later ones win where they overlap)."""
-    return tuple(window_of(w) for w in cfg.degradation.windows)
+    return tuple(_mirror(params.Window, w) for w in cfg.degradation.windows)
 
 
 def problem_of(cfg: CwrendConfig) -> params.Problem:
     """The closed-loop problem described by ``cfg`` (every section but noise and output)."""
-    sc, est, sch, gd, so = cfg.scenario, cfg.estimator, cfg.schedule, cfg.guidance, cfg.solver
     return params.Problem(
-        scenario=params.Scenario(
-            mean_motion_rad_s=sc.mean_motion_rad_s,
-            horizon_s=sc.horizon_s,
-            dt_s=sc.dt_s,
-            x0=sc.x0,
-            xf=sc.xf,
-            u_max_km_s2=sc.u_max_km_s2,
-        ),
-        estimator=params.Estimator(
-            r_nominal_km2=est.r_nominal_km2,
-            q_process=est.q_process,
-            p0=est.p0,
-            initial_error=est.initial_error,
-        ),
-        schedule=params.Schedule(
-            beta=sch.beta,
-            nis_offset=sch.nis_offset,
-            score_lowpass=sch.score_lowpass,
-            kappa_mtf=sch.kappa_mtf,
-            score_max=sch.score_max,
-            eps_min=sch.eps_min,
-            eps_max=sch.eps_max,
-            alpha_eps=sch.alpha_eps,
-            deadband=sch.deadband,
-            eps_saturation=sch.eps_saturation,
-            eps_fixed=sch.eps_fixed,
-        ),
-        guidance=params.Guidance(
-            t_resolve_s=gd.t_resolve_s,
-            t_min_rem_s=gd.t_min_rem_s,
-            resolve_timing=gd.resolve_timing,
-            hold=gd.hold,
-        ),
-        solver=params.Solver(
-            fallback=so.fallback,
-            on_infeasible=so.on_infeasible,
-            success_residual=so.success_residual,
-            tol_pos_km=so.tol_pos_km,
-            tol_vel_km_s=so.tol_vel_km_s,
-            max_iter=so.max_iter,
-            quadrature_nodes=so.quadrature_nodes,
-        ),
+        scenario=_mirror(params.Scenario, cfg.scenario),
+        estimator=_mirror(params.Estimator, cfg.estimator),
+        schedule=_mirror(params.Schedule, cfg.schedule),
+        guidance=_mirror(params.Guidance, cfg.guidance),
+        solver=_mirror(params.Solver, cfg.solver),
         degradation=params.Degradation(windows=windows_of(cfg)),
-        truth=params.Truth(**cfg.truth.model_dump()),
-        actuator=params.Actuator(**cfg.actuator.model_dump()),
+        truth=_mirror(params.Truth, cfg.truth),
+        actuator=_mirror(params.Actuator, cfg.actuator),
     )
 
 
