@@ -25,7 +25,10 @@ magnitude and pointing from its children 0 and 1,
 :func:`cwrend_cli.physics.actuator.draw`). They are drawn here, outside the
 physics, and only when the run's actuator has per-step noise; switching one
 on changes no other draw, and a run with the actuator ideal gets exactly the
-numbers it had before actuators existed.
+numbers it had before actuators existed. ``(seed, 3)`` the sensor faults of
+the degradation windows (:func:`fault_seed_sequence`; children 0 dropout,
+1 outlier, 2 bias drift, :func:`cwrend_cli.physics.sensors.draw_faults`),
+drawn only for the fault kinds some window of the run switches on.
 """
 
 from __future__ import annotations
@@ -61,6 +64,8 @@ __all__ = [
     "actuator_draws",
     "actuator_seed_sequence",
     "execute_task",
+    "fault_draws",
+    "fault_seed_sequence",
     "noise_seed_sequence",
     "references_key",
     "run_case",
@@ -100,6 +105,18 @@ def actuator_draws(problem: Problem, root_seed: int, seed: int) -> actuator.Actu
     return actuator.draw(actuator_seed_sequence(root_seed, seed), problem.scenario.n_steps)
 
 
+def fault_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the sensor faults of realisation ``seed`` (independent of every other)."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 3))
+
+
+def fault_draws(problem: Problem, root_seed: int, seed: int) -> sensors.FaultDraws | None:
+    """The sensor-fault draws of realisation ``seed``, or ``None`` when every fault is off."""
+    return sensors.draw_faults(
+        fault_seed_sequence(root_seed, seed), problem.scenario.n_steps, problem.degradation.windows
+    )
+
+
 def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
     """The standard-normal realisation (N, 3) of ``seed`` from ``noise``.
 
@@ -135,8 +152,12 @@ def run_case(
     problem = problem_of(cfg)
     refs = refs if refs is not None else simulation.open_loop_references(problem)
     draws = actuator_draws(problem, cfg.noise.seed, seed)
+    faults = fault_draws(problem, cfg.noise.seed, seed)
     runs = tuple(
-        simulation.simulate(problem, a, noise, refs, seed=seed, actuator_draws=draws) for a in archs
+        simulation.simulate(
+            problem, a, noise, refs, seed=seed, actuator_draws=draws, fault_draws=faults
+        )
+        for a in archs
     )
     return CaseResult(runs, refs)
 
@@ -223,6 +244,7 @@ def execute_task(
                 run_refs,
                 spec.seed,
                 actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
+                fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
             )
             metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))

@@ -407,7 +407,10 @@ class DegradationWindow(_FrozenModel):
     and ``bias_km`` is added to each measurement. Where windows overlap, the
     later one in the list applies, so the paper's windows [250, 325] and
     [325, 400] give the second one at t = 325 s. Outside every window the true
-    covariance is R_nominal and there is no bias.
+    covariance is R_nominal and there is no bias. Sensor faults (issue 15,
+    item 3; all off by default; :class:`cwrend_cli.physics.params.Window`):
+    dropouts, outliers (a contaminated Gaussian) and a bias drifting as a
+    random walk while the window is active.
     """
 
     start_s: Float = Field(ge=0, description="window start time (inclusive) [s]")
@@ -416,6 +419,20 @@ class DegradationWindow(_FrozenModel):
         1.0, gt=0, description="true measurement covariance = r_scale * R_nominal [-]"
     )
     bias_km: Vec3 = Field((0.0, 0.0, 0.0), description="measurement bias added while active [km]")
+    dropout_probability: Float = Field(
+        0.0, ge=0, le=1, description="probability of no measurement on a step; 1 = blackout [-]"
+    )
+    outlier_probability: Float = Field(
+        0.0, ge=0, le=1, description="probability that a step's noise is an outlier [-]"
+    )
+    outlier_scale: Float = Field(
+        1.0, ge=0, description="factor on the Gaussian noise of an outlier step [-]"
+    )
+    bias_drift_km_per_sqrt_s: Float = Field(
+        0.0,
+        ge=0,
+        description="random-walk intensity q of the bias: N(0, q² Δt) per step and axis [km/√s]",
+    )
 
     @field_validator("bias_km", mode="before")
     @classmethod
@@ -432,7 +449,16 @@ class DegradationWindow(_FrozenModel):
 
 
 _PAPER_WINDOWS = tuple(
-    DegradationWindow(start_s=w.start_s, end_s=w.end_s, r_scale=w.r_scale, bias_km=w.bias_km)
+    DegradationWindow(
+        start_s=w.start_s,
+        end_s=w.end_s,
+        r_scale=w.r_scale,
+        bias_km=w.bias_km,
+        dropout_probability=w.dropout_probability,
+        outlier_probability=w.outlier_probability,
+        outlier_scale=w.outlier_scale,
+        bias_drift_km_per_sqrt_s=w.bias_drift_km_per_sqrt_s,
+    )
     for w in _PAPER.degradation.windows
 )
 

@@ -6,6 +6,12 @@ step → measurement (noise of the window at t_k) → KF predict (with the
 commanded control) → innovation, NIS, MTF → update → score → ε → [re-solve,
 done by the caller] → costate propagated by Δt.
 
+A dropout step (``LoopModel.dropout``, a sensor fault of the window at t_k,
+:mod:`cwrend_cli.physics.sensors`) has no measurement: the filter predicts
+only (x̂ = x⁻, P = P⁻), NIS, MTF ratio, score and measurement are logged as
+NaN, the filtered score s̄ and ε are held (no score, so no update of Eqs.
+24–26), and the re-solves go on from the predicted estimate.
+
 The loop runs in compiled code between re-solves; :func:`advance` stops right
 after the ε update of a step that has a re-solve due, and the Python driver
 performs the re-solve and sets the costate. Its inputs are a few typed
@@ -61,6 +67,7 @@ class LoopModel(NamedTuple):
     hold_mean: bool  # control averaged over the step, else sampled at its start
     u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
     override: np.ndarray  # (N,) bool
+    dropout: np.ndarray  # (N,) bool: no measurement at t_{k+1} (predict only)
 
 
 class ScheduleParams(NamedTuple):
@@ -103,11 +110,11 @@ class StepLog(NamedTuple):
     x_hat: np.ndarray  # (N+1, 6)
     u: np.ndarray  # (N+1, 3) control applied (actuated) over [t_k, t_{k+1}) (row k)
     u_cmd: np.ndarray  # (N+1, 3) control commanded at t_k (row k): what the filter uses
-    y: np.ndarray  # (N+1, 3) measurement
-    nis: np.ndarray  # (N+1,)
-    mtf_ratio: np.ndarray  # (N+1,)
-    score: np.ndarray  # (N+1,)
-    score_filtered: np.ndarray  # (N+1,)
+    y: np.ndarray  # (N+1, 3) measurement (NaN on a dropout)
+    nis: np.ndarray  # (N+1,) (NaN on a dropout)
+    mtf_ratio: np.ndarray  # (N+1,) (NaN on a dropout)
+    score: np.ndarray  # (N+1,) (NaN on a dropout)
+    score_filtered: np.ndarray  # (N+1,) (held on a dropout; NaN before any measurement)
     eps: np.ndarray  # (N+1,)
     trace_p: np.ndarray  # (N+1,)
 
@@ -244,6 +251,27 @@ def _advance(
         # Kalman filter predict (with the commanded control: the filter does not
         # know the actuator errors) and update (Eqs. 11–23)
         x_pred, p_pred = kf_predict(x_hat, p, m.phi, m.gam, u, m.q)
+        if m.dropout[k]:
+            # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
+            x_hat[:] = x_pred
+            p[:, :] = p_pred
+            row = k + 1
+            log.x[row] = x_next
+            log.x_hat[row] = x_pred
+            log.y[row] = np.nan
+            log.nis[row] = np.nan
+            log.mtf_ratio[row] = np.nan
+            log.score[row] = np.nan
+            log.score_filtered[row] = np.nan if first else sbar
+            log.eps[row] = eps
+            log.trace_p[row] = (
+                p_pred[0, 0] + p_pred[1, 1] + p_pred[2, 2]
+                + p_pred[3, 3] + p_pred[4, 4] + p_pred[5, 5]
+            )  # fmt: skip
+            if k == k_stop:
+                break  # the caller re-solves and sets the costate
+            _propagate_costate(m.lam_step, lam, lam_next)
+            continue
         x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
         x_hat[:] = x_post
         p[:, :] = p_post
@@ -275,11 +303,16 @@ def _advance(
         )
         if k == k_stop:
             break  # the caller re-solves and sets the costate
-        # costate propagated exactly by one step: λ ← e^{−AᵀΔt} λ
-        for i in range(6):
-            acc = 0.0
-            for j in range(6):
-                acc += m.lam_step[i, j] * lam[j]
-            lam_next[i] = acc
-        lam[:] = lam_next
+        _propagate_costate(m.lam_step, lam, lam_next)
     return eps, sbar, first
+
+
+@njit(cache=True)
+def _propagate_costate(lam_step: np.ndarray, lam: np.ndarray, scratch: np.ndarray) -> None:
+    """The costate propagated exactly by one step, in place: λ ← e^{−AᵀΔt} λ."""
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += lam_step[i, j] * lam[j]
+        scratch[i] = acc
+    lam[:] = scratch

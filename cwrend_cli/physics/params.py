@@ -132,13 +132,32 @@ class Window:
     """One sensor-degradation interval, active on ``start_s ≤ t ≤ end_s`` (SPEC §6).
 
     While active the true measurement covariance is ``r_scale · R_nominal``
-    and ``bias_km`` is added to each measurement.
+    and ``bias_km`` is added to each measurement. The sensor faults of
+    issue 15 (item 3) compose with these, all off by default
+    (:func:`cwrend_cli.physics.sensors.measurement_noise`); for a step k whose
+    measurement carries this window (the window active at t_k):
+
+    * ``dropout_probability`` p_d: no measurement with probability p_d (the
+      filter predicts only; 1.0 is a blackout);
+    * ``outlier_probability`` p_o, ``outlier_scale`` c: with probability p_o
+      the Gaussian part of the noise is multiplied by c (a contaminated
+      Gaussian, Huber 1964, "Robust estimation of a location parameter");
+    * ``bias_drift_km_per_sqrt_s`` q: the bias is ``bias_km + d_k`` with
+      ``d`` a random walk (Wiener process sampled at the steps,
+      Maybeck 1979, *Stochastic Models, Estimation and Control* vol. 1,
+      §4.3): d = 0 on the window's first active step, each further active
+      step adds an N(0, q² Δt I₃) increment; it does not persist after the
+      window.
     """
 
     start_s: float
     end_s: float
     r_scale: float = 1.0
     bias_km: Vec3 = (0.0, 0.0, 0.0)
+    dropout_probability: float = 0.0  # probability of no measurement on a step [-]
+    outlier_probability: float = 0.0  # probability of an outlier on a step [-]
+    outlier_scale: float = 1.0  # factor on the Gaussian noise of an outlier step [-]
+    bias_drift_km_per_sqrt_s: float = 0.0  # random-walk intensity q of the bias [km/√s]
 
     @property
     def label(self) -> str:

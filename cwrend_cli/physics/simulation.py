@@ -14,6 +14,12 @@ scale error, noise, misalignment, minimum thrust, delay); the filter predicts
 with the commanded control, which it knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
+So are the draws of the sensor faults of the degradation windows
+(:class:`~cwrend_cli.physics.sensors.FaultDraws`: dropouts, outliers, a
+drifting bias; :func:`cwrend_cli.physics.sensors.sensor_noise`). A dropout
+step has no measurement: the filter predicts only, its NIS, MTF ratio, score
+and measurement are NaN and the filtered score and ε are held
+(:mod:`cwrend_cli.physics._loop_kernels`).
 
 Re-solve timing (``guidance.resolve_timing``):
 
@@ -67,7 +73,8 @@ class RunResult:
     (``u``: what the actuator gave the truth; ``u_cmd``: what the guidance
     commanded and the filter used; equal for an ideal actuator; zero in the
     last row), and the quantities of the measurement taken at
-    t_k (NaN in row 0, where there is none) including the ε that results.
+    t_k (NaN in row 0, where there is none, and in the rows of a sensor dropout)
+    including the ε that results.
     """
 
     arch: str
@@ -212,12 +219,15 @@ def simulate(
     refs: References,
     seed: int = 0,
     actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
 
     ``actuator_draws``: the standard-normal draws of the per-step actuator
     errors (required when ``problem.actuator`` has per-step noise; ignored
-    where its σ is zero).
+    where its σ is zero). ``fault_draws``: the draws of the degradation
+    windows' sensor faults (required for the kinds some window switches on,
+    :func:`cwrend_cli.physics.sensors.draw_faults`).
     """
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
@@ -226,9 +236,10 @@ def simulate(
     t = sc.time_grid()
     phi, gam = discretize(n, dt)
     r_nominal = est.r_nominal_matrix()
-    noise, active = sensors.measurement_noise(
-        standard_normal, t[:-1], r_nominal, problem.degradation.windows
+    meas = sensors.sensor_noise(
+        standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
     )
+    noise, active = meas.noise, meas.active
 
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (SPEC §3) unless an initial error is set
@@ -262,6 +273,7 @@ def simulate(
         hold_mean=gd.hold == "mean",
         u_override=np.zeros((n_steps, 3)),
         override=np.zeros(n_steps, dtype=np.bool_),
+        dropout=meas.dropout,
     )
     sched = schedule_params(sch)
     # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
