@@ -36,14 +36,23 @@ from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.console import (
     RichProgress,
     ablation_console_table,
+    compare_console_tables,
     paired_console_table,
     summary_console_table,
     sweep_console_table,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
-from cwrend_cli.output.files import write_run
-from cwrend_cli.output.layout import ABLATION_STATS, RUN_RECORDING, SWEEP_STATS
+from cwrend_cli.output.files import write_parquet, write_run
+from cwrend_cli.output.layout import (
+    ABLATION_STATS,
+    COMPARE_FIGURE,
+    COMPARE_STATS,
+    MANIFEST,
+    RUN_RECORDING,
+    SWEEP_STATS,
+    compare_dir,
+)
 
 app = typer.Typer(
     name="cwrend",
@@ -556,3 +565,79 @@ def report(
             typer.echo(str(path))
         for note in summary.notes:
             _stderr().print(f"note: {note}", markup=False)
+
+
+# ---------------------------------------------------------------------------
+# Compare two campaigns
+# ---------------------------------------------------------------------------
+
+
+@app.command("compare", short_help="Paired differences A − B of two campaigns' shared runs.")
+def compare(
+    a: Annotated[Path, typer.Argument(help="Campaign directory A (ablate or sweep).", metavar="A")],
+    b: Annotated[
+        Path, typer.Argument(help="Campaign directory B, on the same noise.", metavar="B")
+    ],
+    metric: Annotated[
+        str,
+        typer.Option(
+            "--metric",
+            "-m",
+            help="Metrics, comma-separated: miss, dv, fuel (or miss_km, delta_v_km_s, "
+            "fuel_penalty_pct).",
+            metavar="LIST",
+        ),
+    ] = "miss,dv",
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Directory for compare.parquet and compare.png (default: beside A, "
+            "<A's parent>/compare-<A>-vs-<B>).",
+            metavar="DIR",
+        ),
+    ] = None,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="Print nothing but errors (no tables).")
+    ] = False,
+) -> None:
+    """Compare two campaigns seed by seed on the runs they share.
+
+    Runs match on architecture, seed and grid point; grid points match by
+    their swept values (equal on every key both campaigns sweep; a key swept
+    by one campaign only becomes a column of the result). Refused (exit 2)
+    when the campaigns do not share noise (another noise.seed or noise file)
+    or share no run. Per architecture: mean and median of the per-seed
+    differences A − B with 95 % bootstrap intervals, and the share of seeds
+    where A is lower (better), with its Wilson interval. Writes
+    compare.parquet and compare.png; never into A or B unless --out says so.
+    """
+    with user_errors():
+        from cwrend_cli.campaign import compare as cmp
+        from cwrend_cli.report import write_compare_figure
+
+        metrics = cmp.parse_metrics(metric)
+        result = cmp.compare(cmp.load_campaign(a), cmp.load_campaign(b), metrics)
+        if out is None:
+            out = a.resolve().parent / compare_dir(a.resolve().name, b.resolve().name)
+            if (out / MANIFEST).exists():
+                raise ConfigError(f"{out} is a campaign directory: name another with --out")
+        out.mkdir(parents=True, exist_ok=True)
+        write_parquet(cmp.compare_table(result), out / COMPARE_STATS)
+        write_compare_figure(result.frame, a.name, b.name, out / COMPARE_FIGURE)
+        if not quiet:
+            stdout = Console(highlight=False)
+            stdout.print(
+                f"cwrend compare: {result.compared} run pair(s) on the same noise\n"
+                f"A = {a}\nB = {b}",
+                markup=False,
+                soft_wrap=True,  # paths must stay copyable
+            )
+            tables = compare_console_tables(result.frame, list(result.groups), "A − B")
+            for table in tables:
+                stdout.print(table)
+            err = _stderr()
+            for note in result.notes:
+                err.print(f"note: {note}", markup=False)
+            err.print(f"results written to {out}", soft_wrap=True, markup=False)

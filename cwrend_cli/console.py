@@ -247,3 +247,70 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
         "means, 95 % bootstrap interval below; all statistics in sweep.parquet", marginal
     )
     return table
+
+
+#: Console heading and scale of each compared metric (misses in m, as everywhere on the console).
+_COMPARE_METRICS: dict[str, tuple[str, float, str]] = {
+    "miss_km": ("miss m", 1e3, ".2f"),
+    "delta_v_km_s": ("Δv km/s", 1.0, ".4f"),
+    "fuel_penalty_pct": ("fuel pen. %", 1.0, ".2f"),
+}
+
+
+def _point_title(first: pd.Series, groups: list[str]) -> str:
+    """The swept values of a compared pair of grid points (empty for two ablations)."""
+    values = [
+        f"{g.removeprefix('param.')} = {first[g]:g}"
+        if isinstance(first[g], float)
+        else f"{g.removeprefix('param.')} = {first[g]}"
+        for g in groups
+        if g.startswith("param.")
+    ]
+    return ", ".join(values)
+
+
+def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -> list[Table]:
+    """``cwrend compare``: per architecture and metric, A − B per seed (fits 80 columns).
+
+    One table per matched pair of grid points (one for two ablations): mean
+    and median of the per-seed differences with bootstrap intervals, and the
+    share of seeds where A is lower (better), with its Wilson interval.
+    """
+    tables = []
+    grouped = frame.groupby(groups, sort=False, dropna=False) if groups else [((), frame)]
+    for _, part in grouped:
+        point = _point_title(part.iloc[0], groups)
+        table = Table(
+            title=f"{title}{' · ' + point if point else ''}",
+            title_style="bold",
+            header_style="bold cyan",
+            box=box.SIMPLE_HEAD,
+        )
+        table.add_column("architecture", no_wrap=True)
+        table.add_column("metric", no_wrap=True)
+        for name in ("mean Δ", "median Δ", "A better"):
+            table.add_column(name, justify="right", overflow="fold")
+        ties = 0
+        for arch, g in part.groupby("arch", sort=False):
+            n = int(g["n"].iloc[0])
+            for i, metric in enumerate(m for m in _COMPARE_METRICS if m in set(g["metric"])):
+                label, scale, spec = _COMPARE_METRICS[metric]
+                get = {r.statistic: r for _, r in g[g["metric"] == metric].iterrows()}
+                ties += round(float(get["frac_tied"]["value"]) * n)
+                table.add_row(
+                    f"{arch}\n[dim]{n} seed(s)[/dim]" if i == 0 else "",
+                    label,
+                    _ci(get["mean_diff"], spec, scale),
+                    _ci(get["median_diff"], spec, scale),
+                    _ci(get["frac_better"], ".2f", bootstrap=False),
+                )
+        text = (
+            "Δ = A − B per seed; 95 % interval below (bootstrap; Wilson for\n"
+            "A better, the share of seeds with A < B)"
+        )
+        if ties:
+            text += f"\n{ties} tie(s) (A = B exactly) count as not better"
+        bootstrap_rows = part[part["statistic"].isin(["mean_diff", "median_diff"])]
+        table.caption = _caption(text, bootstrap_rows)
+        tables.append(table)
+    return tables

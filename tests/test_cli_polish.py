@@ -30,6 +30,7 @@ HELP_COMMANDS = (
     ["ablate"],
     ["sweep"],
     ["report"],
+    ["compare"],
     ["config"],
     ["config", "show"],
     ["config", "validate"],

@@ -10,6 +10,9 @@
   (:mod:`~cwrend_cli.campaign.executors`), journals every finished task,
   writes the open-loop references and the statistics files
   (:mod:`~cwrend_cli.campaign.statistics`).
+* :mod:`~cwrend_cli.campaign.compare` (pure computation): two campaign
+  directories paired on their shared runs (``cwrend compare``); imported by
+  name, not re-exported here.
 
 The names below are the public API.
 """

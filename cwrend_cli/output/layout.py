@@ -7,6 +7,8 @@ holds :data:`MANIFEST`, :data:`RUNS`, :data:`EVENTS`, the statistics file,
 and the datasets :data:`STEPS`, :data:`SOLVES` (``<dir>/arch=<slug>/*.parquet``),
 :data:`RECORDINGS` (:func:`recording_path`) and :data:`REFERENCES`
 (:func:`references_path`). The campaign writes them, the report reads them.
+``cwrend compare A B`` writes :data:`COMPARE_STATS` and :data:`COMPARE_FIGURE`
+into :func:`compare_dir` (beside A) unless told where.
 """
 
 from __future__ import annotations
@@ -30,6 +32,10 @@ REFERENCES = "references"
 ABLATION_STATS = "ablation.parquet"
 SWEEP_STATS = "sweep.parquet"
 
+# Two campaigns compared (``cwrend compare A B``)
+COMPARE_STATS = "compare.parquet"
+COMPARE_FIGURE = "compare.png"
+
 #: Where ``cwrend report`` writes its figures and report.md, inside a results directory.
 REPORT_DIR = "report"
 
@@ -42,3 +48,8 @@ def references_path(point: str) -> str:
 def recording_path(point: str, seed: int) -> str:
     """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
     return f"{RECORDINGS}/{point}.s{seed:06d}.rrd"
+
+
+def compare_dir(a: str, b: str) -> str:
+    """Default directory of ``cwrend compare A B`` (relative to A's parent): never inside A."""
+    return f"compare-{a}-vs-{b}"

@@ -8,7 +8,7 @@ and ``report.md``, ``write`` saves them all into ``RESULTS_DIR/report/``.
 
 from cwrend_cli.report.load import ReportData, ReportError, load_results
 from cwrend_cli.report.markdown import markdown_table
-from cwrend_cli.report.write import ReportSummary, write_report
+from cwrend_cli.report.write import ReportSummary, write_compare_figure, write_report
 
 __all__ = [
     "ReportData",
@@ -16,5 +16,6 @@ __all__ = [
     "ReportSummary",
     "load_results",
     "markdown_table",
+    "write_compare_figure",
     "write_report",
 ]

@@ -37,7 +37,7 @@ from matplotlib.collections import Collection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
-from matplotlib.ticker import FuncFormatter, NullFormatter
+from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
 
 from cwrend_cli.config import ARCHITECTURES
@@ -835,3 +835,86 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
         elif entry.applies(data):
             out.append(PlannedFigure(entry.file, entry.caption, partial(entry.draw, data)))
     return tuple(out)
+
+
+# ---------------------------------------------------------------------------
+# Two campaigns compared (``cwrend compare``; not part of a report)
+# ---------------------------------------------------------------------------
+
+#: Axis label and scale of each compared metric (misses in m).
+_COMPARE_AXES: dict[str, tuple[str, float]] = {
+    "miss_km": ("miss, A − B [m]", 1e3),
+    "delta_v_km_s": ("Δv, A − B [km/s]", 1.0),
+    "fuel_penalty_pct": ("fuel penalty, A − B [points of %]", 1.0),
+}
+_SHARE_MARKERS = ("s", "^", "v")
+
+
+def _compare_row_label(first: pd.Series, groups: Sequence[str]) -> str:
+    values = [
+        f"{g.removeprefix(PARAM_PREFIX)} = {first[g]:g}"
+        if isinstance(first[g], float)
+        else f"{g.removeprefix(PARAM_PREFIX)} = {first[g]}"
+        for g in groups
+        if g.startswith(PARAM_PREFIX)
+    ]
+    label = arch_label(str(first["arch"]))
+    return "\n".join([label, *values])
+
+
+def fig_compare(frame: pd.DataFrame, label_a: str, label_b: str) -> Figure:
+    """Paired differences A − B per architecture (and grid point) with 95 % intervals.
+
+    ``frame`` holds the rows of ``compare.parquet``. One panel per metric: the
+    mean (circle) and median (diamond) of the per-seed differences with their
+    bootstrap intervals, zero marked; a last panel: the share of seeds where
+    A is lower, with its Wilson interval, one half marked.
+    """
+    groups = [c for c in frame.columns if c in ("point_a", "point_b") or c.startswith(PARAM_PREFIX)]
+    metrics = [m for m in _COMPARE_AXES if m in set(frame["metric"])]
+    keys = [*groups, "arch"]
+    rows = list(frame.groupby(keys, sort=False, dropna=False)) if keys else []
+    archs = list(dict.fromkeys(str(a) for a in frame["arch"]))
+    fig = _figure(3.9 * (len(metrics) + 1) + 1.5, 2.2 + 0.8 * max(2, len(rows)))
+    axes = np.atleast_1d(fig.subplots(1, len(metrics) + 1, sharey=True))
+    ys = np.arange(len(rows))[::-1].astype(float)
+    labels = []
+    for y, (_, g) in zip(ys, rows, strict=True):
+        first = g.iloc[0]
+        labels.append(_compare_row_label(first, groups))
+        colour = arch_colour(str(first["arch"]), archs.index(str(first["arch"])))
+        for ax, metric in zip(axes, metrics, strict=False):
+            scale = _COMPARE_AXES[metric][1]
+            get = {r.statistic: r for _, r in g[g["metric"] == metric].iterrows()}
+            for name, marker, dy in (("mean_diff", "o", 0.13), ("median_diff", "D", -0.13)):
+                r = get[name]
+                err = np.array([[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]]) * scale
+                ax.errorbar(r["value"] * scale, y + dy, xerr=np.nan_to_num(err), fmt=marker,
+                            color=colour, ms=6, capsize=3, lw=1.6)  # fmt: skip
+        for i, metric in enumerate(metrics):
+            r = g[(g["metric"] == metric) & (g["statistic"] == "frac_better")].iloc[0]
+            err = np.array([[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]])
+            dy = 0.2 * (i - (len(metrics) - 1) / 2)
+            axes[-1].errorbar(r["value"], y - dy, xerr=np.nan_to_num(err), color=colour,
+                              fmt=_SHARE_MARKERS[i % 3], ms=6, capsize=3, lw=1.6)  # fmt: skip
+    for ax, metric in zip(axes, metrics, strict=False):
+        ax.axvline(0.0, color="black", lw=1)
+        ax.set_xlabel(_COMPARE_AXES[metric][0])
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4))  # long labels such as −0.0035
+    axes[-1].axvline(0.5, color="black", lw=1, ls="--")
+    axes[-1].set_xlim(-0.02, 1.02)
+    axes[-1].set_xlabel("share of seeds where A is lower")
+    axes[0].set_yticks(ys, labels)
+    axes[0].set_ylim(-0.7, len(rows) - 0.3)
+    n = int(frame["n"].max()) if not frame.empty else 0
+    handles = [
+        Line2D([], [], marker="o", ls="", color="black", label="mean of A − B (95 % bootstrap)"),
+        Line2D([], [], marker="D", ls="", color="black", label="median of A − B (95 % bootstrap)"),
+    ]
+    for i, m in enumerate(metrics):
+        what = _COMPARE_AXES[m][0].split(",")[0]
+        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i % 3], ls="", color="black",
+                              label=f"share A lower, {what} (95 % Wilson)"))  # fmt: skip
+    _legend_below(fig, handles, ncol=2 if len(handles) == 4 else 3)
+    fig.suptitle(f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})")
+    return _finished(fig)

@@ -2,8 +2,9 @@
 
 Writes into ``RESULTS_DIR/report/`` (each file atomically): the figures of
 :data:`~cwrend_cli.report.figures.FIGURES` that apply, as PNG, then
-``report.md`` with the tables and the figures with their captions. This is
-the one place where the report writes files.
+``report.md`` with the tables and the figures with their captions; and the
+figure of ``cwrend compare`` (:func:`write_compare_figure`). This is the one
+place where the report writes files.
 """
 
 from __future__ import annotations
@@ -12,11 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib as mpl
+import pandas as pd
 from matplotlib.figure import Figure
 
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.output.layout import REPORT_DIR
-from cwrend_cli.report.figures import DPI, STYLE, planned_figures
+from cwrend_cli.report.figures import DPI, STYLE, fig_compare, planned_figures
 from cwrend_cli.report.load import Layout, load_results
 from cwrend_cli.report.markdown import report_md
 
@@ -71,3 +73,9 @@ def write_report(results_dir: Path, seed: int | None = None) -> ReportSummary:
         files=(*figures, md),
         notes=data.notes,
     )
+
+
+def write_compare_figure(frame: pd.DataFrame, label_a: str, label_b: str, path: Path) -> Path:
+    """Draw :func:`~cwrend_cli.report.figures.fig_compare` in the report's style; save as PNG."""
+    with mpl.rc_context(STYLE):
+        return _save(fig_compare(frame, label_a, label_b), path)

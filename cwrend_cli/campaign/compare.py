@@ -1,0 +1,364 @@
+"""Paired comparison of two campaign directories on the runs they share (pure computation).
+
+Two campaigns A and B (``cwrend ablate`` / ``cwrend sweep`` directories) are
+compared run by run where they ran the same noise realisation:
+
+* **Noise.** Seed k is the same realisation in both only when both draw it
+  from the same root ``noise.seed`` (``root_seed`` in ``manifest.json``; it
+  also keys the dispersion draws, actuator errors and sensor faults) and the same
+  ``noise.file`` (same path, or files with identical bytes). A grid point
+  that sweeps ``noise.seed`` / ``noise.file`` uses its swept value.
+  :func:`compare` refuses two campaigns that share no noise.
+* **Matching.** A run of A and a run of B match when they have the same
+  architecture and seed and their grid points match. Grid points are
+  matched by their **swept values**, never by their ids: on every key that
+  both campaigns sweep the values must be equal (numbers to a relative
+  1e-9, so ``6e-4:1e-3:3`` and ``0.0008`` meet); a key that only one
+  campaign sweeps does not restrict the match (the other campaign ran its
+  base value throughout) and becomes a grouping column of the result. Two
+  ablations match base point to base point.
+* **Statistics.** Per group (matched pair of points) and architecture, on
+  the matched runs that succeeded in both: for each metric the per-seed
+  difference d = A − B; ``mean_diff`` (the mean of d, which is the
+  difference of the means) and ``median_diff`` (the median of d, the typical
+  seed's change, not the difference of the medians) with 95 % percentile
+  bootstrap intervals (:func:`~cwrend_cli.campaign.statistics.bootstrap_ci`,
+  seeded from the shared root seed), ``frac_better`` (share of seeds with
+  A < B: lower is better for every metric; ties count as not better) with
+  its Wilson interval, and ``frac_tied`` (share with A = B exactly, no
+  interval).
+
+The rows have the long format of ``ablation.parquet`` (``kind`` = ``paired``,
+``arch``, ``metric``, ``statistic``, ``value``, ``ci_low``, ``ci_high``,
+``n``) plus ``point_a``, ``point_b`` and the swept values ``param.<key>``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from cwrend_cli import __version__
+from cwrend_cli.campaign.statistics import METRICS, bootstrap_ci, wilson_ci
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.layout import MANIFEST, RUNS
+from cwrend_cli.output.tables import PARAM_PREFIX, param_columns
+
+__all__ = [
+    "DEFAULT_METRICS",
+    "METRIC_ALIASES",
+    "Campaign",
+    "Comparison",
+    "Matched",
+    "compare",
+    "compare_table",
+    "load_campaign",
+    "match_runs",
+    "parse_metrics",
+]
+
+#: Short names accepted by ``--metric`` besides the column names of ``runs.parquet``.
+METRIC_ALIASES: Mapping[str, str] = {
+    "miss": "miss_km",
+    "dv": "delta_v_km_s",
+    "fuel": "fuel_penalty_pct",
+}
+DEFAULT_METRICS = ("miss_km", "delta_v_km_s")
+#: Relative tolerance of equal swept numbers across campaigns.
+_RTOL = 1e-9
+_NOISE_KEYS = ("noise.seed", "noise.file")
+
+
+def parse_metrics(text: str) -> tuple[str, ...]:
+    """``miss,dv`` → ``("miss_km", "delta_v_km_s")``; unknown names raise :class:`ConfigError`."""
+    out: list[str] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        name = METRIC_ALIASES.get(part, part)
+        if name not in METRICS:
+            allowed = ", ".join([*METRIC_ALIASES, *METRICS])
+            raise ConfigError(f"--metric {part!r}: unknown metric (allowed: {allowed})")
+        if name not in out:
+            out.append(name)
+    if not out:
+        raise ConfigError(f"--metric {text!r}: name at least one of {', '.join(METRIC_ALIASES)}")
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A campaign directory as compared: its manifest and ``runs.parquet``."""
+
+    path: Path
+    manifest: Mapping[str, Any]
+    runs: pd.DataFrame
+
+    @property
+    def root_seed(self) -> int:
+        """``noise.seed`` of the base config (keys every random stream of a seed)."""
+        return int(self.manifest["root_seed"])
+
+    @property
+    def noise_file(self) -> str | None:
+        """``noise.file`` of the base config (``None``: the seeded stream)."""
+        noise = self.manifest.get("config", {}).get("noise", {})
+        file = noise.get("file") if isinstance(noise, Mapping) else None
+        return None if file is None else str(file)
+
+    @property
+    def swept(self) -> tuple[str, ...]:
+        """The ``param.<key>`` columns of ``runs.parquet`` (keys swept by the grid)."""
+        return tuple(param_columns(self.runs.columns))
+
+
+def load_campaign(path: Path) -> Campaign:
+    """Read a campaign directory; :class:`ConfigError` when it is not one."""
+    manifest_path, runs_path = path / MANIFEST, path / RUNS
+    if not manifest_path.is_file() or not runs_path.is_file():
+        raise ConfigError(
+            f"{path}: not a campaign directory (no {MANIFEST} and {RUNS}; "
+            "compare the output of cwrend ablate or cwrend sweep)"
+        )
+    try:
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+        runs = pd.read_parquet(runs_path)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: unreadable campaign ({exc})") from None
+    if "root_seed" not in manifest:
+        raise ConfigError(f"{manifest_path}: no root_seed (not a cwrend campaign manifest)")
+    runs["arch"] = runs["arch"].astype(str)
+    runs["point"] = runs["point"].astype(str)
+    return Campaign(path, manifest, runs)
+
+
+# ---------------------------------------------------------------------------
+# Noise and matching
+# ---------------------------------------------------------------------------
+
+
+def _file_digest(path: str) -> str | None:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _same_file(a: str | None, b: str | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    if a == b:
+        return True
+    da = _file_digest(a)
+    return da is not None and da == _file_digest(b)
+
+
+def _noise_of(c: Campaign, row: Mapping[str, Any]) -> tuple[int, int, str | None]:
+    """(root seed, measurement-noise seed, noise file) of a grid point of ``c``."""
+    seed, file = c.root_seed, c.noise_file
+    swept_seed, swept_file = (row.get(PARAM_PREFIX + k) for k in _NOISE_KEYS)
+    if swept_seed is not None and not _missing(swept_seed):
+        seed = int(swept_seed)
+    if swept_file is not None and not _missing(swept_file):
+        file = str(swept_file)
+    return c.root_seed, seed, file
+
+
+def _missing(value: Any) -> bool:
+    return isinstance(value, float) and math.isnan(value)
+
+
+def _describe_noise(noise: tuple[int, int, str | None]) -> str:
+    root, seed, file = noise
+    text = f"noise.seed = {seed}" if seed == root else f"noise.seed = {seed} (root {root})"
+    return text + (f", noise.file = {file!r}" if file is not None else ", no noise.file")
+
+
+def _same_noise(a: tuple[int, int, str | None], b: tuple[int, int, str | None]) -> bool:
+    return a[0] == b[0] and a[1] == b[1] and _same_file(a[2], b[2])
+
+
+def _equal(x: Any, y: Any) -> bool:
+    numbers = (int, float, np.integer, np.floating)
+    if isinstance(x, numbers) and isinstance(y, numbers) and not isinstance(x, bool):
+        return bool(np.isclose(float(x), float(y), rtol=_RTOL, atol=0.0))
+    return bool(x == y)
+
+
+def _points(c: Campaign) -> list[dict[str, Any]]:
+    cols = ["point", *c.swept]
+    distinct = c.runs[cols].drop_duplicates("point")
+    return [{str(k): v for k, v in r.items()} for r in distinct.to_dict(orient="records")]
+
+
+@dataclass(frozen=True)
+class Matched:
+    """The matched runs of two campaigns and what was left out."""
+
+    pairs: pd.DataFrame  # one row per matched run: point_a, point_b, params, arch, seed, metrics
+    groups: tuple[str, ...]  # point_a, point_b and the swept keys (param.<key>) of A or B
+    notes: tuple[str, ...]
+
+
+def match_runs(a: Campaign, b: Campaign, metrics: Sequence[str] = METRICS) -> Matched:
+    """The runs of A and B on the same noise, architecture, seed and swept values.
+
+    Raises :class:`ConfigError` when the two campaigns share no noise or no run.
+    Columns ``<metric>_a`` / ``<metric>_b`` and ``status_a`` / ``status_b``.
+    """
+    common = [k for k in a.swept if k in b.swept]
+    swept = [*a.swept, *(k for k in b.swept if k not in a.swept)]
+    point_pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    noise_mismatch: list[tuple[tuple[int, int, str | None], tuple[int, int, str | None]]] = []
+    for pa_ in _points(a):
+        for pb in _points(b):
+            if not all(_equal(pa_[k], pb[k]) for k in common):
+                continue
+            na, nb = _noise_of(a, pa_), _noise_of(b, pb)
+            if _same_noise(na, nb):
+                point_pairs.append((pa_, pb))
+            else:
+                noise_mismatch.append((na, nb))
+    if not point_pairs and noise_mismatch:
+        na, nb = noise_mismatch[0]
+        raise ConfigError(
+            f"{a.path} and {b.path} do not share noise: A has {_describe_noise(na)}, "
+            f"B has {_describe_noise(nb)}; a paired comparison needs the same noise "
+            "realisations (the same noise.seed, root_seed in manifest.json, and noise file)"
+        )
+    keep = ["arch", "seed", "status", *metrics]
+    frames = []
+    for pa_, pb in point_pairs:
+        ra = a.runs.loc[a.runs["point"] == pa_["point"], keep]
+        rb = b.runs.loc[b.runs["point"] == pb["point"], keep]
+        both = ra.merge(rb, on=["arch", "seed"], suffixes=("_a", "_b"))
+        both.insert(0, "point_a", pa_["point"])
+        both.insert(1, "point_b", pb["point"])
+        for i, k in enumerate(swept):
+            both.insert(2 + i, k, pa_[k] if k in pa_ else pb[k])
+        frames.append(both)
+    pairs = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    if pairs.empty:
+        raise ConfigError(
+            f"{a.path} and {b.path} share no run (same architecture, seed and swept "
+            f"values): A has {_holds(a)}; B has {_holds(b)}"
+        )
+    notes = []
+    if noise_mismatch:
+        notes.append(f"{len(noise_mismatch)} pair(s) of grid points on different noise left out")
+    only = sorted(set(a.runs["arch"]) ^ set(b.runs["arch"]))
+    if only:
+        notes.append(f"architecture(s) in one campaign only, not compared: {', '.join(only)}")
+    failed = int(((pairs["status_a"] != "ok") | (pairs["status_b"] != "ok")).sum())
+    if failed:
+        notes.append(f"{failed} shared run(s) failed in A or B and are left out")
+    return Matched(pairs, ("point_a", "point_b", *swept), tuple(notes))
+
+
+def _holds(c: Campaign) -> str:
+    seeds = sorted(int(s) for s in c.runs["seed"].unique())
+    span = f"{seeds[0]}–{seeds[-1]}" if seeds else "none"
+    archs = ", ".join(sorted(c.runs["arch"].unique()))
+    points = c.runs["point"].nunique()
+    swept = ", ".join(k.removeprefix(PARAM_PREFIX) for k in c.swept) or "nothing swept"
+    return f"{archs}; {len(seeds)} seed(s) {span}; {points} point(s) ({swept})"
+
+
+# ---------------------------------------------------------------------------
+# Statistics
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The paired differences A − B of two campaigns."""
+
+    frame: pd.DataFrame  # the rows of compare.parquet
+    groups: tuple[str, ...]  # point_a, point_b, param.<key>…
+    metrics: tuple[str, ...]
+    matched: int  # runs matched (any status)
+    compared: int  # runs compared (ok in both)
+    notes: tuple[str, ...]
+    a: Campaign
+    b: Campaign
+
+
+def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) -> Comparison:
+    """Per group and architecture, the paired differences A − B of ``metrics``.
+
+    Raises :class:`ConfigError` (exit 2) when the campaigns share no noise, no
+    run, or no run that succeeded in both.
+    """
+    metrics = tuple(metrics)
+    matched = match_runs(a, b, metrics)
+    pairs = matched.pairs
+    ok = pairs[(pairs["status_a"] == "ok") & (pairs["status_b"] == "ok")]
+    if ok.empty:
+        raise ConfigError(
+            f"{a.path} and {b.path} share {len(pairs)} run(s), none of which succeeded in both"
+        )
+    rng = np.random.default_rng(a.root_seed)
+    rows: list[dict[str, Any]] = []
+    by = [*matched.groups, "arch"]
+    for keys, group in ok.groupby(by, sort=False, dropna=False):
+        ident = dict(zip(by, keys, strict=True))
+        group = group.sort_values("seed")
+        n = len(group)
+        for metric in metrics:
+            d = (group[f"{metric}_a"] - group[f"{metric}_b"]).to_numpy(dtype=float)
+            base = {**ident, "kind": "paired", "metric": metric, "n": n}
+            for name, fn in (("mean_diff", np.mean), ("median_diff", np.median)):
+                lo, hi = bootstrap_ci(d, fn, rng)
+                rows.append(
+                    {**base, "statistic": name, "value": float(fn(d)), "ci_low": lo, "ci_high": hi}
+                )
+            better = int((d < 0).sum())
+            lo, hi = wilson_ci(better, n)
+            rows.append(
+                {**base, "statistic": "frac_better", "value": better / n, "ci_low": lo,
+                 "ci_high": hi}
+            )  # fmt: skip
+            rows.append(
+                {**base, "statistic": "frac_tied", "value": float((d == 0).sum()) / n,
+                 "ci_low": math.nan, "ci_high": math.nan}
+            )  # fmt: skip
+    columns = ["kind", "arch", "metric", "statistic", "value", "ci_low", "ci_high", "n"]
+    frame = pd.DataFrame(rows)[[*columns, *matched.groups]]
+    return Comparison(
+        frame=frame,
+        groups=matched.groups,
+        metrics=metrics,
+        matched=len(pairs),
+        compared=len(ok),
+        notes=matched.notes,
+        a=a,
+        b=b,
+    )
+
+
+def compare_table(comparison: Comparison) -> pa.Table:
+    """``compare.parquet``: the rows, with both campaigns and the units in the metadata."""
+    a, b = comparison.a, comparison.b
+    meta = {
+        "cwrend_version": __version__,
+        "difference": "A - B per seed; frac_better: share of seeds with A < B",
+        "units": "miss_km km, delta_v_km_s km/s, fuel_penalty_pct %",
+        "a": str(a.path.resolve()),
+        "b": str(b.path.resolve()),
+        "campaign_hash_a": str(a.manifest.get("campaign_hash", "")),
+        "campaign_hash_b": str(b.manifest.get("campaign_hash", "")),
+        "config_hash_a": str(a.manifest.get("config_hash", "")),
+        "config_hash_b": str(b.manifest.get("config_hash", "")),
+        "root_seed": str(a.root_seed),
+    }
+    table = pa.Table.from_pandas(comparison.frame, preserve_index=False)
+    return table.replace_schema_metadata({k.encode(): v.encode() for k, v in meta.items()})
