@@ -476,3 +476,21 @@ def test_rrd_seeds_without_recordings_is_refused(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "--rrd-seeds" in result.output
     assert not (tmp_path / "results").exists()
+
+
+def test_manifest_keeps_every_session(tmp_path: Path) -> None:
+    """A resume adds a session; the first start time and the first session stay (issue 18)."""
+    cfg = _write_config(tmp_path / "c.toml", "sessions")
+    args = ("ablate", str(cfg), "--arch", ADAPTIVE, "--workers", "1", "-q", "--no-rrd")
+    assert _cli(*args, "--seeds", "1").exit_code == 0
+    first = json.loads((tmp_path / "results" / "sessions" / "manifest.json").read_text())
+    assert _cli(*args, "--seeds", "2").exit_code == 0
+    assert _cli(*args, "--seeds", "2").exit_code == 0  # nothing left to compute
+    manifest = json.loads((tmp_path / "results" / "sessions" / "manifest.json").read_text())
+    sessions = manifest["sessions"]
+    assert [s["runs_computed"] for s in sessions] == [2, 2, 0]
+    assert [s["runs_skipped"] for s in sessions] == [0, 2, 4]
+    assert all(s["status"] == "complete" and s["finished_at"] for s in sessions)
+    assert sessions[0] == first["sessions"][0]
+    assert manifest["started_at"] == first["started_at"] == sessions[0]["started_at"]
+    assert manifest["counts"] == {"ok": 4, "failed": 0, "runs": 4}

@@ -31,7 +31,7 @@ from cwrend_cli.campaign.journal import (
     append_events,
     check_same_campaign,
     events_of,
-    iso,
+    finish_manifest,
     load_journal,
     new_manifest,
     remove_orphan_files,
@@ -89,6 +89,24 @@ class _NoProgress:
 
     def close(self) -> None:
         pass
+
+
+class _Counting:
+    """A :class:`Progress` that also counts the runs journaled by this invocation."""
+
+    def __init__(self, inner: Progress) -> None:
+        self.inner = inner
+        self.journaled = 0
+
+    def start(self, total: int, skipped: int) -> None:
+        self.inner.start(total, skipped)
+
+    def advance(self, ok: int, failed: int) -> None:
+        self.journaled += ok + failed
+        self.inner.advance(ok, failed)
+
+    def close(self) -> None:
+        self.inner.close()
 
 
 @dataclass(frozen=True)
@@ -167,11 +185,11 @@ def run_campaign(
     campaign (Ctrl-C or ``kill -9``) keeps every completed task and leaves no
     partial data: files of unfinished executions are removed on resume.
     """
-    progress = progress or _NoProgress()
+    progress = _Counting(progress or _NoProgress())
     out_dir.mkdir(parents=True, exist_ok=True)
     if force:
         wipe(out_dir)
-    check_same_campaign(out_dir, plan_)
+    previous = check_same_campaign(out_dir, plan_)
     journal = load_journal(out_dir / EVENTS)
     remove_orphan_files(out_dir, journal.files)
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
@@ -182,7 +200,9 @@ def run_campaign(
     total = sum(len(t.runs) for t in tasks)
     skipped = len(plan_.runs) - total
     executor = {"kind": executor_kind, "workers": workers, "address": address}
-    manifest = new_manifest(plan_, command=command, executor=executor, started=time.time())
+    manifest = new_manifest(
+        plan_, command=command, executor=executor, started=time.time(), previous=previous
+    )
     write_json(manifest, out_dir / MANIFEST)
     interrupted = False
     progress.start(total, skipped)
@@ -201,9 +221,12 @@ def run_campaign(
         ok = sum(r["status"] == "ok" for r in records)
         failed = len(records) - ok
         write_parquet(runs_table(records, {"campaign_hash": plan_.campaign_hash}), out_dir / RUNS)
-        manifest.update(
-            finished_at=iso(time.time()),
+        finish_manifest(
+            manifest,
+            finished=time.time(),
             status="interrupted" if interrupted else "complete",
+            computed=progress.journaled,
+            skipped=skipped,
             counts={"ok": ok, "failed": failed, "runs": len(records)},
         )
         write_json(manifest, out_dir / MANIFEST)

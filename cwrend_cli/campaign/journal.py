@@ -57,6 +57,7 @@ __all__ = [
     "append_events",
     "check_same_campaign",
     "events_of",
+    "finish_manifest",
     "iso",
     "load_journal",
     "new_manifest",
@@ -213,29 +214,65 @@ def wipe(out_dir: Path) -> None:
             shutil.rmtree(out_dir / dataset)
 
 
-def check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> None:
-    """Refuse a directory holding another campaign (other config or grid), unless empty."""
+def check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> dict[str, Any]:
+    """Refuse a directory holding another campaign (other config or grid), unless empty.
+
+    Returns the directory's previous manifest (empty when there is none).
+    """
     manifest = out_dir / MANIFEST
     if not manifest.exists():
-        return
+        return {}
     try:
         previous = json.loads(manifest.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError):
         raise ConfigError(
             f"{manifest}: unreadable manifest; use --force to start the campaign over"
         ) from None
+    if not isinstance(previous, dict):
+        raise ConfigError(f"{manifest}: not a manifest; use --force to start the campaign over")
     if previous.get("campaign_hash") != plan_.campaign_hash:
         raise ConfigError(
             f"{out_dir} holds a campaign with a different configuration or grid "
             f"(hash {str(previous.get('campaign_hash'))[:12]}… vs {plan_.campaign_hash[:12]}…); "
             "use --force to start over, or another output.name"
         )
+    return previous
+
+
+def _earlier_sessions(previous: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The sessions a previous manifest records (one made up from a manifest without them)."""
+    sessions = previous.get("sessions")
+    if isinstance(sessions, list):
+        return [dict(s) for s in sessions if isinstance(s, dict)]
+    if "started_at" in previous:  # written before manifests kept their sessions
+        keys = ("command", "cwrend_version", "started_at", "finished_at", "status")
+        return [{k: previous.get(k) for k in keys}]
+    return []
 
 
 def new_manifest(
-    plan_: CampaignPlan, *, command: str, executor: Mapping[str, Any], started: float
+    plan_: CampaignPlan,
+    *,
+    command: str,
+    executor: Mapping[str, Any],
+    started: float,
+    previous: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The manifest of a campaign invocation that starts now (``status`` = running)."""
+    """The manifest of a campaign invocation that starts now (``status`` = running).
+
+    ``sessions`` lists every invocation of the campaign (the ``previous``
+    manifest's, then this one): command, version, executor, start, end, runs
+    computed and skipped, how it ended. ``started_at`` is the first session's
+    start, so resuming a campaign never hides when it began.
+    """
+    sessions = _earlier_sessions(previous or {})
+    session: dict[str, Any] = {
+        "command": command,
+        "cwrend_version": __version__,
+        "executor": dict(executor),
+        "started_at": iso(started),
+        "status": "running",
+    }
     return {
         "cwrend_version": __version__,
         "command": command,
@@ -247,6 +284,19 @@ def new_manifest(
         "root_seed": plan_.root_seed,
         "archs": list(plan_.archs),
         "executor": dict(executor),
-        "started_at": iso(started),
+        "started_at": sessions[0].get("started_at", iso(started)) if sessions else iso(started),
         "status": "running",
+        "sessions": [*sessions, session],
     }
+
+
+def finish_manifest(
+    manifest: dict[str, Any], *, finished: float, status: str, computed: int, skipped: int,
+    counts: Mapping[str, int],
+) -> None:  # fmt: skip
+    """Record the end of this invocation in ``manifest`` (its last session) and the counts."""
+    end = iso(finished)
+    manifest["sessions"][-1].update(
+        finished_at=end, status=status, runs_computed=computed, runs_skipped=skipped
+    )
+    manifest.update(finished_at=end, status=status, counts=dict(counts))
