@@ -37,6 +37,13 @@ def _solves(r: Mapping[str, Any]) -> str:
     return text + (f" ({r['n_infeasible']} inf.)" if r["n_infeasible"] else "")
 
 
+def _table(title: str | None, **options: Any) -> Table:
+    """A console table in cwrend's style: bold title, cyan header, a rule under it."""
+    return Table(
+        title=title, title_style="bold", header_style="bold cyan", box=box.SIMPLE_HEAD, **options
+    )
+
+
 def summary_console_table(case: CaseResult, title: str = "") -> Table:
     """Compact table: one row per open-loop reference and closed-loop run (fits 80 columns).
 
@@ -48,11 +55,8 @@ def summary_console_table(case: CaseResult, title: str = "") -> Table:
     seeds = sorted({int(r["seed"]) for r in rows if r["seed"] >= 0})
     if seeds:
         title = f"{title} · seed {', '.join(map(str, seeds))}" if title else f"seed {seeds[0]}"
-    table = Table(
-        title=title or None,
-        title_style="bold",
-        header_style="bold cyan",
-        box=box.SIMPLE_HEAD,
+    table = _table(
+        title or None,
         show_edge=False,
         padding=(0, 0, 0, 1),  # with the column separator: two spaces between columns
     )
@@ -173,12 +177,7 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
     """
     marginal = stats[stats["kind"] == "marginal"]
     n = int(marginal["n"].max()) if not marginal.empty else 0
-    table = Table(
-        title=f"{title} · {n} seed(s)",
-        title_style="bold",
-        header_style="bold cyan",
-        box=box.SIMPLE_HEAD,
-    )
+    table = _table(f"{title} · {n} seed(s)")
     table.add_column("architecture", no_wrap=True)
     for name in ("Δv km/s", "miss m", "fuel pen. %", "solves ok %\nms mean/max"):
         table.add_column(name, justify="right", no_wrap=True)
@@ -226,7 +225,7 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
 
 def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) -> Table:
     """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
-    table = Table(title=title, title_style="bold", header_style="bold cyan", box=box.SIMPLE_HEAD)
+    table = _table(title)
     params = [c for c in point_cols if c != "point"]
     for p in params:
         table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
@@ -280,12 +279,7 @@ def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -
     grouped = frame.groupby(groups, sort=False, dropna=False) if groups else [((), frame)]
     for _, part in grouped:
         point = _point_title(part.iloc[0], groups)
-        table = Table(
-            title=f"{title}{' · ' + point if point else ''}",
-            title_style="bold",
-            header_style="bold cyan",
-            box=box.SIMPLE_HEAD,
-        )
+        table = _table(f"{title}{' · ' + point if point else ''}")
         table.add_column("architecture", no_wrap=True)
         table.add_column("metric", no_wrap=True)
         for name in ("mean Δ", "median Δ", "A better"):
