@@ -16,6 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
+from cwrend_cli.campaign.driver import write_statistics
 from cwrend_cli.cli import app
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig, apply, config_from_dict, resolved_dict
 from cwrend_cli.config.adapt import windows_of
@@ -23,6 +24,7 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
 from cwrend_cli.report import load_results, write_report
+from cwrend_cli.report.markdown import report_md
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 PER_SEED = (
@@ -90,10 +92,10 @@ def test_report_of_a_run_writes_every_figure(run_dir: Path, run_report) -> None:
 
 def test_report_md_holds_the_table(run_dir: Path, run_report) -> None:
     md = (run_dir / "report" / "report.md").read_text(encoding="utf-8")
-    assert "| case | Δv [km/s] | miss [km] |" in md
+    assert "| case | Δv [km/s] | miss [m] |" in md
     for arch in ARCHITECTURES.values():
         assert f"| {arch.label} |" in md
-    assert "| open-loop energy | 0.1502386 |" in md
+    assert "| open-loop energy | 0.1502 |" in md
     assert "| open-loop fuel | 0.1128 |" in md
     for name in PER_SEED:
         assert f"]({name})" in md
@@ -134,11 +136,16 @@ CAMPAIGN_ARCHS = ("plain_adaptive", "mtf_adaptive")
 
 
 def _write_campaign(
-    root: Path, points: Sequence[tuple[str, dict]], seeds: Sequence[int], with_refs: bool
+    root: Path,
+    points: Sequence[tuple[str, dict]],
+    seeds: Sequence[int],
+    with_refs: bool,
+    with_stats: bool = True,
 ) -> Path:
     """runs.parquet, steps/arch=<slug>/, manifest.json as the campaign layer writes them.
 
-    With ``with_refs``, also references/<point>.parquet (the open-loop references of each point).
+    With ``with_refs``, also references/<point>.parquet (the open-loop references of each point);
+    with ``with_stats``, the statistics file of the campaign driver.
     """
     base = resolved_dict(CwrendConfig())
     archs = tuple(ARCHITECTURES[a] for a in CAMPAIGN_ARCHS)
@@ -169,6 +176,8 @@ def _write_campaign(
     for arch, tables in steps.items():
         write_parquet(pa.concat_tables(tables), root / "steps" / f"arch={arch}" / "t.parquet")
     (root / "manifest.json").write_text(json.dumps({"config": base, "config_hash": "abc"}))
+    if with_stats:  # ablation.parquet / sweep.parquet, as the campaign driver writes them
+        write_statistics(root, "ablate" if len(points) == 1 else "sweep", 0)
     return root
 
 
@@ -319,3 +328,98 @@ def test_report_with_an_unusable_stored_config(ablation_dir: Path, tmp_path: Pat
     good = load_results(ablation_dir)
     assert good.config is not None and good.windows == windows_of(good.config)
     assert len(good.windows) == 2
+
+
+# ---------------------------------------------------------------------------
+# Intervals, units and precision in report.md and the figures (issue 18, item 2)
+# ---------------------------------------------------------------------------
+
+
+def _row(md: str, start: str) -> list[str]:
+    """The cells of the first markdown table row starting with ``| start |``."""
+    (line,) = [ln for ln in md.splitlines() if ln.startswith(f"| {start} |")][:1]
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def _stat(stats: pd.DataFrame, **match: str) -> pd.Series:
+    sel = stats
+    for column, value in match.items():
+        sel = sel[sel[column] == value]
+    (index,) = sel.index
+    return sel.loc[index]
+
+
+def test_report_md_tables_carry_the_stored_intervals(ablation_dir: Path, tmp_path: Path) -> None:
+    root = _copy(ablation_dir, tmp_path / "tampered")
+    stats = pd.read_parquet(root / "ablation.parquet")
+    # shift the stored intervals: the report must show these, never recompute them
+    stats["ci_low"] -= 1e-4
+    stats.to_parquet(root / "ablation.parquet")
+    md = (write_report(root).out_dir / "report.md").read_text(encoding="utf-8")
+    miss = _stat(stats, kind="marginal", arch="mtf_adaptive", metric="miss_km", statistic="mean")
+    dv = _stat(stats, kind="marginal", arch="mtf_adaptive", metric="delta_v_km_s",
+               statistic="mean")  # fmt: skip
+    overall = md.split("## Over 3 noise seeds")[1]
+    cells = _row(overall, "MTF KF, adaptive ε")
+    assert cells[1] == "3 / 1"
+    assert cells[2] == f"{dv.value:.4f} [{dv.ci_low:.4f}, {dv.ci_high:.4f}]\\*"
+    assert (
+        cells[3] == f"{miss.value * 1e3:.2f} [{miss.ci_low * 1e3:.2f}, {miss.ci_high * 1e3:.2f}]\\*"
+    )
+    less = _stat(stats, kind="paired", arch="mtf_adaptive", statistic="frac_less")
+    med = _stat(stats, kind="paired", arch="mtf_adaptive", statistic="median_diff")
+    pair = _row(overall, "MTF KF, adaptive ε vs plain KF, adaptive ε")
+    assert pair[1] == "3"
+    assert pair[2] == f"{less.value:.2f} [{less.ci_low:.2f}, {less.ci_high:.2f}]"  # Wilson: no mark
+    assert pair[3] == f"{med.value * 1e3:.2f} [{med.ci_low * 1e3:.2f}, {med.ci_high * 1e3:.2f}]\\*"
+
+
+def test_intervals_from_fewer_than_10_seeds_are_flagged(ablation_dir: Path, tmp_path: Path) -> None:
+    note = "fewer than 10 seeds: bootstrap interval unreliable"
+    md = report_md(load_results(ablation_dir), ablation_dir, [])  # 3 seeds
+    assert note in md
+    root = _copy(ablation_dir, tmp_path / "many")
+    stats = pd.read_parquet(root / "ablation.parquet")
+    stats["n"] = 12  # as if from 12 seeds
+    stats.to_parquet(root / "ablation.parquet")
+    text = (write_report(root).out_dir / "report.md").read_text(encoding="utf-8")
+    assert note not in text and "\\*" not in text
+    assert _row(text.split("## Over")[1], "MTF KF, adaptive ε")[2].endswith("]")
+
+
+def test_report_md_without_a_statistics_file(ablation_dir: Path, tmp_path: Path) -> None:
+    root = _copy(ablation_dir, tmp_path / "nostats")
+    (root / "ablation.parquet").unlink()
+    md = (write_report(root).out_dir / "report.md").read_text(encoding="utf-8")
+    assert "values without intervals" in md
+    cells = _row(md.split("## Over 3 noise seeds")[1], "MTF KF, adaptive ε")
+    assert "[" not in "".join(cells)
+    assert "Paired comparisons" not in md
+
+
+def test_misses_are_in_m_in_report_md_and_figures(ablation_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    data = load_results(ablation_dir)
+    md = report_md(data, ablation_dir, [])
+    assert "miss [km]" not in md and "miss [m]" in md
+    header = next(ln for ln in md.splitlines() if ln.startswith("| case |"))
+    assert "| miss [m] |" in header
+    run = data.ok_runs().query("arch == 'mtf_adaptive' and seed == 0").iloc[0]
+    assert _row(md, "MTF KF, adaptive ε")[2] == f"{run.miss_km * 1e3:.2f}"
+    for draw in (figures.fig_miss_distribution, figures.fig_dv_vs_miss):
+        assert draw(data).axes[0].get_ylabel().endswith("[m]")
+    paired = figures.fig_paired_miss(data).axes[0]
+    assert paired.get_xlabel().endswith("[m]") and paired.get_ylabel().endswith("[m]")
+
+
+def test_sweep_table_carries_the_stored_intervals(sweep_dir: Path) -> None:
+    stats = pd.read_parquet(sweep_dir / "sweep.parquet")
+    md = report_md(load_results(sweep_dir), sweep_dir, [])
+    sweep = md.split("## Sweep of")[1]
+    p_b = stats[(stats["point"] == "p_b") & (stats["kind"] == "marginal")]
+    miss = _stat(p_b, arch="plain_adaptive", metric="miss_km", statistic="mean")
+    cells = _row(sweep, "0.5 | plain KF, adaptive ε")
+    assert (
+        cells[4] == f"{miss.value * 1e3:.2f} [{miss.ci_low * 1e3:.2f}, {miss.ci_high * 1e3:.2f}]\\*"
+    )

@@ -61,7 +61,8 @@ STYLE: dict[RcKeyType, Any] = {
     "grid.alpha": 0.3,
     "lines.linewidth": 1.4,
 }
-_MISS_FLOOR_KM = 1e-9  # misses below this are drawn at this value on log axes
+M_PER_KM = 1e3  # misses are drawn in m (as on the console and in report.md)
+_MISS_FLOOR_M = 1e-6  # misses below this are drawn at this value on log axes
 _WINDOW_ALPHAS = (0.18, 0.32, 0.25, 0.4)  # shading of successive degradation windows
 
 
@@ -451,10 +452,10 @@ def fig_errors(data: ReportData) -> Figure:
         axes[row, 1].set_title(f"close-up: last {horizon - zoom:g} s")
     axes[0, 0].set_title("position error to the target ‖r‖")
     axes[1, 0].set_title("estimation error ‖r̂ − r‖")
+    axes[0, 0].set_ylabel("‖r‖ [km]")
+    axes[1, 0].set_ylabel("‖r̂ − r‖ [km]")
     axes[1, 0].legend(handles=_group_handles(est_groups, data.archs), loc="lower right",
                       framealpha=0.9)  # fmt: skip
-    for ax in axes[:, 0]:
-        ax.set_ylabel("[km]")
     for ax in axes[1, :]:
         ax.set_xlabel("time [s]")
     handles = _arch_handles(data.archs) + _ref_handles(data) + _window_handles(data.windows)
@@ -474,7 +475,7 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
         if g.empty:
             continue
         c = arch_colour(a, data.archs.index(a))
-        miss = np.maximum(g["miss_km"].to_numpy(dtype=float), _MISS_FLOOR_KM)
+        miss = np.maximum(g["miss_km"].to_numpy(dtype=float) * M_PER_KM, _MISS_FLOOR_M)
         ax.scatter(g["delta_v_km_s"], miss, color=c, s=22 if multi else 90,
                    alpha=0.45 if multi else 0.95, edgecolor="none" if multi else "black",
                    label=arch_label(a))  # fmt: skip
@@ -488,7 +489,7 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
                    label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s")  # fmt: skip
     ax.set_yscale("log")
     ax.set_xlabel("Δv [km/s]")
-    ax.set_ylabel("terminal miss ‖r(T)‖ [km]")
+    ax.set_ylabel("terminal miss ‖r(T)‖ [m]")
     what = f"{len(runs)} runs; diamonds: per-architecture median" if multi else f"{_title(data)}"
     ax.set_title(f"Fig. 6 · Fuel against accuracy ({what})")
     handles = [
@@ -509,17 +510,19 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
 # ---------------------------------------------------------------------------
 
 
-def _distribution(data: ReportData, column: str, ylabel: str, log: bool, title: str) -> Figure:
-    """``column`` per architecture over the seeds: violin (10+ runs), box and the runs."""
+def _distribution(
+    data: ReportData, column: str, ylabel: str, log: bool, title: str, scale: float = 1.0
+) -> Figure:
+    """``column`` × ``scale`` per architecture over the seeds: violin (10+ runs), box, runs."""
     runs = data.ok_runs()
     archs = [a for a in data.archs if (runs["arch"] == a).any()]
     fig = _figure(max(8.0, 2.3 * len(archs) + 3), 6.2)
     ax = fig.subplots()
     values = []
     for a in archs:
-        v = runs.loc[runs["arch"] == a, column].to_numpy(dtype=float)
+        v = runs.loc[runs["arch"] == a, column].to_numpy(dtype=float) * scale
         v = v[np.isfinite(v)]
-        values.append(np.maximum(v, _MISS_FLOOR_KM) if log else v)
+        values.append(np.maximum(v, _MISS_FLOOR_M) if log else v)
     positions = np.arange(1, len(archs) + 1)
     violin = all(v.size >= 10 for v in values)  # a violin of a handful of runs misleads
     if violin:
@@ -555,7 +558,8 @@ def _distribution(data: ReportData, column: str, ylabel: str, log: bool, title: 
 
 def fig_miss_distribution(data: ReportData) -> Figure:
     """Terminal miss per architecture over the seeds (log scale)."""
-    return _distribution(data, "miss_km", "terminal miss ‖r(T)‖ [km]", True, "Terminal miss")
+    label = "terminal miss ‖r(T)‖ [m]"
+    return _distribution(data, "miss_km", label, True, "Terminal miss", M_PER_KM)
 
 
 def fig_dv_distribution(data: ReportData) -> Figure:
@@ -571,10 +575,11 @@ _PAIRS = (
 
 
 def _miss_by_seed(data: ReportData) -> pd.DataFrame:
-    """Terminal miss of the reported point's runs, one row per seed, one column per arch."""
-    return data.ok_runs().pivot_table(
+    """Terminal miss [m] of the reported point's runs, one row per seed, one column per arch."""
+    pivot = data.ok_runs().pivot_table(
         index="seed", columns="arch", values="miss_km", aggfunc="first"
     )
+    return pivot * M_PER_KM
 
 
 def _pairs(pivot: pd.DataFrame) -> list[tuple[str, str]]:
@@ -594,8 +599,8 @@ def fig_paired_miss(data: ReportData) -> Figure:
     axes = np.atleast_1d(fig.subplots(1, len(pairs)))
     for ax, (xa, ya) in zip(axes, pairs, strict=True):
         both = pivot[[xa, ya]].dropna()
-        x = np.maximum(both[xa].to_numpy(dtype=float), _MISS_FLOOR_KM)
-        y = np.maximum(both[ya].to_numpy(dtype=float), _MISS_FLOOR_KM)
+        x = np.maximum(both[xa].to_numpy(dtype=float), _MISS_FLOOR_M)
+        y = np.maximum(both[ya].to_numpy(dtype=float), _MISS_FLOOR_M)
         ax.scatter(x, y, s=30, color=arch_colour(ya, data.archs.index(ya)), edgecolor="black",
                    lw=0.4, alpha=0.85)  # fmt: skip
         if x.size:
@@ -607,8 +612,8 @@ def fig_paired_miss(data: ReportData) -> Figure:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_box_aspect(1)
-        ax.set_xlabel(f"miss, {arch_label(xa)} [km]")
-        ax.set_ylabel(f"miss, {arch_label(ya)} [km]")
+        ax.set_xlabel(f"miss, {arch_label(xa)} [m]")
+        ax.set_ylabel(f"miss, {arch_label(ya)} [m]")
         better = int((y < x).sum())
         ax.set_title(f"{arch_label(ya)} smaller\nin {better} of {x.size} seeds", fontsize=11)
         ax.legend(loc="upper left")
@@ -653,7 +658,8 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         combos = [""]
     fig = _figure(13, 6.6)
     ax_m, ax_v = fig.subplots(1, 2)
-    floor = _MISS_FLOOR_KM
+    floor = _MISS_FLOOR_M
+    runs["_miss_m"] = runs["miss_km"].astype(float) * M_PER_KM
     for a in data.archs:
         c = arch_colour(a, data.archs.index(a))
         for (ls, marker), combo in zip(_COMBO_STYLES, combos, strict=False):
@@ -661,9 +667,9 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
             if g.empty:
                 continue
             stats = g.groupby("_x").agg(
-                med=("miss_km", "median"),
-                q1=("miss_km", lambda v: v.quantile(0.25)),
-                q3=("miss_km", lambda v: v.quantile(0.75)),
+                med=("_miss_m", "median"),
+                q1=("_miss_m", lambda v: v.quantile(0.25)),
+                q3=("_miss_m", lambda v: v.quantile(0.75)),
                 dv=("delta_v_km_s", "mean"),
             )
             xs = stats.index.to_numpy() if numeric else np.array([pos[v] for v in stats.index])
@@ -683,7 +689,7 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         ax.set_xlabel(key)
         if not numeric:
             ax.set_xticks(range(len(levels)), [str(v) for v in levels])
-    ax_m.set_ylabel("terminal miss [km]")
+    ax_m.set_ylabel("terminal miss [m]")
     band = " (band: quartiles over seeds)" if len(combos) == 1 else ""
     ax_m.set_title(f"median miss{band}")
     ax_v.set_ylabel("mean Δv [km/s]")

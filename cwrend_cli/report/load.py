@@ -42,6 +42,7 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output.layout import (
+    ABLATION_STATS,
     MANIFEST,
     RUN_CONFIG,
     RUN_REFERENCES,
@@ -49,6 +50,7 @@ from cwrend_cli.output.layout import (
     RUN_SUMMARY,
     RUNS,
     STEPS,
+    SWEEP_STATS,
     references_path,
 )
 from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
@@ -84,6 +86,20 @@ class ReportData:
     archs: tuple[str, ...]  # in canonical order
     params: tuple[str, ...] = ()  # swept param columns with > 1 value
     notes: tuple[str, ...] = ()
+    #: rows of ``ablation.parquet`` / ``sweep.parquet`` (long format: kind, arch, metric,
+    #: statistic, value, ci_low, ci_high, n; ``point`` and ``param.*`` for a sweep), if stored
+    stats: pd.DataFrame | None = None
+
+    def point_stats(self) -> pd.DataFrame | None:
+        """The stored statistics of the reported grid point (all of them for an ablation)."""
+        if self.stats is None:
+            return None
+        stats = self.stats
+        if self.point is not None and "point" in stats.columns:
+            stats = stats[stats["point"].astype(str) == self.point]
+        elif "point" in stats.columns and stats["point"].nunique() > 1:
+            return None
+        return stats
 
     @property
     def windows(self) -> tuple[Window, ...]:
@@ -381,7 +397,22 @@ def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
         archs=_order_archs(runs["arch"].unique()),
         params=tuple(params),
         notes=tuple(notes),
+        stats=_campaign_stats(root),
     )
+
+
+def _campaign_stats(root: Path) -> pd.DataFrame | None:
+    """``ablation.parquet`` or ``sweep.parquet`` of a campaign (``None`` if neither)."""
+    for name in (SWEEP_STATS, ABLATION_STATS):
+        if (root / name).exists():
+            stats = _read_parquet(root / name)
+            missing = {"kind", "arch", "metric", "statistic", "value", "ci_low", "ci_high", "n"}
+            missing -= set(stats.columns)
+            if missing:
+                raise ReportError(f"{root / name}: missing columns {', '.join(sorted(missing))}")
+            stats["arch"] = stats["arch"].astype(str)
+            return stats
+    return None
 
 
 def load_results(results_dir: Path, seed: int | None = None) -> ReportData:

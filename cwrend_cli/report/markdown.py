@@ -3,7 +3,12 @@
 Tables (GitHub-flavoured markdown) of the reported noise seed, of every seed
 of the reported grid point and of every grid point of a sweep; the figure
 list comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`)
-with its captions. Units: km, s, km/s (as in the Parquet files).
+with its captions. One unit and precision per quantity, as on the console:
+Δv in km/s (4 decimals), misses in m (2 decimals), fuel penalty in % (2
+decimals). Campaign tables carry the 95 % intervals and paired comparisons
+that the campaign stored in ``ablation.parquet`` / ``sweep.parquet`` (never
+recomputed here); an interval from fewer than :data:`MIN_BOOTSTRAP_N` seeds is
+marked with :data:`UNRELIABLE_MARK`.
 """
 
 from __future__ import annotations
@@ -13,9 +18,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.report.load import ReportData, arch_label, param_values
+
+#: Below this many seeds a bootstrap interval is flagged (as on the console).
+MIN_BOOTSTRAP_N = 10
+UNRELIABLE_MARK = "\\*"  # a literal * in markdown
+UNRELIABLE_NOTE = (
+    f"{UNRELIABLE_MARK} fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable."
+)
+M_PER_KM = 1e3
+DV = ".4f"  # km/s
+MISS = ".2f"  # m (after M_PER_KM)
+FUEL = ".2f"  # %
+SHARE = ".2f"  # a proportion
 
 
 def _fmt(value: Any, spec: str = ".4g") -> str:
@@ -30,6 +48,34 @@ def _fmt(value: Any, spec: str = ".4g") -> str:
     return format(f, spec)
 
 
+def _finite(value: Any) -> bool:
+    try:
+        return bool(np.isfinite(float(value)))
+    except (TypeError, ValueError):
+        return False
+
+
+def _unreliable(row: Any) -> bool:
+    """A bootstrap interval from fewer than :data:`MIN_BOOTSTRAP_N` samples."""
+    return _finite(row["ci_low"]) and int(row["n"]) < MIN_BOOTSTRAP_N
+
+
+def _ci(row: Any, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> str:
+    """``value [low, high]`` of a statistics row (value alone without an interval)."""
+    if row is None:
+        return "–"
+    value = _fmt(float(row["value"]) * scale, spec)
+    if not _finite(row["ci_low"]):
+        return value
+    lo, hi = float(row["ci_low"]) * scale, float(row["ci_high"]) * scale
+    mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
+    return f"{value} [{lo:{spec}}, {hi:{spec}}]{mark}"
+
+
+def _lookup(stats: pd.DataFrame) -> dict[tuple[str, str], Any]:
+    return {(str(r["metric"]), str(r["statistic"])): r for _, r in stats.iterrows()}
+
+
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     """A GitHub-flavoured markdown table."""
     out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
@@ -41,21 +87,21 @@ def seed_table(data: ReportData) -> str:
     """Open-loop references and each architecture's run of the reported seed."""
     runs = data.ok_runs()
     runs = runs[runs["seed"] == data.seed]
-    header = ["case", "Δv [km/s]", "miss [km]", "fuel penalty [%]", "re-solves",
+    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "re-solves",
               "success [%]", "infeasible", "failed", "solve mean / max [ms]"]  # fmt: skip
     rows = []
     for _, r in data.ref_summary.iterrows():
         rows.append([f"open-loop {str(r['arch']).removeprefix('open_loop_')}",
-                     _fmt(r["delta_v_km_s"], ".7g"), _fmt(r["miss_km"], ".3g"),
-                     _fmt(r.get("fuel_penalty_pct"), ".3f"), "", "", "", "", ""])  # fmt: skip
+                     _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
+                     _fmt(r.get("fuel_penalty_pct"), FUEL), "", "", "", "", ""])  # fmt: skip
     for a in data.archs:
         g = runs[runs["arch"] == a]
         if g.empty:
             continue
         r = g.iloc[0]
         rows.append([
-            arch_label(a), _fmt(r["delta_v_km_s"], ".7g"), _fmt(r["miss_km"], ".4g"),
-            _fmt(r.get("fuel_penalty_pct"), ".3f"), _fmt(r.get("n_solves"), "g"),
+            arch_label(a), _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
+            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
             _fmt(r.get("solve_success_pct"), ".2f"), _fmt(r.get("n_infeasible"), "g"),
             _fmt(r.get("n_failed"), "g"),
             f"{_fmt(r.get('solve_mean_ms'), '.3g')} / {_fmt(r.get('solve_max_ms'), '.3g')}",
@@ -64,44 +110,108 @@ def seed_table(data: ReportData) -> str:
 
 
 def campaign_table(data: ReportData) -> str:
-    """Per architecture over the seeds of the reported point (failed runs counted)."""
+    """Per architecture over the seeds of the reported point (failed runs counted).
+
+    Means, medians and p95 with the 95 % intervals stored by the campaign;
+    without stored statistics, the values alone.
+    """
     all_runs = data.runs
     if data.point is not None and "point" in all_runs.columns:
         all_runs = all_runs[all_runs["point"].astype(str) == data.point]
-    header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [km]",
-              "median miss [km]", "p95 miss [km]", "max miss [km]", "mean success [%]"]  # fmt: skip
+    stats = data.point_stats()
+    header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
+              "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
+              "mean success [%]"]  # fmt: skip
     rows = []
     for a in data.archs:
         g = all_runs[all_runs["arch"] == a]
         ok = g[g["status"] == "ok"]
-        miss = ok["miss_km"].astype(float)
+        miss = ok["miss_km"].astype(float) * M_PER_KM
+        ok_label = f"{len(ok)} / {len(g) - len(ok)}"
+        success = _fmt(ok["solve_success_pct"].mean() if "solve_success_pct" in ok else None, ".2f")
+        if stats is not None:
+            get = _lookup(stats[(stats["kind"] == "marginal") & (stats["arch"] == a)])
+            rows.append([
+                arch_label(a), ok_label, _ci(get.get(("delta_v_km_s", "mean")), DV),
+                _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
+                _ci(get.get(("miss_km", "median")), MISS, M_PER_KM),
+                _ci(get.get(("miss_km", "p95")), MISS, M_PER_KM), _fmt(miss.max(), MISS),
+                _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success,
+            ])  # fmt: skip
+            continue
+        fuel = ok["fuel_penalty_pct"].mean() if "fuel_penalty_pct" in ok else None
         rows.append([
-            arch_label(a), f"{len(ok)} / {len(g) - len(ok)}",
-            _fmt(ok["delta_v_km_s"].mean()), _fmt(miss.mean()), _fmt(miss.median()),
-            _fmt(miss.quantile(0.95) if len(miss) else None), _fmt(miss.max()),
-            _fmt(ok["solve_success_pct"].mean() if "solve_success_pct" in ok else None, ".2f"),
+            arch_label(a), ok_label, _fmt(ok["delta_v_km_s"].mean(), DV),
+            _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS),
+            _fmt(miss.quantile(0.95) if len(miss) else None, MISS), _fmt(miss.max(), MISS),
+            _fmt(fuel, FUEL), success,
         ])  # fmt: skip
     return markdown_table(header, rows)
 
 
+def paired_table(data: ReportData) -> str | None:
+    """Seed-by-seed comparisons stored by the campaign (``None`` when there are none)."""
+    stats = data.point_stats()
+    if stats is None or "other" not in stats.columns:
+        return None
+    pairs = stats[stats["kind"] == "paired"]
+    if pairs.empty:
+        return None
+    header = ["A vs B", "seeds", "P(miss A < B)", "median Δmiss [m]", "mean ΔΔv [km/s]"]
+    rows = []
+    for (a, b), g in pairs.groupby(["arch", "other"], sort=False):
+        get = {str(r["statistic"]): r for _, r in g.iterrows()}
+        less = get.get("frac_less")
+        rows.append([
+            f"{arch_label(str(a))} vs {arch_label(str(b))}",
+            str(int(less["n"])) if less is not None else "–",
+            _ci(less, SHARE, bootstrap=False),
+            _ci(get.get("median_diff"), MISS, M_PER_KM), _ci(get.get("mean_diff"), DV),
+        ])  # fmt: skip
+    return markdown_table(header, rows)
+
+
+def _flagged(stats: pd.DataFrame | None) -> bool:
+    if stats is None or stats.empty:
+        return False
+    boot = stats[stats["statistic"] != "frac_less"]
+    return bool(boot.apply(_unreliable, axis=1).any()) if not boot.empty else False
+
+
 def sweep_table(data: ReportData) -> str:
-    """One row per grid point (all swept values) and architecture."""
+    """One row per grid point (all swept values) and architecture.
+
+    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored.
+    """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     keys: list[str] = []
     for param in data.params:
         runs[f"_{param}"] = param_values(runs[param])[0]
         keys.append(f"_{param}")
+    stats = data.stats if data.stats is not None and "point" in data.stats.columns else None
     header = [p.removeprefix(PARAM_PREFIX) for p in data.params] + [
-        "architecture", "runs", "mean Δv [km/s]", "median miss [km]", "max miss [km]",
+        "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
+        "max miss [m]",
     ]  # fmt: skip
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
     for values, g in runs.groupby(keys, sort=True):
         values = values if isinstance(values, tuple) else (values,)
         for a, ga in sorted(g.groupby("arch"), key=lambda item: order.get(str(item[0]), 99)):
+            miss = ga["miss_km"].astype(float) * M_PER_KM
+            cells = [_fmt(ga["delta_v_km_s"].mean(), DV), _fmt(miss.mean(), MISS),
+                     _fmt(miss.median(), MISS)]  # fmt: skip
+            if stats is not None:
+                point_ids = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
+                sel = stats[(stats["kind"] == "marginal") & (stats["arch"] == str(a))]
+                sel = sel[sel["point"].astype(str).isin(point_ids)]
+                if not sel.empty:
+                    get = _lookup(sel)
+                    cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
+                             _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
+                             _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
             rows.append([*(_fmt(v, "g") for v in values), arch_label(str(a)), str(len(ga)),
-                         _fmt(ga["delta_v_km_s"].mean()), _fmt(ga["miss_km"].median()),
-                         _fmt(ga["miss_km"].max())])  # fmt: skip
+                         *cells, _fmt(miss.max(), MISS)])  # fmt: skip
     return markdown_table(header, rows)
 
 
@@ -127,10 +237,25 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
     lines += [f"{note}" for note in data.notes]
     lines += ["", f"## Noise seed {data.seed}", "", seed_table(data), ""]
     if n_seeds > 1:
-        lines += [f"## Over {n_seeds} noise seeds", "", campaign_table(data), ""]
+        stats = data.point_stats()
+        about = (
+            "Values [95 % bootstrap interval], from the campaign's statistics file."
+            if stats is not None
+            else "No statistics file (ablation.parquet / sweep.parquet): values without intervals."
+        )
+        lines += [f"## Over {n_seeds} noise seeds", "", about, "", campaign_table(data), ""]
+        pairs = paired_table(data)
+        if pairs is not None:
+            lines += ["### Paired comparisons (same noise)", "",
+                      "Δ = A − B per seed; 95 % interval in brackets (Wilson for P, "
+                      "bootstrap otherwise).", "", pairs, ""]  # fmt: skip
+        if _flagged(stats):
+            lines += [UNRELIABLE_NOTE, ""]
     if data.params:
         names = ", ".join(f"`{p.removeprefix(PARAM_PREFIX)}`" for p in data.params)
         lines += [f"## Sweep of {names} (every grid point)", "", sweep_table(data), ""]
+        if _flagged(data.stats if data.stats is not None and "point" in data.stats else None):
+            lines += [UNRELIABLE_NOTE, ""]
     lines += ["## Figures", ""]
     for file, caption in figures:
         stem = Path(file).stem
