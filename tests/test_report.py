@@ -6,13 +6,16 @@ import json
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib.image
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
+from matplotlib.collections import PolyCollection
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
@@ -24,6 +27,7 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
 from cwrend_cli.report import load_results, write_report
+from cwrend_cli.report.labels import format_value, param_label, param_setting
 from cwrend_cli.report.markdown import report_md
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
@@ -423,3 +427,51 @@ def test_sweep_table_carries_the_stored_intervals(sweep_dir: Path) -> None:
     assert (
         cells[4] == f"{miss.value * 1e3:.2f} [{miss.ci_low * 1e3:.2f}, {miss.ci_high * 1e3:.2f}]\\*"
     )
+
+
+def test_param_labels_are_symbols_with_units_and_values_as_given() -> None:
+    assert param_label("param.scenario.u_max_km_s2") == "u_max [km/s²]"
+    assert param_label("schedule.beta") == "β [-]"
+    assert param_label("guidance.some_new_key_s") == "some_new_key [s]"  # unit from the suffix
+    assert format_value(0.0007999999999999999) == "0.0008"
+    assert format_value(3) == "3" and format_value(0.25) == "0.25"
+    assert param_setting("scenario.u_max_km_s2", 0.0007999999999999999) == "u_max = 0.0008 km/s²"
+
+
+def test_sweep_figure_labels_are_symbols_with_units(sweep_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_sweep(load_results(sweep_dir), "param.schedule.beta")
+    ax_m, ax_v = fig.axes[:2]
+    assert ax_m.get_xlabel() == ax_v.get_xlabel() == "β [-]"
+    assert ax_m.get_ylabel().endswith("[m]") and ax_v.get_ylabel() == "mean Δv [km/s]"
+    assert [t.get_text() for t in ax_m.get_xticklabels()] == ["0.25", "0.5"]
+
+
+def _band_limits(ax: Any) -> list[tuple[float, float]]:
+    """(low, high) of the y extent of each filled band of ``ax``."""
+    out = []
+    for coll in ax.collections:
+        if isinstance(coll, PolyCollection):
+            y = np.concatenate([p.vertices[:, 1] for p in coll.get_paths()])
+            out.append((float(y.min()), float(y.max())))
+    return out
+
+
+def test_sweep_figure_bands_are_the_stored_intervals(sweep_dir: Path, tmp_path: Path) -> None:
+    from cwrend_cli.report import figures
+
+    stats = pd.read_parquet(sweep_dir / "sweep.parquet")
+    dv = stats[(stats["kind"] == "marginal") & (stats["metric"] == "delta_v_km_s")
+               & (stats["statistic"] == "mean")]  # fmt: skip
+    fig = figures.fig_sweep(load_results(sweep_dir), "param.schedule.beta")
+    expected = sorted(
+        v for _, g in dv.groupby("arch") for v in (g["ci_low"].min(), g["ci_high"].max())
+    )
+    drawn = sorted(v for band in _band_limits(fig.axes[1]) for v in band)
+    assert drawn == pytest.approx(expected)
+    assert len(_band_limits(fig.axes[0])) == 2  # median-miss bands, one per architecture
+    root = _copy(sweep_dir, tmp_path / "nostats")
+    (root / "sweep.parquet").unlink()
+    bare = figures.fig_sweep(load_results(root), "param.schedule.beta")
+    assert _band_limits(bare.axes[0]) == [] and _band_limits(bare.axes[1]) == []

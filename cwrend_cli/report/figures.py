@@ -45,6 +45,7 @@ from cwrend_cli.output.recording import DEGRADATION_COLOUR, REFERENCE_COLOURS, a
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
+from cwrend_cli.report.labels import format_value, param_label, param_setting, param_symbol
 from cwrend_cli.report.load import ReportData, arch_label, param_value, param_values
 
 #: Resolution of the saved PNG files [dots per inch].
@@ -626,9 +627,7 @@ def _others_label(runs: pd.DataFrame, others: Sequence[str]) -> pd.Series:
     if not others:
         return pd.Series("", index=runs.index)
     return runs[list(others)].apply(
-        lambda r: ", ".join(
-            f"{k.removeprefix(PARAM_PREFIX)}={param_value(v)}" for k, v in r.items()
-        ),
+        lambda r: ", ".join(param_setting(str(k), param_value(v)) for k, v in r.items()),
         axis=1,
     )
 
@@ -636,12 +635,38 @@ def _others_label(runs: pd.DataFrame, others: Sequence[str]) -> pd.Series:
 _COMBO_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"))
 
 
-def fig_sweep(data: ReportData, param: str) -> Figure:
-    """Median miss (quartile band) and mean Δv against one swept parameter, per architecture.
+def _sweep_line(
+    g: pd.DataFrame, stats: pd.DataFrame | None, metric: str, statistic: str, scale: float
+) -> pd.DataFrame:
+    """``x``, ``value``, ``low``, ``high`` per grid point of ``g`` (one arch and combination).
 
-    ``param`` is the ``param.<key>`` column. With other swept parameters, each
-    of their combinations (up to four) gets its own line style; with more,
-    the runs are pooled over them (stated in the title).
+    From the stored statistics (rows of ``sweep.parquet`` of ``g``'s points)
+    when there are any, else computed from the runs with no interval (NaN).
+    """
+    xs = g.groupby("point", observed=True)["_x"].first() if "point" in g.columns else None
+    if stats is not None and xs is not None:
+        sel = stats[(stats["metric"] == metric) & (stats["statistic"] == statistic)]
+        sel = sel[sel["point"].astype(str).isin({str(p) for p in xs.index})]
+        if len(sel) == len(xs):
+            x = sel["point"].astype(str).map({str(k): v for k, v in xs.items()})
+            return pd.DataFrame({"x": x.to_numpy(), "value": sel["value"].to_numpy() * scale,
+                                 "low": sel["ci_low"].to_numpy() * scale,
+                                 "high": sel["ci_high"].to_numpy() * scale})  # fmt: skip
+    agg = g.groupby("_x")[metric].agg(statistic) * scale
+    nan = np.full(len(agg), np.nan)
+    return pd.DataFrame({"x": agg.index.to_numpy(), "value": agg.to_numpy(), "low": nan,
+                         "high": nan})  # fmt: skip
+
+
+def fig_sweep(data: ReportData, param: str) -> Figure:
+    """Median miss and mean Δv against one swept parameter, per architecture.
+
+    ``param`` is the ``param.<key>`` column. The bands are the 95 % intervals
+    of ``sweep.parquet`` (none without it, or when the runs are pooled). With
+    other swept parameters, each of their combinations (up to four) gets its
+    own line style; with more, the runs are pooled over them (stated in the
+    title). Axes are labelled with the parameter's symbol and unit, values as
+    given.
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     key = param.removeprefix(PARAM_PREFIX)
@@ -656,44 +681,54 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
     if pooled:
         runs["_other"] = ""
         combos = [""]
+    stats = data.stats
+    if pooled or stats is None or "point" not in stats.columns:
+        stats = None
+    else:
+        stats = stats[stats["kind"] == "marginal"]
     fig = _figure(13, 6.6)
     ax_m, ax_v = fig.subplots(1, 2)
     floor = _MISS_FLOOR_M
-    runs["_miss_m"] = runs["miss_km"].astype(float) * M_PER_KM
+    banded = False
     for a in data.archs:
         c = arch_colour(a, data.archs.index(a))
+        arch_stats = stats[stats["arch"] == a] if stats is not None else None
         for (ls, marker), combo in zip(_COMBO_STYLES, combos, strict=False):
             g = runs[(runs["arch"] == a) & (runs["_other"] == combo)]
             if g.empty:
                 continue
-            stats = g.groupby("_x").agg(
-                med=("_miss_m", "median"),
-                q1=("_miss_m", lambda v: v.quantile(0.25)),
-                q3=("_miss_m", lambda v: v.quantile(0.75)),
-                dv=("delta_v_km_s", "mean"),
-            )
-            xs = stats.index.to_numpy() if numeric else np.array([pos[v] for v in stats.index])
-            order = np.argsort(xs)
-            xs, st = xs[order], stats.iloc[order]
-            ax_m.plot(xs, np.maximum(st["med"], floor), ls=ls, marker=marker, color=c)
-            if len(combos) == 1:
-                ax_m.fill_between(xs, np.maximum(st["q1"], floor), np.maximum(st["q3"], floor),
-                                  color=c, alpha=0.12, lw=0)  # fmt: skip
-            ax_v.plot(xs, st["dv"], ls=ls, marker=marker, color=c)
+            for ax, metric, statistic, scale, low in (
+                (ax_m, "miss_km", "median", M_PER_KM, floor),
+                (ax_v, "delta_v_km_s", "mean", 1.0, -np.inf),
+            ):
+                line = _sweep_line(g, arch_stats, metric, statistic, scale)
+                if not numeric:
+                    line["x"] = [pos[v] for v in line["x"]]
+                line = line.sort_values("x")
+                xs = line["x"].to_numpy(dtype=float)
+                ax.plot(xs, np.maximum(line["value"], low), ls=ls, marker=marker, color=c)
+                if line["low"].notna().all():
+                    banded = True
+                    ax.fill_between(xs, np.maximum(line["low"], low),
+                                    np.maximum(line["high"], low), color=c, alpha=0.12,
+                                    lw=0)  # fmt: skip
     for _, row in data.ref_summary.iterrows():
         name = str(row["arch"]).removeprefix("open_loop_")
         st_ = _ref_style(name)
         ax_v.axhline(float(row["delta_v_km_s"]), color=st_["color"], ls=st_["ls"], lw=1.4)
     ax_m.set_yscale("log")
+    symbol = param_label(key)
     for ax in (ax_m, ax_v):
-        ax.set_xlabel(key)
-        if not numeric:
+        ax.set_xlabel(symbol)
+        if numeric:
+            ax.set_xticks(levels, [format_value(v) for v in levels])
+        else:
             ax.set_xticks(range(len(levels)), [str(v) for v in levels])
-    ax_m.set_ylabel("terminal miss [m]")
-    band = " (band: quartiles over seeds)" if len(combos) == 1 else ""
-    ax_m.set_title(f"median miss{band}")
+    band = " (band: 95 % interval)" if banded else ""
+    ax_m.set_ylabel("median terminal miss [m]")
+    ax_m.set_title(f"median miss over seeds{band}")
     ax_v.set_ylabel("mean Δv [km/s]")
-    ax_v.set_title("mean Δv over seeds")
+    ax_v.set_title(f"mean Δv over seeds{band}")
     handles: list[Any] = _arch_handles_plain([a for a in data.archs if (runs["arch"] == a).any()])
     if len(combos) > 1:
         handles += [
@@ -707,12 +742,8 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         for r in data.ref_summary["arch"]
     ]  # fmt: skip
     _legend_below(fig, handles, ncol=3)
-    what = (
-        f" (pooled over {', '.join(o.removeprefix(PARAM_PREFIX) for o in others)})"
-        if pooled
-        else ""
-    )
-    fig.suptitle(f"Sweep of {key}{what}")
+    what = f" (pooled over {', '.join(param_symbol(o)[0] for o in others)})" if pooled else ""
+    fig.suptitle(f"Sweep of {param_symbol(key)[0]} ({key}){what}")
     return _finished(fig)
 
 

@@ -56,6 +56,7 @@ from cwrend_cli.output.layout import (
 from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
+from cwrend_cli.report.labels import format_value
 
 Layout = Literal["run", "campaign"]
 
@@ -166,7 +167,9 @@ def point_values(runs: pd.DataFrame) -> str:
         return ""
     row = runs.iloc[0]
     cols = param_columns(runs.columns)
-    return ", ".join(f"{c.removeprefix(PARAM_PREFIX)}={param_value(row[c])}" for c in cols)
+    return ", ".join(
+        f"{c.removeprefix(PARAM_PREFIX)}={format_value(param_value(row[c]))}" for c in cols
+    )
 
 
 # ---------------------------------------------------------------------------

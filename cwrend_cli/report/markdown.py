@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.report.labels import format_value
 from cwrend_cli.report.load import ReportData, arch_label, param_values
 
 #: Below this many seeds a bootstrap interval is flagged (as on the console).
@@ -210,7 +211,7 @@ def sweep_table(data: ReportData) -> str:
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
-            rows.append([*(_fmt(v, "g") for v in values), arch_label(str(a)), str(len(ga)),
+            rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
                          *cells, _fmt(miss.max(), MISS)])  # fmt: skip
     return markdown_table(header, rows)
 

@@ -1,0 +1,94 @@
+"""Display names of swept parameters and their values (figures and tables of the report).
+
+A swept key (``schedule.beta``) is shown as its symbol with its unit
+(``β [-]``); keys without a known symbol get their last segment, with the
+unit read from its suffix (``_km_s2`` → km/s², ``_s`` → s, …). Values are
+printed as given in the campaign file: a float is shown with 12 significant
+digits, so ``0.0007999999999999999`` (floating-point noise of a grid) reads
+``0.0008``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cwrend_cli.output.tables import PARAM_PREFIX
+
+#: Symbol and unit of the configuration keys that have one in the paper.
+SYMBOLS: dict[str, tuple[str, str]] = {
+    "scenario.mean_motion_rad_s": ("n", "rad/s"),
+    "scenario.horizon_s": ("T", "s"),
+    "scenario.dt_s": ("Δt", "s"),
+    "scenario.u_max_km_s2": ("u_max", "km/s²"),
+    "schedule.beta": ("β", "-"),
+    "schedule.nis_offset": ("m", "-"),
+    "schedule.score_lowpass": ("ρ_s", "-"),
+    "schedule.kappa_mtf": ("κ_MTF", "-"),
+    "schedule.score_max": ("s_max", "-"),
+    "schedule.eps_min": ("ε_min", "-"),
+    "schedule.eps_max": ("ε_max", "-"),
+    "schedule.alpha_eps": ("α_ε", "-"),
+    "schedule.deadband": ("deadband", "-"),
+    "schedule.eps_saturation": ("ε_sat", "-"),
+    "schedule.eps_fixed": ("ε_fixed", "-"),
+    "guidance.t_resolve_s": ("T_resolve", "s"),
+    "guidance.t_min_rem_s": ("T_min,rem", "s"),
+    "truth.eccentricity": ("e", "-"),
+    "actuator.magnitude_bias": ("thrust bias", "-"),
+    "actuator.magnitude_sigma": ("σ_thrust", "-"),
+    "actuator.pointing_sigma_deg": ("σ_pointing", "°"),
+    "actuator.min_thrust_km_s2": ("u_min", "km/s²"),
+    "actuator.delay_steps": ("delay", "steps"),
+}
+
+#: Unit suffixes of configuration keys, longest first.
+_SUFFIXES = (
+    ("_km_s2", "km/s²"),
+    ("_km_s", "km/s"),
+    ("_rad_s", "rad/s"),
+    ("_km", "km"),
+    ("_deg", "°"),
+    ("_pct", "%"),
+    ("_ms", "ms"),
+    ("_s", "s"),
+)
+
+
+def param_symbol(key: str) -> tuple[str, str | None]:
+    """Symbol and unit of a swept key (``param.`` prefix allowed); unit ``None`` if unknown."""
+    key = key.removeprefix(PARAM_PREFIX)
+    if key in SYMBOLS:
+        return SYMBOLS[key]
+    name = key.rsplit(".", 1)[-1]
+    for suffix, unit in _SUFFIXES:
+        if name.endswith(suffix):
+            return name.removesuffix(suffix), unit
+    return name, None
+
+
+def param_label(key: str) -> str:
+    """Axis label of a swept key: ``β [-]``, ``u_max [km/s²]`` (the name alone if no unit)."""
+    symbol, unit = param_symbol(key)
+    return f"{symbol} [{unit}]" if unit is not None else symbol
+
+
+def format_value(value: Any) -> str:
+    """A swept value as given: floats with 12 significant digits (no floating-point noise)."""
+    if isinstance(value, bool | str) or value is None:
+        return str(value)
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return format(value, ".12g")
+    return str(value)
+
+
+def param_setting(key: str, value: Any) -> str:
+    """``symbol = value unit`` of one swept key (a legend entry)."""
+    symbol, unit = param_symbol(key)
+    shown = format_value(value)
+    return f"{symbol} = {shown}" + (f" {unit}" if unit not in (None, "-") else "")
