@@ -550,6 +550,16 @@ def report(
             metavar="N",
         ),
     ] = None,
+    point: Annotated[
+        str | None,
+        typer.Option(
+            "--point",
+            help="Grid point of figures 1–5 and the per-point tables: its id, or its "
+            "swept values (beta=0.5, or 0.5; comma-separated for several keys). "
+            "Default: the point at the config's values. A bad one lists the points.",
+            metavar="KEY",
+        ),
+    ] = None,
 ) -> None:
     """Write the paper's figures (PNG) and report.md into RESULTS_DIR/report/.
 
@@ -560,7 +570,7 @@ def report(
     with user_errors():
         from cwrend_cli.report import write_report
 
-        summary = write_report(results_dir, seed=seed)
+        summary = write_report(results_dir, seed=seed, point=point)
         for path in summary.files:
             typer.echo(str(path))
         for note in summary.notes:

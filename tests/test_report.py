@@ -475,3 +475,38 @@ def test_sweep_figure_bands_are_the_stored_intervals(sweep_dir: Path, tmp_path: 
     (root / "sweep.parquet").unlink()
     bare = figures.fig_sweep(load_results(root), "param.schedule.beta")
     assert _band_limits(bare.axes[0]) == [] and _band_limits(bare.axes[1]) == []
+
+
+def test_point_picks_the_grid_point_of_figs_1_to_5(sweep_dir: Path, tmp_path: Path) -> None:
+    root = _copy(sweep_dir, tmp_path / "pick")
+    result = _report(root, "--point", "p_b")
+    assert result.exit_code == 0, result.output
+    md = (root / "report" / "report.md").read_text(encoding="utf-8")
+    assert "at grid point `p_b`" in md and "(schedule.beta=0.5)" in md
+    for wanted in ("beta=0.5", "schedule.beta=0.5", "0.5"):  # the swept values pick it too
+        assert load_results(root, point=wanted).point == "p_b"
+    data = load_results(root, point="p_b")
+    assert set(data.steps["point"].astype(str)) == {"p_b"}
+
+
+def test_a_bad_point_exits_2_listing_the_points(sweep_dir: Path, run_dir: Path) -> None:
+    result = _report(sweep_dir, "--point", "beta=0.3")
+    assert result.exit_code == 2
+    assert "--point beta=0.3: no such grid point" in result.output
+    assert (
+        "p_a (schedule.beta=0.25)" in result.output and "p_b (schedule.beta=0.5)" in result.output
+    )
+    run = _report(run_dir, "--point", "p_a")
+    assert run.exit_code == 2 and "--point p_a" in run.output
+
+
+def test_fig1_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_trajectories(load_results(ablation_dir))
+    for ax in fig.axes[:2]:
+        labels = [line.get_label() for line in ax.get_lines()]
+        refs = [i for i, label in enumerate(labels) if label.startswith("open-loop")]
+        assert [labels[i] for i in refs] == ["open-loop energy-optimal", "open-loop fuel-optimal"]
+        assert refs == list(range(len(labels) - 2, len(labels)))  # drawn last
+        assert all(ax.get_lines()[i].get_linewidth() == figures.REF_LW_FIG1 for i in refs)

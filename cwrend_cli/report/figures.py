@@ -246,8 +246,12 @@ def _arch_handles_plain(archs: Sequence[str]) -> list[Line2D]:
     ]
 
 
-def _ref_handles(data: ReportData) -> list[Line2D]:
-    return [Line2D([], [], **_ref_style(name)) for name, _ in _refs(data)]
+#: Line width of the open-loop references in Fig. 1 (drawn over the closed-loop runs).
+REF_LW_FIG1 = 2.6
+
+
+def _ref_handles(data: ReportData, **style: Any) -> list[Line2D]:
+    return [Line2D([], [], **{**_ref_style(name), **style}) for name, _ in _refs(data)]
 
 
 # ---------------------------------------------------------------------------
@@ -260,12 +264,13 @@ def fig_trajectories(data: ReportData) -> Figure:
     fig = _figure(13.5, 6.4)
     ax3: Any = fig.add_subplot(1, 2, 1, projection="3d")  # an Axes3D (mpl_toolkits is untyped)
     ax2 = fig.add_subplot(1, 2, 2)
-    for name, g in _refs(data):
-        st = _ref_style(name)
-        ax3.plot(g["x_km"], g["y_km"], g["z_km"], **st)
-        ax2.plot(g["x_km"], g["z_km"], **st)
     for a, g in _by_arch(data.steps, data.archs):
         st = _arch_style(a, data.archs)
+        ax3.plot(g["x_km"], g["y_km"], g["z_km"], **st)
+        ax2.plot(g["x_km"], g["z_km"], **st)
+    # the references last and thicker: the fuel-optimal one lies under the fixed-ε runs
+    for name, g in _refs(data):
+        st = {**_ref_style(name), "lw": REF_LW_FIG1, "zorder": 4}
         ax3.plot(g["x_km"], g["y_km"], g["z_km"], **st)
         ax2.plot(g["x_km"], g["z_km"], **st)
     first = data.steps.sort_values("t_s").iloc[0] if not data.steps.empty else None
@@ -291,7 +296,8 @@ def fig_trajectories(data: ReportData) -> Figure:
         Line2D([], [], marker="*", ls="", ms=12, color="black", label="target (origin)"),
         Line2D([], [], marker="o", ls="", ms=7, mfc="white", mec="black", label="start x₀"),
     ]
-    _legend_below(fig, _arch_handles(data.archs) + _ref_handles(data) + markers, ncol=4)
+    refs = _ref_handles(data, lw=REF_LW_FIG1)
+    _legend_below(fig, _arch_handles(data.archs) + refs + markers, ncol=4)
     fig.suptitle(f"Fig. 1 · Trajectories, open and closed loop ({_title(data)})")
     return _finished(fig)
 

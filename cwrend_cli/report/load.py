@@ -288,6 +288,65 @@ def _reported_point(runs: pd.DataFrame, config: CwrendConfig | None) -> str | No
     return points[0]
 
 
+def _point_list(runs: pd.DataFrame) -> str:
+    """``id (key=value, …)`` of every grid point with a successful run, for messages."""
+    ok = runs[runs["status"] == "ok"]
+    points = sorted(ok["point"].astype(str).unique()) if "point" in ok.columns else []
+    return (
+        "; ".join(f"{p} ({point_values(ok[ok['point'].astype(str) == p])})" for p in points)
+        or "none"
+    )
+
+
+def _matches(row: pd.Series, params: list[str], wanted: str) -> bool:
+    """Whether a point's swept values are ``wanted``: ``key=value, …`` or the values alone.
+
+    Keys may be given in full (``schedule.beta``) or by their last segment
+    (``beta``); with the values alone they are in the order of the columns.
+    """
+    parts = [p.strip() for p in wanted.split(",") if p.strip()]
+    if not parts or len(parts) != len(params):
+        return False
+    given: dict[str, str] = {}
+    for i, part in enumerate(parts):
+        if "=" in part:
+            key, value = (x.strip() for x in part.split("=", 1))
+            full = [c for c in params if c.removeprefix(PARAM_PREFIX) == key
+                    or c.removeprefix(PARAM_PREFIX).rsplit(".", 1)[-1] == key]  # fmt: skip
+            if len(full) != 1:
+                return False
+            given[full[0]] = value
+        else:
+            given[params[i]] = part
+    if set(given) != set(params):
+        return False
+    return all(_same_value(param_value(row[c]), _parsed(v)) for c, v in given.items())
+
+
+def _parsed(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def _chosen_point(runs: pd.DataFrame, wanted: str) -> str:
+    """The grid point named by ``--point`` (its id or its swept values)."""
+    ok = runs[runs["status"] == "ok"]
+    points: list[str] = sorted(ok["point"].astype(str).unique())
+    if wanted in points:
+        return wanted
+    params = param_columns(runs.columns)
+    found = [
+        p for p in points if params and _matches(ok[ok["point"].astype(str) == p].iloc[0],
+                                                  params, wanted)
+    ]  # fmt: skip
+    if len(found) == 1:
+        return found[0]
+    what = "matches several grid points" if found else "no such grid point"
+    raise ReportError(f"--point {wanted}: {what} (points: {_point_list(runs)})")
+
+
 def _pick_seed(runs: pd.DataFrame, seed: int | None) -> int:
     ok = runs[runs["status"] == "ok"]
     if ok.empty:
@@ -306,7 +365,9 @@ def _pick_seed(runs: pd.DataFrame, seed: int | None) -> int:
 # ---------------------------------------------------------------------------
 
 
-def _load_run_dir(root: Path, seed: int | None) -> ReportData:
+def _load_run_dir(root: Path, seed: int | None, point: str | None = None) -> ReportData:
+    if point is not None:
+        raise ReportError(f"--point {point}: {root} is a `cwrend run` directory (one point)")
     for name in (RUN_SUMMARY, RUN_STEPS, RUN_CONFIG):
         if not (root / name).exists():
             raise ReportError(f"{root}: not a complete cwrend results directory (no {name})")
@@ -352,7 +413,7 @@ def _campaign_references(root: Path, point: str | None, notes: list[str]) -> pd.
     return None
 
 
-def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
+def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) -> ReportData:
     runs = _read_parquet(root / RUNS)
     missing = {"arch", "seed", "status", "delta_v_km_s", "miss_km"} - set(runs.columns)
     if missing:
@@ -364,7 +425,13 @@ def _load_campaign_dir(root: Path, seed: int | None) -> ReportData:
     config = _stored_config(meta.get("config"), manifest, notes)
     params = [c for c in param_columns(runs.columns) if runs[c].dropna().astype(str).nunique() > 1]
     point = None
-    if "point" in runs.columns and runs["point"].nunique() > 1:
+    if wanted is not None:
+        if "point" not in runs.columns:
+            raise ReportError(f"--point {wanted}: {root / RUNS} has no point column")
+        point = _chosen_point(runs, wanted)
+        if runs["point"].nunique() <= 1:
+            point = None  # a single point: as without --point
+    elif "point" in runs.columns and runs["point"].nunique() > 1:
         point = _reported_point(runs, config)
     selected = runs if point is None else runs[runs["point"].astype(str) == point]
     chosen = _pick_seed(selected, seed)
@@ -418,11 +485,17 @@ def _campaign_stats(root: Path) -> pd.DataFrame | None:
     return None
 
 
-def load_results(results_dir: Path, seed: int | None = None) -> ReportData:
+def load_results(
+    results_dir: Path, seed: int | None = None, point: str | None = None
+) -> ReportData:
     """Load a run or campaign directory (raises :class:`ReportError` if it is neither).
 
     ``seed`` selects the noise realisation of the per-seed data (default: the
-    first seed with a successful run).
+    first seed with a successful run); ``point`` the grid point of a campaign,
+    by its id or its swept values (``beta=0.5``, ``schedule.beta=0.5, …`` or
+    the values alone, comma-separated; default: the point at the base
+    config's values, else the first). An unknown point raises
+    :class:`ReportError` listing the points.
     """
     root = Path(results_dir)
     if not root.exists():
@@ -430,9 +503,9 @@ def load_results(results_dir: Path, seed: int | None = None) -> ReportData:
     if not root.is_dir():
         raise ReportError(f"{root}: not a directory")
     if (root / RUNS).exists():
-        return _load_campaign_dir(root, seed)
+        return _load_campaign_dir(root, seed, point)
     if (root / RUN_SUMMARY).exists():
-        return _load_run_dir(root, seed)
+        return _load_run_dir(root, seed, point)
     raise ReportError(
         f"{root}: no cwrend results here (expected summary.parquet from `cwrend run` "
         "or runs.parquet from a campaign)"

@@ -42,17 +42,21 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
-def write_report(results_dir: Path, seed: int | None = None) -> ReportSummary:
+def write_report(
+    results_dir: Path, seed: int | None = None, point: str | None = None
+) -> ReportSummary:
     """Write the figures and ``report.md`` of a run or campaign directory.
 
     ``seed`` selects the noise realisation of the per-seed figures (default:
-    the first seed with a successful run). Raises
+    the first seed with a successful run), ``point`` the grid point of Figs
+    1–5 and the per-point tables (its id or its swept values, see
+    :func:`~cwrend_cli.report.load.load_results`). Raises
     :class:`~cwrend_cli.report.load.ReportError` (a
     :class:`~cwrend_cli.errors.CwrendError`) for a missing or unreadable
-    directory or an unknown seed.
+    directory, an unknown seed or an unknown point.
     """
     results_dir = Path(results_dir)
-    data = load_results(results_dir, seed)
+    data = load_results(results_dir, seed, point)
     out = results_dir / REPORT_DIR
     out.mkdir(parents=True, exist_ok=True)
     planned = planned_figures(data)
