@@ -561,7 +561,10 @@ def report(
         ),
     ] = None,
 ) -> None:
-    """Write the paper's figures (PNG) and report.md into RESULTS_DIR/report/.
+    """Write the paper's figures (PNG), report.md and report.html into RESULTS_DIR/report/.
+
+    report.html is self-contained (figures embedded, the tables, the config
+    and its hash).
 
     Figures 1–6 (trajectories, control, ε and score, NIS and MTF ratio,
     errors, Δv vs miss); for several seeds the miss and Δv distributions and

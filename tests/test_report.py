@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -109,7 +110,7 @@ def test_report_is_rewritten_in_place(run_dir: Path, run_report) -> None:
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output
     names = sorted(p.name for p in (run_dir / "report").iterdir())
-    assert names == sorted([*PER_SEED, "report.md"])  # no temp files left behind
+    assert names == sorted([*PER_SEED, "report.md", "report.html"])  # no temp files left behind
 
 
 def test_report_errors(tmp_path: Path, run_dir: Path) -> None:
@@ -510,3 +511,15 @@ def test_fig1_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
         assert [labels[i] for i in refs] == ["open-loop energy-optimal", "open-loop fuel-optimal"]
         assert refs == list(range(len(labels) - 2, len(labels)))  # drawn last
         assert all(ax.get_lines()[i].get_linewidth() == figures.REF_LW_FIG1 for i in refs)
+
+
+def test_report_html_is_self_contained(ablation_dir: Path, tmp_path: Path) -> None:
+    root = _copy(ablation_dir, tmp_path / "html")
+    summary = write_report(root)
+    page = (summary.out_dir / "report.html").read_text(encoding="utf-8")
+    pngs = [p for p in summary.files if p.suffix == ".png"]
+    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED)
+    assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
+    assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
+    assert "<code>abc</code>" in page  # the config hash
+    assert '"beta": 0.25' in page  # the resolved config

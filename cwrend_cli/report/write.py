@@ -2,13 +2,16 @@
 
 Writes into ``RESULTS_DIR/report/`` (each file atomically): the figures of
 :data:`~cwrend_cli.report.figures.FIGURES` that apply, as PNG, then
-``report.md`` with the tables and the figures with their captions; and the
+``report.md`` with the tables and the figures with their captions, then
+``report.html`` (the same, self-contained: figures embedded, the config and
+its hash); and the
 figure of ``cwrend compare`` (:func:`write_compare_figure`). This is the one
 place where the report writes files.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,9 +19,11 @@ import matplotlib as mpl
 import pandas as pd
 from matplotlib.figure import Figure
 
+from cwrend_cli.config import resolved_dict
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.output.layout import REPORT_DIR
 from cwrend_cli.report.figures import DPI, STYLE, fig_compare, planned_figures
+from cwrend_cli.report.html import report_html
 from cwrend_cli.report.load import Layout, load_results
 from cwrend_cli.report.markdown import report_md
 
@@ -68,13 +73,18 @@ def write_report(
     text = report_md(data, results_dir, [(f.file, f.caption) for f in planned])
     with atomic_path(md) as tmp:
         tmp.write_text(text, encoding="utf-8")
+    page = out / "report.html"
+    config = json.dumps(resolved_dict(data.config), indent=2) if data.config else None
+    images = {path.name: path.read_bytes() for path in figures}
+    with atomic_path(page) as tmp:
+        tmp.write_text(report_html(text, images, config, data.config_hash), encoding="utf-8")
     return ReportSummary(
         results_dir=results_dir,
         out_dir=out,
         layout=data.layout,
         seed=data.seed,
         point=data.point,
-        files=(*figures, md),
+        files=(*figures, md, page),
         notes=data.notes,
     )
 
