@@ -23,6 +23,7 @@ from rich.table import Table
 
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
+from cwrend_cli.report.labels import swept_values
 
 
 def _num(value: float, spec: str) -> str:
@@ -256,18 +257,6 @@ _COMPARE_METRICS: dict[str, tuple[str, float, str]] = {
 }
 
 
-def _point_title(first: pd.Series, groups: list[str]) -> str:
-    """The swept values of a compared pair of grid points (empty for two ablations)."""
-    values = [
-        f"{g.removeprefix('param.')} = {first[g]:g}"
-        if isinstance(first[g], float)
-        else f"{g.removeprefix('param.')} = {first[g]}"
-        for g in groups
-        if g.startswith("param.")
-    ]
-    return ", ".join(values)
-
-
 def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -> list[Table]:
     """``cwrend compare``: per architecture and metric, A − B per seed (fits 80 columns).
 
@@ -278,7 +267,7 @@ def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -
     tables = []
     grouped = frame.groupby(groups, sort=False, dropna=False) if groups else [((), frame)]
     for _, part in grouped:
-        point = _point_title(part.iloc[0], groups)
+        point = ", ".join(swept_values(part.iloc[0], groups))
         table = _table(f"{title}{' · ' + point if point else ''}")
         table.add_column("architecture", no_wrap=True)
         table.add_column("metric", no_wrap=True)

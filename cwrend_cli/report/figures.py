@@ -45,7 +45,13 @@ from cwrend_cli.output.recording import DEGRADATION_COLOUR, REFERENCE_COLOURS, a
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
-from cwrend_cli.report.labels import format_value, param_label, param_setting, param_symbol
+from cwrend_cli.report.labels import (
+    format_value,
+    param_label,
+    param_setting,
+    param_symbol,
+    swept_values,
+)
 from cwrend_cli.report.load import ReportData, arch_label, param_value, param_values
 
 #: Resolution of the saved PNG files [dots per inch].
@@ -894,15 +900,8 @@ _SHARE_MARKERS = ("s", "^", "v")
 
 
 def _compare_row_label(first: pd.Series, groups: Sequence[str]) -> str:
-    values = [
-        f"{g.removeprefix(PARAM_PREFIX)} = {first[g]:g}"
-        if isinstance(first[g], float)
-        else f"{g.removeprefix(PARAM_PREFIX)} = {first[g]}"
-        for g in groups
-        if g.startswith(PARAM_PREFIX)
-    ]
     label = arch_label(str(first["arch"]))
-    return "\n".join([label, *values])
+    return "\n".join([label, *swept_values(first, groups)])
 
 
 def fig_compare(frame: pd.DataFrame, label_a: str, label_b: str) -> Figure:

@@ -10,9 +10,11 @@ digits, so ``0.0007999999999999999`` (floating-point noise of a grid) reads
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 
@@ -85,6 +87,15 @@ def format_value(value: Any) -> str:
     if isinstance(value, float):
         return format(value, ".12g")
     return str(value)
+
+
+def swept_values(row: pd.Series, columns: Iterable[str]) -> list[str]:
+    """``key = value`` for each swept (``param.``) column of ``row``, values as given."""
+    return [
+        f"{c.removeprefix(PARAM_PREFIX)} = {format_value(row[c])}"
+        for c in columns
+        if c.startswith(PARAM_PREFIX)
+    ]
 
 
 def param_setting(key: str, value: Any) -> str:
