@@ -253,7 +253,7 @@ def test_steps_dataset_reads_as_one_typed_table(small_ablation: Path) -> None:
     steps = pd.read_parquet(small_ablation / "steps")
     assert len(steps) == 6 * 801
     assert set(steps["arch"].astype(str)) == {"mtf_adaptive", "plain_adaptive"}
-    assert steps["t_s"].dtype == np.float64 and steps["window"].dtype == np.int64
+    assert steps["t_s"].dtype == np.float64 and steps["degradation_window"].dtype == np.int64
     assert steps.groupby("run_key").size().eq(801).all()
 
 

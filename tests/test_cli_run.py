@@ -49,7 +49,7 @@ def test_steps_has_one_row_per_grid_time_and_architecture(paper_run: Path) -> No
     steps = pd.read_parquet(paper_run / "steps.parquet")
     assert len(steps) == 2 * 801  # t = 0 … 800 s, two architectures
     assert set(steps["arch"]) == {"mtf_adaptive", "plain_fixed"}
-    assert steps["t_s"].dtype == np.float64 and steps["window"].dtype == np.int64
+    assert steps["t_s"].dtype == np.float64 and steps["degradation_window"].dtype == np.int64
 
 
 def test_steps_last_control_is_zero(paper_run: Path) -> None:

@@ -55,7 +55,7 @@ STEPS_SCHEMA = pa.schema(
         ("est_err_km", pa.float64()),
         ("est_vel_err_km_s", pa.float64()),
         ("trace_p", pa.float64()),
-        ("window", pa.int64()),
+        ("degradation_window", pa.int64()),
     ]
 )
 
@@ -92,7 +92,7 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
     cols["est_err_km"] = np.linalg.norm(result.x_hat[:, :3] - result.x_true[:, :3], axis=1)
     cols["est_vel_err_km_s"] = np.linalg.norm(result.x_hat[:, 3:] - result.x_true[:, 3:], axis=1)
     cols["trace_p"] = result.trace_p
-    cols["window"] = result.window.astype(np.int64)
+    cols["degradation_window"] = result.window.astype(np.int64)
     schema = STEPS_SCHEMA.with_metadata(_metadata(metadata or {}))
     return pa.table(cols, schema=schema)
 
