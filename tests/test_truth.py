@@ -26,10 +26,12 @@ import pytest
 from scipy.integrate import solve_ivp
 from typer.testing import CliRunner
 
+from cwrend_cli import campaign
 from cwrend_cli.cli import app
+from cwrend_cli.config import config_from_dict, overrides
 from cwrend_cli.physics import truth
 from cwrend_cli.physics.dynamics import stm
-from cwrend_cli.physics.params import Scenario, Truth
+from cwrend_cli.physics.params import ARCHITECTURES, Scenario, Truth
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 SC = Scenario()
@@ -266,3 +268,59 @@ def test_a_chief_below_the_surface_is_refused() -> None:
     )  # fmt: skip
     assert result.exit_code == 2
     assert "truth.eccentricity = 0.2: the chief's perigee radius" in result.stderr
+
+
+def test_a_sweep_over_the_truth_model_and_a_fault_runs_each_point_as_configured(
+    tmp_path: Path,
+) -> None:
+    """Issue 15 item 5: the new fields sweep like any other; each point is its config."""
+    (tmp_path / "mismatch.toml").write_text(
+        "[output]\nrrd_seeds = 0\n"
+        '[sweep]\n"truth.model" = ["cw", "j2"]\n'
+        '"degradation.windows.1.dropout_probability" = [0.0, 0.5]\n'
+    )
+    result = runner.invoke(
+        app,
+        ["sweep", str(tmp_path / "mismatch.toml"), "--seeds", "1", "--workers", "1",
+         "--no-rrd", "-q", "--arch", "mtf_adaptive", "--set", f"output.dir={str(tmp_path)!r}"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    runs = pd.read_parquet(tmp_path / "mismatch" / "runs.parquet")
+    assert len(runs) == 4 and (runs["status"] == "ok").all()
+    assert set(runs["param.truth.model"]) == {"cw", "j2"}
+    for _, row in runs.iterrows():
+        model = row["param.truth.model"]
+        dropout = float(row["param.degradation.windows.1.dropout_probability"])
+        tree = overrides.apply(
+            {},
+            [("truth.model", model), ("degradation.windows.1.dropout_probability", dropout)],
+        )
+        cfg = config_from_dict(tree, source="test")
+        alone = campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), int(row["seed"]))
+        assert alone.runs[0].miss_km == row["miss_km"]  # bit for bit: the point is its config
+    misses = runs.set_index(
+        ["param.truth.model", "param.degradation.windows.1.dropout_probability"]
+    )
+    assert misses.loc[("cw", 0.0), "miss_km"] != misses.loc[("j2", 0.0), "miss_km"]
+    assert misses.loc[("cw", 0.0), "miss_km"] != misses.loc[("cw", 0.5), "miss_km"]
+
+
+@pytest.mark.parametrize(
+    ("sweep", "message"),
+    [
+        ('"truth.eccentricity" = [0.1, 1.2]', "truth.eccentricity = 1.2: must be < 1"),
+        ('"truth.model" = ["cw", "kepler"]', "truth.model"),
+    ],
+)
+def test_a_bad_swept_truth_value_exits_2_before_any_run(
+    tmp_path: Path, sweep: str, message: str
+) -> None:
+    (tmp_path / "bad.toml").write_text(f"[sweep]\n{sweep}\n")
+    result = runner.invoke(
+        app,
+        ["sweep", str(tmp_path / "bad.toml"), "--seeds", "1", "--no-rrd", "-q",
+         "--set", f"output.dir={str(tmp_path)!r}"],
+    )  # fmt: skip
+    assert result.exit_code == 2
+    assert message in result.stderr and "Traceback" not in result.output
+    assert not (tmp_path / "bad").exists()  # refused before anything was written
