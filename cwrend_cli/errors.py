@@ -12,7 +12,16 @@ from collections.abc import Sequence
 
 from cwrend_cli.physics.errors import CwrendError, ScenarioError
 
-__all__ = ["ConfigError", "CwrendError", "InputDataError", "ScenarioError"]
+__all__ = [
+    "ConfigError",
+    "CwrendError",
+    "InfrastructureError",
+    "InputDataError",
+    "ScenarioError",
+]
+
+#: Exit code of a campaign stopped by an infrastructure fault (not by its input).
+INFRASTRUCTURE_EXIT = 3
 
 
 class ConfigError(CwrendError):
@@ -32,3 +41,17 @@ class ConfigError(CwrendError):
 
 class InputDataError(CwrendError):
     """A data file referenced by the configuration (e.g. a noise file) is unusable."""
+
+
+class InfrastructureError(CwrendError):
+    """The machine failed, not a run: a campaign stopped by an infrastructure fault (exit 3).
+
+    A worker process that died, a lost Dask scheduler or worker, a cancelled
+    task or an I/O error writing results (disk full, permission) is retried a
+    bounded number of times and never recorded as a run's result; when the
+    retries are exhausted (at once for an I/O error) the campaign stops with
+    this error. Everything journaled before stays; the same command resumes
+    and computes exactly the missing runs.
+    """
+
+    exit_code = INFRASTRUCTURE_EXIT

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import os
 import signal
@@ -20,7 +21,9 @@ from pydantic import BaseModel
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
+from cwrend_cli.campaign import driver as driver_module
 from cwrend_cli.campaign import journal
+from cwrend_cli.campaign import worker as worker_module
 from cwrend_cli.cli import app
 from cwrend_cli.config import CwrendConfig, config_from_dict, expand_grid, load_config, parse_param
 from cwrend_cli.config.adapt import problem_of
@@ -494,3 +497,105 @@ def test_manifest_keeps_every_session(tmp_path: Path) -> None:
     assert sessions[0] == first["sessions"][0]
     assert manifest["started_at"] == first["started_at"] == sessions[0]["started_at"]
     assert manifest["counts"] == {"ok": 4, "failed": 0, "runs": 4}
+
+
+# --- infrastructure faults (issue 21): retried or stopped, never recorded as results ---
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_a_killed_worker_is_replaced_and_its_task_rerun(tmp_path: Path) -> None:
+    """kill -9 of one pool worker: every run ends ok, identical to an uninterrupted campaign."""
+    cfg = _write_config(tmp_path / "c.toml", "workerkill", "seeds_per_task = 2\n")
+    out = tmp_path / "results" / "workerkill"
+    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "24", "--arch",
+            ADAPTIVE, "--workers", "2", "-q"]  # fmt: skip
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while _events_done(out / "events.jsonl") < 1 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    workers = [
+        p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()
+    ]
+    assert workers and _events_done(out / "events.jsonl") < 12, "kill must land mid-campaign"
+    os.kill(workers[0], signal.SIGKILL)
+    _, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) == 48 and (runs["status"] == "ok").all()  # nothing recorded as failed
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "complete"
+    whole_cfg = _write_config(tmp_path / "w.toml", "whole")
+    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], capture_output=True,
+                           text=True, timeout=300)  # fmt: skip
+    assert whole.returncode == 0, whole.stderr
+    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
+    steps = _steps(out)
+    assert len(steps) == 48 * 801  # the lost executions left nothing behind
+    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+
+
+def test_a_full_disk_stops_the_campaign_with_exit_3_and_records_no_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ENOSPC while a worker writes its files (simulated in the writer): stop, keep, resume."""
+    cfg = _write_config(tmp_path / "c.toml", "full", "seeds_per_task = 1\n")
+    out = tmp_path / "results" / "full"
+    real_write = worker_module.write_parquet
+    calls = {"n": 0}
+
+    def filling_disk(table: Any, path: Path) -> None:
+        calls["n"] += 1
+        if calls["n"] > 6:  # the first three tasks' steps and solves fit; then the disk is full
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        real_write(table, path)
+
+    monkeypatch.setattr(worker_module, "write_parquet", filling_disk)
+    args = ["ablate", str(cfg), "--seeds", "6", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    result = _cli(*args)
+    assert result.exit_code == 3, result.output
+    assert "campaign stopped: disk full" in result.stderr and "Traceback" not in result.output
+    assert "3 of 6 run(s) are done" in result.stderr, result.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"].startswith("stopped: disk full")
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) == 3 and (runs["status"] == "ok").all()  # nothing recorded for the fault
+    monkeypatch.setattr(worker_module, "write_parquet", real_write)  # space freed
+    resumed = _cli(*args)
+    assert resumed.exit_code == 0, resumed.output
+    assert json.loads((out / "manifest.json").read_text())["status"] == "complete"
+    whole = _cli("ablate", str(_write_config(tmp_path / "w.toml", "whole")), *args[2:])
+    assert whole.exit_code == 0, whole.output
+    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
+    pd.testing.assert_frame_equal(
+        _steps(out), _steps(tmp_path / "results" / "whole"), check_exact=True
+    )
+
+
+def test_a_lost_task_is_retried_then_the_campaign_stops_with_exit_3(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A task that never comes back (not an I/O error) is retried, then the campaign stops."""
+    cfg = _write_config(tmp_path / "c.toml", "lost")
+    monkeypatch.setattr(driver_module, "RETRY_BACKOFF_S", 0.0)
+    attempts = {"n": 0}
+
+    def lost(*args: Any, **kwargs: Any) -> Any:
+        attempts["n"] += 1
+        raise RuntimeError("worker lost")
+
+    monkeypatch.setattr(driver_module, "execute_task", lost)
+    result = _cli("ablate", str(cfg), "--seeds", "1", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 3, result.output
+    assert attempts["n"] == driver_module.MAX_TASK_ATTEMPTS
+    assert "was lost 3 times, last: RuntimeError: worker lost" in result.stderr
+    runs = pd.read_parquet(tmp_path / "results" / "lost" / "runs.parquet")
+    assert runs.empty  # no run recorded as failed for a fault of the machine
+
+
+def test_an_append_after_a_torn_journal_line_keeps_its_events(tmp_path: Path) -> None:
+    path = tmp_path / "events.jsonl"
+    journal.append_events(path, [{"event": "a"}])
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write('{"event": "tor')  # a kill -9 or a full disk mid-write
+    journal.append_events(path, [{"event": "b"}, {"event": "c"}])
+    assert [e["event"] for e in journal.read_events(path)] == ["a", "b", "c"]

@@ -15,7 +15,9 @@ protocol.
 
 from __future__ import annotations
 
+import errno
 import time
+from collections import deque
 from collections.abc import Collection, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, replace
@@ -40,12 +42,12 @@ from cwrend_cli.campaign.journal import (
 from cwrend_cli.campaign.plan import CampaignPlan, Task
 from cwrend_cli.campaign.worker import (
     ReferencesKey,
-    RunOutcome,
     TaskOutcome,
     execute_task,
     references_key,
     seeds_to_record,
 )
+from cwrend_cli.errors import CwrendError, InfrastructureError
 from cwrend_cli.output.files import write_json, write_parquet
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
@@ -153,15 +155,19 @@ class _PointReferences:
         return refs
 
 
-def _failed_outcome(task: Task, exc: BaseException) -> TaskOutcome:
-    """Every run of a task that did not come back (its worker died or it could not start)."""
-    text = f"{type(exc).__name__}: {exc}"
-    now = time.time()
-    return TaskOutcome(
-        f"{task.task_key}-lost",
-        tuple(RunOutcome(r, "failed", {}, text, now, 0.0) for r in task.runs),
-        (),
-    )
+#: Attempts of one task on infrastructure faults before the campaign stops.
+MAX_TASK_ATTEMPTS = 3
+#: Pause before the executor is reopened after a fault [s]; doubled on each reopening.
+RETRY_BACKOFF_S = 0.5
+
+
+def _fault_text(exc: BaseException) -> str:
+    """What an infrastructure fault was, in a few words (for the message and the manifest)."""
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return f"disk full ({exc})"
+    if isinstance(exc, OSError):
+        return f"cannot write results ({type(exc).__name__}: {exc})"
+    return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
 
 
 def run_campaign(
@@ -205,32 +211,94 @@ def run_campaign(
     )
     write_json(manifest, out_dir / MANIFEST)
     interrupted = False
+    stopped: str | None = None
     progress.start(total, skipped)
     try:
         if tasks:
             if executor_kind == "local":  # no pool larger than the work (one task: in-process)
                 workers = min(workers or default_workers(), len(tasks))
-            with open_executor(executor_kind, workers, address) as (pool, parallel):
-                _drive(pool, parallel, tasks, plan_, out_dir, progress)
+            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address)
     except KeyboardInterrupt:
         interrupted = True
+    except _StopError as stop:
+        stopped = stop.cause
     finally:
         progress.close()
         journal = load_journal(out_dir / EVENTS)
         records = list(journal.runs.values())
         ok = sum(r["status"] == "ok" for r in records)
         failed = len(records) - ok
-        write_parquet(runs_table(records, {"campaign_hash": plan_.campaign_hash}), out_dir / RUNS)
-        finish_manifest(
-            manifest,
-            finished=time.time(),
-            status="interrupted" if interrupted else "complete",
-            computed=progress.journaled,
-            skipped=skipped,
-            counts={"ok": ok, "failed": failed, "runs": len(records)},
+        status = "interrupted" if interrupted else "complete"
+        if stopped is not None:
+            status = f"stopped: {stopped}"
+        try:  # under a full disk these may fail too: the journal stays the record
+            write_parquet(
+                runs_table(records, {"campaign_hash": plan_.campaign_hash}), out_dir / RUNS
+            )
+            finish_manifest(
+                manifest,
+                finished=time.time(),
+                status=status,
+                computed=progress.journaled,
+                skipped=skipped,
+                counts={"ok": ok, "failed": failed, "runs": len(records)},
+            )
+            write_json(manifest, out_dir / MANIFEST)
+        except OSError as exc:
+            stopped = stopped or _fault_text(exc)
+    if stopped is not None:
+        raise InfrastructureError(
+            f"campaign stopped: {stopped}. {len(records)} of {len(plan_.runs)} run(s) are done "
+            f"and kept ({failed} failed), none was recorded for this fault; fix the cause and run "
+            "the same command to compute exactly the missing runs"
         )
-        write_json(manifest, out_dir / MANIFEST)
     return CampaignSummary(out_dir, total, skipped, ok, failed, interrupted)
+
+
+class _StopError(Exception):
+    """Internal: the campaign stops on an infrastructure fault (``cause`` in a few words)."""
+
+    def __init__(self, cause: str) -> None:
+        super().__init__(cause)
+        self.cause = cause
+
+
+def _execute(
+    tasks: Sequence[Task],
+    plan_: CampaignPlan,
+    out_dir: Path,
+    progress: Progress,
+    kind: ExecutorKind,
+    workers: int | None,
+    address: str | None,
+) -> None:
+    """Run ``tasks`` on an executor, reopening it after an infrastructure fault.
+
+    A task whose execution did not come back (its worker died, the pool
+    broke, the scheduler was lost, the task was cancelled) is submitted again
+    to a fresh executor, up to :data:`MAX_TASK_ATTEMPTS` times, with a
+    backoff of :data:`RETRY_BACKOFF_S` doubling per reopening; nothing of it is
+    journaled as a result. An I/O error writing results stops at once (a
+    full disk does not heal by retrying). Raises :class:`_StopError` when the
+    campaign cannot go on.
+    """
+    attempts: dict[str, int] = {}
+    references = _PointReferences(out_dir, plan_.campaign_hash)
+    pending = list(tasks)
+    reopened = 0
+    while pending:
+        if reopened:
+            time.sleep(RETRY_BACKOFF_S * 2 ** min(reopened - 1, 4))
+        try:
+            with open_executor(kind, workers, address) as (pool, parallel):
+                pending = _drive(
+                    pool, parallel, pending, plan_, out_dir, progress, references, attempts
+                )
+        except (CwrendError, OSError) as exc:  # only opening or closing the executor raises these
+            if not reopened:
+                raise
+            raise _StopError(f"the executor could not be reopened after a fault ({exc})") from None
+        reopened += 1
 
 
 def _drive(
@@ -240,45 +308,79 @@ def _drive(
     plan_: CampaignPlan,
     out_dir: Path,
     progress: Progress,
-) -> None:
-    """Submit tasks with a bounded number in flight; journal each as it completes."""
-    queue = iter(tasks)
-    in_flight: dict[Future[TaskOutcome], Task] = {}
+    references: _PointReferences,
+    attempts: dict[str, int],
+) -> list[Task]:
+    """Submit tasks with a bounded number in flight; journal each as it completes.
+
+    Returns the tasks still to run when an execution did not come back (the
+    lost ones and those not yet submitted; the executor is then suspect and
+    gets nothing new), else an empty list. When the campaign cannot go on (a
+    task exhausted its attempts, results cannot be written) nothing new is
+    submitted, the executions in flight are awaited and journaled, and then
+    :class:`_StopError` is raised.
+    """
+    queue = deque(tasks)
+    in_flight: dict[Future[TaskOutcome], tuple[int, Task]] = {}
+    lost: list[Task] = []
+    fatal: str | None = None
     limit = 2 * parallel
+    submitted = 0
     events_path = out_dir / EVENTS
-    references = _PointReferences(out_dir, plan_.campaign_hash)
     try:
         while True:
-            while len(in_flight) < limit:
-                task = next(queue, None)
-                if task is None:
-                    break
+            while fatal is None and not lost and len(in_flight) < limit and queue:
+                task = queue.popleft()
                 record = seeds_to_record(task, plan_.archs, plan_.rrd_seeds)
-                future = executor.submit(
-                    execute_task,
-                    task,
-                    references.of(task),
-                    str(out_dir),
-                    record,
-                    plan_.steps_seeds,
-                )
-                in_flight[future] = task
+                try:
+                    refs = references.of(task)
+                except OSError as exc:  # writing the point's references failed
+                    fatal = _fault_text(exc)
+                    break
+                try:
+                    future = executor.submit(
+                        execute_task, task, refs, str(out_dir), record, plan_.steps_seeds
+                    )
+                except RuntimeError as exc:  # a broken pool refuses new work
+                    fatal = _count_attempt(task, exc, attempts)
+                    lost.append(task)
+                    break
+                in_flight[future] = (submitted, task)
+                submitted += 1
             if not in_flight:
-                return
+                break
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-            for future in finished:
-                task = in_flight.pop(future)
+            for future in sorted(finished, key=lambda f: in_flight[f][0]):  # submission order
+                _, task = in_flight.pop(future)
                 try:
                     outcome = future.result()
-                except Exception as exc:  # the worker itself died or the task failed to run
-                    outcome = _failed_outcome(task, exc)
-                append_events(events_path, events_of(outcome, plan_.campaign_hash, time.time()))
+                except Exception as exc:  # the execution did not come back: not a result
+                    fatal = fatal or _count_attempt(task, exc, attempts)
+                    lost.append(task)
+                    continue
+                try:
+                    append_events(events_path, events_of(outcome, plan_.campaign_hash, time.time()))
+                except OSError as exc:  # the journal itself cannot be written: stop now
+                    raise _StopError(_fault_text(exc)) from None
                 n_ok = sum(o.status == "ok" for o in outcome.outcomes)
                 progress.advance(n_ok, len(outcome.outcomes) - n_ok)
-    except KeyboardInterrupt:
+    except BaseException:
         for future in in_flight:
             future.cancel()
         raise
+    if fatal is not None:
+        raise _StopError(fatal)
+    return [*lost, *queue] if lost else []
+
+
+def _count_attempt(task: Task, exc: BaseException, attempts: dict[str, int]) -> str | None:
+    """Count a lost execution of ``task``; the cause if the campaign cannot go on, else None."""
+    if isinstance(exc, OSError):  # writing results failed (disk full, permission, read-only)
+        return _fault_text(exc)
+    attempts[task.task_key] = attempts.get(task.task_key, 0) + 1
+    if attempts[task.task_key] >= MAX_TASK_ATTEMPTS:
+        return f"task {task.task_key} was lost {MAX_TASK_ATTEMPTS} times, last: {_fault_text(exc)}"
+    return None
 
 
 # ---------------------------------------------------------------------------

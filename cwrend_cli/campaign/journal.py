@@ -83,10 +83,20 @@ def iso(unix: float) -> str:
 
 
 def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None:
-    """Append JSON lines in one write and fsync (a ``kill -9`` can only tear the last line)."""
+    """Append JSON lines in one write and fsync.
+
+    A ``kill -9`` or a full disk can only tear the last line; the next append
+    first ends such a torn line, so the tear stays one unparsable line that
+    :func:`read_events` drops, never glued to the events that follow.
+    """
     text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
-    with open(path, "a", encoding="utf-8") as fh:
-        fh.write(text)
+    with open(path, "ab") as fh:
+        if fh.tell() > 0:
+            with open(path, "rb") as tail:
+                tail.seek(-1, os.SEEK_END)
+                if tail.read(1) != b"\n":
+                    text = "\n" + text
+        fh.write(text.encode("utf-8"))
         fh.flush()
         os.fsync(fh.fileno())
 
