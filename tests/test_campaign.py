@@ -7,6 +7,7 @@ import errno
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -599,3 +600,28 @@ def test_an_append_after_a_torn_journal_line_keeps_its_events(tmp_path: Path) ->
         fh.write('{"event": "tor')  # a kill -9 or a full disk mid-write
     journal.append_events(path, [{"event": "b"}, {"event": "c"}])
     assert [e["event"] for e in journal.read_events(path)] == ["a", "b", "c"]
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.parametrize(
+    ("address", "message"),
+    [
+        ("foo://bar", "not a Dask scheduler address; give the scheduler as tcp://host:port"),
+        ("nohost", "not a Dask scheduler address"),
+        ("tcp://127.0.0.1:{port}", "cannot reach the Dask scheduler within 5 s"),
+    ],
+)
+def test_a_bad_dask_address_exits_2_before_anything_is_written(
+    tmp_path: Path, address: str, message: str
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "dask")
+    address = address.format(port=_free_port())
+    result = _cli("ablate", str(cfg), "--executor", "dask", "--address", address, "-n", "1")
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr and "Traceback" not in result.output
+    assert not (tmp_path / "results").exists()

@@ -28,7 +28,12 @@ import pandas as pd
 import pyarrow as pa
 
 from cwrend_cli.campaign import statistics
-from cwrend_cli.campaign.executors import ExecutorKind, default_workers, open_executor
+from cwrend_cli.campaign.executors import (
+    ExecutorKind,
+    check_address,
+    default_workers,
+    open_executor,
+)
 from cwrend_cli.campaign.journal import (
     append_events,
     check_same_campaign,
@@ -192,6 +197,8 @@ def run_campaign(
     partial data: files of unfinished executions are removed on resume.
     """
     progress = _Counting(progress or _NoProgress())
+    if executor_kind == "dask" and address:
+        check_address(address)  # before anything is written
     out_dir.mkdir(parents=True, exist_ok=True)
     if force:
         wipe(out_dir)
@@ -222,6 +229,9 @@ def run_campaign(
         interrupted = True
     except _StopError as stop:
         stopped = stop.cause
+    except CwrendError as exc:  # e.g. the executor could not be opened: recorded, then raised
+        stopped = str(exc)
+        raise
     finally:
         progress.close()
         journal = load_journal(out_dir / EVENTS)

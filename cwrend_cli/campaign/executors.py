@@ -17,16 +17,23 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Literal, ParamSpec, TypeVar
+from urllib.parse import urlsplit
 
 from cwrend_cli.errors import ConfigError
 
 ExecutorKind = Literal["local", "dask"]
+
+#: How long reaching a Dask scheduler may take before the campaign is refused [s].
+DASK_CONNECT_TIMEOUT_S = 5.0
+#: Address schemes of a Dask scheduler reached over TCP.
+_TCP_SCHEMES = ("tcp", "tls")
 
 _T = TypeVar("_T")
 _P = ParamSpec("_P")
@@ -72,6 +79,34 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+def check_address(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> None:
+    """Refuse a malformed or unreachable Dask scheduler address (:class:`ConfigError`, exit 2).
+
+    ``tcp://host:port``, ``tls://host:port`` or ``host:port``; the scheduler
+    must accept a TCP connection within ``timeout_s``. Called before a
+    campaign writes anything, so a wrong address leaves no directory behind.
+    """
+    text = address if "://" in address else f"tcp://{address}"
+    fix = "give the scheduler as tcp://host:port (e.g. tcp://127.0.0.1:8786)"
+    try:
+        parts = urlsplit(text)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+        parts = None
+    if parts is None or parts.scheme not in _TCP_SCHEMES or not host or port is None:
+        raise ConfigError(f"--address {address!r}: not a Dask scheduler address; {fix}")
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else str(exc)
+        raise ConfigError(
+            f"--address {address}: cannot reach the Dask scheduler within {timeout_s:g} s "
+            f"({reason}); is it running?"
+        ) from None
+
+
 @contextmanager
 def open_executor(
     kind: ExecutorKind = "local", workers: int | None = None, address: str | None = None
@@ -103,10 +138,11 @@ def open_executor(
     cluster = None
     if address:
         try:
-            client = Client(address, timeout="20s")  # type: ignore[no-untyped-call]
-        except OSError as exc:
+            client = Client(address, timeout=f"{DASK_CONNECT_TIMEOUT_S:g}s")  # type: ignore[no-untyped-call]
+        except Exception as exc:  # refused, timed out, or not a Dask scheduler at all
             raise ConfigError(
-                f"--address {address}: cannot reach the Dask scheduler ({exc})"
+                f"--address {address}: cannot open a Dask client to the scheduler "
+                f"({type(exc).__name__}: {exc})"
             ) from None
     else:
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
