@@ -625,3 +625,26 @@ def test_a_bad_dask_address_exits_2_before_anything_is_written(
     assert result.exit_code == 2, result.output
     assert message in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "results").exists()
+
+
+def test_a_campaign_computed_by_another_version_is_refused(tmp_path: Path) -> None:
+    """Issue 21 item 4: resuming mixes numbers of two installations only when asked."""
+    cfg = _write_config(tmp_path / "c.toml", "versions")
+    out = tmp_path / "results" / "versions"
+    args = ["ablate", str(cfg), "--seeds", "1", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    assert _cli(*args).exit_code == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["environment"] == journal.environment()
+    events = journal.read_events(out / "events.jsonl")
+    assert {e["cwrend_version"] for e in events} == {manifest["cwrend_version"]}
+    manifest["environment"]["numpy"] = "1.0.0"
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    refused = _cli(*args[:3], "2", *args[4:])
+    assert refused.exit_code == 2
+    assert "other versions (numpy 1.0.0 → " in refused.stderr
+    assert "--allow-version-change" in refused.stderr
+    assert len(pd.read_parquet(out / "runs.parquet")) == 1  # nothing was computed
+    plan_ = campaign.plan(load_config(cfg), ["mtf_adaptive"], [0, 1])
+    summary = campaign.run_campaign(plan_, out, command="ablate", workers=1,
+                                    allow_version_change=True)  # fmt: skip
+    assert summary.executed == 1 and summary.ok == 2

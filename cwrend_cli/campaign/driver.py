@@ -185,16 +185,19 @@ def run_campaign(
     address: str | None = None,
     force: bool = False,
     retry_failed: bool = False,
+    allow_version_change: bool = False,
     progress: Progress | None = None,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
     Completed runs (same campaign hash) are skipped, failed ones too unless
     ``retry_failed``; a changed configuration is refused unless ``force``,
-    which starts over. Each finished task appends its run events and a
-    ``task_done`` record to ``events.jsonl`` in one write, so an interrupted
-    campaign (Ctrl-C or ``kill -9``) keeps every completed task and leaves no
-    partial data: files of unfinished executions are removed on resume.
+    which starts over; one computed with other versions of cwrend or the
+    numerics is refused unless ``allow_version_change``. Each finished task
+    appends its run events and a ``task_done`` record to ``events.jsonl`` in
+    one write, so an interrupted campaign (Ctrl-C or ``kill -9``) keeps every
+    completed task and leaves no partial data: files of unfinished executions
+    are removed on resume.
     """
     progress = _Counting(progress or _NoProgress())
     if executor_kind == "dask" and address:
@@ -202,7 +205,7 @@ def run_campaign(
     out_dir.mkdir(parents=True, exist_ok=True)
     if force:
         wipe(out_dir)
-    previous = check_same_campaign(out_dir, plan_)
+    previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
     journal = load_journal(out_dir / EVENTS)
     remove_orphan_files(out_dir, journal.files)
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}

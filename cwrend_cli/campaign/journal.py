@@ -29,6 +29,7 @@ import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -132,6 +133,7 @@ def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str,
             "run_key": s.run_key,
             "execution": outcome.execution,
             "campaign_hash": campaign,
+            "cwrend_version": __version__,
         }
         events.append({"event": "run_started", "time": iso(o.started_at), **common})
         events.append(
@@ -160,6 +162,7 @@ def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str,
             "execution": outcome.execution,
             "files": list(outcome.files),
             "campaign_hash": campaign,
+            "cwrend_version": __version__,
         }
     )
     return events
@@ -224,10 +227,45 @@ def wipe(out_dir: Path) -> None:
             shutil.rmtree(out_dir / dataset)
 
 
-def check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> dict[str, Any]:
+#: Distributions whose version can change a campaign's numbers (cwrend's own, and the numerics).
+NUMERICS_DISTRIBUTIONS = ("numpy", "scipy", "numba", "clarabel")
+
+
+def environment() -> dict[str, str]:
+    """The versions a campaign's numbers depend on: cwrend and :data:`NUMERICS_DISTRIBUTIONS`."""
+    versions = {"cwrend": __version__}
+    for name in NUMERICS_DISTRIBUTIONS:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "absent"
+    return versions
+
+
+def _changed_versions(previous: Mapping[str, Any]) -> list[str]:
+    """``name a → b`` for each version that differs from the manifest's (old ones: cwrend only)."""
+    recorded = previous.get("environment")
+    if not isinstance(recorded, dict):
+        recorded = {"cwrend": previous.get("cwrend_version")}
+    now = environment()
+    return [
+        f"{name} {recorded[name]} → {now.get(name)}"
+        for name in recorded
+        if recorded[name] != now.get(name)
+    ]
+
+
+def check_same_campaign(
+    out_dir: Path, plan_: CampaignPlan, *, allow_version_change: bool = False
+) -> dict[str, Any]:
     """Refuse a directory holding another campaign (other config or grid), unless empty.
 
-    Returns the directory's previous manifest (empty when there is none).
+    Also refuse to resume a campaign written by another cwrend version or
+    with other versions of the numerics (:func:`environment`): its runs
+    could differ from this installation's in the last bits, and a campaign
+    must hold numbers from one computation (issue 21), unless
+    ``allow_version_change``. Returns the directory's previous manifest
+    (empty when there is none).
     """
     manifest = out_dir / MANIFEST
     if not manifest.exists():
@@ -245,6 +283,13 @@ def check_same_campaign(out_dir: Path, plan_: CampaignPlan) -> dict[str, Any]:
             f"{out_dir} holds a campaign with a different configuration or grid "
             f"(hash {str(previous.get('campaign_hash'))[:12]}… vs {plan_.campaign_hash[:12]}…); "
             "use --force to start over, or another output.name"
+        )
+    changed = _changed_versions(previous)
+    if changed and not allow_version_change:
+        raise ConfigError(
+            f"{out_dir} was computed with other versions ({', '.join(changed)}); its runs may "
+            "differ from this installation's in the last bits. Resume anyway with "
+            "--allow-version-change, or start over with --force"
         )
     return previous
 
@@ -279,12 +324,14 @@ def new_manifest(
     session: dict[str, Any] = {
         "command": command,
         "cwrend_version": __version__,
+        "environment": environment(),
         "executor": dict(executor),
         "started_at": iso(started),
         "status": "running",
     }
     return {
         "cwrend_version": __version__,
+        "environment": environment(),
         "command": command,
         "campaign_hash": plan_.campaign_hash,
         "config": plan_.base,
