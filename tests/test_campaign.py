@@ -648,3 +648,55 @@ def test_a_campaign_computed_by_another_version_is_refused(tmp_path: Path) -> No
     summary = campaign.run_campaign(plan_, out, command="ablate", workers=1,
                                     allow_version_change=True)  # fmt: skip
     assert summary.executed == 1 and summary.ok == 2
+
+
+# --- confinement and exclusive use (issue 20, items 3 and 5) -----------------
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_symlinked_dataset_is_refused_and_never_written_through(
+    tmp_path: Path, force: bool
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "linked")
+    out = tmp_path / "results" / "linked"
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "precious.txt").write_text("not cwrend's")
+    out.mkdir(parents=True)
+    (out / "steps").symlink_to(elsewhere, target_is_directory=True)
+    args = ["ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1"]
+    result = _cli(*args, *(["--force"] if force else []))
+    assert result.exit_code == 2, result.output
+    assert "a symbolic link inside the campaign directory" in result.stderr
+    assert "Traceback" not in result.output
+    assert [p.name for p in elsewhere.iterdir()] == ["precious.txt"]  # nothing written or removed
+    assert (out / "steps").is_symlink() and not (out / "runs.parquet").exists()
+
+
+def test_an_output_dir_that_is_a_file_exits_2_naming_it(tmp_path: Path) -> None:
+    (tmp_path / "afile").write_text("")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "afile"}"\nname = "x"\n')
+    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 2, result.output
+    assert f"{tmp_path / 'afile' / 'x'}: cannot create the campaign directory" in result.stderr
+
+
+def test_a_second_process_on_the_same_campaign_is_refused(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "busy", "seeds_per_task = 1\n")
+    out = tmp_path / "results" / "busy"
+    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "400", "--arch",
+            ADAPTIVE, "--workers", "1", "-q"]  # fmt: skip
+    first = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while _events_done(out / "events.jsonl") < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        second = _cli("ablate", str(cfg), "--seeds", "300", "--arch", ADAPTIVE, "-q")
+        assert second.exit_code == 2, second.output
+        assert f"is in use by another cwrend process (pid {first.pid}, since" in second.stderr
+    finally:
+        first.kill()
+        first.wait()
+    after = _cli("ablate", str(cfg), "--seeds", "2", "--arch", ADAPTIVE, "-q", "--workers", "1")
+    assert after.exit_code == 0, after.output  # the kernel released the killed holder's lock

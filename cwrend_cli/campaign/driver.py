@@ -36,6 +36,8 @@ from cwrend_cli.campaign.executors import (
 )
 from cwrend_cli.campaign.journal import (
     append_events,
+    campaign_lock,
+    check_confined,
     check_same_campaign,
     events_of,
     finish_manifest,
@@ -52,7 +54,7 @@ from cwrend_cli.campaign.worker import (
     references_key,
     seeds_to_record,
 )
-from cwrend_cli.errors import CwrendError, InfrastructureError
+from cwrend_cli.errors import ConfigError, CwrendError, InfrastructureError
 from cwrend_cli.output.files import write_json, write_parquet
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
@@ -202,7 +204,34 @@ def run_campaign(
     progress = _Counting(progress or _NoProgress())
     if executor_kind == "dask" and address:
         check_address(address)  # before anything is written
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(
+            f"{out_dir}: cannot create the campaign directory ({exc.strerror}); choose another "
+            "output.dir or output.name"
+        ) from None
+    check_confined(out_dir)
+    with campaign_lock(out_dir):
+        return _run_locked(
+            plan_, out_dir, progress, command, executor_kind, workers, address, force,
+            retry_failed, allow_version_change,
+        )  # fmt: skip
+
+
+def _run_locked(
+    plan_: CampaignPlan,
+    out_dir: Path,
+    progress: _Counting,
+    command: str,
+    executor_kind: ExecutorKind,
+    workers: int | None,
+    address: str | None,
+    force: bool,
+    retry_failed: bool,
+    allow_version_change: bool,
+) -> CampaignSummary:
+    """:func:`run_campaign` once the directory exists, is confined and locked."""
     if force:
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)

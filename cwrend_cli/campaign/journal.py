@@ -23,10 +23,13 @@ the manifest check and the manifest, and ``--force``'s wipe.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -42,6 +45,7 @@ from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     EVENTS,
+    LOCK,
     MANIFEST,
     RECORDINGS,
     REFERENCES,
@@ -56,6 +60,8 @@ __all__ = [
     "STATS_FILES",
     "JournalState",
     "append_events",
+    "campaign_lock",
+    "check_confined",
     "check_same_campaign",
     "events_of",
     "finish_manifest",
@@ -216,6 +222,63 @@ def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
 # ---------------------------------------------------------------------------
 # The manifest and --force
 # ---------------------------------------------------------------------------
+
+
+def check_confined(out_dir: Path) -> None:
+    """Refuse a campaign directory holding symbolic links where cwrend reads or writes.
+
+    cwrend never reads or writes through a link: a linked ``steps/`` (or
+    journal, manifest, …) would send results, or ``--force``'s removal,
+    outside the campaign directory (issue 20).
+    """
+    names = (MANIFEST, RUNS, EVENTS, LOCK, *STATS_FILES, *DATASETS, REFERENCES)
+    for name in names:
+        if (out_dir / name).is_symlink():
+            _refuse_link(out_dir / name, out_dir)
+    for dataset in (*DATASETS, REFERENCES):
+        for root, dirs, files in os.walk(out_dir / dataset):  # does not follow links
+            for entry in (*dirs, *files):
+                if (Path(root) / entry).is_symlink():
+                    _refuse_link(Path(root) / entry, out_dir)
+
+
+def _refuse_link(path: Path, out_dir: Path) -> None:
+    raise ConfigError(
+        f"{path}: a symbolic link inside the campaign directory; cwrend reads and writes only "
+        f"inside {out_dir} and never follows links: remove the link, or choose another "
+        "output.dir / output.name"
+    )
+
+
+@contextmanager
+def campaign_lock(out_dir: Path) -> Iterator[None]:
+    """Hold an exclusive lock on a campaign directory for the ``with`` block.
+
+    A second process on the same directory is refused (naming the holder)
+    instead of writing duplicate rows beside the first. The lock is an
+    ``flock`` on :data:`~cwrend_cli.output.layout.LOCK`: the kernel releases it
+    when its holder exits however it exits, so a lock is never stale; the
+    file itself stays and only names the last holder.
+    """
+    path = out_dir / LOCK
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot open the campaign lock ({exc.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 256, 0).decode("utf-8", "replace").strip() or "unknown"
+            raise ConfigError(
+                f"{out_dir} is in use by another cwrend process ({holder}); wait for it to "
+                "finish or stop it, then run the command again"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}, since {iso(time.time())}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def wipe(out_dir: Path) -> None:

@@ -31,6 +31,8 @@ RECORDINGS = "recordings"
 REFERENCES = "references"
 ABLATION_STATS = "ablation.parquet"
 SWEEP_STATS = "sweep.parquet"
+#: Held (flock) by the process running the campaign; names that process.
+LOCK = ".cwrend.lock"
 
 # Two campaigns compared (``cwrend compare A B``)
 COMPARE_STATS = "compare.parquet"
