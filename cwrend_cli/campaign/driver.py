@@ -123,11 +123,12 @@ class CampaignSummary:
     """Outcome of one invocation of a campaign."""
 
     out_dir: Path
-    executed: int
-    skipped: int
+    executed: int  # runs computed and journaled by this invocation
+    skipped: int  # runs the directory already held
     ok: int  # in the whole campaign directory
     failed: int  # in the whole campaign directory
     interrupted: bool
+    planned: int = 0  # runs of the plan (this invocation's command)
 
 
 class _PointReferences:
@@ -294,7 +295,9 @@ def _run_locked(
             f"and kept ({failed} failed), none was recorded for this fault; fix the cause and run "
             "the same command to compute exactly the missing runs"
         )
-    return CampaignSummary(out_dir, total, skipped, ok, failed, interrupted)
+    return CampaignSummary(
+        out_dir, progress.journaled, skipped, ok, failed, interrupted, len(plan_.runs)
+    )
 
 
 class _StopError(Exception):

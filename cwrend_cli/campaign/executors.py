@@ -67,6 +67,16 @@ def _worker_init() -> None:
     threading.Thread(target=watch, name="cwrend-parent-watch", daemon=True).start()
 
 
+def _terminate_workers(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool's worker processes now (SIGTERM; they ignore Ctrl-C).
+
+    What their running tasks wrote is unjournaled and removed on resume
+    (:func:`cwrend_cli.campaign.journal.remove_orphan_files`).
+    """
+    for process in list((pool._processes or {}).values()):
+        process.terminate()
+
+
 def _started() -> None:
     """Nothing: submitting it makes the pool start a worker process."""
 
@@ -126,6 +136,9 @@ def open_executor(
             pool.submit(_started)
         try:
             yield pool, n
+        except BaseException:  # Ctrl-C or a stop: the running tasks are abandoned, not awaited
+            _terminate_workers(pool)
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         return
