@@ -752,3 +752,29 @@ def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) ->
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr + stdout
+
+
+def test_a_lost_manifest_does_not_let_another_config_reuse_the_runs(tmp_path: Path) -> None:
+    """Issue 20 item 2: the journal's records name their campaign; a mismatch is refused."""
+    cfg = _write_config(tmp_path / "c.toml", "nomanifest")
+    out = tmp_path / "results" / "nomanifest"
+    args = ["ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    assert _cli(*args).exit_code == 0
+    (out / "manifest.json").unlink()
+    changed = _cli(*args, "--set", "schedule.beta=0.5")
+    assert changed.exit_code == 2, changed.output
+    assert "has no manifest.json but its journal holds runs of another campaign" in changed.stderr
+    same = _cli(*args)  # the same campaign may resume without its manifest
+    assert same.exit_code == 0, same.output
+
+
+@pytest.mark.parametrize("content", [b"[]", b"null", b"\xff\xfe\x00garbage"])
+def test_a_corrupt_manifest_exits_2_with_the_fix(tmp_path: Path, content: bytes) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "corrupt")
+    out = tmp_path / "results" / "corrupt"
+    out.mkdir(parents=True)
+    (out / "manifest.json").write_bytes(content)
+    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 2, result.output
+    assert "manifest; use --force to start the campaign over" in result.stderr
+    assert "Traceback" not in result.output

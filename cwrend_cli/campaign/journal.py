@@ -117,16 +117,18 @@ def _json_default(value: Any) -> Any:
 
 
 def read_events(path: str | Path) -> list[dict[str, Any]]:
-    """All complete events of a journal; a torn (unparsable) line is dropped."""
+    """All complete events of a journal; a torn or unparsable line is dropped."""
     path = Path(path)
     if not path.exists():
         return []
     events = []
-    for line in path.read_text(encoding="utf-8").splitlines():
+    for line in path.read_bytes().splitlines():
         try:
-            events.append(json.loads(line))
-        except json.JSONDecodeError:
+            event = json.loads(line)
+        except ValueError:  # torn, not JSON, not UTF-8
             continue
+        if isinstance(event, dict):
+            events.append(event)
     return events
 
 
@@ -332,10 +334,22 @@ def check_same_campaign(
     """
     manifest = out_dir / MANIFEST
     if not manifest.exists():
+        # each journal record names its campaign: a lost manifest cannot hide another one
+        others = {
+            str(e["campaign_hash"])
+            for e in read_events(out_dir / EVENTS)
+            if "campaign_hash" in e and e["campaign_hash"] != plan_.campaign_hash
+        }
+        if others:
+            raise ConfigError(
+                f"{out_dir} has no manifest.json but its journal holds runs of another campaign "
+                f"(hash {sorted(others)[0][:12]}… vs {plan_.campaign_hash[:12]}…); use --force "
+                "to start over, or another output.name"
+            )
         return {}
     try:
         previous = json.loads(manifest.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError):
+    except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
         raise ConfigError(
             f"{manifest}: unreadable manifest; use --force to start the campaign over"
         ) from None
