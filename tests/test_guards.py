@@ -1,0 +1,58 @@
+"""A run that does not raise can still fail: non-finite results and time limits (issue 21)."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+from cwrend_cli.campaign import guards
+from cwrend_cli.config import CwrendConfig
+from cwrend_cli.config.adapt import problem_of
+from cwrend_cli.physics import simulation
+from cwrend_cli.physics.params import ARCHITECTURES
+
+
+@pytest.fixture(scope="module")
+def run(paper_refs: simulation.References) -> simulation.RunResult:
+    noise = np.random.default_rng(0).standard_normal((800, 3))
+    problem = problem_of(CwrendConfig())
+    return simulation.simulate(problem, ARCHITECTURES["mtf_adaptive"], noise, paper_refs)
+
+
+def test_a_finite_run_passes(run: simulation.RunResult) -> None:
+    guards.check_finite(run)  # NaN rows of NIS and measurements are by design
+
+
+def test_a_non_finite_estimate_is_named_with_its_first_step(run: simulation.RunResult) -> None:
+    x_hat = run.x_hat.copy()
+    x_hat[5:, 2] = np.inf
+    with pytest.raises(
+        guards.NonFiniteRunError,
+        match=r"non-finite estimate \(x_hat\) from t = 5 s \(step 5, 796 of 801 rows\)",
+    ):
+        guards.check_finite(dataclasses.replace(run, x_hat=x_hat))
+
+
+def test_a_non_finite_miss_is_named(run: simulation.RunResult) -> None:
+    with pytest.raises(guards.NonFiniteRunError, match="non-finite miss_km"):
+        guards.check_finite(dataclasses.replace(run, miss_km=float("nan")))
+
+
+def test_a_block_longer_than_its_limit_raises_a_timeout() -> None:
+    started = time.monotonic()
+    expected = r"timed out: the run took longer than 0\.2 s"
+    with pytest.raises(guards.RunTimeoutError, match=expected), guards.time_limit(0.2):
+        while time.monotonic() - started < 10.0:
+            time.sleep(0.01)
+    assert time.monotonic() - started < 5.0
+
+
+def test_no_limit_and_a_finished_block_leave_no_alarm_behind() -> None:
+    with guards.time_limit(None):
+        time.sleep(0.05)
+    with guards.time_limit(0.1):
+        pass
+    time.sleep(0.2)  # an alarm left armed would raise here
