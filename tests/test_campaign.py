@@ -395,6 +395,24 @@ def _events_done(path: Path) -> int:
     return sum(e["event"] == "task_done" for e in journal.read_events(path))
 
 
+def _assert_same_as_uninterrupted(
+    tmp_path: Path, out: Path, args: list[str], runs: int, extra: str = ""
+) -> None:
+    """``out`` holds exactly what the same subprocess command computes in one go, nothing twice.
+
+    ``args`` is ``[python, -m, cwrend_cli, command, config, ...]``; the
+    uninterrupted campaign runs the same options on a copy of the config.
+    """
+    whole_cfg = _write_config(tmp_path / "w.toml", "whole", extra)
+    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], capture_output=True,
+                           text=True, timeout=300)  # fmt: skip
+    assert whole.returncode == 0, whole.stderr
+    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
+    steps = _steps(out)
+    assert len(steps) == runs * 801  # nothing duplicated, nothing left by lost executions
+    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+
+
 def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
     """SIGKILL mid-campaign, then resume: same tables as an uninterrupted run, no duplicates."""
     cfg = _write_config(tmp_path / "c.toml", "killed", "seeds_per_task = 4\n")
@@ -414,14 +432,7 @@ def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
     assert 0 < done_before < 6, "the kill should land mid-campaign (6 tasks of 4 seeds)"
     resumed = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
-    whole_cfg = _write_config(tmp_path / "w.toml", "whole")
-    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], env=env, capture_output=True,
-                           text=True, timeout=300)  # fmt: skip
-    assert whole.returncode == 0, whole.stderr
-    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
-    steps = _steps(out)
-    assert len(steps) == 48 * 801  # nothing duplicated
-    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+    _assert_same_as_uninterrupted(tmp_path, out, args, runs=48)
 
 
 def _children(pid: int) -> list[int]:
@@ -525,14 +536,7 @@ def test_a_killed_worker_is_replaced_and_its_task_rerun(tmp_path: Path) -> None:
     assert len(runs) == 48 and (runs["status"] == "ok").all()  # nothing recorded as failed
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["status"] == "complete"
-    whole_cfg = _write_config(tmp_path / "w.toml", "whole")
-    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], capture_output=True,
-                           text=True, timeout=300)  # fmt: skip
-    assert whole.returncode == 0, whole.stderr
-    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
-    steps = _steps(out)
-    assert len(steps) == 48 * 801  # the lost executions left nothing behind
-    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+    _assert_same_as_uninterrupted(tmp_path, out, args, runs=48)
 
 
 def test_a_full_disk_stops_the_campaign_with_exit_3_and_records_no_result(
@@ -731,14 +735,7 @@ def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     assert json.loads((out / "manifest.json").read_text())["status"] == "interrupted"
     resumed = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
-    whole_cfg = _write_config(tmp_path / "w.toml", "whole", "seeds_per_task = 2\n")
-    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], capture_output=True,
-                           text=True, timeout=300)  # fmt: skip
-    assert whole.returncode == 0, whole.stderr
-    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
-    steps = _steps(out)
-    assert len(steps) == 80 * 801  # the abandoned executions left nothing behind
-    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+    _assert_same_as_uninterrupted(tmp_path, out, args, runs=80, extra="seeds_per_task = 2\n")
 
 
 def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) -> None:
