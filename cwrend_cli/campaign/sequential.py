@@ -1,0 +1,187 @@
+"""Sequential Monte Carlo: seeds in batches until the 95 % intervals are narrow enough (issue 19).
+
+``cwrend ablate … --until TARGET`` runs seeds ``0 … n−1`` for
+``n = batch, 2·batch, …`` (each step an ordinary campaign that resumes the
+previous one, so the result is the fixed campaign of the final seed count,
+bit for bit) and stops when every targeted interval's half-width is at most
+the target, or at ``--max-seeds``. This module is pure: it parses targets and
+reads the campaign's own statistics frame (:mod:`cwrend_cli.campaign.statistics`),
+so a target reported as met is met by the intervals the campaign reports.
+
+Target syntax, ``[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%]``:
+
+* ``miss_km:0.0005`` — the half-width of the 95 % interval of the mean miss
+  is at most 0.5 m, for every architecture;
+* ``median.miss_km:5%`` — of the median, relative: at most 5 % of |median|;
+* ``miss_km@mtf_adaptive-plain_adaptive:0.0005`` — the paired difference of
+  the two architectures on the same seeds (``median_diff`` for the miss,
+  ``mean_diff`` for Δv, or ``frac_less.miss_km@A-B:0.05`` for the share of
+  seeds where A misses less).
+
+The stopping rule and coverage: a rule that stops when an interval is narrow
+enough looks at the data several times, and stopping on a lucky, too-narrow
+interval would lower coverage. cwrend limits this as the fixed-width
+sequential procedures of Chow & Robbins (1965, *Ann. Math. Statist.* 36, 457)
+do: widths are checked only at batch boundaries, never before
+:data:`MIN_BATCHES` batches (at least ``MIN_BATCHES · batch`` seeds, and
+:data:`MIN_SEEDS`), and the reported intervals are those of the final seed
+count, recomputed on all its seeds. For such rules the coverage of the final
+interval tends to the nominal 95 % as the target width shrinks; with wide
+targets (few batches) it can fall a little short of it, so a target should
+ask for several batches' worth of seeds.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+import pandas as pd
+
+from cwrend_cli.campaign.statistics import METRICS, PAIRS, STATISTICS
+from cwrend_cli.errors import ConfigError
+
+__all__ = [
+    "MIN_BATCHES",
+    "MIN_SEEDS",
+    "Achieved",
+    "Target",
+    "achieved",
+    "parse_until",
+    "ready",
+    "seed_counts",
+]
+
+#: Widths are not checked before this many batches.
+MIN_BATCHES = 2
+#: Nor before this many seeds (a bootstrap interval of fewer is unreliable).
+MIN_SEEDS = 20
+#: The paired statistic of each metric (statistics.paired).
+_PAIRED_STATISTIC = {"miss_km": "median_diff", "delta_v_km_s": "mean_diff"}
+_SYNTAX = re.compile(
+    r"^(?:(?P<stat>[a-z_0-9]+)\.)?(?P<metric>[a-z_0-9]+)"
+    r"(?:@(?P<a>[a-z_0-9]+)-(?P<b>[a-z_0-9]+))?:(?P<width>[^%]+)(?P<pct>%)?$"
+)
+
+
+@dataclass(frozen=True)
+class Target:
+    """A requested half-width of a 95 % interval (absolute, in the metric's unit, or relative)."""
+
+    metric: str
+    statistic: str
+    half_width: float
+    relative: bool  # half_width is a fraction of |value|
+    pair: tuple[str, str] | None = None  # a paired difference A − B, else every architecture
+
+    def describe(self) -> str:
+        """The target as a phrase for the console."""
+        what = f"{self.statistic} {self.metric}"
+        if self.pair:
+            what += f" ({self.pair[0]} − {self.pair[1]})"
+        width = (
+            f"{100 * self.half_width:g} % of the value" if self.relative else f"{self.half_width:g}"
+        )
+        return f"95 % half-width of {what} ≤ {width}"
+
+
+def parse_until(text: str) -> Target:
+    """Parse ``--until``; :class:`ConfigError` with the syntax on a bad target."""
+    syntax = (
+        "[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%], e.g. miss_km:0.0005, median.miss_km:5% or "
+        "miss_km@mtf_adaptive-plain_adaptive:0.0005"
+    )
+    m = _SYNTAX.match(text.strip())
+    if m is None:
+        raise ConfigError(f"--until {text!r}: expected {syntax}")
+    metric = m["metric"]
+    try:
+        width = float(m["width"])
+    except ValueError:
+        raise ConfigError(f"--until {text!r}: the half-width must be a number; {syntax}") from None
+    relative = m["pct"] is not None
+    if not math.isfinite(width) or width <= 0:
+        raise ConfigError(f"--until {text!r}: the half-width must be positive")
+    if m["a"] is None:
+        if metric not in METRICS:
+            raise ConfigError(f"--until {text!r}: metric must be one of {', '.join(METRICS)}")
+        statistic = m["stat"] or "mean"
+        if statistic not in STATISTICS:
+            raise ConfigError(f"--until {text!r}: statistic must be one of {', '.join(STATISTICS)}")
+        return Target(metric, statistic, width / 100 if relative else width, relative)
+    pair = (m["a"], m["b"])
+    if pair not in PAIRS:
+        known = ", ".join(f"{a}-{b}" for a, b in PAIRS)
+        raise ConfigError(f"--until {text!r}: pairs compared are {known}")
+    if metric not in _PAIRED_STATISTIC:
+        raise ConfigError(f"--until {text!r}: a paired target is on miss_km or delta_v_km_s")
+    statistic = m["stat"] or _PAIRED_STATISTIC[metric]
+    allowed = {_PAIRED_STATISTIC[metric], *(("frac_less",) if metric == "miss_km" else ())}
+    if statistic not in allowed:
+        raise ConfigError(
+            f"--until {text!r}: the paired statistic of {metric} is {' or '.join(sorted(allowed))}"
+        )
+    return Target(metric, statistic, width / 100 if relative else width, relative, pair)
+
+
+def seed_counts(batch: int, max_seeds: int) -> Iterator[int]:
+    """Seed counts to try: ``batch, 2·batch, …`` up to ``max_seeds`` (always tried last)."""
+    if batch < 1 or max_seeds < 1:
+        raise ConfigError("--batch and --max-seeds must be at least 1")
+    n = batch
+    while n < max_seeds:
+        yield n
+        n += batch
+    yield max_seeds
+
+
+def ready(n_seeds: int, batch: int) -> bool:
+    """Whether widths may be checked at ``n_seeds`` (the minimum batches and seeds reached)."""
+    return n_seeds >= max(MIN_BATCHES * batch, MIN_SEEDS)
+
+
+@dataclass(frozen=True)
+class Achieved:
+    """A targeted interval as the campaign reports it."""
+
+    label: str  # the architecture, or "A − B"
+    value: float
+    half_width: float
+    limit: float  # the target half-width in the metric's unit
+    n: int
+
+    @property
+    def met(self) -> bool:
+        """Half-width at most the limit (a NaN interval, from < 2 seeds, is not met)."""
+        return self.half_width <= self.limit
+
+
+def achieved(stats: pd.DataFrame, target: Target, archs: Sequence[str]) -> list[Achieved]:
+    """The targeted intervals of a statistics frame (``statistics.describe`` + ``paired`` rows).
+
+    Per architecture of ``archs`` (marginal) or for the target's pair; an
+    interval the frame lacks (an architecture with no ok run) is reported
+    with a NaN half-width, never met.
+    """
+    if target.pair is None:
+        rows = stats[(stats["kind"] == "marginal") & (stats["metric"] == target.metric)]
+        rows = rows[rows["statistic"] == target.statistic]
+        wanted = [(a, rows[rows["arch"] == a]) for a in archs]
+    else:
+        a, b = target.pair
+        rows = stats[(stats["kind"] == "paired") & (stats["metric"] == target.metric)]
+        rows = rows[(rows["statistic"] == target.statistic) & (rows["arch"] == a)]
+        wanted = [(f"{a} − {b}", rows[rows["other"] == b])]
+    out = []
+    for label, row in wanted:
+        if row.empty:
+            out.append(Achieved(label, math.nan, math.nan, math.nan, 0))
+            continue
+        r = row.iloc[0]
+        value = float(r["value"])
+        half = (float(r["ci_high"]) - float(r["ci_low"])) / 2
+        limit = target.half_width * abs(value) if target.relative else target.half_width
+        out.append(Achieved(label, value, half, limit, int(r["n"])))
+    return out

@@ -1,0 +1,102 @@
+"""Sequential Monte Carlo targets (issue 19, item 3): parsed as documented, read from the stats."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cwrend_cli.campaign import sequential, statistics
+from cwrend_cli.errors import ConfigError
+
+
+@pytest.mark.parametrize(
+    ("text", "target"),
+    [
+        ("miss_km:0.0005", sequential.Target("miss_km", "mean", 0.0005, False)),
+        ("median.miss_km:5%", sequential.Target("miss_km", "median", 0.05, True)),
+        ("delta_v_km_s:1e-4", sequential.Target("delta_v_km_s", "mean", 1e-4, False)),
+        (
+            "miss_km@mtf_adaptive-plain_adaptive:0.001",
+            sequential.Target(
+                "miss_km", "median_diff", 0.001, False, ("mtf_adaptive", "plain_adaptive")
+            ),
+        ),
+        (
+            "frac_less.miss_km@mtf_adaptive-mtf_fixed:0.05",
+            sequential.Target("miss_km", "frac_less", 0.05, False, ("mtf_adaptive", "mtf_fixed")),
+        ),
+    ],
+)
+def test_targets_parse_as_documented(text: str, target: sequential.Target) -> None:
+    assert sequential.parse_until(text) == target
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("miss", "expected [STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%]"),
+        ("speed_km:1", "metric must be one of"),
+        ("mode.miss_km:1", "statistic must be one of"),
+        ("miss_km:-1", "must be positive"),
+        ("miss_km:abc", "must be a number"),
+        ("miss_km@plain_fixed-mtf_adaptive:1", "pairs compared are"),
+        ("mean.miss_km@mtf_adaptive-plain_adaptive:1", "paired statistic of miss_km"),
+    ],
+)
+def test_bad_targets_exit_with_the_syntax(text: str, message: str) -> None:
+    with pytest.raises(ConfigError, match="--until") as err:
+        sequential.parse_until(text)
+    assert message in str(err.value)
+
+
+def test_seed_counts_grow_by_batches_and_end_at_the_maximum() -> None:
+    assert list(sequential.seed_counts(50, 180)) == [50, 100, 150, 180]
+    assert list(sequential.seed_counts(50, 100)) == [50, 100]
+
+
+def test_widths_are_checked_only_after_the_minimum_batches_and_seeds() -> None:
+    assert not sequential.ready(10, batch=10)  # one batch
+    assert not sequential.ready(2 * 5, batch=5)  # two batches but fewer than MIN_SEEDS
+    assert sequential.ready(max(sequential.MIN_BATCHES * 25, sequential.MIN_SEEDS), batch=25)
+
+
+def _runs(n: int) -> pd.DataFrame:
+    rng = np.random.default_rng(1)
+    rows = []
+    for seed in range(n):
+        for arch, scale in (("mtf_adaptive", 1.0), ("plain_adaptive", 2.0)):
+            rows.append(
+                {"seed": seed, "arch": arch, "status": "ok",
+                 "miss_km": scale * 1e-3 * (1 + 0.3 * rng.standard_normal()),
+                 "delta_v_km_s": 0.14 + 1e-4 * rng.standard_normal(),
+                 "fuel_penalty_pct": 25.0, "solve_success_pct": 100.0,
+                 "solve_mean_ms": 1.0, "solve_max_ms": 2.0, "n_infeasible": 0}
+            )  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_achieved_widths_are_the_reported_intervals() -> None:
+    runs = _runs(200)
+    stats = pd.concat([statistics.describe(runs, ["arch"]), statistics.paired(runs)])
+    target = sequential.parse_until("miss_km:10%")
+    got = sequential.achieved(stats, target, ["mtf_adaptive", "plain_adaptive"])
+    for a in got:
+        row = stats[(stats["kind"] == "marginal") & (stats["arch"] == a.label)
+                    & (stats["metric"] == "miss_km") & (stats["statistic"] == "mean")]  # fmt: skip
+        assert a.half_width == pytest.approx((row["ci_high"].iloc[0] - row["ci_low"].iloc[0]) / 2)
+        assert a.limit == pytest.approx(0.1 * row["value"].iloc[0])
+        assert a.met == (a.half_width <= a.limit) and a.n == 200
+    paired = sequential.achieved(
+        stats, sequential.parse_until("miss_km@mtf_adaptive-plain_adaptive:1e-4"), []
+    )
+    assert [p.label for p in paired] == ["mtf_adaptive − plain_adaptive"]
+    assert paired[0].value < 0 and math.isfinite(paired[0].half_width)
+
+
+def test_an_architecture_without_runs_never_meets_its_target() -> None:
+    stats = statistics.describe(_runs(30), ["arch"])
+    got = sequential.achieved(stats, sequential.parse_until("miss_km:1"), ["mtf_fixed"])
+    assert len(got) == 1 and not got[0].met and got[0].n == 0
