@@ -14,6 +14,7 @@ collects them as they complete, whatever executor it was given.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
 import signal
@@ -148,6 +149,10 @@ def open_executor(
         raise ConfigError(
             "--executor dask needs Dask distributed: pip install 'cwrend[dask]'"
         ) from None
+    # cwrend reports a lost scheduler or worker itself (exit 3, the manifest): Dask's own
+    # log lines with tracebacks would only bury that message
+    for name in ("distributed", "distributed.client", "distributed.worker", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     cluster = None
     if address:
         try:

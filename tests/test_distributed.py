@@ -1,0 +1,204 @@
+"""A real distributed run: a Dask scheduler and two workers on 127.0.0.1 (issues 20 and 21).
+
+The tests start ``dask scheduler`` and ``dask worker`` processes, run
+campaigns with ``--executor dask --address …`` and check the numbers against
+``--workers 1``; then they kill a worker, and stop the scheduler, in the
+middle of a campaign: the campaign completes (Dask reruns a dead worker's
+tasks) or stops with exit code 3, and never records an infrastructure fault
+as a run's result or duplicates a row.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from cwrend_cli.campaign import journal
+
+pytestmark = pytest.mark.skipif(shutil.which("dask") is None, reason="needs Dask distributed")
+
+ARCHS = "mtf_adaptive,plain_adaptive"
+TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _wait_for_port(port: int, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.1)
+    raise TimeoutError(f"nothing listens on port {port}")
+
+
+class Cluster:
+    """A scheduler and worker processes (one thread each) on the loopback interface."""
+
+    def __init__(self, tmp: Path, workers: int) -> None:
+        self.port = _free_port()
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.log = tmp / "dask.log"
+        log = self.log.open("w")
+        env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+        self.scheduler = subprocess.Popen(
+            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(self.port),
+             "--no-dashboard"],
+            stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True,
+        )  # fmt: skip
+        _wait_for_port(self.port)
+        self.workers = [
+            subprocess.Popen(
+                [
+                    "dask",
+                    "worker",
+                    self.address,
+                    "--nthreads",
+                    "1",
+                    "--nworkers",
+                    "1",
+                    "--no-dashboard",
+                    "--no-nanny",
+                    "--local-directory",
+                    str(tmp / f"w{i}"),
+                ],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
+                start_new_session=True,
+            )
+            for i in range(workers)
+        ]
+        self._wait_for_workers(workers)
+
+    def _wait_for_workers(self, n: int) -> None:
+        from distributed import Client
+
+        with Client(self.address, timeout="30s") as client:  # type: ignore[no-untyped-call]
+            client.wait_for_workers(n, timeout=60)  # type: ignore[no-untyped-call]
+
+    def stop(self) -> None:
+        for proc in [*self.workers, self.scheduler]:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+@pytest.fixture
+def cluster(tmp_path: Path) -> Iterator[Cluster]:
+    c = Cluster(tmp_path, workers=2)
+    try:
+        yield c
+    finally:
+        c.stop()
+
+
+def _config(tmp_path: Path, name: str) -> Path:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(
+        f'[output]\ndir = "{tmp_path / "results"}"\nname = "{name}"\nseeds_per_task = 1\n'
+        "rrd_seeds = 0\n"
+    )
+    return path
+
+
+def _cwrend(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cwrend_cli", *args], capture_output=True,
+                          text=True, timeout=timeout)  # fmt: skip
+
+
+def _runs(out: Path) -> pd.DataFrame:
+    runs = pd.read_parquet(out / "runs.parquet")
+    runs = runs.drop(columns=[c for c in TIMING if c in runs.columns])
+    return runs.sort_values("run_key").reset_index(drop=True)
+
+
+def _steps(out: Path) -> pd.DataFrame:
+    steps = pd.read_parquet(out / "steps")
+    steps["arch"] = steps["arch"].astype(str)
+    return steps.sort_values(["run_key", "step"]).reset_index(drop=True)
+
+
+def _events_done(out: Path) -> int:
+    return sum(e["event"] == "task_done" for e in journal.read_events(out / "events.jsonl"))
+
+
+def _reference(tmp_path: Path, seeds: int) -> Path:
+    result = _cwrend("ablate", str(_config(tmp_path, "local")), "--seeds", str(seeds),
+                     "--arch", ARCHS, "--workers", "1", "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    return tmp_path / "results" / "local"
+
+
+def test_a_dask_cluster_gives_the_numbers_of_one_worker(tmp_path: Path, cluster: Cluster) -> None:
+    result = _cwrend("ablate", str(_config(tmp_path, "dask")), "--seeds", "6", "--arch", ARCHS,
+                     "--executor", "dask", "--address", cluster.address, "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    out, local = tmp_path / "results" / "dask", _reference(tmp_path, 6)
+    pd.testing.assert_frame_equal(_runs(out), _runs(local))
+    pd.testing.assert_frame_equal(_steps(out), _steps(local), check_exact=True)
+
+
+def _start_campaign(tmp_path: Path, cluster: Cluster, seeds: int) -> subprocess.Popen[str]:
+    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(_config(tmp_path, "dask")),
+            "--seeds", str(seeds), "--arch", ARCHS, "--executor", "dask", "--address",
+            cluster.address, "-q"]  # fmt: skip
+    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_tasks(out: Path, proc: subprocess.Popen[str], n: int) -> None:
+    deadline = time.monotonic() + 180
+    while (not (out / "events.jsonl").exists() or _events_done(out) < n) and (
+        time.monotonic() < deadline and proc.poll() is None
+    ):
+        time.sleep(0.05)
+
+
+def test_a_killed_dask_worker_loses_no_run_and_duplicates_none(
+    tmp_path: Path, cluster: Cluster
+) -> None:
+    out = tmp_path / "results" / "dask"
+    proc = _start_campaign(tmp_path, cluster, seeds=16)
+    _wait_for_tasks(out, proc, 2)
+    assert proc.poll() is None, "the kill must land mid-campaign"
+    os.killpg(cluster.workers[0].pid, signal.SIGKILL)
+    _, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr  # Dask reran the dead worker's tasks on the other
+    runs = _runs(out)
+    assert len(runs) == 32 and (runs["status"] == "ok").all()
+    local = _reference(tmp_path, 16)
+    pd.testing.assert_frame_equal(runs, _runs(local))
+    pd.testing.assert_frame_equal(_steps(out), _steps(local), check_exact=True)
+
+
+def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
+    tmp_path: Path, cluster: Cluster
+) -> None:
+    out = tmp_path / "results" / "dask"
+    proc = _start_campaign(tmp_path, cluster, seeds=40)
+    _wait_for_tasks(out, proc, 2)
+    assert proc.poll() is None, "the scheduler must stop mid-campaign"
+    os.killpg(cluster.scheduler.pid, signal.SIGKILL)
+    _, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 3, stderr
+    assert "campaign stopped:" in stderr and "Traceback" not in stderr
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert (runs["status"] == "ok").all()  # nothing recorded for the lost scheduler
+    assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped:")
