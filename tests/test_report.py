@@ -523,3 +523,36 @@ def test_report_html_is_self_contained(ablation_dir: Path, tmp_path: Path) -> No
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
     assert "<code>abc</code>" in page  # the config hash
     assert '"beta": 0.25' in page  # the resolved config
+
+
+# ---------------------------------------------------------------------------
+# The simulated world (issue 15, item 6)
+# ---------------------------------------------------------------------------
+
+
+def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
+    """Title and caption of each figure name the truth model, actuator errors and faults."""
+    import dataclasses
+
+    from cwrend_cli.report import figures
+
+    data = load_results(ablation_dir)
+    assert data.world == "truth: cw (the design model)"
+    cfg = config_from_dict(
+        apply(
+            resolved_dict(CwrendConfig()),
+            (
+                ("truth.model", "j2"),
+                ("actuator.magnitude_sigma", 0.01),
+                ("degradation.windows.0.dropout_probability", 0.5),
+            ),
+        )
+    )
+    mismatched = dataclasses.replace(data, config=cfg)
+    world = "truth: j2 · actuator errors on · sensor faults on"
+    assert mismatched.world == world
+    planned = figures.planned_figures(mismatched)
+    assert {*PER_SEED, *MULTI_SEED} == {f.file for f in planned}
+    for f in planned:
+        assert f.caption.endswith(f"Simulated world: {world}."), f.file
+        assert world in f.draw().get_suptitle(), f.file

@@ -47,11 +47,10 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from cwrend_cli import __version__
 from cwrend_cli.campaign.statistics import METRICS, bootstrap_ci, wilson_ci
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import MANIFEST, RUNS
-from cwrend_cli.output.tables import PARAM_PREFIX, param_columns
+from cwrend_cli.output.tables import PARAM_PREFIX, param_columns, statistics_table
 
 __all__ = [
     "DEFAULT_METRICS",
@@ -348,17 +347,19 @@ def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) 
 def compare_table(comparison: Comparison) -> pa.Table:
     """``compare.parquet``: the rows, with both campaigns and the units in the metadata."""
     a, b = comparison.a, comparison.b
+    hash_a = str(a.manifest.get("config_hash", ""))
+    hash_b = str(b.manifest.get("config_hash", ""))
     meta = {
-        "cwrend_version": __version__,
+        # one config hash when both campaigns share their base config, else both
+        "config_hash": hash_a if hash_a == hash_b else f"A {hash_a}; B {hash_b}",
         "difference": "A - B per seed; frac_better: share of seeds with A < B",
         "units": "miss_km km, delta_v_km_s km/s, fuel_penalty_pct %",
         "a": str(a.path.resolve()),
         "b": str(b.path.resolve()),
         "campaign_hash_a": str(a.manifest.get("campaign_hash", "")),
         "campaign_hash_b": str(b.manifest.get("campaign_hash", "")),
-        "config_hash_a": str(a.manifest.get("config_hash", "")),
-        "config_hash_b": str(b.manifest.get("config_hash", "")),
+        "config_hash_a": hash_a,
+        "config_hash_b": hash_b,
         "root_seed": str(a.root_seed),
     }
-    table = pa.Table.from_pandas(comparison.frame, preserve_index=False)
-    return table.replace_schema_metadata({k.encode(): v.encode() for k, v in meta.items()})
+    return statistics_table(comparison.frame, meta)

@@ -16,6 +16,7 @@ protocol.
 from __future__ import annotations
 
 import errno
+import json
 import time
 from collections import deque
 from collections.abc import Collection, Sequence
@@ -25,7 +26,6 @@ from pathlib import Path
 from typing import Literal, Protocol
 
 import pandas as pd
-import pyarrow as pa
 
 from cwrend_cli.campaign import statistics
 from cwrend_cli.campaign.executors import (
@@ -64,7 +64,12 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     references_path,
 )
-from cwrend_cli.output.tables import param_columns, references_table, runs_table
+from cwrend_cli.output.tables import (
+    param_columns,
+    references_table,
+    runs_table,
+    statistics_table,
+)
 from cwrend_cli.physics import simulation
 
 __all__ = [
@@ -141,9 +146,10 @@ class _PointReferences:
     would have alone.
     """
 
-    def __init__(self, out_dir: Path, campaign_hash: str) -> None:
+    def __init__(self, out_dir: Path, campaign_hash: str, config_hash: str) -> None:
         self._out_dir = out_dir
         self._campaign_hash = campaign_hash
+        self._config_hash = config_hash
         self._by_key: dict[ReferencesKey, simulation.References | None] = {}
         self._written: set[str] = set()
 
@@ -157,7 +163,11 @@ class _PointReferences:
                 self._by_key[key] = None
         refs = self._by_key[key]
         if refs is not None and task.point not in self._written:
-            meta = {"campaign_hash": self._campaign_hash, "point": task.point}
+            meta = {
+                "config_hash": self._config_hash,
+                "campaign_hash": self._campaign_hash,
+                "point": task.point,
+            }
             write_parquet(references_table(refs, meta), self._out_dir / references_path(task.point))
             self._written.add(task.point)
         return refs
@@ -275,9 +285,7 @@ def _run_locked(
         if stopped is not None:
             status = f"stopped: {stopped}"
         try:  # under a full disk these may fail too: the journal stays the record
-            write_parquet(
-                runs_table(records, {"campaign_hash": plan_.campaign_hash}), out_dir / RUNS
-            )
+            write_parquet(runs_table(records, _file_metadata(plan_)), out_dir / RUNS)
             finish_manifest(
                 manifest,
                 finished=time.time(),
@@ -328,7 +336,7 @@ def _execute(
     campaign cannot go on.
     """
     attempts: dict[str, int] = {}
-    references = _PointReferences(out_dir, plan_.campaign_hash)
+    references = _PointReferences(out_dir, plan_.campaign_hash, plan_.config_hash)
     pending = list(tasks)
     reopened = 0
     while pending:
@@ -457,6 +465,18 @@ def _statistics(
     return frame, groups
 
 
+def _file_metadata(plan_: CampaignPlan) -> dict[str, str]:
+    """Schema metadata of a campaign's Parquet files: its base config's and its own hash."""
+    return {"config_hash": plan_.config_hash, "campaign_hash": plan_.campaign_hash}
+
+
+def _stored_metadata(out_dir: Path) -> dict[str, str]:
+    """The config and campaign hashes of a campaign directory (its manifest; empty if none)."""
+    manifest = out_dir / MANIFEST
+    stored = json.loads(manifest.read_text(encoding="utf-8")) if manifest.exists() else {}
+    return {k: str(stored.get(k, "")) for k in ("config_hash", "campaign_hash")}
+
+
 def write_statistics(
     out_dir: Path, command: Literal["ablate", "sweep"], root_seed: int
 ) -> CampaignStatistics:
@@ -473,7 +493,7 @@ def write_statistics(
     if frame.empty:
         return CampaignStatistics(frame, groups, None)
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
-    write_parquet(pa.Table.from_pandas(frame, preserve_index=False), path)
+    write_parquet(statistics_table(frame, _stored_metadata(out_dir)), path)
     return CampaignStatistics(frame, groups, path)
 
 

@@ -7,6 +7,18 @@ the open-loop ``references`` of ``cwrend run``, their campaign variants (the
 hive-partitioned ``steps/`` and ``solves/`` datasets) and ``runs.parquet``.
 Files are written by :mod:`cwrend_cli.output.files`; the campaign directory
 and its journal are :mod:`cwrend_cli.campaign.journal`.
+
+Data conventions (issue 18, item 5): every Parquet file carries, in its Arrow
+schema metadata, ``cwrend_version`` and ``config_hash``
+(:func:`cwrend_cli.config.config_hash` of the resolved config; a campaign's
+files carry its base config's hash, as ``manifest.json``), and every column
+a field-level ``unit`` (``b"km"``, ``b"km/s"``, ``b"-"`` for dimensionless …)
+and ``description`` (:func:`with_conventions`, checked by
+:func:`check_conventions` before any file is written). Units come from one
+table: :data:`COLUMNS` names every fixed column, with its unit derived from
+the name's suffix where it has one (:data:`SUFFIX_UNITS`) and explicit
+otherwise; swept and dispersed values (``param.<key>``, ``disp.<key>``) take
+the unit of their configuration key (:func:`unit_of`).
 """
 
 from __future__ import annotations
@@ -17,6 +29,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 
 from cwrend_cli import __version__
@@ -26,11 +39,222 @@ from cwrend_cli.physics.simulation import References, RunResult
 
 _AXES = ("x", "y", "z")
 _VEL = ("vx", "vy", "vz")
+#: Prefix of the ``runs.parquet`` columns holding a run's swept values.
+PARAM_PREFIX = "param."
 
 
 def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
-    meta = {"cwrend_version": __version__, "units": "km, s, km/s, km/s^2", **extra}
+    units = "per column: field metadata 'unit' (km, s, km/s, km/s^2; - dimensionless)"
+    meta = {"cwrend_version": __version__, "units": units, **extra}
     return {k.encode(): str(v).encode() for k, v in meta.items()}
+
+
+# ---------------------------------------------------------------------------
+# Units and descriptions of every column (issue 18, item 5)
+# ---------------------------------------------------------------------------
+
+#: Unit of a column (or configuration key) from its name's suffix, longest first.
+SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
+    ("_km_s2", "km/s^2"),
+    ("_km_s", "km/s"),
+    ("_rad_s", "rad/s"),
+    ("_km2", "km^2"),
+    ("_km", "km"),
+    ("_deg", "deg"),
+    ("_pct", "%"),
+    ("_ms", "ms"),
+    ("_s", "s"),
+)
+#: Unit of the long-format statistics' ``value``, ``ci_low`` and ``ci_high``: that of the
+#: row's ``metric`` (read from its suffix, e.g. ``miss_km`` → km; none: dimensionless).
+PER_METRIC = "unit of metric"
+
+
+def suffix_unit(name: str) -> str | None:
+    """The unit a name's suffix gives (``miss_km`` → ``km``), ``None`` without one."""
+    for suffix, unit in SUFFIX_UNITS:
+        if name.endswith(suffix):
+            return unit
+    return None
+
+
+def _col(description: str, unit: str | None = None) -> tuple[str, str]:
+    return (unit if unit is not None else "", description)
+
+
+_A = {"x": "radial", "y": "along-track", "z": "cross-track"}
+#: Every fixed column cwrend writes: ``name → (unit, description)``; an empty unit is
+#: read from the name's suffix (:func:`unit_of`), the others are explicit.
+COLUMNS: Mapping[str, tuple[str, str]] = {
+    "arch": _col("architecture (estimator_schedule) or open_loop_<reference>", "-"),
+    "seed": _col("seed index k of the noise stream (SeedSequence spawn key (k, …))", "-"),
+    "step": _col("step index k; row k is time t_k", "-"),
+    "t_s": _col("time t_k from the start"),
+    **{f"{a}_km": _col(f"true relative position, {d} (CW frame)") for a, d in _A.items()},
+    **{f"v{a}_km_s": _col(f"true relative velocity, {d}") for a, d in _A.items()},
+    **{f"{a}_hat_km": _col(f"estimated position, {d} (filter posterior)") for a, d in _A.items()},
+    **{f"v{a}_hat_km_s": _col(f"estimated velocity, {d}") for a, d in _A.items()},
+    **{
+        f"u{a}_km_s2": _col(f"control applied over [t_k, t_k+1) (after actuator errors), {d}")
+        for a, d in _A.items()
+    },
+    "u_norm_km_s2": _col("norm of the applied control"),
+    **{
+        f"ucmd_{a}_km_s2": _col(f"control commanded at t_k (what the filter uses), {d}")
+        for a, d in _A.items()
+    },
+    **{
+        f"meas_{a}_km": _col(f"position measurement of row k (taken at t_k), {d}; NaN: none")
+        for a, d in _A.items()
+    },
+    "nis": _col("normalised innovation squared of the row's measurement (chi2_3)", "-"),
+    "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
+    "score": _col("composite innovation score s", "-"),
+    "score_filtered": _col("low-pass filtered score s-bar", "-"),
+    "eps": _col("homotopy parameter epsilon after the row's update", "-"),
+    "pos_err_km": _col("distance to the target ||r||"),
+    "est_err_km": _col("position estimation error ||r-hat - r||"),
+    "est_vel_err_km_s": _col("velocity estimation error ||v-hat - v||"),
+    "trace_p": _col("trace of the estimate covariance P (sums km^2 and km^2/s^2)", "mixed"),
+    "nees": _col(
+        "normalised estimation error squared (x-hat - x)' P^-1 (x-hat - x) (chi2_6); "
+        "row 0: initial error against P0; posterior, prior on a dropout row",
+        "-",
+    ),
+    "degradation_window": _col(
+        "index of the degradation window active at t_(k-1), whose noise the row's "
+        "measurement carries; -1 none",
+        "-",
+    ),
+    "dropout": _col("sensor dropout: the row has no measurement", "-"),
+    "outlier": _col("the row's measurement noise is an outlier (scaled)", "-"),
+    "run_key": _col("run identifier <point>.<arch>.s<seed>", "-"),
+    "point": _col("grid point identifier", "-"),
+    # solves
+    "kind": _col("initial or resolve (solves); marginal or paired (statistics)", "-"),
+    "horizon_s": _col("horizon of the solve"),
+    "status": _col("solve outcome (solves) or run outcome ok/failed (runs)", "-"),
+    "fallback_step": _col("solver step of the fallback chain that produced the result", "-"),
+    "iterations": _col("solver iterations", "-"),
+    "residual_km": _col("terminal residual norm of the solve"),
+    "wall_time_ms": _col("wall time of the solve"),
+    "success": _col("converged with residual below solver.success_residual", "-"),
+    # summary / runs
+    "delta_v_km_s": _col("trapezoid of ||u|| (applied) over the grid"),
+    "miss_km": _col("terminal miss ||r(T) - r_f||"),
+    "fuel_penalty_pct": _col("delta-v above the open-loop fuel optimum"),
+    "n_solves": _col("receding-horizon re-solves", "-"),
+    "n_converged": _col("re-solves that converged", "-"),
+    "n_infeasible": _col("re-solves found infeasible", "-"),
+    "n_failed": _col("re-solves that failed", "-"),
+    "solve_success_pct": _col("share of successful re-solves"),
+    "solve_mean_ms": _col("mean wall time per re-solve"),
+    "solve_max_ms": _col("longest re-solve"),
+    "mean_nis_nominal": _col(
+        "mean NIS over rows with a measurement outside every degradation window "
+        "(3 for a consistent filter)",
+        "-",
+    ),
+    "mean_nees": _col("mean NEES over rows 1..N (6 for a consistent filter)", "-"),
+    "error": _col("error text and traceback of a failed run", "-"),
+    "duration_s": _col("wall time of the run"),
+    # references
+    "reference": _col("open-loop reference: energy or fuel", "-"),
+    # statistics (ablation.parquet, sweep.parquet, compare.parquet)
+    "metric": _col("runs.parquet column the statistic is of", "-"),
+    "statistic": _col("mean, median, p95, frac_less, median_diff, mean_diff, …", "-"),
+    "value": _col("the statistic's value", PER_METRIC),
+    "ci_low": _col("lower end of its 95 % interval (bootstrap; Wilson for shares)", PER_METRIC),
+    "ci_high": _col("upper end of its 95 % interval", PER_METRIC),
+    "n": _col("number of runs or seed pairs", "-"),
+    "other": _col("the architecture A is compared with (A - B)", "-"),
+    "point_a": _col("grid point of campaign A", "-"),
+    "point_b": _col("grid point of campaign B", "-"),
+}
+#: Configuration keys without a unit suffix whose value is dimensionless.
+_DIMENSIONLESS_KEYS = ("schedule.", "truth.eccentricity", "noise.seed", "actuator.magnitude_")
+#: Configuration keys without a unit suffix that are not dimensionless.
+_KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
+#: Prefixes of the ``runs.parquet`` columns of swept values and dispersion draws.
+_VALUE_PREFIXES = ("param.", "disp.")
+
+
+def _key_unit(key: str) -> str:
+    """Unit of a configuration key's value (``scenario.x0.2`` → km, ``schedule.beta`` → -)."""
+    parts = key.split(".")
+    index = int(parts[-1]) if parts[-1].isdigit() else None
+    names = [p for p in parts if not p.isdigit()]
+    field = ".".join(names)
+    if names[-1] in ("x0", "xf", "initial_error") and index is not None:
+        return "km" if index < 3 else "km/s"  # the state (x, y, z, vx, vy, vz)
+    unit = suffix_unit(names[-1]) or _KEY_UNITS.get(field)
+    if unit is not None:
+        return unit
+    if field.startswith(_DIMENSIONLESS_KEYS) or names[-1].endswith(("_probability", "_scale")):
+        return "-"
+    return f"as configuration key {field}"
+
+
+def unit_of(name: str) -> str:
+    """The unit of column ``name``; ``KeyError`` for a column the table does not know."""
+    for prefix in _VALUE_PREFIXES:
+        if name.startswith(prefix):
+            return _key_unit(name.removeprefix(prefix))
+    unit, _ = COLUMNS[name]
+    if unit:
+        return unit
+    derived = suffix_unit(name)
+    if derived is None:
+        raise KeyError(f"column {name!r}: no unit (add it to output.tables.COLUMNS)")
+    return derived
+
+
+def description_of(name: str) -> str:
+    """What column ``name`` holds (swept and dispersed values: their key)."""
+    if name.startswith(PARAM_PREFIX):
+        return f"swept value of {name.removeprefix(PARAM_PREFIX)}"
+    if name.startswith("disp."):
+        return f"dispersed value of {name.removeprefix('disp.')} applied to the run"
+    return COLUMNS[name][1]
+
+
+def with_conventions(table: pa.Table, metadata: Mapping[str, Any]) -> pa.Table:
+    """``table`` with every column's ``unit`` and ``description`` and the file metadata.
+
+    ``metadata`` must hold ``config_hash``; ``cwrend_version`` is added. Raises
+    ``KeyError`` for a column without a unit.
+    """
+    if "config_hash" not in metadata:
+        raise KeyError("Parquet metadata needs the config_hash")
+    fields = [
+        f.with_metadata(
+            {b"unit": unit_of(f.name).encode(), b"description": description_of(f.name).encode()}
+        )
+        for f in table.schema
+    ]
+    existing = dict(table.schema.metadata or {})
+    existing.update(_metadata(metadata))
+    return table.cast(pa.schema(fields, metadata=existing))
+
+
+def check_conventions(table: pa.Table) -> None:
+    """Raise ``ValueError`` unless ``table`` carries the conventions of :func:`with_conventions`."""
+    meta = table.schema.metadata or {}
+    missing = [k for k in (b"cwrend_version", b"config_hash") if k not in meta]
+    no_unit = [f.name for f in table.schema if b"unit" not in (f.metadata or {})]
+    if missing or no_unit:
+        raise ValueError(
+            f"Parquet table without the data conventions: metadata {missing} missing, "
+            f"columns without a unit {no_unit} (use output.tables.with_conventions)"
+        )
+
+
+def _conventional(table: pa.Table, metadata: Mapping[str, Any] | None) -> pa.Table:
+    """``table`` with the conventions when ``metadata`` names the config hash, else the units."""
+    meta = dict(metadata or {})
+    if "config_hash" in meta:
+        return with_conventions(table, meta)
+    return table.replace_schema_metadata(_metadata(meta))
 
 
 STEPS_SCHEMA = pa.schema(
@@ -45,6 +269,7 @@ STEPS_SCHEMA = pa.schema(
         *[(f"{a}_hat_km_s", pa.float64()) for a in _VEL],
         *[(f"u{a}_km_s2", pa.float64()) for a in _AXES],
         ("u_norm_km_s2", pa.float64()),
+        *[(f"ucmd_{a}_km_s2", pa.float64()) for a in _AXES],
         *[(f"meas_{a}_km", pa.float64()) for a in _AXES],
         ("nis", pa.float64()),
         ("mtf_ratio", pa.float64()),
@@ -82,6 +307,8 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
         cols[f"u{a}_km_s2"] = result.u[:, i]
     cols["u_norm_km_s2"] = np.linalg.norm(result.u, axis=1)
     for i, a in enumerate(_AXES):
+        cols[f"ucmd_{a}_km_s2"] = result.u_cmd[:, i]
+    for i, a in enumerate(_AXES):
         cols[f"meas_{a}_km"] = result.y[:, i]
     cols["nis"] = result.nis
     cols["mtf_ratio"] = result.mtf_ratio
@@ -93,8 +320,7 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
     cols["est_vel_err_km_s"] = np.linalg.norm(result.x_hat[:, 3:] - result.x_true[:, 3:], axis=1)
     cols["trace_p"] = result.trace_p
     cols["degradation_window"] = result.window.astype(np.int64)
-    schema = STEPS_SCHEMA.with_metadata(_metadata(metadata or {}))
-    return pa.table(cols, schema=schema)
+    return _conventional(pa.table(cols, schema=STEPS_SCHEMA), metadata)
 
 
 SOLVES_SCHEMA = pa.schema(
@@ -134,8 +360,7 @@ def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -
         "wall_time_ms": [s.wall_time_ms for s in recs],
         "success": [s.success for s in recs],
     }
-    schema = SOLVES_SCHEMA.with_metadata(_metadata(metadata or {}))
-    return pa.table(cols, schema=schema)
+    return _conventional(pa.table(cols, schema=SOLVES_SCHEMA), metadata)
 
 
 SUMMARY_SCHEMA = pa.schema(
@@ -172,8 +397,8 @@ def summary_table(
     rows: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any] | None = None
 ) -> pa.Table:
     """Table of summary rows (see :func:`summary_row`)."""
-    schema = SUMMARY_SCHEMA.with_metadata(_metadata(metadata or {}))
-    return pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
+    table = pa.Table.from_pylist([dict(r) for r in rows], schema=SUMMARY_SCHEMA)
+    return _conventional(table, metadata)
 
 
 REFERENCE_SCHEMA = pa.schema(
@@ -201,7 +426,7 @@ def references_table(refs: References, metadata: Mapping[str, Any] | None = None
             cols[f"u{a}_km_s2"] = ref.u[:, i]
         cols["u_norm_km_s2"] = np.linalg.norm(ref.u, axis=1)
         parts.append(pa.table(cols, schema=REFERENCE_SCHEMA))
-    return pa.concat_tables(parts).replace_schema_metadata(_metadata(metadata or {}))
+    return _conventional(pa.concat_tables(parts), metadata)
 
 
 # ---------------------------------------------------------------------------
@@ -232,22 +457,26 @@ def _with_run_columns(
 
 
 def campaign_steps_table(
-    results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]
+    results: Sequence[RunResult],
+    extra: Mapping[str, Sequence[str]],
+    metadata: Mapping[str, Any] | None = None,
 ) -> pa.Table:
     """Steps of several runs for the hive-partitioned ``steps/`` dataset."""
-    return _with_run_columns([steps_table(r) for r in results], extra, CAMPAIGN_STEPS_SCHEMA)
+    table = _with_run_columns([steps_table(r) for r in results], extra, CAMPAIGN_STEPS_SCHEMA)
+    return _conventional(table, metadata)
 
 
 def campaign_solves_table(
-    results: Sequence[RunResult], extra: Mapping[str, Sequence[str]]
+    results: Sequence[RunResult],
+    extra: Mapping[str, Sequence[str]],
+    metadata: Mapping[str, Any] | None = None,
 ) -> pa.Table:
     """Solves of several runs for the hive-partitioned ``solves/`` dataset."""
-    return _with_run_columns([solves_table(r) for r in results], extra, CAMPAIGN_SOLVES_SCHEMA)
+    table = _with_run_columns([solves_table(r) for r in results], extra, CAMPAIGN_SOLVES_SCHEMA)
+    return _conventional(table, metadata)
 
 
 _RUN_METRICS = [f for f in SUMMARY_SCHEMA if f.name not in ("arch", "seed")]
-#: Prefix of the ``runs.parquet`` columns holding a run's swept values.
-PARAM_PREFIX = "param."
 
 
 def param_columns(columns: Iterable[str]) -> list[str]:
@@ -295,5 +524,25 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
                 arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())
             cols[prefix + name] = arr
             fields.append(pa.field(prefix + name, arr.type))
-    schema = pa.schema(fields).with_metadata(_metadata(metadata))
-    return pa.table(cols, schema=schema)
+    return _conventional(pa.table(cols, schema=pa.schema(fields)), metadata)
+
+
+def statistics_table(frame: pd.DataFrame, metadata: Mapping[str, Any]) -> pa.Table:
+    """A long-format statistics table (``ablation.parquet``, ``sweep.parquet``) from pandas."""
+    table = pa.Table.from_pandas(frame, preserve_index=False).replace_schema_metadata(None)
+    return with_conventions(table, metadata)
+
+
+def normalize_steps(frame: pd.DataFrame) -> pd.DataFrame:
+    """Steps read back from any version: the old ``window`` column as ``degradation_window``.
+
+    Campaigns written before issue 18 named the degradation-window column
+    ``window`` (an SQL keyword). A dataset mixing both (a campaign resumed
+    by a newer cwrend) has both; the new column is filled from the old.
+    """
+    if "window" not in frame.columns:
+        return frame
+    if "degradation_window" in frame.columns:
+        frame["degradation_window"] = frame["degradation_window"].fillna(frame["window"])
+        return frame.drop(columns="window")
+    return frame.rename(columns={"window": "degradation_window"})

@@ -17,7 +17,14 @@ both the drawing and the figure list of ``report.md``:
   the reported point);
 * with more than one seed per architecture: ``miss_distribution.png``,
   ``dv_distribution.png``, ``paired_miss.png`` (MTF vs plain, seed by seed);
-* per swept parameter with more than one value: ``sweep_<key>.png``.
+* per swept parameter with more than one value: ``sweep_<key>.png``;
+* when the steps hold it: ``nees.png`` (filter consistency, every seed of
+  the reported point).
+
+Every figure names the simulated world it shows (:attr:`ReportData.world`:
+the truth model, and actuator errors and sensor faults when configured) in
+its title and caption (issue 15, item 6): the guidance and the filter always
+assume CW, the truth need not.
 
 Units: km, s, km/s, km/s² (as in the Parquet files); ‖u‖ is drawn in m/s².
 """
@@ -39,6 +46,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
+from scipy.stats import chi2
 
 from cwrend_cli.config import ARCHITECTURES
 from cwrend_cli.output.recording import DEGRADATION_COLOUR, REFERENCE_COLOURS, arch_colour
@@ -518,6 +526,86 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
     return _finished(fig)
 
 
+#: Two-sided probability of the χ² band drawn in the NEES figure.
+NEES_BAND_PROBABILITY = 0.95
+#: Dimension of the state: NEES of a consistent filter is χ² with this many degrees of freedom.
+STATE_DIM = 6
+#: ``gid`` of the χ² band's patch in the NEES figure.
+NEES_BAND_GID = "nees_chi2_band"
+#: Quantiles of the band over seeds in the NEES figure.
+_NEES_SEED_BAND = (0.1, 0.9)
+
+
+def nees_chi2_band(probability: float = NEES_BAND_PROBABILITY) -> tuple[float, float]:
+    """The two-sided ``probability`` interval of χ²₆, where one run's NEES lies if consistent.
+
+    (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): [1.24, 14.45] at 95 %.
+    """
+    tail = (1.0 - probability) / 2.0
+    return float(chi2.ppf(tail, STATE_DIM)), float(chi2.ppf(1.0 - tail, STATE_DIM))
+
+
+def _nees_lines(nees: pd.DataFrame, archs: Sequence[str]) -> pd.DataFrame:
+    """Median and seed band of the NEES per architecture and time (arch, t_s, med, lo, hi)."""
+    lo_q, hi_q = _NEES_SEED_BAND
+    grouped = nees.groupby(["arch", "t_s"], observed=True)["nees"]
+    out = pd.DataFrame(
+        {"med": grouped.median(), "lo": grouped.quantile(lo_q), "hi": grouped.quantile(hi_q)}
+    ).reset_index()
+    return out[out["arch"].isin(archs)]
+
+
+def fig_nees(data: ReportData) -> Figure:
+    """Filter consistency: NEES against time per architecture, median and band over seeds.
+
+    NEES = (x̂ − x)ᵀ P⁻¹ (x̂ − x) of every step (row 0 excluded when zero: no
+    initial error); a consistent filter has NEES ~ χ²₆ (mean 6), the grey
+    band is χ²₆'s 95 % interval of a single run. Architectures whose median
+    curves coincide (same estimator, control-independent errors) are drawn
+    once. Log y. Raises ``ValueError`` without stored NEES (see :data:`FIGURES`).
+    """
+    if data.nees is None or data.nees.empty:
+        raise ValueError("no NEES stored")
+    lines = _nees_lines(data.nees, data.archs)
+    n_seeds = int(data.nees["seed"].nunique())
+    fig = _figure(13, 6.4)
+    ax = fig.subplots()
+    low, high = nees_chi2_band()
+    ax.axhspan(low, high, color="0.5", alpha=0.18, lw=0, gid=NEES_BAND_GID)
+    ax.axhline(STATE_DIM, color="black", lw=1.0, ls=":")
+    groups = _groups(lines, data.archs, ["med"])
+    for members, g in groups:
+        g = g[g["med"] > 0]
+        c = _group_colour(members, data.archs)
+        ax.plot(g["t_s"], g["med"], color=c, lw=1.5)
+        if n_seeds > 1:
+            ax.fill_between(g["t_s"], g["lo"].clip(lower=1e-12), g["hi"], color=c, alpha=0.15,
+                            lw=0)  # fmt: skip
+    _shade(ax, data.windows)
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("NEES [-]")
+    what = (
+        f"median over {n_seeds} seeds, band {100 * _NEES_SEED_BAND[0]:g}–"
+        f"{100 * _NEES_SEED_BAND[1]:g} % of the seeds"
+        if n_seeds > 1
+        else f"noise seed {data.nees['seed'].iloc[0]}"
+    )
+    ax.set_title(f"normalised estimation error squared ({what})")
+    handles: list[Any] = _group_handles(groups, data.archs)
+    handles += [
+        Patch(color="0.5", alpha=0.18, label=f"χ²₆ 95 % interval [{low:.2f}, {high:.2f}]"),
+        Line2D([], [], color="black", ls=":", label="E[NEES] = 6 (consistent filter)"),
+    ]
+    _legend_below(fig, handles + _window_handles(data.windows), ncol=3)
+    fig.suptitle("Filter consistency: NEES against time")
+    return _finished(fig)
+
+
+def _has_nees(data: ReportData) -> bool:
+    return data.nees is not None and not data.nees.empty
+
+
 # ---------------------------------------------------------------------------
 # Campaign figures
 # ---------------------------------------------------------------------------
@@ -851,6 +939,14 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "Median miss and mean Δv against `{key}`.",
         fig_sweep,
     ),
+    FigureEntry(
+        "nees.png",
+        "Filter consistency: NEES per architecture against time, median and band over the "
+        "seeds, with the 95 % interval of χ²₆ (where one run's NEES lies if the filter is "
+        "consistent; mean 6), log scale.",
+        fig_nees,
+        _has_nees,
+    ),
 )
 
 
@@ -867,9 +963,29 @@ def _file_key(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "param"
 
 
+def _with_world(draw: Callable[[], Figure], world: str) -> Figure:
+    """The figure of ``draw`` with the simulated world added to its title.
+
+    Under the figure's title (a second line of its suptitle), or as its
+    suptitle when it has only axes titles.
+    """
+    fig = draw()
+    title = fig.get_suptitle()
+    fig.suptitle(f"{title}\n{world}" if title else world)
+    return fig
+
+
+def _captioned(caption: str, world: str) -> str:
+    return f"{caption} Simulated world: {world}."
+
+
 def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
-    """The figures of :data:`FIGURES` that apply to ``data``, in report order."""
+    """The figures of :data:`FIGURES` that apply to ``data``, in report order.
+
+    Each one's title and caption name the simulated world (:attr:`ReportData.world`).
+    """
     out: list[PlannedFigure] = []
+    world = data.world
     for entry in FIGURES:
         if isinstance(entry, SweepFigureEntry):
             for param in data.params:
@@ -877,12 +993,18 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
                 out.append(
                     PlannedFigure(
                         entry.file.format(key=key),
-                        entry.caption.format(key=key),
-                        partial(entry.draw, data, param),
+                        _captioned(entry.caption.format(key=key), world),
+                        partial(_with_world, partial(entry.draw, data, param), world),
                     )
                 )
         elif entry.applies(data):
-            out.append(PlannedFigure(entry.file, entry.caption, partial(entry.draw, data)))
+            out.append(
+                PlannedFigure(
+                    entry.file,
+                    _captioned(entry.caption, world),
+                    partial(_with_world, partial(entry.draw, data), world),
+                )
+            )
     return tuple(out)
 
 

@@ -7,7 +7,8 @@ Reads either layout that cwrend writes:
 * a campaign directory: ``runs.parquet`` (one row per run: ``run_key``,
   ``point``, ``arch``, ``seed``, ``status``, the summary metrics, swept values
   as ``param.<key>``), the hive dataset ``steps/arch=<slug>/…`` (steps columns
-  plus ``run_key`` and ``point``), ``references/<point>.parquet`` (the open-loop
+  plus ``run_key`` and ``point``; the per-step NEES of every seed of the
+  reported point is read too, when stored), ``references/<point>.parquet`` (the open-loop
   references of each grid point, with the schema of a run's
   ``references.parquet``) and ``manifest.json`` (``config`` = the resolved base
   config).
@@ -15,7 +16,9 @@ Reads either layout that cwrend writes:
 The stored configuration is validated with the config model
 (:func:`~cwrend_cli.config.config_from_dict`); the figures and tables read
 typed values from it. A campaign written before campaigns stored their
-references is reported without them, with a note.
+references is reported without them, with a note. Steps written before the
+degradation-window column was renamed (``window``, issue 18 item 5) are read
+with the current name (:func:`~cwrend_cli.output.tables.normalize_steps`).
 
 Units: km, s, km/s, km/s² (as in the Parquet files).
 """
@@ -30,6 +33,7 @@ from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
+import pyarrow.dataset as ds
 
 from cwrend_cli.config import (
     ARCHITECTURES,
@@ -39,7 +43,7 @@ from cwrend_cli.config import (
     resolved_dict,
     set_dotted,
 )
-from cwrend_cli.config.adapt import windows_of
+from cwrend_cli.config.adapt import problem_of, windows_of
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
@@ -53,7 +57,12 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     references_path,
 )
-from cwrend_cli.output.tables import PARAM_PREFIX, REFERENCE_SCHEMA, param_columns
+from cwrend_cli.output.tables import (
+    PARAM_PREFIX,
+    REFERENCE_SCHEMA,
+    normalize_steps,
+    param_columns,
+)
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import format_value
@@ -90,6 +99,27 @@ class ReportData:
     #: rows of ``ablation.parquet`` / ``sweep.parquet`` (long format: kind, arch, metric,
     #: statistic, value, ci_low, ci_high, n; ``point`` and ``param.*`` for a sweep), if stored
     stats: pd.DataFrame | None = None
+    #: per-step NEES of the reported point, every seed (arch, seed, t_s, nees); ``None``
+    #: for results written before cwrend stored it
+    nees: pd.DataFrame | None = None
+
+    @property
+    def world(self) -> str:
+        """The simulated world the figures show: truth model, actuator errors, sensor faults.
+
+        E.g. ``truth: cw (the design model)`` or ``truth: j2 · actuator errors
+        on · sensor faults on`` (issue 15: the guidance and the filter always
+        assume CW; this names what the truth was).
+        """
+        if self.config is None:
+            return "truth model not stored"
+        model = self.config.truth.model
+        parts = [f"truth: {model}" + (" (the design model)" if model == "cw" else "")]
+        if not problem_of(self.config).actuator.ideal:
+            parts.append("actuator errors on")
+        if any(_has_faults(w) for w in self.windows):
+            parts.append("sensor faults on")
+        return " · ".join(parts)
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -187,11 +217,43 @@ def _read_json(path: Path) -> dict[str, Any]:
     return data
 
 
+def _has_faults(w: Window) -> bool:
+    """True when degradation window ``w`` switches a sensor fault on (issue 15, item 3)."""
+    outliers = w.outlier_probability > 0.0 and w.outlier_scale != 1.0
+    return w.dropout_probability > 0.0 or outliers or w.bias_drift_km_per_sqrt_s > 0.0
+
+
 def _read_parquet(path: Path, **kwargs: Any) -> pd.DataFrame:
     try:
         return pd.read_parquet(path, **kwargs)
     except (OSError, ValueError) as exc:
         raise ReportError(f"{path}: unreadable Parquet ({exc})") from None
+
+
+def _read_steps(path: Path, **kwargs: Any) -> pd.DataFrame:
+    """Steps (file or dataset) with the current column names, whatever cwrend wrote them."""
+    return normalize_steps(_read_parquet(path, **kwargs))
+
+
+def _nees_of(steps: pd.DataFrame) -> pd.DataFrame | None:
+    """The NEES columns of steps of every seed (``None`` when not stored)."""
+    if "nees" not in steps.columns:
+        return None
+    out = steps[["arch", "seed", "t_s", "nees"]].copy()
+    out["arch"] = out["arch"].astype(str)
+    return out
+
+
+def _campaign_nees(steps_dir: Path, point: str | None) -> pd.DataFrame | None:
+    """NEES of every seed of the reported point from the steps/ dataset (``None``: not stored)."""
+    names = set(ds.dataset(steps_dir, format="parquet", partitioning="hive").schema.names)
+    if "nees" not in names:
+        return None
+    columns = ["arch", "seed", "t_s", "nees"] + (["point"] if "point" in names else [])
+    frame = _read_parquet(steps_dir, columns=columns)
+    if point is not None and "point" in frame.columns:
+        frame = frame[frame["point"].astype(str) == point]
+    return _nees_of(frame)
 
 
 def _read_references(path: Path) -> pd.DataFrame:
@@ -380,8 +442,8 @@ def _load_run_dir(root: Path, seed: int | None, point: str | None = None) -> Rep
     runs["arch"] = runs["arch"].astype(str)
     runs["status"] = "ok"
     chosen = _pick_seed(runs, seed)
-    steps = _read_parquet(root / RUN_STEPS)
-    steps = steps[steps["seed"] == chosen].copy()
+    all_steps = _read_steps(root / RUN_STEPS)
+    steps = all_steps[all_steps["seed"] == chosen].copy()
     references = (
         _read_references(root / RUN_REFERENCES) if (root / RUN_REFERENCES).exists() else None
     )
@@ -397,6 +459,7 @@ def _load_run_dir(root: Path, seed: int | None, point: str | None = None) -> Rep
         point=None,
         archs=_order_archs(runs["arch"].unique()),
         notes=tuple(notes),
+        nees=_nees_of(all_steps),
     )
 
 
@@ -444,7 +507,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
     if not steps_dir.exists():
         raise ReportError(f"{root}: campaign without a steps/ dataset (was it run with steps off?)")
     filters: list[tuple[str, str, Any]] = [("seed", "==", chosen)]
-    steps = _read_parquet(steps_dir, filters=filters)
+    steps = _read_steps(steps_dir, filters=filters)
     if point is not None and "point" in steps.columns:
         steps = steps[steps["point"].astype(str) == point]
     if steps.empty:
@@ -468,6 +531,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         params=tuple(params),
         notes=tuple(notes),
         stats=_campaign_stats(root),
+        nees=_campaign_nees(steps_dir, point),
     )
 
 
