@@ -22,7 +22,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from benchmarks import bench_campaign, bench_solver
+from benchmarks import bench_campaign, bench_convex, bench_solver
 from benchmarks.common import PUBLISHED, Row
 
 RESULTS = Path(__file__).resolve().parent / "results.json"
@@ -91,7 +91,11 @@ def main() -> None:
     args = parser.parse_args()
     seeds, runs, big = (5, 100, 400) if args.quick else (20, 200, 2000)
     start = time.perf_counter()
-    rows = bench_solver.run(seeds=seeds, naive=3) + bench_campaign.run(runs=runs, big=big)
+    rows = (
+        bench_solver.run(seeds=seeds, naive=3)
+        + bench_convex.run(seeds=seeds)
+        + bench_campaign.run(runs=runs, big=big)
+    )
     elapsed = time.perf_counter() - start
     print_rows(rows)
     report = {

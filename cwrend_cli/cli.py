@@ -22,12 +22,13 @@ from cwrend_cli import __version__, campaign
 from cwrend_cli.campaign import ExecutorKind
 from cwrend_cli.config import (
     ARCHITECTURES,
+    SOCP_ARCHITECTURES,
     Architecture,
     CwrendConfig,
     config_hash,
     format_validation_error,
     load_config,
-    parse_arch,
+    parse_archs,
     resolved_dict,
     to_json,
     to_toml,
@@ -190,13 +191,17 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
 
 
 def _parse_archs(text: str) -> tuple[Architecture, ...]:
-    """``all`` or a comma-separated list of architecture slugs."""
-    if text.strip() == "all":
-        return tuple(ARCHITECTURES.values())
-    archs = tuple(parse_arch(part) for part in text.split(",") if part.strip())
-    if not archs:
-        raise ConfigError(f"--arch {text!r}: name at least one of {', '.join(ARCHITECTURES)}")
-    return archs
+    """``all``, ``all_socp``, ``everything`` or a comma-separated list of architecture slugs."""
+    return parse_archs(text)
+
+
+ARCH_HELP = (
+    "Architecture slug(s), comma-separated, or a group: 'all' (the paper's four, shooting: "
+    + ", ".join(ARCHITECTURES)
+    + "), 'all_socp' (the same with the cone-program re-solve: "
+    + ", ".join(SOCP_ARCHITECTURES)
+    + ") or 'everything' (both)."
+)
 
 
 @app.command("run", short_help="One seed of the chosen architectures and the references.")
@@ -207,9 +212,7 @@ def run(
         typer.Option(
             "--arch",
             "-a",
-            help="Architecture slug(s), comma-separated, or 'all': "
-            + ", ".join(ARCHITECTURES)
-            + ".",
+            help=ARCH_HELP,
             metavar="ARCHS",
         ),
     ] = "mtf_adaptive",
@@ -300,7 +303,7 @@ ArchsOption = Annotated[
     typer.Option(
         "--arch",
         "-a",
-        help="Architectures, comma-separated, or 'all': " + ", ".join(ARCHITECTURES) + ".",
+        help=ARCH_HELP,
         metavar="ARCHS",
     ),
 ]

@@ -88,3 +88,70 @@ def test_on_infeasible_min_miss_overrides_only_after_an_infeasible_resolve() -> 
     assert np.array_equal(keep.u[:first], steer.u[:first])
     assert not np.array_equal(keep.u[first:], steer.u[first:])
     assert np.linalg.norm(steer.u, axis=1).max() <= U_MAX * (1 + 1e-12)
+
+
+# --- the continuous-time dual bound (issue 16, item 3) -------------------------------
+
+SHORT_S = 5.0  # a last-seconds horizon: there the 1 s grid overstates the bound by ~4 %
+
+
+def _shooting_problem(x0: np.ndarray, horizon_s: float) -> guidance.ShootingProblem:
+    return guidance.ShootingProblem(x0, horizon_s, 0.0, N, U_MAX)
+
+
+def test_support_upper_bound_is_an_upper_bound_and_tight() -> None:
+    """Ī(λ) ≥ ∫‖Wᵀλ‖dτ (a 0.01 s composite Gauss quadrature) and within 3e-5 relative.
+
+    Tightness observed for random λ: 2e-6 (400 s), 1.1e-5 (5 s; the cells'
+    second-derivative bound carries ‖μ‖ over all six components); at the
+    maximising λ the bound is used with, ~1e-12 (against 0.25 s × 16-node
+    quadrature). Slack only makes the test more cautious (an infeasible
+    problem within it of the boundary would be called failed, not infeasible).
+    """
+    rng = np.random.default_rng(3)
+    gx, gw = np.polynomial.legendre.leggauss(8)
+    for horizon in (SHORT_S, 400.0):
+        edges = np.linspace(0.0, horizon, round(horizon / 0.01) + 1)
+        half = 0.5 * np.diff(edges)
+        tau = ((edges[:-1] + half)[:, None] + half[:, None] * gx).ravel()
+        w = (half[:, None] * gw).ravel()
+        for _ in range(3):
+            lam = rng.normal(size=6) * np.array([1 / horizon] * 3 + [1.0] * 3)
+            f = np.array([np.linalg.norm(feasibility.stm(N, -t)[:, 3:].T @ lam) for t in tau])
+            exact = float(w @ f)
+            bound = feasibility._support_upper_bound(N, lam, horizon, 0.25)
+            assert exact <= bound <= exact * (1 + 3e-5)
+
+
+def test_continuous_bound_is_homogeneous_and_below_every_grid() -> None:
+    """The least continuous peak thrust scales with the distance to cover, and any grid's
+    held controls are continuous controls, so their minimum peak bounds it from above."""
+    bound = feasibility.continuous_peak_thrust(N, X0, np.zeros(6), 120.0)
+    twice = feasibility.continuous_peak_thrust(N, 2 * X0, np.zeros(6), 120.0)
+    assert twice == pytest.approx(2 * bound, rel=1e-9)
+    for dt in (1.0, 0.1):
+        g = feasibility.grid_problem(N, X0, np.zeros(6), 120.0, dt, U_MAX)
+        assert feasibility.min_peak_thrust(g) >= bound * (1 - 1e-9)
+
+
+def test_infeasible_by_1e4_is_recognised() -> None:
+    """Scaled 1e-4 beyond the boundary: the certified bound exceeds u_max."""
+    scale = U_MAX / feasibility.continuous_peak_thrust(N, X0, np.zeros(6), SHORT_S)
+    x0 = X0 * scale * (1 + 1e-4)
+    assert feasibility.continuous_peak_thrust(N, x0, np.zeros(6), SHORT_S) > U_MAX
+    problem = _shooting_problem(x0, SHORT_S)
+    assert guidance.classify_failure(problem) is guidance.SolveStatus.INFEASIBLE
+
+
+def test_feasible_within_1e4_of_the_boundary_is_not_labelled_infeasible() -> None:
+    """Scaled 1e-4 inside the boundary: feasible (a 0.01 s grid plan proves it), not
+    infeasible by the dual bound, though the 1 s grid's peak thrust says infeasible."""
+    scale = U_MAX / feasibility.continuous_peak_thrust(N, X0, np.zeros(6), SHORT_S)
+    x0 = X0 * scale * (1 - 1e-4)
+    fine = feasibility.grid_problem(N, x0, np.zeros(6), SHORT_S, 0.01, U_MAX)
+    assert feasibility.min_peak_thrust(fine) <= U_MAX  # a bounded control reaches x_f
+    assert feasibility.continuous_peak_thrust(N, x0, np.zeros(6), SHORT_S) <= U_MAX
+    problem = _shooting_problem(x0, SHORT_S)
+    assert guidance.classify_failure(problem) is guidance.SolveStatus.FAILED
+    # what the grid test of before issue 16 said (the 1 s grid overstates by ~4 % here)
+    assert feasibility.min_peak_thrust(_grid(x0, SHORT_S)) > U_MAX

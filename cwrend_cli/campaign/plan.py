@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from cwrend_cli.config import (
-    ARCHITECTURES,
+    ALL_ARCHITECTURES,
     CwrendConfig,
     Dispersion,
     config_from_dict,
@@ -266,10 +266,11 @@ def plan(
     Raises :class:`ConfigError` naming the key and value of the first bad
     grid value or dispersion draw; nothing has run or been written then.
     """
-    unknown = [a for a in archs if a not in ARCHITECTURES]
+    unknown = [a for a in archs if a not in ALL_ARCHITECTURES]
     if unknown:
         raise ConfigError(
-            f"unknown architecture(s) {', '.join(unknown)} (allowed: {', '.join(ARCHITECTURES)})"
+            f"unknown architecture(s) {', '.join(unknown)} "
+            f"(allowed: {', '.join(ALL_ARCHITECTURES)})"
         )
     if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
         raise ConfigError("seeds must be distinct non-negative integers")

@@ -53,7 +53,13 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
 from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
 from cwrend_cli.physics import actuator, sensors, simulation
-from cwrend_cli.physics.params import ARCHITECTURES, Architecture, FloatArray, Problem, Scenario
+from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
+    Architecture,
+    FloatArray,
+    Problem,
+    Scenario,
+)
 from cwrend_cli.physics.params import Solver as SolverParams
 
 __all__ = [
@@ -239,7 +245,7 @@ def execute_task(
                 )
             result = simulation.simulate(
                 problem,
-                ARCHITECTURES[spec.arch],
+                ALL_ARCHITECTURES[spec.arch],
                 noise,
                 run_refs,
                 spec.seed,

@@ -21,6 +21,7 @@ from cwrend_cli.config.overrides import (
     expand_grid,
     get_dotted,
     parse_arch,
+    parse_archs,
     parse_override,
     parse_param,
     set_dotted,
@@ -40,10 +41,17 @@ from cwrend_cli.config.schema import (
     SolverConfig,
     TruthConfig,
 )
-from cwrend_cli.physics.params import ARCHITECTURES, Architecture
+from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
+    ARCHITECTURES,
+    SOCP_ARCHITECTURES,
+    Architecture,
+)
 
 __all__ = [
+    "ALL_ARCHITECTURES",
     "ARCHITECTURES",
+    "SOCP_ARCHITECTURES",
     "ActuatorConfig",
     "Architecture",
     "CwrendConfig",
@@ -66,6 +74,7 @@ __all__ = [
     "get_dotted",
     "load_config",
     "parse_arch",
+    "parse_archs",
     "parse_override",
     "parse_param",
     "resolved_dict",

@@ -16,19 +16,27 @@ import copy
 import functools
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.physics.params import ARCHITECTURES, Architecture
+from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
+    ARCHITECTURES,
+    SOCP_ARCHITECTURES,
+    Architecture,
+)
 
 __all__ = [
+    "ARCH_GROUPS",
     "apply",
     "expand_grid",
     "get_dotted",
     "parse_arch",
+    "parse_archs",
     "parse_override",
     "parse_param",
     "set_dotted",
@@ -216,7 +224,28 @@ def expand_grid(
 def parse_arch(slug: str) -> Architecture:
     """Return the architecture named ``slug``; :class:`ConfigError` lists the valid slugs."""
     try:
-        return ARCHITECTURES[slug.strip()]
+        return ALL_ARCHITECTURES[slug.strip()]
     except KeyError:
-        allowed = ", ".join(ARCHITECTURES)
+        allowed = ", ".join(ALL_ARCHITECTURES)
         raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed})") from None
+
+
+#: Names of architecture groups accepted by :func:`parse_archs`.
+ARCH_GROUPS: Mapping[str, tuple[Architecture, ...]] = MappingProxyType(
+    {
+        "all": tuple(ARCHITECTURES.values()),  # the paper's ablation (shooting)
+        "all_socp": tuple(SOCP_ARCHITECTURES.values()),  # the same with the cone program
+        "everything": tuple(ALL_ARCHITECTURES.values()),  # both, shooting first
+    }
+)
+
+
+def parse_archs(text: str) -> tuple[Architecture, ...]:
+    """A group name (``all``, ``all_socp``, ``everything``) or comma-separated slugs."""
+    group = ARCH_GROUPS.get(text.strip())
+    if group is not None:
+        return group
+    archs = tuple(parse_arch(part) for part in text.split(",") if part.strip())
+    if not archs:
+        raise ConfigError(f"--arch {text!r}: name at least one of {', '.join(ALL_ARCHITECTURES)}")
+    return archs

@@ -363,6 +363,11 @@ class GuidanceConfig(_FrozenModel):
         _PAPER.guidance.hold,
         description="control hold over a step: 'sample' (start) or 'mean' (average)",
     )
+    method: Literal["shooting", "socp"] = Field(
+        _PAPER.guidance.method,
+        description="re-solve method of the architectures that do not name one: 'shooting' "
+        "(costate) or 'socp' (held controls of the smoothed min-fuel cone program)",
+    )
 
 
 class SolverConfig(_FrozenModel):

@@ -112,6 +112,9 @@ class Guidance:
     t_min_rem_s: float = 20.0  # no re-solve once the remaining horizon is <= this [s]
     resolve_timing: Literal["correct", "reference"] = "correct"
     hold: Literal["sample", "mean"] = "sample"
+    # re-solve method of the architectures that do not name one (issue 16): the
+    # shooting solver's costate plan, or the cone program's held controls
+    method: Literal["shooting", "socp"] = "shooting"
 
 
 @dataclass(frozen=True)
@@ -269,20 +272,32 @@ class Problem:
 
 @dataclass(frozen=True)
 class Architecture:
-    """One closed-loop architecture: estimator (plain/MTF KF) × schedule (fixed/adaptive ε)."""
+    """One closed-loop architecture: estimator (plain/MTF KF) × schedule × re-solve method.
+
+    ``method``: the re-solve method (``"shooting"``: the costate of the
+    shooting solver; ``"socp"``: the held controls of the smoothed minimum-fuel
+    cone program, :mod:`cwrend_cli.physics.guidance.convex`), or None for the
+    method of ``guidance.method`` (the paper's four slugs; shooting by default).
+    """
 
     slug: str
     mtf: bool
     adaptive: bool
+    method: Literal["shooting", "socp"] | None = None
 
     @property
     def label(self) -> str:
-        """Human-readable name, e.g. ``"MTF KF, adaptive ε"``."""
+        """Human-readable name, e.g. ``"MTF KF, adaptive ε"`` (``", SOCP"`` appended for socp)."""
         kf = "MTF KF" if self.mtf else "plain KF"
-        return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε"
+        tail = ", SOCP" if self.method == "socp" else ""
+        return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε{tail}"
+
+    def resolved_method(self, guidance: Guidance) -> Literal["shooting", "socp"]:
+        """The re-solve method this architecture uses under ``guidance``."""
+        return self.method if self.method is not None else guidance.method
 
 
-#: The ablation of SPEC §6, in the paper's order.
+#: The ablation of SPEC §6, in the paper's order (``--arch all``).
 ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
     {
         a.slug: a
@@ -293,4 +308,17 @@ ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
             Architecture("mtf_adaptive", mtf=True, adaptive=True),
         )
     }
+)
+
+#: The same four with the cone-program re-solve (issue 16; ``--arch all_socp``).
+SOCP_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+    {
+        f"{a.slug}_socp": Architecture(f"{a.slug}_socp", a.mtf, a.adaptive, method="socp")
+        for a in ARCHITECTURES.values()
+    }
+)
+
+#: Every architecture by slug (``--arch everything``): what a slug may name.
+ALL_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+    {**ARCHITECTURES, **SOCP_ARCHITECTURES}
 )

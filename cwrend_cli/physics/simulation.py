@@ -43,7 +43,7 @@ import numpy.typing as npt
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import actuator, guidance, references, sensors, truth
 from cwrend_cli.physics.dynamics import costate_stm, discretize
-from cwrend_cli.physics.guidance import feasibility
+from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
 
@@ -245,7 +245,8 @@ def simulate(
     # the filter starts at the true initial state (SPEC §3) unless an initial error is set
     x_hat0 = x0 + np.asarray(est.initial_error, dtype=float)
     solves: list[SolveRecord] = []
-    if arch.adaptive:
+    socp = arch.resolved_method(gd) == "socp"
+    if arch.adaptive and not socp:
         eps0 = sch.eps_max
         # initial solve at ε_max from the energy costate; on failure keep it (SPEC §4)
         first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
@@ -253,7 +254,7 @@ def simulate(
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
     else:
-        eps0 = sch.eps_fixed
+        eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
         lam = refs.fuel.costate.copy()
 
     model = sk.LoopModel(
@@ -275,6 +276,10 @@ def simulate(
         override=np.zeros(n_steps, dtype=np.bool_),
         dropout=meas.dropout,
     )
+    if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
+        result = convex.solve(_grid(sc, x_hat0, sc.horizon_s), eps0, n)
+        solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
+        _hold_plan(result, 0, model)
     sched = schedule_params(sch)
     # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
     truth_model = truth.truth_model(problem.truth, sc)
@@ -304,14 +309,19 @@ def simulate(
         t_est = (k + 1) * dt
         horizon = sc.horizon_s - (t_est if correct else k * dt)
         lam_next = model.lam_step @ lam
-        shooting = _shooting(sc, state.x_hat, horizon, scalars.eps)
-        result = guidance.solve(shooting, lam_next if correct else lam, settings)
+        if socp:
+            result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n)
+        else:
+            shooting = _shooting(sc, state.x_hat, horizon, scalars.eps)
+            result = guidance.solve(shooting, lam_next if correct else lam, settings)
         rec = _record("resolve", k, t_est, result, settings.success_residual)
         solves.append(rec)
-        if rec.success:
+        if rec.success and not socp:
             lam[:] = result.costate if correct else model.lam_step @ result.costate
         else:
             lam[:] = lam_next
+        if rec.success:
+            _hold_plan(result, k + 1, model)
         if result.status is guidance.SolveStatus.INFEASIBLE and problem.solver.on_infeasible == (
             "min_miss"
         ):
@@ -344,6 +354,29 @@ def simulate(
     )
 
 
+def _grid(sc: Scenario, x_hat: FloatArray, horizon_s: float) -> feasibility.GridProblem:
+    """One re-solve of the scenario on its zero-order-hold grid (the loop's Δt)."""
+    xf = np.asarray(sc.xf, dtype=float)
+    return feasibility.grid_problem(
+        sc.mean_motion_rad_s, x_hat, xf, horizon_s, sc.dt_s, sc.u_max_km_s2
+    )
+
+
+def _hold_plan(result: guidance.SolveResult, k_first: int, model: sk.LoopModel) -> None:
+    """Make a successful re-solve the plan from step ``k_first`` on.
+
+    Held controls (cone program, shooting's ``socp_plan``) go into the override
+    arrays up to the end; a costate plan clears them (the costate then drives
+    the control, as without overrides).
+    """
+    if result.controls is None:
+        model.override[k_first:] = False
+        return
+    count = min(result.controls.shape[0], model.u_override.shape[0] - k_first)
+    model.u_override[k_first : k_first + count] = result.controls[:count]
+    model.override[k_first : k_first + count] = True
+
+
 def _apply_min_miss(
     sc: Scenario,
     x_hat: FloatArray,
@@ -354,10 +387,7 @@ def _apply_min_miss(
     override: npt.NDArray[np.bool_],
 ) -> None:
     """Hold the bounded controls minimising the terminal miss for steps ``k_first … k_last``."""
-    g = feasibility.grid_problem(
-        sc.mean_motion_rad_s, x_hat, np.asarray(sc.xf, dtype=float),
-        sc.horizon_s - t_est, sc.dt_s, sc.u_max_km_s2,
-    )  # fmt: skip
+    g = _grid(sc, x_hat, sc.horizon_s - t_est)
     controls = feasibility.min_miss_controls(g, velocity_weight_s=sc.dt_s)
     if controls is None:
         return

@@ -3,15 +3,17 @@
 :mod:`~cwrend_cli.physics.guidance.shooting` is the typed API over the
 compiled kernels of :mod:`~cwrend_cli.physics.guidance._kernels`;
 :mod:`~cwrend_cli.physics.guidance.feasibility` holds the second-order-cone
-programs on the zero-order-hold grid.
+checks on the zero-order-hold grid and
+:mod:`~cwrend_cli.physics.guidance.convex` the smoothed minimum-fuel cone
+program (the ``socp`` method and the shooting chain's plan of last resort);
+:mod:`~cwrend_cli.physics.guidance.results` the outcome both return.
 """
 
+from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
 from cwrend_cli.physics.guidance.shooting import (
     EPS_BANG_BANG,
     ShootingProblem,
-    SolveResult,
     SolverSettings,
-    SolveStatus,
     classify_failure,
     control,
     energy_optimal_costate,

@@ -1,0 +1,145 @@
+"""Convex guidance: the smoothed minimum-fuel problem as a cone program (SPEC §1, §5; issue 16).
+
+The smoothed control law of Eq. (10) (SPEC §1: throttle 0 for ``S > ε``,
+``(ε − S)/(2ε)`` for ``|S| ≤ ε``, 1 for ``S < −ε``, ``S = 1 − ‖λ_v‖``) is the
+pointwise minimiser over ``‖u‖ ≤ u_max`` of the Hamiltonian
+
+    ``ℓ_ε(u) + λ_vᵀu``,  ``ℓ_ε(u) = (1 − ε)‖u‖ + (ε/u_max)‖u‖²``:
+
+along ``u = −a λ_v/‖λ_v‖`` its derivative in ``a`` is
+``(1 − ε) + 2εa/u_max − ‖λ_v‖``, zero at ``a = u_max(ε − S)/(2ε)``, clipped to
+``[0, u_max]`` (``tests/test_convex.py`` checks this against
+:func:`~cwrend_cli.physics.guidance.shooting.control`). The shooting re-solve
+therefore solves ``min ∫ ℓ_ε(u) dt`` subject to the CW dynamics, ``x(T) = x_f``
+and ``‖u‖ ≤ u_max``. On the zero-order-hold grid the loop executes, with the
+exact discrete dynamics (condensed: ``x_N = Φᴺ x̂ + Σ_j Φ^{N−1−j} Γ u_j``,
+:func:`~cwrend_cli.physics.guidance.feasibility.grid_problem`), that is the
+second-order-cone program
+
+    ``min Σ_j Δt ℓ_ε(u_j)``  s.t.  ``Σ_j M_j u_j = x_f − Φᴺ x̂``,  ``‖u_j‖ ≤ u_max``,
+
+solved here with Clarabel in the scaled controls ``ũ = u/u_max``: variables
+``(ũ_0 … ũ_{N−1}, t̃_0 … t̃_{N−1})`` with ``‖ũ_j‖ ≤ t̃_j ≤ 1`` (one SOC(4) and one
+nonnegative row per step), cost ``Σ (1 − ε) t̃_j + ε‖ũ_j‖²`` (the quadratic
+part through Clarabel's ``P``), i.e. the objective above divided by
+``Δt u_max``.
+
+Uniqueness at ε → 0: the fuel-optimal set can be a face rather than a point
+(a small correction can sit almost anywhere at the same cost), so the
+quadratic weight is ``max(ε, ρ)`` with ``ρ = REGULARISATION = 1e-6``. The cost
+is then strictly convex, the plan unique and continuous in the data, and it
+tends to the minimum-energy element of the fuel-optimal set as ρ → 0. The
+fuel it gives up is bounded: with ``‖ũ_j‖ ≤ 1``, ``‖ũ_j‖² ≤ ‖ũ_j‖``, so
+``F(u_ρ) − F* ≤ ρ Σ‖ũ*_j‖² ≤ ρ F*`` — at most a relative 1e-6 of the optimal
+fuel (far below the grid's own discretisation error). Chosen over a second
+stage (minimise ``Σ‖ũ_j‖²`` with the fuel held within a tolerance) because it
+costs one cone program, not two, with the same kind of tolerance.
+
+Infeasible re-solves (the final burn, SPEC §5) are recognised by Clarabel's
+primal infeasibility certificate; when Clarabel stops without one (a problem
+within about 1e-4 of the thrust boundary ends in a numerical error), by the
+grid's minimum peak thrust (:func:`~cwrend_cli.physics.guidance.feasibility.min_peak_thrust`),
+which decides feasibility of exactly this discrete problem.
+
+Units: km, s, km/s, km/s².
+"""
+
+from __future__ import annotations
+
+import time
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+
+from cwrend_cli.physics.guidance import feasibility
+from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
+
+#: Quadratic weight used below ε = ρ so that the ε → 0 plan is unique (module docstring).
+REGULARISATION = 1e-6
+
+_INFEASIBLE = (clarabel.SolverStatus.PrimalInfeasible, clarabel.SolverStatus.AlmostPrimalInfeasible)
+
+
+def plan_controls(
+    g: feasibility.GridProblem, eps: float, n: float, regularisation: float = REGULARISATION
+) -> tuple[SolveStatus, np.ndarray, np.ndarray, int]:
+    """Solve the smoothed minimum-fuel cone program on the grid of ``g``.
+
+    Returns ``(status, controls (N, 3) [km/s²], λ(0), iterations)``; on
+    anything but ``converged`` the controls are zero and ``λ(0)`` NaN.
+    ``λ(0)`` is the costate the terminal multiplier implies
+    (:func:`~cwrend_cli.physics.guidance.feasibility.costate_from_multiplier`).
+    """
+    steps = g.blocks.shape[0]
+    n_vars = 4 * steps  # ũ (3N), t̃ (N)
+    a_eq, b_eq = feasibility.terminal_rows(g, n_vars)
+    epigraph = feasibility.cone_rows(steps, n_vars, 3 * steps + np.arange(steps))
+    # t̃_j ≤ 1 as s = 1 − t̃_j ≥ 0
+    cap = sp.csc_matrix(
+        (np.ones(steps), (np.arange(steps), 3 * steps + np.arange(steps))), shape=(steps, n_vars)
+    )
+    a = sp.vstack([a_eq, epigraph, cap]).tocsc()
+    b = np.concatenate([b_eq, np.zeros(4 * steps), np.ones(steps)])
+    weight = max(float(eps), regularisation)
+    q = np.zeros(n_vars)
+    q[3 * steps :] = 1.0 - min(float(eps), 1.0)
+    diag = np.zeros(n_vars)
+    diag[: 3 * steps] = 2.0 * weight  # Clarabel's cost is ½xᵀPx + qᵀx
+    p = sp.diags(diag, format="csc")
+    cones = [
+        clarabel.ZeroConeT(6),
+        *([clarabel.SecondOrderConeT(4)] * steps),
+        clarabel.NonnegativeConeT(steps),
+    ]
+    sol = feasibility.solve_cone(p, q, a, b, cones)
+    iterations = int(sol.iterations)
+    if not feasibility.solved(sol):
+        infeasible = sol.status in _INFEASIBLE
+        if not infeasible:
+            # No certificate (within ~1e-4 of the boundary the interior point stalls):
+            # the grid's own test, SPEC §5, on exactly this grid.
+            infeasible = feasibility.min_peak_thrust(g) > g.u_max_km_s2
+        status = SolveStatus.INFEASIBLE if infeasible else SolveStatus.FAILED
+        return status, np.zeros((steps, 3)), np.full(6, np.nan), iterations
+    u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3) * g.u_max_km_s2
+    # Interior-point iterates may exceed the bound by the solver tolerance: project.
+    norms = np.linalg.norm(u, axis=1)
+    over = norms > g.u_max_km_s2
+    u[over] *= (g.u_max_km_s2 / norms[over])[:, None]
+    costate = feasibility.costate_from_multiplier(g, n, np.asarray(sol.z[:6]))
+    return SolveStatus.CONVERGED, u, costate, iterations
+
+
+def terminal_miss(g: feasibility.GridProblem, controls: np.ndarray) -> float:
+    """``‖x_N − x_f‖`` of held ``controls`` under the exact discrete dynamics (SPEC §5 norm)."""
+    reached = np.einsum("jab,jb->a", g.blocks, controls)
+    return float(np.linalg.norm(reached - g.rhs))
+
+
+def solve(
+    g: feasibility.GridProblem,
+    eps: float,
+    n: float,
+    step: str = "socp",
+    regularisation: float = REGULARISATION,
+) -> SolveResult:
+    """One cone-program re-solve as a :class:`SolveResult` whose plan is ``controls``.
+
+    ``step`` names the method in the solves table (``socp`` for the
+    cone-program architectures, ``socp_plan`` in the shooting chain).
+    """
+    start = time.perf_counter()
+    status, controls, costate, iterations = plan_controls(g, eps, n, regularisation)
+    converged = status is SolveStatus.CONVERGED
+    return SolveResult(
+        costate=costate,
+        status=status,
+        step=step,
+        iterations=iterations,
+        residual_km=terminal_miss(g, controls) if converged else float("nan"),
+        wall_time_s=time.perf_counter() - start,
+        eps=float(eps),
+        horizon_s=g.blocks.shape[0] * g.dt_s,
+        controls=controls if converged else None,
+    )
