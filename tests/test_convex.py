@@ -278,3 +278,49 @@ def test_chain_plan_of_last_resort_on_seed_262(tmp_path: Path) -> None:
     assert (plans["residual_km"] < 1e-8).all()
     miss_km = float(summary.loc[summary["arch"] == "plain_fixed", "miss_km"].iloc[0])
     assert miss_km < 0.010
+
+
+def test_degenerate_problem_gets_a_plan() -> None:
+    """A degenerate ε = 0 re-solve (‖λ_v‖ ≈ 1 over the whole horizon) yields a valid plan.
+
+    The state, horizon and warm start are those of the first failed re-solve of
+    ``plain_fixed --seed 262`` before issue 16 (t = 511 s; captured from the
+    loop): the warm Newton ascent fails on it; the chain's ``socp_plan`` step
+    returns held controls that reach x_f, and the optimal costate (the cone
+    program's terminal multiplier) has ‖λ_v‖ within 1e-5 of 1 over all 289 s
+    (observed 0.999994–1.000004): the fuel-optimal set is a face, not a point.
+    """
+    x0 = np.array(
+        [
+            0.004412438163979933,
+            0.857705772007222,
+            12.032330172517076,
+            0.0008786391298324018,
+            -0.0033571507573003675,
+            -0.04574663867586507,
+        ]
+    )
+    guess = np.array(
+        [
+            0.00010143349996422298,
+            0.001519424856174881,
+            0.008091334896182344,
+            -0.052551172146071565,
+            0.2976916331501046,
+            0.8704139891154757,
+        ]
+    )
+    problem = guidance.ShootingProblem(x0, 289.0, 0.0, N_RAD_S, U_MAX)
+    warm = guidance.solve(problem, guess, guidance.SolverSettings(fallback="none"))
+    assert warm.status is guidance.SolveStatus.FAILED
+    result = guidance.solve(problem, guess)
+    assert result.status is guidance.SolveStatus.CONVERGED
+    assert result.step == "socp_plan"
+    assert result.controls is not None and result.controls.shape == (289, 3)
+    assert np.linalg.norm(result.controls, axis=1).max() <= U_MAX
+    g = feasibility.grid_problem(N_RAD_S, x0, np.zeros(6), 289.0, 1.0, U_MAX)
+    assert convex.terminal_miss(g, result.controls) == pytest.approx(result.residual_km)
+    assert result.residual_km < 1e-11
+    t = np.linspace(0.0, 289.0, 579)
+    speed = [np.linalg.norm((costate_stm(N_RAD_S, s) @ result.costate)[3:]) for s in t]
+    assert np.max(np.abs(np.array(speed) - 1.0)) < 1e-5
