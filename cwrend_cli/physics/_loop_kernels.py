@@ -12,6 +12,13 @@ only (x̂ = x⁻, P = P⁻), NIS, MTF ratio, score and measurement are logged as
 NaN, the filtered score s̄ and ε are held (no score, so no update of Eqs.
 24–26), and the re-solves go on from the predicted estimate.
 
+Each row also logs the normalised estimation error squared (NEES,
+Bar-Shalom, Li & Kirubarajan 2001, *Estimation with Applications to
+Tracking and Navigation*, §5.4.2) ``(x̂ − x)ᵀ P⁻¹ (x̂ − x)`` of the estimate
+and covariance the row holds (the posterior; the prior on a dropout row)
+against the true state: χ² with 6 degrees of freedom, mean 6, for a
+consistent filter. One 6×6 Cholesky solve per step (:func:`nees`).
+
 The loop runs in compiled code between re-solves; :func:`advance` stops right
 after the ε update of a step that has a re-solve due, and the Python driver
 performs the re-solve and sets the costate. Its inputs are a few typed
@@ -117,6 +124,37 @@ class StepLog(NamedTuple):
     score_filtered: np.ndarray  # (N+1,) (held on a dropout; NaN before any measurement)
     eps: np.ndarray  # (N+1,)
     trace_p: np.ndarray  # (N+1,)
+    nees: np.ndarray  # (N+1,) (x̂ − x)ᵀ P⁻¹ (x̂ − x) of the row's estimate and covariance
+
+
+@njit(cache=True)
+def nees(p: np.ndarray, x_hat: np.ndarray, x_true: np.ndarray, scratch: np.ndarray) -> float:
+    """NEES ``(x̂ − x)ᵀ P⁻¹ (x̂ − x)`` of a 6-state estimate, by a Cholesky solve of ``P``.
+
+    ``P = L Lᵀ`` and NEES = ‖z‖² with ``L z = x̂ − x``; ``L`` is built in
+    ``scratch[:, :6]`` and ``z`` in ``scratch[:, 6]`` (``scratch`` (6, 7):
+    nothing allocated). NaN when ``P`` is not positive definite.
+    """
+    for i in range(6):
+        for j in range(i + 1):
+            acc = p[i, j]
+            for m in range(j):
+                acc -= scratch[i, m] * scratch[j, m]
+            if i == j:
+                if not acc > 0.0:
+                    return np.nan
+                scratch[i, i] = np.sqrt(acc)
+            else:
+                scratch[i, j] = acc / scratch[j, j]
+    total = 0.0
+    for i in range(6):
+        acc = x_hat[i] - x_true[i]
+        for m in range(i):
+            acc -= scratch[i, m] * scratch[m, 6]
+        z = acc / scratch[i, i]
+        scratch[i, 6] = z
+        total += z * z
+    return total
 
 
 @njit(cache=True)
@@ -218,6 +256,7 @@ def _advance(
     u = np.empty(3)
     u_applied = np.empty(3)
     lam_next = np.empty(6)
+    chol = np.empty((6, 7))  # nees() scratch
     x_true, x_hat, p, lam = state.x_true, state.x_hat, state.p, state.lam
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     for k in range(k_start, min(k_stop + 1, n_steps)):
@@ -268,6 +307,7 @@ def _advance(
                 p_pred[0, 0] + p_pred[1, 1] + p_pred[2, 2]
                 + p_pred[3, 3] + p_pred[4, 4] + p_pred[5, 5]
             )  # fmt: skip
+            log.nees[row] = nees(p_pred, x_pred, x_next, chol)
             if k == k_stop:
                 break  # the caller re-solves and sets the costate
             _propagate_costate(m.lam_step, lam, lam_next)
@@ -301,6 +341,7 @@ def _advance(
         log.trace_p[row] = (
             p_post[0, 0] + p_post[1, 1] + p_post[2, 2] + p_post[3, 3] + p_post[4, 4] + p_post[5, 5]
         )
+        log.nees[row] = nees(p_post, x_post, x_next, chol)
         if k == k_stop:
             break  # the caller re-solves and sets the costate
         _propagate_costate(m.lam_step, lam, lam_next)

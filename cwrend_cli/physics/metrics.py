@@ -5,6 +5,17 @@ loop no control is computed at t = T, so that sample is 0); the miss is the
 distance ‖r(T) − r_f‖; the fuel penalty is Δv relative to the open-loop
 fuel-optimal Δv. Solve statistics are over the receding-horizon re-solves,
 not the initial solve (the convention of the paper's Table 2, SPEC §7).
+
+Filter consistency (issue 15, item 6), the chi-square tests of Bar-Shalom,
+Li & Kirubarajan 2001, *Estimation with Applications to Tracking and
+Navigation*, §5.4: the NIS ``νᵀ S⁻¹ ν`` of SPEC §3 (S with the nominal R) is
+χ² with 3 degrees of freedom for a filter whose model matches the world, so
+its mean is 3; the NEES ``(x̂ − x)ᵀ P⁻¹ (x̂ − x)`` against the simulated truth
+is χ² with 6, mean 6. Means well below say the filter is conservative (its P
+larger than its errors: e.g. a process noise Q where the truth has none),
+above that it is overconfident (model mismatch, faults). The NIS mean is
+taken over the nominal periods only (:func:`mean_nis_nominal`), because a
+degradation window inflates it by design.
 Units: km, s, km/s, km/s².
 """
 
@@ -57,6 +68,34 @@ class RunMetrics:
     solve_success_pct: float  # converged with ‖residual‖ below the threshold (SPEC §5)
     solve_mean_ms: float  # wall time per solve
     solve_max_ms: float
+    mean_nis_nominal: float  # mean NIS outside the degradation windows; 3 if consistent
+    mean_nees: float  # mean NEES over rows 1 … N; 6 if consistent (NaN for references)
+
+
+def mean_nis_nominal(nis: FloatArray, window: np.ndarray) -> float:
+    """Mean NIS over the rows with a measurement outside every degradation window.
+
+    ``window`` is the row's degradation-window index (−1 none,
+    :attr:`~cwrend_cli.physics.simulation.RunResult.window`: the window whose
+    noise the row's measurement carries). Rows without a measurement (row 0,
+    dropouts) have NaN NIS and are skipped. E[NIS] = 3 (the measurement's
+    dimension, χ²₃; SPEC §3, Bar-Shalom et al. 2001, §5.4.2) for a
+    consistent filter. NaN when no such row exists.
+    """
+    values = np.asarray(nis, dtype=float)[np.asarray(window) < 0]
+    values = values[~np.isnan(values)]
+    return float(values.mean()) if values.size else float("nan")
+
+
+def mean_nees(nees: FloatArray) -> float:
+    """Mean NEES over rows 1 … N (row 0, the initial error against P0, left out).
+
+    E[NEES] = 6 (the state's dimension, χ²₆; Bar-Shalom et al. 2001, §5.4.2)
+    for a consistent filter; a NaN row (a covariance not positive definite)
+    makes it NaN.
+    """
+    values = np.asarray(nees, dtype=float)[1:]
+    return float(values.mean()) if values.size else float("nan")
 
 
 def _times(times_ms: Sequence[float]) -> tuple[float, float]:
@@ -80,6 +119,8 @@ def run_metrics(result: RunResult, fuel_delta_v_km_s: float) -> RunMetrics:
         solve_success_pct=100.0 * sum(s.success for s in rs) / len(rs) if rs else float("nan"),
         solve_mean_ms=mean_ms,
         solve_max_ms=max_ms,
+        mean_nis_nominal=mean_nis_nominal(result.nis, result.window),
+        mean_nees=mean_nees(result.nees),
     )
 
 
@@ -97,4 +138,6 @@ def reference_metrics(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> RunMetri
         solve_success_pct=100.0 if ref.solves else float("nan"),
         solve_mean_ms=mean_ms,
         solve_max_ms=max_ms,
+        mean_nis_nominal=float("nan"),  # open loop: no filter
+        mean_nees=float("nan"),
     )

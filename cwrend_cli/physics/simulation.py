@@ -95,6 +95,9 @@ class RunResult:
     delta_v_km_s: float  # trapezoid of ‖u‖ (applied) over the grid (SPEC §2)
     miss_km: float
     u_cmd: np.ndarray  # commanded control (the filter's input)
+    nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
+    dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
+    outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -209,6 +212,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         score_filtered=np.full(rows, np.nan),
         eps=np.full(rows, np.nan),
         trace_p=np.full(rows, np.nan),
+        nees=np.full(rows, np.nan),
     )
 
 
@@ -332,6 +336,9 @@ def simulate(
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
+    dropout = np.concatenate(([False], meas.dropout))
+    outlier = np.concatenate(([False], meas.outlier))
+    log.nees[0] = sk.nees(est.p0_matrix(), x_hat0, x0, np.empty((6, 7)))
     return RunResult(
         arch=arch.slug,
         seed=seed,
@@ -351,6 +358,9 @@ def simulate(
         delta_v_km_s=delta_v(t, log.u),
         miss_km=miss,
         u_cmd=log.u_cmd,
+        nees=log.nees,
+        dropout=dropout,
+        outlier=outlier,
     )
 
 
