@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pandas as pd
 from rich import box
-from rich.console import Console
+from rich.console import Console, Group
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -23,6 +23,7 @@ from rich.table import Table
 
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
+from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import swept_values
 
 
@@ -45,8 +46,9 @@ def _table(title: str | None, **options: Any) -> Table:
     )
 
 
-def summary_console_table(case: CaseResult, title: str = "") -> Table:
-    """Compact table: one row per open-loop reference and closed-loop run (fits 80 columns).
+def summary_console_table(case: CaseResult, title: str = "") -> Group:
+    """Compact tables: one row per open-loop reference and closed-loop run (fits 80 columns),
+    then the filter consistency of each closed-loop run (mean NIS and NEES, faults).
 
     The seed (one per case) goes into the title, not into a column.
     """
@@ -75,6 +77,31 @@ def summary_console_table(case: CaseResult, title: str = "") -> Table:
             f"{_num(r['solve_mean_ms'], '.2f')}/{_num(r['solve_max_ms'], '.1f')}",
         )
     table.caption = "solve ms: mean/max per re-solve; inf.: certified infeasible"
+    return Group(table, _consistency_table(case.runs, rows[2:]))
+
+
+def _consistency_table(runs: Sequence[RunResult], rows: Sequence[Mapping[str, Any]]) -> Table:
+    """Filter consistency of the closed-loop runs: mean NIS (nominal periods), mean NEES.
+
+    E[NIS] = 3 and E[NEES] = 6 for a consistent filter (χ² with 3 and 6
+    degrees of freedom, :mod:`cwrend_cli.physics.metrics`).
+    """
+    table = _table(None, show_edge=False, padding=(0, 0, 0, 1))
+    table.add_column("filter", no_wrap=True)
+    for name in ("mean NIS", "mean NEES", "dropouts", "outliers"):
+        table.add_column(name, justify="right", overflow="fold")
+    for run, r in zip(runs, rows, strict=True):
+        table.add_row(
+            r["arch"],
+            _num(r["mean_nis_nominal"], ".2f"),
+            _num(r["mean_nees"], ".4g"),
+            str(int(run.dropout.sum())),
+            str(int(run.outlier.sum())),
+        )
+    table.caption = (
+        "mean NIS outside the degradation windows (3 if consistent); mean NEES over "
+        "t > 0 (6 if consistent); steps with a sensor dropout or outlier"
+    )
     return table
 
 

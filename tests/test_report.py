@@ -41,6 +41,7 @@ PER_SEED = (
     "fig6_dv_vs_miss.png",
 )
 MULTI_SEED = ("miss_distribution.png", "dv_distribution.png", "paired_miss.png")
+NEES = "nees.png"  # filter consistency, when the steps hold the NEES (issue 15, item 6)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 runner = CliRunner()
@@ -110,7 +111,8 @@ def test_report_is_rewritten_in_place(run_dir: Path, run_report) -> None:
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output
     names = sorted(p.name for p in (run_dir / "report").iterdir())
-    assert names == sorted([*PER_SEED, "report.md", "report.html"])  # no temp files left behind
+    expected = [*PER_SEED, NEES, "report.md", "report.html"]
+    assert names == sorted(expected)  # no temp files left behind
 
 
 def test_report_errors(tmp_path: Path, run_dir: Path) -> None:
@@ -518,7 +520,7 @@ def test_report_html_is_self_contained(ablation_dir: Path, tmp_path: Path) -> No
     summary = write_report(root)
     page = (summary.out_dir / "report.html").read_text(encoding="utf-8")
     pngs = [p for p in summary.files if p.suffix == ".png"]
-    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED)
+    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 1
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
     assert "<code>abc</code>" in page  # the config hash
@@ -526,8 +528,45 @@ def test_report_html_is_self_contained(ablation_dir: Path, tmp_path: Path) -> No
 
 
 # ---------------------------------------------------------------------------
-# The simulated world (issue 15, item 6)
+# Filter consistency (NEES) and the simulated world (issue 15, item 6)
 # ---------------------------------------------------------------------------
+
+
+def test_nees_figure_draws_median_over_seeds_and_the_chi2_band(ablation_dir: Path) -> None:
+    """Median line = the median over the seeds of the stored NEES; band = χ²₆'s 95 % interval."""
+    from scipy.stats import chi2
+
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_nees(load_results(ablation_dir))
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "log"
+    (band,) = [p for p in ax.patches if p.get_gid() == figures.NEES_BAND_GID]
+    low, high = band.get_y(), band.get_y() + band.get_height()
+    assert (low, high) == pytest.approx((chi2.ppf(0.025, 6), chi2.ppf(0.975, 6)), rel=1e-12)
+    steps = pd.read_parquet(ablation_dir / "steps", filters=[("arch", "==", "mtf_adaptive")])
+    median = steps.groupby("t_s")["nees"].median()
+    median = median[median > 0]
+    lines = [line for line in ax.get_lines() if len(line.get_xdata()) > 2]
+    match = [
+        line
+        for line in lines
+        if np.array_equal(line.get_xdata(), median.index)
+        and np.allclose(line.get_ydata(), median.to_numpy(), rtol=1e-12, atol=0)
+    ]
+    assert match  # one of the drawn median curves is mtf_adaptive's (or its identical twin)
+
+
+def test_nees_figure_is_absent_without_stored_nees(ablation_dir: Path, tmp_path: Path) -> None:
+    from cwrend_cli.report import figures
+
+    root = _copy(ablation_dir, tmp_path / "old")
+    for path in (root / "steps").rglob("*.parquet"):
+        table = pq.read_table(path, partitioning=None)
+        pq.write_table(table.drop_columns(["nees"]), path)
+    data = load_results(root)
+    assert data.nees is None
+    assert NEES not in [f.file for f in figures.planned_figures(data)]
 
 
 def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
@@ -552,7 +591,7 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
     world = "truth: j2 · actuator errors on · sensor faults on"
     assert mismatched.world == world
     planned = figures.planned_figures(mismatched)
-    assert {*PER_SEED, *MULTI_SEED} == {f.file for f in planned}
+    assert {*PER_SEED, *MULTI_SEED, NEES} == {f.file for f in planned}
     for f in planned:
         assert f.caption.endswith(f"Simulated world: {world}."), f.file
         assert world in f.draw().get_suptitle(), f.file

@@ -392,7 +392,13 @@ def _drive(
                     break
                 try:
                     future = executor.submit(
-                        execute_task, task, refs, str(out_dir), record, plan_.steps_seeds
+                        execute_task,
+                        task,
+                        refs,
+                        str(out_dir),
+                        record,
+                        plan_.steps_seeds,
+                        _file_metadata(plan_),
                     )
                 except RuntimeError as exc:  # a broken pool refuses new work
                     fatal = _count_attempt(task, exc, attempts)

@@ -36,7 +36,7 @@ from __future__ import annotations
 import hashlib
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -201,6 +201,7 @@ def execute_task(
     out_dir: str,
     record_seeds: tuple[int, ...] = (),
     steps_seeds: int | None = None,
+    metadata: Mapping[str, str] | None = None,
 ) -> TaskOutcome:
     """Run a task's runs, write their steps/solves files and return their outcomes.
 
@@ -218,6 +219,9 @@ def execute_task(
     architectures and the references is written to
     ``recordings/<point>.s<seed>.rrd``. A recording that cannot be written is
     reported in the outcome's ``warnings``; the runs stay valid.
+
+    ``metadata`` goes into the schema metadata of the steps/solves files
+    (the campaign's ``config_hash`` and ``campaign_hash``, issue 18 item 5).
     """
     outcomes: list[RunOutcome] = []
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
@@ -275,7 +279,7 @@ def execute_task(
                 "point": [s.point for s, _ in chosen],
             }
             rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
-            write_parquet(build([r for _, r in chosen], extra), Path(out_dir) / rel)
+            write_parquet(build([r for _, r in chosen], extra, metadata), Path(out_dir) / rel)
             files.append(rel)
     warnings: list[str] = []
     for seed in record_seeds:

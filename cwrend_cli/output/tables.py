@@ -280,7 +280,10 @@ STEPS_SCHEMA = pa.schema(
         ("est_err_km", pa.float64()),
         ("est_vel_err_km_s", pa.float64()),
         ("trace_p", pa.float64()),
+        ("nees", pa.float64()),
         ("degradation_window", pa.int64()),
+        ("dropout", pa.bool_()),
+        ("outlier", pa.bool_()),
     ]
 )
 
@@ -319,7 +322,10 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
     cols["est_err_km"] = np.linalg.norm(result.x_hat[:, :3] - result.x_true[:, :3], axis=1)
     cols["est_vel_err_km_s"] = np.linalg.norm(result.x_hat[:, 3:] - result.x_true[:, 3:], axis=1)
     cols["trace_p"] = result.trace_p
+    cols["nees"] = result.nees
     cols["degradation_window"] = result.window.astype(np.int64)
+    cols["dropout"] = result.dropout.astype(np.bool_)
+    cols["outlier"] = result.outlier.astype(np.bool_)
     return _conventional(pa.table(cols, schema=STEPS_SCHEMA), metadata)
 
 
@@ -377,6 +383,8 @@ SUMMARY_SCHEMA = pa.schema(
         ("solve_success_pct", pa.float64()),
         ("solve_mean_ms", pa.float64()),
         ("solve_max_ms", pa.float64()),
+        ("mean_nis_nominal", pa.float64()),
+        ("mean_nees", pa.float64()),
     ]
 )
 
