@@ -92,6 +92,11 @@ def test_every_column_of_every_schema_has_a_unit(schema: pa.Schema) -> None:
         ("disp.estimator.initial_error.4", "km/s"),
         ("disp.degradation.windows.1.bias_km.0", "km"),
         ("param.actuator.pointing_sigma_deg", "deg"),
+        ("param.truth.model", "-"),
+        ("param.guidance.method", "-"),
+        ("param.guidance.t_resolve_s", "s"),
+        ("param.truth.inclination_deg", "deg"),
+        ("param.estimator.q_process", "as configuration key estimator.q_process"),
     ],
 )
 def test_units_from_suffixes_and_keys(column: str, unit: str) -> None:

@@ -172,7 +172,19 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "point_b": _col("grid point of campaign B", "-"),
 }
 #: Configuration keys without a unit suffix whose value is dimensionless.
-_DIMENSIONLESS_KEYS = ("schedule.", "truth.eccentricity", "noise.seed", "actuator.magnitude_")
+#: (Keys with a unit suffix, e.g. ``guidance.t_resolve_s``, take it first.) Choices given
+#: as text (``truth.model``, ``guidance.method``, …) and counts are dimensionless too.
+_DIMENSIONLESS_KEYS = (
+    "schedule.",
+    "truth.",
+    "guidance.",
+    "noise.seed",
+    "actuator.magnitude_",
+    "solver.fallback",
+    "solver.on_infeasible",
+    "solver.max_iter",
+    "solver.quadrature_nodes",
+)
 #: Configuration keys without a unit suffix that are not dimensionless.
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
 #: Prefixes of the ``runs.parquet`` columns of swept values and dispersion draws.
