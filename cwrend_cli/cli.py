@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Literal
@@ -18,8 +19,8 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__, campaign
-from cwrend_cli.campaign import ExecutorKind
+from cwrend_cli import __version__, campaign, limits
+from cwrend_cli.campaign import ExecutorKind, design, sequential
 from cwrend_cli.config import (
     ARCHITECTURES,
     SOCP_ARCHITECTURES,
@@ -39,12 +40,14 @@ from cwrend_cli.console import (
     ablation_console_table,
     compare_console_tables,
     paired_console_table,
+    sensitivity_console_table,
     summary_console_table,
     sweep_console_table,
+    until_console_table,
 )
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output import recording
-from cwrend_cli.output.files import write_parquet, write_run
+from cwrend_cli.output.files import check_output_dir, write_parquet, write_run
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     COMPARE_FIGURE,
@@ -261,6 +264,7 @@ def run(
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
+        check_output_dir(out, "choose another --out or output.dir")  # before computing
         console = Console(stderr=True, highlight=False)
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)
@@ -339,6 +343,18 @@ ForceOption = Annotated[
     bool, typer.Option("--force", help="Start over: discard what the campaign directory holds.")
 ]
 RetryOption = Annotated[bool, typer.Option("--retry-failed", help="Rerun the failed runs.")]
+VersionChangeOption = Annotated[
+    bool,
+    typer.Option(
+        "--allow-version-change",
+        help="Resume a campaign computed with other versions of cwrend or its numerics "
+        "(refused by default: its numbers could differ in the last bits).",
+    ),
+]
+LargeOption = Annotated[
+    bool,
+    typer.Option("--yes-large", help=f"Allow more than {limits.MAX_POINTS:,} grid points."),
+]
 QuietOption = Annotated[
     bool,
     typer.Option(
@@ -361,16 +377,51 @@ def _seeds(seeds: int | None, seed_list: str | None) -> list[int]:
     if seeds is not None and seed_list is not None:
         raise ConfigError("use either --seeds or --seed-list, not both")
     if seed_list is None:
+        if seeds is not None and seeds > limits.MAX_RUNS:
+            raise ConfigError(f"--seeds {seeds}: at most {limits.MAX_RUNS:,} seeds per campaign")
         return list(range(seeds or 1))
+    if len(seed_list) > 20 * limits.MAX_RUNS:
+        raise ConfigError(f"--seed-list: too long (at most {limits.MAX_RUNS:,} seeds)")
     try:
         values = [int(v) for v in seed_list.split(",") if v.strip()]
     except ValueError:
         raise ConfigError(
-            f"--seed-list {seed_list!r}: comma-separated integers, e.g. 0,5,9"
+            f"--seed-list {seed_list[:40]!r}: comma-separated integers, e.g. 0,5,9"
         ) from None
-    if not values or len(set(values)) != len(values) or min(values) < 0:
-        raise ConfigError(f"--seed-list {seed_list!r}: distinct non-negative integers required")
+    if not values or len(set(values)) != len(values):
+        raise ConfigError(f"--seed-list {seed_list[:40]!r}: distinct integers required")
+    bad = [v for v in values if not 0 <= v <= limits.MAX_SEED]
+    if bad:
+        raise ConfigError(
+            f"--seed-list: seed {bad[0]} is out of range; seeds are integers in "
+            f"[0, {limits.MAX_SEED}] (2**63 − 1)"
+        )
     return values
+
+
+@dataclass(frozen=True)
+class CampaignOptions:
+    """The command-line options shared by ``ablate`` and ``sweep``."""
+
+    seeds: int | None
+    seed_list: str | None
+    arch: str
+    workers: int | None
+    executor: str
+    address: str | None
+    name: str | None
+    force: bool
+    retry_failed: bool
+    quiet: bool
+    rrd: bool
+    rrd_seeds: int | None
+    allow_version_change: bool
+    yes_large: bool
+    design: str | None = None  # sweep: a sampled design instead of a grid
+    samples: int | None = None
+    until: str | None = None  # ablate: sequential Monte Carlo target
+    batch: int = 50
+    max_seeds: int = 1000
 
 
 def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
@@ -381,88 +432,196 @@ def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     return out
 
 
+#: Approximate bytes a run adds to a campaign directory (steps, solves, journal).
+_STEPS_BYTES_PER_RUN = 200_000
+_OTHER_BYTES_PER_RUN = 6_000
+_RECORDING_BYTES_PER_SEED = 1_600_000
+
+
+def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
+    """Say how many runs and roughly how much disk a large campaign will take."""
+    runs = len(plan.runs)
+    if runs <= limits.ANNOUNCE_RUNS:
+        return
+    seeds, points = len(plan.seeds), max(len({r.point for r in plan.runs}), 1)
+    kept = seeds if plan.steps_seeds is None else min(seeds, plan.steps_seeds)
+    recorded = seeds if plan.rrd_seeds is None else min(seeds, plan.rrd_seeds)
+    size = runs * _OTHER_BYTES_PER_RUN + runs * kept / seeds * _STEPS_BYTES_PER_RUN
+    size += points * recorded * _RECORDING_BYTES_PER_SEED
+    err.print(
+        f"plan: {runs:,} runs ({points:,} point(s) × {seeds:,} seeds × {len(plan.archs)} "
+        f"architectures), about {size / 1e9:.1f} GB of results (per-step data for "
+        f"{kept:,} seeds: output.steps_seeds)",
+        markup=False,
+    )
+
+
 def _campaign(
     command: Literal["ablate", "sweep"],
     file: Path,
     set_: list[str] | None,
     params: list[str],
-    seeds: int | None,
-    seed_list: str | None,
-    arch: str,
-    workers: int | None,
-    executor: str,
-    address: str | None,
-    name: str | None,
-    force: bool,
-    retry_failed: bool,
-    quiet: bool,
-    rrd: bool,
-    rrd_seeds: int | None,
+    opts: CampaignOptions,
 ) -> None:
     err = Console(stderr=True, highlight=False)
     with user_errors():
-        overrides = list(set_ or [])
-        if name is not None:
-            overrides.append(f"output.name={json.dumps(name)}")
-        if rrd_seeds is not None and not rrd:
-            raise ConfigError("--rrd-seeds sets how many seeds are recorded: drop --no-rrd")
-        if not rrd or rrd_seeds is not None:
-            overrides.append(f"output.rrd_seeds={0 if not rrd else rrd_seeds}")
-        cfg = load_config(file, overrides)
-        if cfg.output.rrd_seeds != 0:
-            recording.check_enabled()
-        if executor not in ("local", "dask"):
-            raise ConfigError(f"--executor {executor!r}: must be 'local' or 'dask'")
-        executor_kind: ExecutorKind = "dask" if executor == "dask" else "local"
-        if address and executor != "dask":
-            raise ConfigError("--address needs --executor dask")
-        archs = [a.slug for a in _parse_archs(arch)]
-        plan = campaign.plan(cfg, archs, _seeds(seeds, seed_list), params)
-        out = _campaign_dir(cfg, name)
-        progress = RichProgress(err, f"{command} {out.name}", quiet=quiet)
-        summary = campaign.run_campaign(
-            plan, out, command=command, executor_kind=executor_kind, workers=workers,
-            address=address, force=force, retry_failed=retry_failed, progress=progress,
-        )  # fmt: skip
-        statistics = campaign.write_statistics(out, command, plan.root_seed)
-        asked = {r.run_key for r in plan.runs}
-        held = campaign.held_run_keys(out)
-        if held - asked and not quiet:
-            # a re-run naming fewer seeds, architectures or points than the directory holds:
-            # report on exactly the runs asked for; the statistics file covers them all
-            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
-            stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
-            err.print(
-                f"note: the tables cover the {len(asked & held)} run(s) this command names; "
-                f"the directory holds {len(held)} and {stats_file} covers them all",
-                markup=False,
-            )
-        stats = statistics.frame
-        if not quiet and not stats.empty:
-            stdout = Console(highlight=False)
-            if command == "ablate":
-                stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
-                pairs = paired_console_table(stats)
-                if pairs is not None:
-                    stdout.print(pairs)
-            else:
-                title = f"cwrend sweep · {out.name}"
-                stdout.print(sweep_console_table(stats, list(statistics.groups), title))
-        if not quiet:
-            err.print(
-                f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
-                f"holds {summary.ok} ok, {summary.failed} failed → {out}",
-                soft_wrap=True,  # a path must stay copyable
-                markup=False,
-            )
-        if summary.interrupted:
+        try:
+            _run_campaign_command(command, file, set_, params, opts, err)
+        except KeyboardInterrupt:  # a second Ctrl-C while results are summarised
             err.print("interrupted: completed runs are kept; run the same command to resume")
-            raise typer.Exit(code=130)
-        if summary.failed:
-            err.print(
-                "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
+            raise typer.Exit(code=130) from None
+
+
+def _run_campaign_command(
+    command: Literal["ablate", "sweep"],
+    file: Path,
+    set_: list[str] | None,
+    params: list[str],
+    opts: CampaignOptions,
+    err: Console,
+) -> None:
+    overrides = list(set_ or [])
+    if opts.name is not None:
+        overrides.append(f"output.name={json.dumps(opts.name)}")
+    if opts.rrd_seeds is not None and not opts.rrd:
+        raise ConfigError("--rrd-seeds sets how many seeds are recorded: drop --no-rrd")
+    if not opts.rrd or opts.rrd_seeds is not None:
+        overrides.append(f"output.rrd_seeds={0 if not opts.rrd else opts.rrd_seeds}")
+    cfg = load_config(file, overrides)
+    if cfg.output.rrd_seeds != 0:
+        recording.check_enabled()
+    if opts.executor not in ("local", "dask"):
+        raise ConfigError(f"--executor {opts.executor!r}: must be 'local' or 'dask'")
+    if opts.address and opts.executor != "dask":
+        raise ConfigError("--address needs --executor dask")
+    if opts.design is not None and opts.design not in design.DESIGNS:
+        raise ConfigError(f"--design {opts.design!r}: one of {', '.join(design.DESIGNS)}")
+    if opts.samples is not None and opts.design is None:
+        raise ConfigError("--samples sets the size of a --design")
+    archs = [a.slug for a in _parse_archs(opts.arch)]
+    out = _campaign_dir(cfg, opts.name)
+    if opts.until is None:
+        seeds = _seeds(opts.seeds, opts.seed_list)
+        plan, summary, statistics = _campaign_step(
+            command, cfg, archs, seeds, params, opts, out, err
+        )
+        achieved: list[sequential.Achieved] = []
+    else:
+        if opts.seeds is not None or opts.seed_list is not None:
+            raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
+        target = sequential.parse_until(opts.until)
+        if opts.max_seeds > limits.MAX_RUNS:
+            raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
+        for n in sequential.seed_counts(opts.batch, opts.max_seeds):
+            plan, summary, statistics = _campaign_step(
+                command, cfg, archs, list(range(n)), params, opts, out, err
             )
-            raise typer.Exit(code=1)
+            achieved = sequential.achieved(statistics.frame, target, archs)
+            if summary.interrupted or (
+                sequential.ready(n, opts.batch) and all(a.met for a in achieved)
+            ):
+                break
+            if not opts.quiet and n < opts.max_seeds:
+                widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
+                err.print(
+                    f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
+                    f"> {widest.limit:.3g}); next batch",
+                    markup=False,
+                )
+    _report_campaign(command, plan, summary, statistics, out, opts, err)
+    if achieved and not opts.quiet:
+        Console(highlight=False).print(until_console_table(achieved, opts.until or ""))
+    unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
+    if unmet and not summary.interrupted and not opts.quiet:
+        err.print(f"--until not met within --max-seeds {opts.max_seeds}", markup=False)
+    if summary.interrupted:
+        asked = {r.run_key for r in plan.runs}
+        done = len(asked & campaign.held_run_keys(out))
+        err.print(
+            f"interrupted: {done} of {len(asked)} runs done ({summary.executed} computed now), "
+            f"{summary.failed} failed; run the same command to resume → {out}",
+            soft_wrap=True,
+            markup=False,
+        )
+        raise typer.Exit(code=130)
+    if summary.failed:
+        err.print("some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them")
+        raise typer.Exit(code=1)
+
+
+def _campaign_step(
+    command: Literal["ablate", "sweep"],
+    cfg: CwrendConfig,
+    archs: list[str],
+    seeds: list[int],
+    params: list[str],
+    opts: CampaignOptions,
+    out: Path,
+    err: Console,
+) -> tuple[campaign.CampaignPlan, campaign.CampaignSummary, campaign.CampaignStatistics]:
+    """Plan, run (resuming) and compute the statistics of one campaign invocation."""
+    design_kind: design.Design | None = opts.design  # type: ignore[assignment]
+    plan = campaign.plan(
+        cfg, archs, seeds, params, allow_large=opts.yes_large, design_kind=design_kind,
+        samples=opts.samples,
+    )  # fmt: skip
+    if not opts.quiet:
+        _announce(err, plan)
+    executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
+    progress = RichProgress(err, f"{command} {out.name}", quiet=opts.quiet)
+    summary = campaign.run_campaign(
+        plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
+        address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
+        allow_version_change=opts.allow_version_change, progress=progress,
+    )  # fmt: skip
+    return plan, summary, campaign.write_statistics(out, command, plan.root_seed)
+
+
+def _report_campaign(
+    command: Literal["ablate", "sweep"],
+    plan: campaign.CampaignPlan,
+    summary: campaign.CampaignSummary,
+    statistics: campaign.CampaignStatistics,
+    out: Path,
+    opts: CampaignOptions,
+    err: Console,
+) -> None:
+    """The console tables and summary line of a finished (or interrupted) campaign."""
+    sensitivity = campaign.write_sensitivity(out, plan)
+    asked = {r.run_key for r in plan.runs}
+    held = campaign.held_run_keys(out)
+    if held - asked and not opts.quiet:
+        # a re-run naming fewer seeds, architectures or points than the directory holds:
+        # report on exactly the runs asked for; the statistics file covers them all
+        statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
+        stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
+        err.print(
+            f"note: the tables cover the {len(asked & held)} run(s) this command names; "
+            f"the directory holds {len(held)} and {stats_file} covers them all",
+            markup=False,
+        )
+    if opts.quiet:
+        return
+    stats = statistics.frame
+    stdout = Console(highlight=False)
+    if not stats.empty:
+        if command == "ablate":
+            stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
+            pairs = paired_console_table(stats)
+            if pairs is not None:
+                stdout.print(pairs)
+        else:
+            title = f"cwrend sweep · {out.name}"
+            stdout.print(sweep_console_table(stats, list(statistics.groups), title))
+    if not sensitivity.empty:
+        stdout.print(sensitivity_console_table(sensitivity, f"Sobol indices · {out.name}"))
+    if not summary.interrupted:
+        err.print(
+            f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
+            f"holds {summary.ok} ok, {summary.failed} failed → {out}",
+            soft_wrap=True,  # a path must stay copyable
+            markup=False,
+        )
 
 
 @app.command("ablate", short_help="Compare the architectures on the same noise per seed.")
@@ -477,9 +636,28 @@ def ablate(
     name: NameOption = None,
     force: ForceOption = False,
     retry_failed: RetryOption = False,
+    allow_version_change: VersionChangeOption = False,
     quiet: QuietOption = False,
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
+    yes_large: LargeOption = False,
+    until: Annotated[
+        str | None,
+        typer.Option(
+            "--until",
+            help="Run seeds in batches until the 95 % interval half-width of a metric is at "
+            "most a target: [STATISTIC.]METRIC[@A-B]:WIDTH[%], e.g. miss_km:0.0005 (every "
+            "architecture), median.miss_km:5% or miss_km@mtf_adaptive-plain_adaptive:0.001.",
+            metavar="TARGET",
+        ),
+    ] = None,
+    batch: Annotated[
+        int, typer.Option("--batch", min=1, help="Seeds per batch with --until.", metavar="N")
+    ] = 50,
+    max_seeds: Annotated[
+        int,
+        typer.Option("--max-seeds", min=1, help="Stop --until at this many seeds.", metavar="N"),
+    ] = 1000,
     set_: SetOption = None,
 ) -> None:
     """Compare the architectures on the same noise per seed (plus open-loop references).
@@ -488,10 +666,13 @@ def ablate(
     solves/ datasets, events.jsonl, ablation.parquet (statistics with 95 %
     bootstrap intervals and paired comparisons) and recordings/ (one Rerun
     .rrd per recorded seed). Rerunning resumes.
-    Exit code 1 if any run failed, 130 if interrupted.
+    Exit code 1 if any run failed, 2 for bad input, 3 if the machine failed (disk full,
+    lost workers: nothing recorded, rerun to resume), 130 if interrupted.
     """
-    _campaign("ablate", file, set_, [], seeds, seed_list, arch, workers, executor, address,
-              name, force, retry_failed, quiet, rrd, rrd_seeds)  # fmt: skip
+    opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
+                           retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
+                           yes_large, until=until, batch=batch, max_seeds=max_seeds)  # fmt: skip
+    _campaign("ablate", file, set_, [], opts)
 
 
 @app.command("sweep", short_help="Grid × architectures × seeds, [dispersions] per run.")
@@ -516,9 +697,31 @@ def sweep(
     name: NameOption = None,
     force: ForceOption = False,
     retry_failed: RetryOption = False,
+    allow_version_change: VersionChangeOption = False,
     quiet: QuietOption = False,
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
+    yes_large: LargeOption = False,
+    design_: Annotated[
+        str | None,
+        typer.Option(
+            "--design",
+            help="Sample the ranges of [sweep] ({ low = L, high = H }, log = true, int = true, "
+            "or { values = [V1, V2] }) instead of a grid: lhs, sobol (with Sobol sensitivity "
+            "indices) or random.",
+            metavar="lhs|sobol|random",
+        ),
+    ] = None,
+    samples: Annotated[
+        int | None,
+        typer.Option(
+            "--samples",
+            min=1,
+            help="Design size: points (lhs, random) or base points, a power of two (sobol: "
+            "samples × (parameters + 2) points).",
+            metavar="N",
+        ),
+    ] = None,
     set_: SetOption = None,
 ) -> None:
     """Grid (cartesian product) × architectures × seeds, with [dispersions] per run.
@@ -526,8 +729,10 @@ def sweep(
     Every run's config is validated before anything runs. Results as for
     ablate, with sweep.parquet holding the statistics per grid point.
     """
-    _campaign("sweep", file, set_, list(param or []), seeds, seed_list, arch, workers, executor,
-              address, name, force, retry_failed, quiet, rrd, rrd_seeds)  # fmt: skip
+    opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
+                           retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
+                           yes_large, design=design_, samples=samples)  # fmt: skip
+    _campaign("sweep", file, set_, list(param or []), opts)
 
 
 # ---------------------------------------------------------------------------

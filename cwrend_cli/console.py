@@ -324,3 +324,45 @@ def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -
         table.caption = _caption(text, bootstrap_rows)
         tables.append(table)
     return tables
+
+
+def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table:
+    """Sobol indices of a design campaign: S1 and ST with 95 % intervals, per arch and metric.
+
+    The fuel penalty is Δv scaled by a constant (same indices) and is left to
+    ``sensitivity.parquet``; parameters are shown by their key's last segment.
+    """
+    table = _table(title, show_edge=False, padding=(0, 0, 0, 1))
+    for name in ("architecture", "metric", "parameter"):
+        table.add_column(name, no_wrap=True)
+    for name in ("S1 ± 95 %", "ST ± 95 %"):
+        table.add_column(name, justify="right", no_wrap=True)
+    shown = frame[frame["metric"] != "fuel_penalty_pct"]
+    keys = ["arch", "metric", "parameter"]
+    wide = shown.pivot_table(index=keys, columns="statistic", values=["value", "ci_low", "ci_high"])
+    previous: tuple[str, ...] = ()
+    for index, row in wide.iterrows():
+        arch, metric, parameter = (str(v) for v in (index if isinstance(index, tuple) else ()))
+        cells = [
+            f"{row[('value', k)]:.2f} ± {(row[('ci_high', k)] - row[('ci_low', k)]) / 2:.2f}"
+            for k in ("S1", "ST")
+        ]
+        first = (arch, metric) != previous
+        previous = (arch, metric)
+        table.add_row(arch if first else "", metric if first else "",
+                      parameter.rsplit(".", 1)[-1], *cells)  # fmt: skip
+    table.caption = "Sobol indices of the mean over seeds (SALib); all in sensitivity.parquet"
+    return table
+
+
+def until_console_table(achieved: Sequence[Any], target: str) -> Table:
+    """The intervals a ``--until`` target asked for, as achieved."""
+    table = _table(f"--until {target}", show_edge=False, padding=(0, 0, 0, 1))
+    table.add_column("interval of")
+    for name in ("seeds", "value", "half-width", "target"):
+        table.add_column(name, justify="right")
+    table.add_column("met")
+    for a in achieved:
+        table.add_row(a.label, str(a.n), f"{a.value:.6g}", f"{a.half_width:.3g}",
+                      f"{a.limit:.3g}", "yes" if a.met else "no")  # fmt: skip
+    return table

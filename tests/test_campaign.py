@@ -683,7 +683,7 @@ def test_an_output_dir_that_is_a_file_exits_2_naming_it(tmp_path: Path) -> None:
     cfg.write_text(f'[output]\ndir = "{tmp_path / "afile"}"\nname = "x"\n')
     result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
     assert result.exit_code == 2, result.output
-    assert f"{tmp_path / 'afile' / 'x'}: cannot create the campaign directory" in result.stderr
+    assert f"'{tmp_path / 'afile' / 'x'}': cannot write results there" in result.stderr
 
 
 def test_a_second_process_on_the_same_campaign_is_refused(tmp_path: Path) -> None:
@@ -731,7 +731,8 @@ def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     assert elapsed < 10.0, f"took {elapsed:.1f} s to stop"  # measured ~1.4 s on 2 loaded cores
     held = len(pd.read_parquet(out / "runs.parquet"))
     assert 0 < held < 80
-    assert f"{held} run(s) computed" in stderr and "Traceback" not in stderr
+    assert f"interrupted: {held} of 80 runs done ({held} computed now), 0 failed" in stderr
+    assert "run the same command to resume" in stderr and "Traceback" not in stderr
     assert json.loads((out / "manifest.json").read_text())["status"] == "interrupted"
     resumed = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
@@ -775,3 +776,33 @@ def test_a_corrupt_manifest_exits_2_with_the_fix(tmp_path: Path, content: bytes)
     assert result.exit_code == 2, result.output
     assert "manifest; use --force to start the campaign over" in result.stderr
     assert "Traceback" not in result.output
+
+
+# --- runs that fail without raising (issue 21, items 1 and 3) ---------------------
+
+
+def test_a_run_with_non_finite_estimates_is_recorded_failed_naming_the_quantity(
+    tmp_path: Path,
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "nonfinite")
+    result = _cli("ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1",
+                  "-q", "--set", "degradation.windows.1.bias_km=[1e308, 0.0, 0.0]")  # fmt: skip
+    assert result.exit_code == 1, result.output  # some runs failed
+    runs = pd.read_parquet(tmp_path / "results" / "nonfinite" / "runs.parquet")
+    assert (runs["status"] == "failed").all()
+    assert runs["error"].str.contains(r"non-finite estimate \(x_hat\) from t = 326 s").all()
+
+
+def test_a_run_past_its_time_limit_is_recorded_timed_out_and_the_campaign_goes_on(
+    tmp_path: Path,
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "slow", "seeds_per_task = 1\n")
+    result = _cli("ablate", str(cfg), "-n", "3", "--arch", "mtf_adaptive", "--workers", "1",
+                  "-q", "--set", "output.run_timeout_s=1e-6")  # fmt: skip
+    assert result.exit_code == 1, result.output
+    runs = pd.read_parquet(tmp_path / "results" / "slow" / "runs.parquet")
+    assert len(runs) == 3 and (runs["status"] == "failed").all()  # every task ran
+    assert runs["error"].str.contains("timed out: the run took longer than 1e-06 s").all()
+    retried = _cli("ablate", str(cfg), "-n", "3", "--arch", "mtf_adaptive", "--workers", "1",
+                   "-q", "--retry-failed")  # fmt: skip
+    assert retried.exit_code == 0, retried.output  # the default limit (460 s) lets them finish

@@ -23,7 +23,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "cwrend_cli"
 #: What each layer may import from cwrend_cli (module-name prefixes).
 ALLOWED: dict[str, tuple[str, ...]] = {
     "physics": ("cwrend_cli.physics",),
-    "config": ("cwrend_cli.config", "cwrend_cli.physics", "cwrend_cli.errors"),
+    "config": ("cwrend_cli.config", "cwrend_cli.physics", "cwrend_cli.errors", "cwrend_cli.limits"),
     "output": ("cwrend_cli.output", "cwrend_cli.physics", "cwrend_cli.errors", "cwrend_cli"),
     "campaign": (
         "cwrend_cli.campaign",
@@ -31,6 +31,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cwrend_cli.output",
         "cwrend_cli.physics",
         "cwrend_cli.errors",
+        "cwrend_cli.limits",
         "cwrend_cli",
     ),
     "report": (
@@ -114,7 +115,7 @@ def violations(module: str, imported: set[str]) -> list[str]:
     )
 
 
-# The top-level modules (cli, console, errors) may import any layer.
+# The top-level modules (cli, console, errors, limits) may import any layer.
 LAYERED = [p for p in MODULES if _layer(_module_name(p)) is not None]
 
 

@@ -10,6 +10,11 @@
   (:mod:`~cwrend_cli.campaign.executors`), journals every finished task,
   writes the open-loop references and the statistics files
   (:mod:`~cwrend_cli.campaign.statistics`).
+* :mod:`~cwrend_cli.campaign.guards`: what makes a run fail without raising
+  (non-finite results, a time limit).
+* :mod:`~cwrend_cli.campaign.design` (pure): sampled designs (LHS, Sobol,
+  random) and Sobol sensitivity indices (SALib);
+  :mod:`~cwrend_cli.campaign.sequential` (pure): ``--until`` targets.
 * :mod:`~cwrend_cli.campaign.compare` (pure computation): two campaign
   directories paired on their shared runs (``cwrend compare``); imported by
   name, not re-exported here.
@@ -24,6 +29,7 @@ from cwrend_cli.campaign.driver import (
     held_run_keys,
     run_campaign,
     subset_statistics,
+    write_sensitivity,
     write_statistics,
 )
 from cwrend_cli.campaign.executors import ExecutorKind
@@ -88,5 +94,6 @@ __all__ = [
     "standard_normal",
     "standard_normal_for",
     "subset_statistics",
+    "write_sensitivity",
     "write_statistics",
 ]

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+import pandas as pd
 from scipy.stats import qmc
 
 from cwrend_cli.errors import ConfigError
@@ -54,9 +55,13 @@ __all__ = [
     "design_points",
     "n_runs_per_base",
     "parse_range",
+    "sensitivity",
     "sobol_indices",
     "unit_samples",
 ]
+
+#: Metrics whose Sobol indices a sobol campaign reports (runs.parquet columns).
+SENSITIVITY_METRICS = ("miss_km", "delta_v_km_s", "fuel_penalty_pct")
 
 Design = Literal["lhs", "sobol", "random"]
 DESIGNS: tuple[Design, ...] = ("lhs", "sobol", "random")
@@ -217,3 +222,44 @@ def sobol_indices(
         st=np.asarray(result["ST"]),
         st_conf=np.asarray(result["ST_conf"]),
     )
+
+
+def sensitivity(
+    runs: pd.DataFrame,
+    rows: Sequence[str],
+    ranges: Sequence[ParameterRange],
+    root_seed: int,
+    metrics: Sequence[str] = SENSITIVITY_METRICS,
+) -> pd.DataFrame:
+    """Sobol indices of a ``sobol`` campaign per architecture and metric (long format).
+
+    The output of design row i is the mean of the metric over the seeds of
+    its point (``rows[i]``, its point id), so the indices say which
+    parameter drives the mean over the noise. Rows: ``arch``, ``metric``,
+    ``parameter``, ``statistic`` (``S1`` first-order, ``ST`` total), ``value``,
+    ``ci_low``, ``ci_high`` (95 %), ``n_seeds`` (the fewest ok seeds of a
+    point). An architecture with a point without ok runs gets no rows.
+    """
+    ok = runs[runs["status"] == "ok"]
+    out = []
+    for arch, group in ok.groupby("arch", sort=True, observed=True):
+        means = group.groupby("point", observed=True)[list(metrics)].mean()
+        counts = group.groupby("point", observed=True).size()
+        if not set(rows) <= set(means.index):
+            continue
+        for metric in metrics:
+            y = means.loc[list(rows), metric].to_numpy(dtype=float)
+            if not np.isfinite(y).all():
+                continue
+            idx = sobol_indices(ranges, y, root_seed)
+            for i, name in enumerate(idx.names):
+                for kind, value, conf in (
+                    ("S1", idx.s1[i], idx.s1_conf[i]),
+                    ("ST", idx.st[i], idx.st_conf[i]),
+                ):
+                    out.append(
+                        {"arch": str(arch), "metric": metric, "parameter": name, "statistic": kind,
+                         "value": float(value), "ci_low": float(value - conf),
+                         "ci_high": float(value + conf), "n_seeds": int(counts.min())}
+                    )  # fmt: skip
+    return pd.DataFrame(out)

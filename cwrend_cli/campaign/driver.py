@@ -27,7 +27,7 @@ from typing import Literal, Protocol
 
 import pandas as pd
 
-from cwrend_cli.campaign import statistics
+from cwrend_cli.campaign import design, statistics
 from cwrend_cli.campaign.executors import (
     ExecutorKind,
     check_address,
@@ -54,13 +54,14 @@ from cwrend_cli.campaign.worker import (
     references_key,
     seeds_to_record,
 )
-from cwrend_cli.errors import ConfigError, CwrendError, InfrastructureError
-from cwrend_cli.output.files import write_json, write_parquet
+from cwrend_cli.errors import CwrendError, InfrastructureError
+from cwrend_cli.output.files import make_output_dir, write_json, write_parquet
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     EVENTS,
     MANIFEST,
     RUNS,
+    SENSITIVITY,
     SWEEP_STATS,
     references_path,
 )
@@ -77,6 +78,7 @@ __all__ = [
     "CampaignSummary",
     "Progress",
     "run_campaign",
+    "write_sensitivity",
     "write_statistics",
 ]
 
@@ -215,13 +217,7 @@ def run_campaign(
     progress = _Counting(progress or _NoProgress())
     if executor_kind == "dask" and address:
         check_address(address)  # before anything is written
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(
-            f"{out_dir}: cannot create the campaign directory ({exc.strerror}); choose another "
-            "output.dir or output.name"
-        ) from None
+    make_output_dir(out_dir, "choose another output.dir or output.name")
     check_confined(out_dir)
     with campaign_lock(out_dir):
         return _run_locked(
@@ -399,6 +395,7 @@ def _drive(
                         record,
                         plan_.steps_seeds,
                         _file_metadata(plan_),
+                        plan_.run_timeout_s,
                     )
                 except RuntimeError as exc:  # a broken pool refuses new work
                     fatal = _count_attempt(task, exc, attempts)
@@ -501,6 +498,25 @@ def write_statistics(
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
     write_parquet(statistics_table(frame, _stored_metadata(out_dir)), path)
     return CampaignStatistics(frame, groups, path)
+
+
+def write_sensitivity(out_dir: Path, plan_: CampaignPlan) -> pd.DataFrame:
+    """Sobol indices of a ``sobol`` design campaign into ``sensitivity.parquet`` (else nothing).
+
+    Computed from ``runs.parquet`` (:func:`cwrend_cli.campaign.design.sensitivity`);
+    returns the frame (empty when the plan has no sobol design or no point
+    has ok runs of an architecture).
+    """
+    spec = plan_.design
+    if spec is None or spec.kind != "sobol":
+        return pd.DataFrame()
+    runs = pd.read_parquet(out_dir / RUNS)
+    runs = runs[runs["run_key"].isin({r.run_key for r in plan_.runs})]
+    frame = design.sensitivity(runs, spec.rows, spec.ranges, plan_.root_seed)
+    if not frame.empty:
+        table = statistics_table(frame, _stored_metadata(out_dir))
+        write_parquet(table, out_dir / SENSITIVITY)
+    return frame
 
 
 def held_run_keys(out_dir: Path) -> set[str]:

@@ -50,6 +50,7 @@ from cwrend_cli.output.layout import (
     RECORDINGS,
     REFERENCES,
     RUNS,
+    SENSITIVITY,
     SOLVES,
     STEPS,
     SWEEP_STATS,
@@ -76,7 +77,7 @@ __all__ = [
 #: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
 DATASETS = (STEPS, SOLVES, RECORDINGS)
 #: The statistics files of ``cwrend ablate`` and ``cwrend sweep``.
-STATS_FILES = (ABLATION_STATS, SWEEP_STATS)
+STATS_FILES = (ABLATION_STATS, SWEEP_STATS, SENSITIVITY)
 
 
 def iso(unix: float) -> str:

@@ -25,12 +25,15 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from cwrend_cli.campaign.design import Design, ParameterRange, parse_range
+from cwrend_cli.campaign.design import design_points as sample_design
 from cwrend_cli.config import (
     ALL_ARCHITECTURES,
     CwrendConfig,
@@ -40,8 +43,10 @@ from cwrend_cli.config import (
     resolved_dict,
 )
 from cwrend_cli.config.adapt import problem_of, with_values
+from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
 from cwrend_cli.physics.params import Problem
 
 __all__ = [
@@ -81,11 +86,13 @@ class NoiseSource:
 
     root_seed: int
     file: str | None = None
+    digest: str | None = None  # SHA-256 of the file's bytes when the campaign was planned
 
 
 def noise_source(cfg: CwrendConfig) -> NoiseSource:
-    """The noise source of a validated configuration."""
-    return NoiseSource(root_seed=cfg.noise.seed, file=cfg.noise.file)
+    """The noise source of a validated configuration (a noise file identified by its content)."""
+    file = cfg.noise.file
+    return NoiseSource(cfg.noise.seed, file, file_digest(file) if file is not None else None)
 
 
 @dataclass(frozen=True)
@@ -122,6 +129,27 @@ class Task:
 
 
 @dataclass(frozen=True)
+class DesignSpec:
+    """A campaign's sampled design (:mod:`cwrend_cli.campaign.design`) and its points' order."""
+
+    kind: Design
+    samples: int  # points (lhs, random) or base points (sobol)
+    ranges: tuple[ParameterRange, ...]
+    rows: tuple[str, ...]  # the point id of each design row, in design order
+
+    def identity(self) -> dict[str, Any]:
+        """What identifies the design's points (the sample count only where a larger design
+        is not an extension of a smaller one: lhs)."""
+        ident: dict[str, Any] = {
+            "design": self.kind,
+            "ranges": [[r.key, r.kind, r.low, r.high, r.log, list(r.values)] for r in self.ranges],
+        }
+        if self.kind == "lhs":
+            ident["samples"] = self.samples
+        return ident
+
+
+@dataclass(frozen=True)
 class CampaignPlan:
     """Everything a campaign will run, decided before anything runs."""
 
@@ -135,6 +163,8 @@ class CampaignPlan:
     root_seed: int  # noise.seed of the base config (also keys the dispersion draws)
     steps_seeds: int | None  # output.steps_seeds: per-step data only below this seed
     rrd_seeds: int | None  # output.rrd_seeds: recordings only below this seed
+    run_timeout_s: float | None = None  # output.run_timeout_s (None: guards.run_timeout_s default)
+    design: DesignSpec | None = None  # a sampled design instead of a grid (``grid`` is then empty)
 
     @property
     def runs(self) -> tuple[RunSpec, ...]:
@@ -156,6 +186,44 @@ def grid_points(grid: Sequence[tuple[str, Sequence[Any]]]) -> tuple[tuple[str, A
         assignment = tuple(zip(keys, combo, strict=True))
         points.append((point_id(assignment), assignment))
     return tuple(points)
+
+
+def design_points(
+    sweep: Mapping[str, Any],
+    cli_params: Sequence[str],
+    kind: Design,
+    samples: int | None,
+    root_seed: int,
+) -> tuple[DesignSpec, tuple[tuple[str, Assignment], ...]]:
+    """The sampled points of a design over the ranges of ``[sweep]``, each point once.
+
+    Rows of a design that sample identical values (integer or categorical
+    ranges) are one point; :attr:`DesignSpec.rows` keeps each row's point.
+    """
+    if cli_params:
+        raise ConfigError("--param gives grid values; a --design samples the ranges of [sweep]")
+    if samples is None:
+        raise ConfigError(f"--design {kind} needs --samples N")
+    if not sweep:
+        raise ConfigError(
+            f'--design {kind}: [sweep] has no ranges; e.g. "schedule.beta" = '
+            "{ low = 0.05, high = 1.0 }"
+        )
+    ranges = []
+    for key, spec in sweep.items():
+        if not isinstance(spec, Mapping):
+            raise ConfigError(
+                f"[sweep] {key}: a --design samples ranges ({{ low = …, high = … }} or "
+                "{ values = […] }), not a list of grid values"
+            )
+        ranges.append(parse_range(key, spec))
+    rows: list[str] = []
+    points: dict[str, Assignment] = {}
+    for assignment in sample_design(kind, ranges, samples, root_seed):
+        pid = point_id(assignment)
+        rows.append(pid)
+        points.setdefault(pid, assignment)
+    return DesignSpec(kind, samples, tuple(ranges), tuple(rows)), tuple(points.items())
 
 
 def point_id(assignment: Assignment) -> str:
@@ -245,11 +313,41 @@ def _check_typed(problem: Problem, dispersed: Assignment, run_cfg: CwrendConfig,
         )
 
 
-def campaign_hash(base: Mapping[str, Any], grid: Sequence[tuple[str, Sequence[Any]]]) -> str:
-    """Hash of what determines a campaign's numbers (not where it is written)."""
+def campaign_hash(
+    base: Mapping[str, Any],
+    grid: Sequence[tuple[str, Sequence[Any]]],
+    input_digests: Sequence[str] = (),
+    design: Mapping[str, Any] | None = None,
+) -> str:
+    """Hash of what determines a campaign's numbers (not where it is written).
+
+    The resolved config (without ``[output]``), the grid, and the content
+    digests of the input files (noise files): the same path with other
+    content is another campaign (issue 20).
+    """
     tree = {k: v for k, v in base.items() if k != "output"}
-    text = json.dumps({"config": tree, "grid": [[k, list(v)] for k, v in grid]}, sort_keys=True)
+    identity: dict[str, Any] = {"config": tree, "grid": [[k, list(v)] for k, v in grid]}
+    if input_digests:
+        identity["inputs"] = sorted(set(input_digests))
+    if design is not None:
+        identity["design"] = dict(design)
+    text = json.dumps(identity, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _check_size(n_points: int, n_seeds: int, n_archs: int, allow_large: bool) -> None:
+    """Refuse a plan beyond :mod:`cwrend_cli.limits` before it is expanded."""
+    if n_points > MAX_POINTS and not allow_large:
+        raise ConfigError(
+            f"the sweep has {n_points:,} grid points (more than {MAX_POINTS:,}); "
+            "pass --yes-large if you mean it"
+        )
+    runs = n_points * n_seeds * n_archs
+    if runs > MAX_RUNS:
+        raise ConfigError(
+            f"{runs:,} runs ({n_points:,} points × {n_seeds:,} seeds × {n_archs} "
+            f"architectures): at most {MAX_RUNS:,} per campaign; split it (e.g. by --seed-list)"
+        )
 
 
 def plan(
@@ -258,13 +356,21 @@ def plan(
     seeds: Sequence[int],
     cli_params: Sequence[str] = (),
     seeds_per_task: int | None = None,
+    allow_large: bool = False,
+    design_kind: Design | None = None,
+    samples: int | None = None,
 ) -> CampaignPlan:
     """Expand a campaign into tasks, validating every run's resolved config first.
 
     Each grid point's config is validated once and converted into the typed
     problem its tasks carry; each dispersed run's config is validated once.
     Raises :class:`ConfigError` naming the key and value of the first bad
-    grid value or dispersion draw; nothing has run or been written then.
+    grid value or dispersion draw, or a plan beyond :mod:`cwrend_cli.limits`
+    (more than ``MAX_POINTS`` points unless ``allow_large``); a noise file is
+    read and checked once here. Nothing has run or been written then.
+
+    With ``design_kind`` the points are sampled from the ranges of
+    ``[sweep]`` (:func:`design_points`) instead of forming a grid.
     """
     unknown = [a for a in archs if a not in ALL_ARCHITECTURES]
     if unknown:
@@ -272,20 +378,32 @@ def plan(
             f"unknown architecture(s) {', '.join(unknown)} "
             f"(allowed: {', '.join(ALL_ARCHITECTURES)})"
         )
-    if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
-        raise ConfigError("seeds must be distinct non-negative integers")
+    if len(set(seeds)) != len(seeds) or any(not 0 <= s <= MAX_SEED for s in seeds):
+        raise ConfigError(f"seeds must be distinct integers in [0, {MAX_SEED}] (2**63 − 1)")
     seeds_per_task = seeds_per_task or cfg.output.seeds_per_task
     base = resolved_dict(cfg)
     base.pop("sweep", None)
     base.pop("dispersions", None)
-    grid = expand_grid(cfg.sweep, cli_params)
     root = cfg.noise.seed
+    spec: DesignSpec | None = None
+    if design_kind is None:
+        grid = expand_grid(cfg.sweep, cli_params)
+        _check_size(math.prod(len(v) for _, v in grid), len(seeds), len(archs), allow_large)
+        points = grid_points(grid)
+    else:
+        grid = ()
+        spec, points = design_points(cfg.sweep, cli_params, design_kind, samples, root)
+        _check_size(len(spec.rows), len(seeds), len(archs), allow_large)
     tasks = []
-    for pid, params in grid_points(grid):
+    digests: list[str] = []
+    for pid, params in points:
         point_cfg = _validated(base, params, f"grid point {pid}")
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
         noise = noise_source(point_cfg)
+        if noise.file is not None and noise.digest is not None:
+            load_noise_file(noise.file, problem.scenario.n_steps)  # refused before any run
+            digests.append(noise.digest)
         for start in range(0, len(seeds), seeds_per_task):
             chunk = seeds[start : start + seeds_per_task]
             runs: list[RunSpec] = []
@@ -307,10 +425,12 @@ def plan(
         seeds=tuple(seeds),
         archs=tuple(archs),
         tasks=tuple(tasks),
-        campaign_hash=campaign_hash(base, grid),
+        campaign_hash=campaign_hash(base, grid, digests, spec.identity() if spec else None),
         # the hash of ``base`` as a config, without validating it again
         config_hash=config_hash(cfg.model_copy(update={"sweep": {}})),
         root_seed=root,
         steps_seeds=cfg.output.steps_seeds,
         rrd_seeds=cfg.output.rrd_seeds,
+        run_timeout_s=cfg.output.run_timeout_s,
+        design=spec,
     )

@@ -43,11 +43,12 @@ from typing import Any
 
 import numpy as np
 
+from cwrend_cli.campaign import guards
 from cwrend_cli.campaign.plan import Assignment, NoiseSource, RunSpec, Task, noise_source
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of, with_values
-from cwrend_cli.config.io import load_noise_file
-from cwrend_cli.errors import CwrendError
+from cwrend_cli.config.io import file_digest, load_noise_file
+from cwrend_cli.errors import CwrendError, InputDataError
 from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
@@ -130,6 +131,11 @@ def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
     otherwise the stream :func:`noise_seed_sequence` of the root seed.
     """
     if noise.file is not None:
+        if noise.digest is not None and file_digest(noise.file) != noise.digest:
+            raise InputDataError(
+                f"noise.file = {noise.file!r} changed since the campaign was planned; "
+                "a campaign replays one realisation: restore the file or start over"
+            )
         return load_noise_file(noise.file, n_steps)
     return sensors.standard_normal_stream(noise_seed_sequence(noise.root_seed, seed), n_steps)
 
@@ -165,6 +171,8 @@ def run_case(
         )
         for a in archs
     )
+    for run in runs:
+        guards.check_finite(run)
     return CaseResult(runs, refs)
 
 
@@ -202,6 +210,7 @@ def execute_task(
     record_seeds: tuple[int, ...] = (),
     steps_seeds: int | None = None,
     metadata: Mapping[str, str] | None = None,
+    run_timeout_s: float | None = None,
 ) -> TaskOutcome:
     """Run a task's runs, write their steps/solves files and return their outcomes.
 
@@ -222,6 +231,12 @@ def execute_task(
 
     ``metadata`` goes into the schema metadata of the steps/solves files
     (the campaign's ``config_hash`` and ``campaign_hash``, issue 18 item 5).
+
+    A run also fails when its results are not finite or it runs longer than
+    ``run_timeout_s`` (:mod:`cwrend_cli.campaign.guards`; default from its
+    number of steps). An exception that escapes this function (an I/O error
+    writing the files) is an infrastructure fault: the driver retries or
+    stops, and records nothing.
     """
     outcomes: list[RunOutcome] = []
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
@@ -247,15 +262,18 @@ def execute_task(
                 noise = noises[spec.dispersed, spec.seed] = standard_normal(
                     task.noise, spec.seed, n_steps
                 )
-            result = simulation.simulate(
-                problem,
-                ALL_ARCHITECTURES[spec.arch],
-                noise,
-                run_refs,
-                spec.seed,
-                actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
-                fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
-            )
+            limit = guards.run_timeout_s(run_timeout_s, problem.scenario.n_steps)
+            with guards.time_limit(limit):
+                result = simulation.simulate(
+                    problem,
+                    ALL_ARCHITECTURES[spec.arch],
+                    noise,
+                    run_refs,
+                    spec.seed,
+                    actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
+                    fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
+                )
+            guards.check_finite(result)
             metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
             results.setdefault(spec.arch, []).append((spec, result))
             by_seed.setdefault(spec.seed, []).append((problem, result))

@@ -27,6 +27,7 @@ from cwrend_cli.config.messages import format_validation_error
 from cwrend_cli.config.overrides import parse_override, set_dotted
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
+from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING
 from cwrend_cli.physics.params import FloatArray
 
 __all__ = [
@@ -65,6 +66,17 @@ def config_from_dict(
         raise ConfigError(header, format_validation_error(exc, CwrendConfig)) from None
 
 
+def _depth(value: Any, level: int = 0) -> int:
+    """Nesting depth of tables and arrays, counted no further than :data:`MAX_NESTING` + 1."""
+    if level > MAX_NESTING:
+        return level
+    if isinstance(value, dict):
+        return max((_depth(v, level + 1) for v in value.values()), default=level + 1)
+    if isinstance(value, list):
+        return max((_depth(v, level + 1) for v in value), default=level + 1)
+    return level
+
+
 def _safe_stem(path: Path) -> str:
     """The file stem made into a valid ``output.name``."""
     stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-")
@@ -80,20 +92,34 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig
     unreadable file, malformed TOML, a malformed override or invalid values.
     """
     path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"config file not found: {path}")
-    if not path.is_file():
-        raise ConfigError(f"config path is not a file: {path}")
     try:
+        if not path.exists():
+            raise ConfigError(f"config file not found: {path}")
+        if not path.is_file():
+            raise ConfigError(f"config path is not a file: {path}")
+        if path.stat().st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"{path}: {path.stat().st_size:,} bytes; a configuration is at most "
+                f"{MAX_CONFIG_BYTES:,} (long grids belong in --param start:stop:num ranges)"
+            )
         text = path.read_bytes().decode("utf-8")
     except OSError as exc:
         raise ConfigError(f"cannot read config file {path}: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except ValueError as exc:  # e.g. a NUL byte in the path
+        raise ConfigError(f"config path {str(path)!r}: {exc}") from None
     try:
         data: dict[str, Any] = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: malformed TOML: {exc}") from None
+    except RecursionError:
+        data = {}
+        too_deep = True
+    else:
+        too_deep = _depth(data) > MAX_NESTING
+    if too_deep:
+        raise ConfigError(f"{path}: tables and arrays nested more than {MAX_NESTING} levels deep")
 
     for text_override in overrides:
         key, value = parse_override(text_override)
@@ -193,6 +219,14 @@ def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
 # ---------------------------------------------------------------------------
 # Noise files
 # ---------------------------------------------------------------------------
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (an input identified by its content); :class:`InputDataError`."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as exc:
+        raise InputDataError(f"{path}: cannot be read ({exc.strerror or exc})") from None
 
 
 def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:

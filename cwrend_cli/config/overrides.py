@@ -23,6 +23,7 @@ import numpy as np
 
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.limits import MAX_VALUES_PER_KEY
 from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     ARCHITECTURES,
@@ -190,13 +191,15 @@ def _range_values(key: str, spec: str) -> tuple[float, ...]:
     try:
         start, stop, num = spec.split(":")
         count = int(num)
+        if not 1 <= count <= MAX_VALUES_PER_KEY:
+            raise ConfigError(
+                f"sweep {key} = {spec!r}: num must be between 1 and {MAX_VALUES_PER_KEY:,}"
+            )
         values = np.linspace(float(start), float(stop), count)
     except ValueError:
         raise ConfigError(
             f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
         ) from None
-    if count < 1:
-        raise ConfigError(f"sweep {key} = {spec!r}: num must be at least 1")
     return tuple(float(v) for v in values)
 
 
@@ -206,6 +209,11 @@ def expand_grid(
     """The swept keys and their values: ``[sweep]`` table, then ``--param`` (which wins)."""
     grid: dict[str, tuple[Any, ...]] = {}
     for key, values in sweep.items():
+        if isinstance(values, Mapping):
+            raise ConfigError(
+                f"[sweep] {key}: a range table is sampled by a design: add --design "
+                "lhs|sobol|random --samples N (a grid lists values: [v1, v2] or 'start:stop:num')"
+            )
         grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
     for text in cli_params:
         key, values = parse_param(text)
@@ -213,6 +221,10 @@ def expand_grid(
     for key, values in grid.items():
         if not values:
             raise ConfigError(f"sweep {key}: needs at least one value")
+        if len(values) > MAX_VALUES_PER_KEY:
+            raise ConfigError(
+                f"sweep {key}: {len(values):,} values; at most {MAX_VALUES_PER_KEY:,} per key"
+            )
     return tuple(grid.items())
 
 

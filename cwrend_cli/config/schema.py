@@ -37,6 +37,7 @@ from pydantic import (
 )
 
 from cwrend_cli.config.messages import fmt_num, rules_error
+from cwrend_cli.limits import MAX_SEED, MAX_STEPS
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
 from cwrend_cli.physics.truth import R_EARTH_KM, semi_major_axis_km
@@ -134,6 +135,17 @@ class ScenarioConfig(_FrozenModel):
 
     @model_validator(mode="after")
     def _horizon_on_grid(self) -> Self:
+        if self.horizon_s / self.dt_s > MAX_STEPS + 0.5:
+            raise rules_error(
+                [
+                    (
+                        "horizon_s",
+                        self.horizon_s,
+                        f"gives {fmt_num(self.horizon_s / self.dt_s)} steps of dt_s = "
+                        f"{fmt_num(self.dt_s)}; at most {MAX_STEPS:,} steps per run",
+                    )
+                ]
+            )
         if not _is_whole_multiple(self.horizon_s, self.dt_s):
             raise rules_error(
                 [
@@ -575,7 +587,9 @@ class NoiseConfig(_FrozenModel):
     file's directory when loaded; the stored value is the absolute path.
     """
 
-    seed: Int = Field(0, ge=0, description="root seed of the standard-normal realisation [-]")
+    seed: Int = Field(
+        0, ge=0, le=MAX_SEED, description="root seed of the standard-normal realisation [-]"
+    )
     file: str | None = Field(
         None,
         description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3)",
@@ -588,6 +602,8 @@ class NoiseConfig(_FrozenModel):
             return None
         if not value.strip():
             raise ValueError("must be a non-empty path")
+        if "\x00" in value:
+            raise ValueError("must not contain a NUL character")
         path = Path(value).expanduser()
         if not path.is_absolute():
             base = (info.context or {}).get("base_dir")
@@ -628,6 +644,20 @@ class OutputConfig(_FrozenModel):
         "references, about 1.6 MB for four architectures) for seeds below this number at "
         "each grid point; 0 = none, unset = every seed",
     )
+    run_timeout_s: Float | None = Field(
+        None,
+        gt=0,
+        description="campaigns: wall-time limit of one run [s]; a run past it is recorded "
+        "failed 'timed out' and the campaign goes on; unset = 60 s + 0.5 s per step "
+        "(460 s for the paper's 800 steps; not enforced on Dask workers)",
+    )
+
+    @field_validator("dir")
+    @classmethod
+    def _plain_dir(cls, value: str) -> str:
+        if "\x00" in value:
+            raise ValueError("must not contain a NUL character")
+        return value
 
     @field_validator("name")
     @classmethod
@@ -701,9 +731,11 @@ class CwrendConfig(_FrozenModel):
     )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
-    sweep: dict[str, tuple[SweepValue, ...] | str] = Field(
+    sweep: dict[str, tuple[SweepValue, ...] | str | dict[str, Any]] = Field(
         default_factory=dict,
-        description="grid: dotted.key = [v1, v2, …] or 'start:stop:num' (cartesian product)",
+        description="grid: dotted.key = [v1, v2, …] or 'start:stop:num' (cartesian product); "
+        "or, for cwrend sweep --design, ranges: dotted.key = { low = …, high = … } "
+        "(log = true, int = true) or { values = […] }",
     )
     dispersions: dict[str, Dispersion] = Field(
         default_factory=dict, description="per-run random draws: dotted.key = {dist = …}"

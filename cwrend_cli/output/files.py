@@ -22,6 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cwrend_cli import __version__
+from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import (
     RUN_CONFIG,
     RUN_REFERENCES,
@@ -62,6 +63,51 @@ def atomic_path(path: Path) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _cannot_write(path: Path, reason: str, setting: str) -> ConfigError:
+    return ConfigError(f"{str(path)!r}: cannot write results there ({reason}); {setting}")
+
+
+def check_output_dir(path: str | Path, setting: str) -> Path:
+    """Refuse, without creating anything, a ``path`` that cannot become a results directory.
+
+    For a command that computes before it writes (``cwrend run``): a file in
+    the way, a parent that is a file or not writable, a name longer than the
+    file system allows. ``setting`` names the option or key to change.
+    """
+    out = Path(path)
+    if out.exists():
+        if not out.is_dir():
+            raise _cannot_write(out, "File exists", setting)
+        return out
+    existing = out.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise _cannot_write(out, "Not a directory", setting)
+    name_max = os.pathconf(existing, "PC_NAME_MAX") if hasattr(os, "pathconf") else 255
+    if any(len(part.encode()) > name_max for part in out.parts):
+        raise _cannot_write(out, "File name too long", setting)
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise _cannot_write(out, "Permission denied", setting)
+    return out
+
+
+def make_output_dir(path: str | Path, setting: str) -> Path:
+    """Create the directory ``path`` (and parents) to write results into, or refuse clearly.
+
+    Raises :class:`~cwrend_cli.errors.ConfigError` naming the path, the reason
+    and ``setting`` (the option or config key to change) when it cannot be a
+    directory: a file is in the way, a parent is a file, permission is
+    denied, a name is too long.
+    """
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _cannot_write(out, exc.strerror or str(exc), setting) from None
+    return out
 
 
 def write_parquet(table: pa.Table, path: str | Path) -> Path:

@@ -31,6 +31,8 @@ RECORDINGS = "recordings"
 REFERENCES = "references"
 ABLATION_STATS = "ablation.parquet"
 SWEEP_STATS = "sweep.parquet"
+#: Sobol indices of a ``cwrend sweep --design sobol`` campaign.
+SENSITIVITY = "sensitivity.parquet"
 #: Held (flock) by the process running the campaign; names that process.
 LOCK = ".cwrend.lock"
 

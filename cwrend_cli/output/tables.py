@@ -170,6 +170,9 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "other": _col("the architecture A is compared with (A - B)", "-"),
     "point_a": _col("grid point of campaign A", "-"),
     "point_b": _col("grid point of campaign B", "-"),
+    # sensitivity.parquet (statistic: S1 first-order, ST total Sobol index)
+    "parameter": _col("the swept configuration key of a Sobol index", "-"),
+    "n_seeds": _col("fewest ok seeds of a design point (the index is of the mean over seeds)", "-"),
 }
 #: Configuration keys without a unit suffix whose value is dimensionless.
 #: (Keys with a unit suffix, e.g. ``guidance.t_resolve_s``, take it first.) Choices given

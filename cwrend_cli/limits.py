@@ -1,0 +1,28 @@
+"""The bounds cwrend puts on its inputs, in one place (issue 20).
+
+Inputs beyond these would run out of memory or run for days before saying
+anything; they are refused at the boundary (exit 2, the field or option
+named), before anything runs or is written. The numbers are generous: the
+paper's scenario has 800 steps, a 1,000-seed ablation 4,000 runs.
+"""
+
+from __future__ import annotations
+
+#: Steps of one run (``scenario.horizon_s / scenario.dt_s``): a run's histories
+#: take about 0.5 kB per step in memory (100,000 steps: 50 MB per run per worker).
+MAX_STEPS = 100_000
+#: Largest seed (and ``noise.seed``): seeds are stored as int64 in Parquet.
+MAX_SEED = 2**63 - 1
+#: Values of one swept key (a ``start:stop:num`` range or a list).
+MAX_VALUES_PER_KEY = 10_000
+#: Grid (or design) points of one campaign, unless ``--yes-large``.
+MAX_POINTS = 10_000
+#: Runs of one campaign invocation (points × seeds × architectures): the plan
+#: and the journal of a campaign are held in memory.
+MAX_RUNS = 5_000_000
+#: A campaign of more runs than this says how many and how much disk before it starts.
+ANNOUNCE_RUNS = 20_000
+#: Size of a configuration file [bytes].
+MAX_CONFIG_BYTES = 1_000_000
+#: Nesting of tables and arrays in a configuration file.
+MAX_NESTING = 16
