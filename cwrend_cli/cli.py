@@ -610,6 +610,12 @@ def _report_campaign(
             pairs = paired_console_table(stats)
             if pairs is not None:
                 stdout.print(pairs)
+        elif plan.design is not None:  # hundreds of sampled points: no per-point table
+            err.print(
+                f"{len({r.point for r in plan.runs})} design points: the statistics of each "
+                f"are in {SWEEP_STATS}",
+                markup=False,
+            )
         else:
             title = f"cwrend sweep · {out.name}"
             stdout.print(sweep_console_table(stats, list(statistics.groups), title))
