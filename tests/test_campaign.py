@@ -806,3 +806,22 @@ def test_a_run_past_its_time_limit_is_recorded_timed_out_and_the_campaign_goes_o
     retried = _cli("ablate", str(cfg), "-n", "3", "--arch", "mtf_adaptive", "--workers", "1",
                    "-q", "--retry-failed")  # fmt: skip
     assert retried.exit_code == 0, retried.output  # the default limit (460 s) lets them finish
+
+
+def test_a_disk_without_room_for_the_first_task_stops_before_computing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 21 item 2: the room is checked before anything is computed (exit 3, nothing run)."""
+    cfg = _write_config(tmp_path / "c.toml", "noroom")
+    real = driver_module.shutil.disk_usage
+
+    def almost_full(path: Any) -> Any:
+        return real(path)._replace(free=100_000)  # 0.1 MB: less than one task's files
+
+    monkeypatch.setattr(driver_module.shutil, "disk_usage", almost_full)
+    result = _cli("ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 3, result.output
+    assert "campaign stopped: disk full: 0.1 MB free" in result.stderr
+    out = tmp_path / "results" / "noroom"
+    assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped: disk")
+    assert pd.read_parquet(out / "runs.parquet").empty and not (out / "steps").exists()

@@ -202,3 +202,26 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
     runs = pd.read_parquet(out / "runs.parquet")
     assert (runs["status"] == "ok").all()  # nothing recorded for the lost scheduler
     assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped:")
+
+
+def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
+    tmp_path: Path, cluster: Cluster
+) -> None:
+    """Issue 19: a design campaign end to end on the Dask executor, resumed, equal to local."""
+    ranges = '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n'
+    for name in ("dask_design", "local_design"):
+        cfg = _config(tmp_path, name)
+        cfg.write_text(cfg.read_text() + ranges)
+    design = ["--design", "sobol", "--samples", "2", "--arch", "mtf_adaptive", "-q"]
+    dask = ["--executor", "dask", "--address", cluster.address]
+    first = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "1", *design, *dask)
+    assert first.returncode == 0, first.stderr
+    resumed = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "2", *design, *dask)
+    assert resumed.returncode == 0, resumed.stderr
+    local = _cwrend("sweep", str(tmp_path / "local_design.toml"), "--seeds", "2", *design,
+                    "--workers", "1")  # fmt: skip
+    assert local.returncode == 0, local.stderr
+    out, ref = tmp_path / "results" / "dask_design", tmp_path / "results" / "local_design"
+    pd.testing.assert_frame_equal(_runs(out), _runs(ref))
+    indices = pd.read_parquet(out / "sensitivity.parquet")
+    pd.testing.assert_frame_equal(indices, pd.read_parquet(ref / "sensitivity.parquet"))

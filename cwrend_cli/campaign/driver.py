@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import errno
 import json
+import shutil
 import time
 from collections import deque
 from collections.abc import Collection, Sequence
@@ -55,7 +56,7 @@ from cwrend_cli.campaign.worker import (
     seeds_to_record,
 )
 from cwrend_cli.errors import CwrendError, InfrastructureError
-from cwrend_cli.output.files import make_output_dir, write_json, write_parquet
+from cwrend_cli.output.files import estimated_bytes, make_output_dir, write_json, write_parquet
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     EVENTS,
@@ -261,6 +262,7 @@ def _run_locked(
     progress.start(total, skipped)
     try:
         if tasks:
+            _check_room(out_dir, plan_, tasks[0])
             if executor_kind == "local":  # no pool larger than the work (one task: in-process)
                 workers = min(workers or default_workers(), len(tasks))
             _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address)
@@ -302,6 +304,19 @@ def _run_locked(
     return CampaignSummary(
         out_dir, progress.journaled, skipped, ok, failed, interrupted, len(plan_.runs)
     )
+
+
+def _check_room(out_dir: Path, plan_: CampaignPlan, first: Task) -> None:
+    """Stop before computing when the disk cannot hold even the first task's files (exit 3)."""
+    steps = [r for r in first.runs if plan_.steps_seeds is None or r.seed < plan_.steps_seeds]
+    recorded = seeds_to_record(first, plan_.archs, plan_.rrd_seeds)
+    need = estimated_bytes(len(first.runs), len(steps), len(recorded))
+    free = shutil.disk_usage(out_dir).free
+    if free < need:
+        raise _StopError(
+            f"disk full: {free / 1e6:.1f} MB free in {out_dir}, the first task needs about "
+            f"{need / 1e6:.1f} MB"
+        )
 
 
 class _StopError(Exception):

@@ -65,6 +65,23 @@ def atomic_path(path: Path) -> Iterator[Path]:
             tmp_path.unlink()
 
 
+#: Approximate bytes a run adds to a campaign directory: its per-step data (when kept,
+#: output.steps_seeds), and the rest (re-solves, journal, runs.parquet row).
+STEPS_BYTES_PER_RUN = 200_000
+OTHER_BYTES_PER_RUN = 6_000
+#: Approximate bytes of one recording (a seed's architectures and references).
+RECORDING_BYTES = 1_600_000
+
+
+def estimated_bytes(runs: int, runs_with_steps: int, recordings: int) -> int:
+    """Roughly what ``runs`` runs (``runs_with_steps`` with per-step data) and recordings take."""
+    return (
+        runs * OTHER_BYTES_PER_RUN
+        + runs_with_steps * STEPS_BYTES_PER_RUN
+        + recordings * RECORDING_BYTES
+    )
+
+
 def _cannot_write(path: Path, reason: str, setting: str) -> ConfigError:
     return ConfigError(f"{str(path)!r}: cannot write results there ({reason}); {setting}")
 
