@@ -17,6 +17,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 from matplotlib.collections import PolyCollection
+from matplotlib.container import BarContainer
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
@@ -27,7 +28,7 @@ from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
-from cwrend_cli.report import load_results, write_report
+from cwrend_cli.report import load_results, write_compare_figure, write_report
 from cwrend_cli.report.labels import format_value, param_label, param_setting
 from cwrend_cli.report.markdown import report_md
 
@@ -595,3 +596,244 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
     for f in planned:
         assert f.caption.endswith(f"Simulated world: {world}."), f.file
         assert world in f.draw().get_suptitle(), f.file
+
+
+# ---------------------------------------------------------------------------
+# Sampled designs and their sensitivity (issue 19, item 4)
+# ---------------------------------------------------------------------------
+
+#: Sobol indices of a hand-made sensitivity.parquet: (metric, parameter, statistic) → value.
+SOBOL = {
+    ("miss_km", "schedule.beta", "S1"): 0.62,
+    ("miss_km", "schedule.beta", "ST"): 0.71,
+    ("miss_km", "schedule.kappa_mtf", "S1"): 0.18,
+    ("miss_km", "schedule.kappa_mtf", "ST"): 0.30,
+    ("delta_v_km_s", "schedule.beta", "S1"): 0.05,
+    ("delta_v_km_s", "schedule.beta", "ST"): 0.08,
+    ("delta_v_km_s", "schedule.kappa_mtf", "S1"): 0.85,
+    ("delta_v_km_s", "schedule.kappa_mtf", "ST"): 0.93,
+}
+SOBOL_HALF_WIDTH = 0.11
+
+
+def _sensitivity_rows(arch: str = "mtf_adaptive") -> pd.DataFrame:
+    """Rows of sensitivity.parquet as campaign/design.py::sensitivity writes them."""
+    return pd.DataFrame(
+        [
+            {"arch": arch, "metric": m, "parameter": p, "statistic": s, "value": v,
+             "ci_low": v - SOBOL_HALF_WIDTH, "ci_high": v + SOBOL_HALF_WIDTH, "n_seeds": 2}
+            for (m, p, s), v in SOBOL.items()
+        ]
+    )  # fmt: skip
+
+
+def _set_manifest(root: Path, **fields: Any) -> None:
+    manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    (root / "manifest.json").write_text(json.dumps({**manifest, **fields}), encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def design_dir(sweep_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The sweep campaign as a sobol design: sensitivity.parquet, a manifest with grid = {}."""
+    root = _copy(sweep_dir, tmp_path_factory.mktemp("design") / "sobol")
+    write_parquet(pa.Table.from_pandas(_sensitivity_rows(), preserve_index=False),
+                  root / "sensitivity.parquet")  # fmt: skip
+    _set_manifest(root, grid={})
+    return root
+
+
+def test_a_design_is_recognised_by_its_sensitivity_file(design_dir: Path, tmp_path: Path) -> None:
+    root = _copy(design_dir, tmp_path / "no-grid-key")
+    manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
+    del manifest["grid"]
+    (root / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    data = load_results(root)
+    assert data.design and data.sensitivity is not None and len(data.sensitivity) == len(SOBOL)
+
+
+def test_a_design_is_recognised_by_its_manifest_without_sensitivity(
+    design_dir: Path, tmp_path: Path
+) -> None:
+    """An lhs/random design has no indices; its manifest records an empty grid."""
+    from cwrend_cli.report import figures
+
+    root = _copy(design_dir, tmp_path / "lhs")
+    (root / "sensitivity.parquet").unlink()
+    data = load_results(root)
+    assert data.design and data.sensitivity is None
+    assert "sensitivity.png" not in [f.file for f in figures.planned_figures(data)]
+    md = report_md(data, root, [])
+    assert "## Sampled design" in md and "No sensitivity indices stored" in md
+
+
+def test_a_grid_sweep_is_not_a_design(sweep_dir: Path, tmp_path: Path) -> None:
+    assert not load_results(sweep_dir).design  # a manifest without grid says nothing
+    root = _copy(sweep_dir, tmp_path / "grid")
+    _set_manifest(root, grid={"schedule.beta": [0.25, 0.5]})
+    assert not load_results(root).design
+
+
+def test_a_design_gets_no_per_point_sweep_figures_or_table(design_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    data = load_results(design_dir)
+    files = [f.file for f in figures.planned_figures(data)]
+    assert "sensitivity.png" in files
+    assert not [f for f in files if f.startswith("sweep_")]
+    md = report_md(data, design_dir, [])
+    assert "## Sweep of" not in md and "## Sampled design" in md
+    assert "2 design points over β [-]" in md
+
+
+def test_sensitivity_figure_draws_s1_and_st_with_their_intervals(design_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_sensitivity(load_results(design_dir))
+    panels = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in panels] == [
+        "MTF KF, adaptive ε · terminal miss, 2 seeds per point",
+        "MTF KF, adaptive ε · Δv, 2 seeds per point",
+    ]
+    labels = [t.get_text() for t in panels[0].get_yticklabels()]  # shared by the row
+    assert labels == ["β [-]", "κ_MTF [-]"]
+    for ax, metric in zip(panels, ("miss_km", "delta_v_km_s"), strict=True):
+        bars = {c.get_label(): c for c in ax.containers if isinstance(c, BarContainer)}
+        assert set(bars) == {"S1 (first-order)", "ST (total)"}
+        for stat in ("S1", "ST"):
+            container = bars[f"{stat} ({'first-order' if stat == 'S1' else 'total'})"]
+            widths = [p.get_width() for p in container.patches]
+            expected = [SOBOL[(metric, p, stat)] for p in ("schedule.beta", "schedule.kappa_mtf")]
+            assert widths == pytest.approx(expected)
+            (segments,) = container.errorbar.lines[2]  # the interval of each bar
+            spans = [x for seg in segments.get_segments() for x in sorted(seg[:, 0])]
+            assert spans == pytest.approx(
+                [x for v in expected for x in (v - SOBOL_HALF_WIDTH, v + SOBOL_HALF_WIDTH)]
+            )
+
+
+def test_sensitivity_figure_is_registered_and_names_the_world(design_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    assert "sensitivity.png" in [f.file for f in figures.FIGURES]
+    data = load_results(design_dir)
+    (planned,) = [f for f in figures.planned_figures(data) if f.file == "sensitivity.png"]
+    assert planned.caption.endswith(f"Simulated world: {data.world}.")
+    assert data.world in planned.draw().get_suptitle()
+
+
+def test_sensitivity_table_in_report_md(design_dir: Path) -> None:
+    md = report_md(load_results(design_dir), design_dir, [])
+    header = "| architecture | parameter | S1 terminal miss | ST terminal miss | S1 Δv | ST Δv |"
+    assert header in md
+    cells = _row(md, "MTF KF, adaptive ε | κ_MTF [-]")
+    assert cells[2:] == [
+        f"{v:.2f} [{v - SOBOL_HALF_WIDTH:.2f}, {v + SOBOL_HALF_WIDTH:.2f}]"
+        for v in (SOBOL[("miss_km", "schedule.kappa_mtf", s)] for s in ("S1", "ST"))
+    ] + [
+        f"{v:.2f} [{v - SOBOL_HALF_WIDTH:.2f}, {v + SOBOL_HALF_WIDTH:.2f}]"
+        for v in (SOBOL[("delta_v_km_s", "schedule.kappa_mtf", s)] for s in ("S1", "ST"))
+    ]
+
+
+def test_report_of_a_design_writes_the_sensitivity_figure(design_dir: Path, tmp_path: Path) -> None:
+    root = _copy(design_dir, tmp_path / "full")
+    summary = write_report(root)
+    _check_png(root / "report" / "sensitivity.png")
+    page = (summary.out_dir / "report.html").read_text(encoding="utf-8")
+    assert "<th>S1 terminal miss</th>" in page and "<td>κ_MTF [-]</td>" in page
+
+
+# ---------------------------------------------------------------------------
+# Issue 18 leftovers
+# ---------------------------------------------------------------------------
+
+
+def test_sweep_table_header_uses_symbols_with_units(sweep_dir: Path) -> None:
+    md = report_md(load_results(sweep_dir), sweep_dir, [])
+    sweep = md.split("## Sweep of")[1]
+    assert "| β [-] | architecture | runs |" in sweep
+    assert "| schedule.beta |" not in md
+
+
+def test_campaign_table_carries_the_consistency_means(ablation_dir: Path) -> None:
+    md = report_md(load_results(ablation_dir), ablation_dir, [])
+    table = md.split("## Over 3 noise seeds")[1]
+    header = next(ln for ln in table.splitlines() if ln.startswith("| architecture |"))
+    columns = [c.strip() for c in header.strip("|").split("|")]
+    runs = pd.read_parquet(ablation_dir / "runs.parquet").query("status == 'ok'")
+    cells = _row(table, "MTF KF, adaptive ε")
+    mine = runs[runs["arch"] == "mtf_adaptive"]
+    means = (("mean_nees", "mean NEES [-] (6)"), ("mean_nis_nominal", "mean NIS [-] (3)"))
+    for column, name in means:
+        assert cells[columns.index(name)] == f"{mine[column].mean():.2f}"
+
+
+def test_fig1_3d_panel_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
+    """mplot3d sorts artists by depth unless computed_zorder is off: the references would hide."""
+    from cwrend_cli.report import figures
+
+    ax3 = figures.fig_trajectories(load_results(ablation_dir)).axes[0]
+    assert ax3.name == "3d" and ax3.computed_zorder is False
+    refs = [ln for ln in ax3.get_lines() if ln.get_label().startswith("open-loop")]
+    runs = [ln for ln in ax3.get_lines() if not ln.get_label().startswith("open-loop")]
+    assert refs and runs
+    assert min(ln.get_zorder() for ln in refs) > max(ln.get_zorder() for ln in runs)
+
+
+def test_fig6_medians_are_hollow_over_the_runs(ablation_dir: Path) -> None:
+    """A tight cluster (MTF-fixed: the same Δv every seed) stays visible inside its median."""
+    from cwrend_cli.report import figures
+
+    ax = figures.fig_dv_vs_miss(load_results(ablation_dir)).axes[0]
+    medians = [c for c in ax.collections if str(c.get_gid()).startswith("median:")]
+    runs = [c for c in ax.collections if str(c.get_gid()).startswith("runs:")]
+    assert len(medians) == len(runs) == len(CAMPAIGN_ARCHS)
+    for median in medians:
+        assert median.get_facecolor().size == 0 or median.get_facecolor()[0][3] == 0.0
+    lo, hi = ax.get_ylim()
+    for coll in runs:  # no run drawn on the frame
+        y = coll.get_offsets()[:, 1]
+        assert lo < y.min() / 1.05 and y.max() * 1.05 < hi
+
+
+def test_fig6_miss_axis_reads_plain_numbers(ablation_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    ax = figures.fig_dv_vs_miss(load_results(ablation_dir)).axes[0]
+    labels = [t.get_text() for t in ax.get_yticklabels(which="both")]
+    assert any(labels)
+    assert not [t for t in labels if "times" in t or "^" in t]  # no 2×10¹, no 10¹
+    major, minor = ax.yaxis.get_major_formatter(), ax.yaxis.get_minor_formatter()
+    assert major(10.0, 0) == "10" and major(0.1, 0) == "0.1"
+    assert minor(20.0, 0) in ("20", "")  # labelled over 1–2.5 decades, else none
+
+
+def _compare_frame() -> pd.DataFrame:
+    rows = []
+    for metric in ("miss_km", "delta_v_km_s"):
+        for statistic, value in (("mean_diff", -0.001), ("median_diff", -0.002),
+                                 ("frac_better", 0.7)):  # fmt: skip
+            rows.append({"arch": "mtf_adaptive", "metric": metric, "statistic": statistic,
+                         "value": value, "ci_low": value - 0.1, "ci_high": value + 0.1,
+                         "n": 20})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_compare_figure_names_the_truth_models(ablation_dir: Path, tmp_path: Path) -> None:
+    from cwrend_cli.report import figures
+    from cwrend_cli.report.load import results_world
+
+    cw = results_world(ablation_dir)
+    assert cw == "truth: cw (the design model)"
+    other = _copy(ablation_dir, tmp_path / "j2")
+    cfg = apply(resolved_dict(CwrendConfig()), (("truth.model", "j2"),))
+    _set_manifest(other, config=cfg)
+    j2 = results_world(other)
+    assert j2 == "truth: j2"
+    title = figures.fig_compare(_compare_frame(), "cw", "j2", (cw, j2)).get_suptitle()
+    assert f"A: {cw}" in title and f"B: {j2}" in title
+    same = figures.fig_compare(_compare_frame(), "a", "b", (cw, cw)).get_suptitle()
+    assert f"A and B: {cw}" in same
+    path = write_compare_figure(_compare_frame(), "cw", "j2", tmp_path / "compare.png",
+                                dirs=(ablation_dir, other))  # fmt: skip
+    _check_png(path)

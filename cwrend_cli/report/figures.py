@@ -17,7 +17,10 @@ both the drawing and the figure list of ``report.md``:
   the reported point);
 * with more than one seed per architecture: ``miss_distribution.png``,
   ``dv_distribution.png``, ``paired_miss.png`` (MTF vs plain, seed by seed);
-* per swept parameter with more than one value: ``sweep_<key>.png``;
+* per swept parameter with more than one value: ``sweep_<key>.png`` (not for
+  a sampled design, whose hundreds of points would not read);
+* for a ``sobol`` design: ``sensitivity.png`` (first-order and total Sobol
+  indices per architecture and metric, with their 95 % intervals);
 * when the steps hold it: ``nees.png`` (filter consistency, every seed of
   the reported point).
 
@@ -39,6 +42,7 @@ from typing import Any, cast
 
 import numpy as np
 import pandas as pd
+from matplotlib import patheffects
 from matplotlib.axes import Axes
 from matplotlib.collections import Collection
 from matplotlib.figure import Figure
@@ -87,7 +91,11 @@ _WINDOW_ALPHAS = (0.18, 0.32, 0.25, 0.4)  # shading of successive degradation wi
 
 
 def _tidy_log_axes(fig: Figure) -> None:
-    """Readable log axes: minor labels at 2 and 5 over 1–2.5 decades, none beyond."""
+    """Readable log axes: minor labels at 2 and 5 over 1–2.5 decades, none beyond.
+
+    Axes within :data:`_PLAIN_LOG_RANGE` (misses in m, NIS) read plain numbers
+    (``0.1``, ``1``, ``20``); wider ones keep powers of ten.
+    """
     for ax in fig.axes:
         for axis, scale, lim in (
             (ax.xaxis, ax.get_xscale(), ax.get_xlim()),
@@ -97,10 +105,18 @@ def _tidy_log_axes(fig: Figure) -> None:
             if scale != "log" or lo <= 0:
                 continue
             decades = np.log10(hi / lo)
+            plain = lo >= _PLAIN_LOG_RANGE[0] and hi <= _PLAIN_LOG_RANGE[1]
+            if plain:  # 0.1, 1, 10, 20, 50 rather than 10⁻¹, 10¹, 2×10¹
+                axis.set_major_formatter(FuncFormatter(_plain_log_label))
             if decades > 2.5:
                 axis.set_minor_formatter(NullFormatter())
             elif decades > 1.0:  # otherwise a single labelled tick may be all there is
-                axis.set_minor_formatter(FuncFormatter(_minor_log_label))
+                label = _plain_minor_log_label if plain else _minor_log_label
+                axis.set_minor_formatter(FuncFormatter(label))
+
+
+#: Log axes whose limits lie within this range are labelled with plain numbers.
+_PLAIN_LOG_RANGE = (1e-3, 1e5)
 
 
 def _minor_log_label(value: float, _pos: int | None) -> str:
@@ -108,6 +124,20 @@ def _minor_log_label(value: float, _pos: int | None) -> str:
     exponent = int(np.floor(np.log10(value)))
     mantissa = round(value / 10.0**exponent)
     return rf"${mantissa}\times10^{{{exponent}}}$" if mantissa in (2, 5) else ""
+
+
+def _plain_log_label(value: float, _pos: int | None) -> str:
+    """A major log tick as a plain number (``0.01``, ``1``, ``100``)."""
+    return format(float(value), ".6g") if value > 0 else ""
+
+
+def _plain_minor_log_label(value: float, _pos: int | None) -> str:
+    """The minor log ticks at 2 and 5 as plain numbers (``20``, ``0.5``); others unlabelled."""
+    if value <= 0:
+        return ""
+    exponent = int(np.floor(np.log10(value)))
+    mantissa = round(value / 10.0**exponent)
+    return format(mantissa * 10.0**exponent, ".6g") if mantissa in (2, 5) else ""
 
 
 def _finished(fig: Figure) -> Figure:
@@ -262,6 +292,10 @@ def _arch_handles_plain(archs: Sequence[str]) -> list[Line2D]:
 
 #: Line width of the open-loop references in Fig. 1 (drawn over the closed-loop runs).
 REF_LW_FIG1 = 2.6
+#: A white outline under the references of Fig. 1: the dotted fuel-optimal one stays legible
+#: on the fixed-ε runs it lies on.
+_REF_HALO = [patheffects.Stroke(linewidth=REF_LW_FIG1 + 2.4, foreground="white"),
+             patheffects.Normal()]  # fmt: skip
 
 
 def _ref_handles(data: ReportData, **style: Any) -> list[Line2D]:
@@ -277,6 +311,9 @@ def fig_trajectories(data: ReportData) -> Figure:
     """Fig. 1: 3D and x–z views of the true trajectories, open and closed loop."""
     fig = _figure(13.5, 6.4)
     ax3: Any = fig.add_subplot(1, 2, 1, projection="3d")  # an Axes3D (mpl_toolkits is untyped)
+    # mplot3d orders artists by their depth unless told otherwise, which puts the fuel-optimal
+    # reference under the fixed-ε runs whatever its zorder: draw in zorder instead
+    ax3.computed_zorder = False
     ax2 = fig.add_subplot(1, 2, 2)
     for a, g in _by_arch(data.steps, data.archs):
         st = _arch_style(a, data.archs)
@@ -284,7 +321,7 @@ def fig_trajectories(data: ReportData) -> Figure:
         ax2.plot(g["x_km"], g["z_km"], **st)
     # the references last and thicker: the fuel-optimal one lies under the fixed-ε runs
     for name, g in _refs(data):
-        st = {**_ref_style(name), "lw": REF_LW_FIG1, "zorder": 4}
+        st = {**_ref_style(name), "lw": REF_LW_FIG1, "zorder": 4, "path_effects": _REF_HALO}
         ax3.plot(g["x_km"], g["y_km"], g["z_km"], **st)
         ax2.plot(g["x_km"], g["z_km"], **st)
     first = data.steps.sort_values("t_s").iloc[0] if not data.steps.empty else None
@@ -497,21 +534,23 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
             continue
         c = arch_colour(a, data.archs.index(a))
         miss = np.maximum(g["miss_km"].to_numpy(dtype=float) * M_PER_KM, _MISS_FLOOR_M)
-        ax.scatter(g["delta_v_km_s"], miss, color=c, s=22 if multi else 90,
-                   alpha=0.45 if multi else 0.95, edgecolor="none" if multi else "black",
-                   label=arch_label(a))  # fmt: skip
-        if multi:
-            ax.scatter(g["delta_v_km_s"].median(), np.median(miss), color=c, s=160, marker="D",
-                       edgecolor="black", zorder=5)  # fmt: skip
+        ax.scatter(g["delta_v_km_s"], miss, color=c, s=26 if multi else 90,
+                   alpha=0.7 if multi else 0.95, edgecolor="black", lw=0.3 if multi else 1.0,
+                   label=arch_label(a), zorder=4, gid=f"runs:{a}")  # fmt: skip
+        if multi:  # hollow: a tight cluster (MTF-fixed) stays visible inside its median
+            ax.scatter(g["delta_v_km_s"].median(), np.median(miss), s=190, marker="D",
+                       facecolor="none", edgecolor=c, lw=2.2, zorder=5,
+                       gid=f"median:{a}")  # fmt: skip
     for _, row in data.ref_summary.iterrows():
         name = str(row["arch"]).removeprefix("open_loop_")
         st = _ref_style(name)
         ax.axvline(float(row["delta_v_km_s"]), color=st["color"], ls=st["ls"], lw=1.6,
                    label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s")  # fmt: skip
     ax.set_yscale("log")
+    ax.margins(x=0.04, y=0.08)  # no run on the frame (margins of the log axis in decades)
     ax.set_xlabel("Δv [km/s]")
     ax.set_ylabel("terminal miss ‖r(T)‖ [m]")
-    what = f"{len(runs)} runs; diamonds: per-architecture median" if multi else f"{_title(data)}"
+    what = f"{len(runs)} runs; hollow diamonds: per-architecture median" if multi else _title(data)
     ax.set_title(f"Fig. 6 · Fuel against accuracy ({what})")
     handles = [
         Line2D([], [], marker="o", ls="", ms=9, color=arch_colour(a, data.archs.index(a)),
@@ -520,8 +559,8 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
         if (runs["arch"] == a).any()
     ] + [h for h in ax.get_legend_handles_labels()[0] if isinstance(h, Line2D)]  # fmt: skip
     if multi:
-        handles.append(Line2D([], [], marker="D", ls="", ms=9, color="white", mec="black",
-                              label="median of the seeds"))  # fmt: skip
+        handles.append(Line2D([], [], marker="D", ls="", ms=10, mfc="none", mec="black",
+                              mew=2.0, label="median of the seeds"))  # fmt: skip
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     return _finished(fig)
 
@@ -848,6 +887,84 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
 
 
 # ---------------------------------------------------------------------------
+# Sensitivity of a sampled design (``sweep --design sobol``)
+# ---------------------------------------------------------------------------
+
+#: Metrics of the sensitivity figure and table (``sensitivity.parquet``'s ``metric``), shown as.
+SENSITIVITY_METRICS: tuple[tuple[str, str], ...] = (
+    ("miss_km", "terminal miss"),
+    ("delta_v_km_s", "Δv"),
+)
+#: The two Sobol indices: statistic, legend label, colour.
+SOBOL_INDICES: tuple[tuple[str, str, str], ...] = (
+    ("S1", "S1 (first-order)", "#4c72b0"),
+    ("ST", "ST (total)", "#dd8452"),
+)
+
+
+def sensitivity_archs(data: ReportData) -> list[str]:
+    """Architectures with stored Sobol indices, in canonical order."""
+    table = data.sensitivity
+    if table is None or table.empty:
+        return []
+    present = set(table["arch"])
+    return [a for a in data.archs if a in present] + sorted(present - set(data.archs))
+
+
+def fig_sensitivity(data: ReportData) -> Figure:
+    """Sobol indices of a ``sobol`` design: one panel per architecture (row) and metric (column).
+
+    Per parameter (labelled by symbol and unit) the first-order index S1 and
+    the total index ST side by side as horizontal bars, their 95 % intervals
+    (``ci_low``, ``ci_high`` of ``sensitivity.parquet``) as error bars. The
+    indices are of the mean over the seeds of each design point. Raises
+    ``ValueError`` without stored indices (see :data:`FIGURES`).
+    """
+    table = data.sensitivity
+    archs = sensitivity_archs(data)
+    if table is None or not archs:
+        raise ValueError("no sensitivity indices stored")
+    metrics = [(m, name) for m, name in SENSITIVITY_METRICS if (table["metric"] == m).any()]
+    params = list(dict.fromkeys(table["parameter"]))
+    height = 1.8 + len(archs) * (0.62 * len(params) + 1.3)
+    fig = _figure(6.2 * len(metrics) + 2.2, height)
+    axes = np.atleast_2d(fig.subplots(len(archs), len(metrics), sharey=True, squeeze=False))
+    ys = np.arange(len(params), dtype=float)
+    bar = 0.36
+    for row, a in enumerate(archs):
+        for col, (metric, name) in enumerate(metrics):
+            ax = axes[row, col]
+            sel = table[(table["arch"] == a) & (table["metric"] == metric)]
+            for i, (stat, label, colour) in enumerate(SOBOL_INDICES):
+                rows = sel[sel["statistic"] == stat].set_index("parameter").reindex(params)
+                value = rows["value"].to_numpy(dtype=float)
+                err = np.vstack([value - rows["ci_low"].to_numpy(dtype=float),
+                                 rows["ci_high"].to_numpy(dtype=float) - value])  # fmt: skip
+                ax.barh(ys + (i - 0.5) * bar, np.nan_to_num(value), height=bar, color=colour,
+                        xerr=np.nan_to_num(err), capsize=3, label=label,
+                        error_kw={"lw": 1.1, "ecolor": "black"})  # fmt: skip
+            ax.axvline(0.0, color="black", lw=0.9)
+            ax.axvline(1.0, color="black", lw=0.9, ls=":")  # an index lies in [0, 1]
+            ax.set_yticks(ys, [param_label(p) for p in params])
+            ax.set_ylim(len(params) - 0.5, -0.5)  # the first parameter on top
+            n = int(sel["n_seeds"].min()) if "n_seeds" in sel and not sel.empty else None
+            seeds = f", {n} seed{'s' if n != 1 else ''} per point" if n is not None else ""
+            ax.set_title(f"{arch_label(a)} · {name}{seeds}", fontsize=10.5)
+            if row == len(archs) - 1:
+                ax.set_xlabel("Sobol index of the mean over seeds [-]")
+    handles: list[Any] = [Patch(color=colour, label=label) for _, label, colour in SOBOL_INDICES]
+    handles.append(Line2D([], [], color="black", marker="|", ms=10, ls="-", lw=1.1,
+                          label="95 % interval"))  # fmt: skip
+    _legend_below(fig, handles, ncol=3)
+    fig.suptitle("Sensitivity: Sobol indices of the sampled design")
+    return _finished(fig)
+
+
+def _has_sensitivity(data: ReportData) -> bool:
+    return bool(sensitivity_archs(data))
+
+
+# ---------------------------------------------------------------------------
 # The registry of the report's figures
 # ---------------------------------------------------------------------------
 
@@ -872,7 +989,7 @@ class FigureEntry:
 
 @dataclass(frozen=True)
 class SweepFigureEntry:
-    """A figure drawn once per swept parameter with more than one value.
+    """A figure drawn once per swept parameter with more than one value (grid sweeps only).
 
     ``{key}`` in ``file`` and ``caption`` stands for the swept key (made safe
     for a file name); ``draw`` takes the ``param.<key>`` column.
@@ -940,6 +1057,14 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         fig_sweep,
     ),
     FigureEntry(
+        "sensitivity.png",
+        "Sensitivity of the sampled design: first-order (S1) and total (ST) Sobol indices of "
+        "the mean miss and mean Δv over the seeds of each design point, per parameter and "
+        "architecture; error bars: 95 % intervals (sensitivity.parquet).",
+        fig_sensitivity,
+        _has_sensitivity,
+    ),
+    FigureEntry(
         "nees.png",
         "Filter consistency: NEES per architecture against time, median and band over the "
         "seeds, with the 95 % interval of χ²₆ (where one run's NEES lies if the filter is "
@@ -988,7 +1113,7 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
     world = data.world
     for entry in FIGURES:
         if isinstance(entry, SweepFigureEntry):
-            for param in data.params:
+            for param in () if data.design else data.params:
                 key = _file_key(param.removeprefix(PARAM_PREFIX))
                 out.append(
                     PlannedFigure(
@@ -1026,13 +1151,17 @@ def _compare_row_label(first: pd.Series, groups: Sequence[str]) -> str:
     return "\n".join([label, *swept_values(first, groups)])
 
 
-def fig_compare(frame: pd.DataFrame, label_a: str, label_b: str) -> Figure:
+def fig_compare(
+    frame: pd.DataFrame, label_a: str, label_b: str, worlds: tuple[str, str] | None = None
+) -> Figure:
     """Paired differences A − B per architecture (and grid point) with 95 % intervals.
 
     ``frame`` holds the rows of ``compare.parquet``. One panel per metric: the
     mean (circle) and median (diamond) of the per-seed differences with their
     bootstrap intervals, zero marked; a last panel: the share of seeds where
-    A is lower, with its Wilson interval, one half marked.
+    A is lower, with its Wilson interval, one half marked. ``worlds``: the
+    simulated worlds of A and B (:func:`~cwrend_cli.report.load.results_world`),
+    named under the title (once when they are the same).
     """
     groups = [c for c in frame.columns if c in ("point_a", "point_b") or c.startswith(PARAM_PREFIX)]
     metrics = [m for m in _COMPARE_AXES if m in set(frame["metric"])]
@@ -1080,5 +1209,10 @@ def fig_compare(frame: pd.DataFrame, label_a: str, label_b: str) -> Figure:
         handles.append(Line2D([], [], marker=_SHARE_MARKERS[i % 3], ls="", color="black",
                               label=f"share A lower, {what} (95 % Wilson)"))  # fmt: skip
     _legend_below(fig, handles, ncol=2 if len(handles) == 4 else 3)
-    fig.suptitle(f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})")
+    title = f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})"
+    if worlds is not None:
+        world_a, world_b = worlds
+        same = f"A and B: {world_a}" if world_a == world_b else f"A: {world_a}  |  B: {world_b}"
+        title = f"{title}\n{same}"
+    fig.suptitle(title)
     return _finished(fig)

@@ -13,6 +13,13 @@ Reads either layout that cwrend writes:
   ``references.parquet``) and ``manifest.json`` (``config`` = the resolved base
   config).
 
+A campaign of a sampled design (``cwrend sweep --design …``) is recognised
+(:attr:`ReportData.design`) by its ``sensitivity.parquet`` (Sobol indices of a
+``sobol`` design, read into :attr:`ReportData.sensitivity`), or by a manifest
+whose ``grid`` is empty while the runs hold swept (``param.``) values over
+more than one point: its hundreds of points get no per-point sweep tables or
+figures.
+
 The stored configuration is validated with the config model
 (:func:`~cwrend_cli.config.config_from_dict`); the figures and tables read
 typed values from it. A campaign written before campaigns stored their
@@ -53,6 +60,7 @@ from cwrend_cli.output.layout import (
     RUN_STEPS,
     RUN_SUMMARY,
     RUNS,
+    SENSITIVITY,
     STEPS,
     SWEEP_STATS,
     references_path,
@@ -102,6 +110,12 @@ class ReportData:
     #: per-step NEES of the reported point, every seed (arch, seed, t_s, nees); ``None``
     #: for results written before cwrend stored it
     nees: pd.DataFrame | None = None
+    #: a sampled design's points (``sweep --design``) rather than a grid: no per-point
+    #: sweep tables and figures (hundreds of points); ``params`` still lists the swept keys
+    design: bool = False
+    #: rows of ``sensitivity.parquet`` (arch, metric, parameter, statistic S1/ST, value,
+    #: ci_low, ci_high, n_seeds), a ``sobol`` design's indices, if stored
+    sensitivity: pd.DataFrame | None = None
 
     @property
     def world(self) -> str:
@@ -111,15 +125,7 @@ class ReportData:
         on · sensor faults on`` (issue 15: the guidance and the filter always
         assume CW; this names what the truth was).
         """
-        if self.config is None:
-            return "truth model not stored"
-        model = self.config.truth.model
-        parts = [f"truth: {model}" + (" (the design model)" if model == "cw" else "")]
-        if not problem_of(self.config).actuator.ideal:
-            parts.append("actuator errors on")
-        if any(_has_faults(w) for w in self.windows):
-            parts.append("sensor faults on")
-        return " · ".join(parts)
+        return world_of(self.config)
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -163,6 +169,38 @@ class ReportData:
 # ---------------------------------------------------------------------------
 # Stored values
 # ---------------------------------------------------------------------------
+
+
+def world_of(config: CwrendConfig | None) -> str:
+    """The simulated world of ``config`` (see :attr:`ReportData.world`)."""
+    if config is None:
+        return "truth model not stored"
+    model = config.truth.model
+    parts = [f"truth: {model}" + (" (the design model)" if model == "cw" else "")]
+    if not problem_of(config).actuator.ideal:
+        parts.append("actuator errors on")
+    if any(_has_faults(w) for w in windows_of(config)):
+        parts.append("sensor faults on")
+    return " · ".join(parts)
+
+
+def results_world(results_dir: Path) -> str:
+    """The simulated world of a run or campaign directory, from its stored configuration.
+
+    For figures that are not part of a report (``cwrend compare``'s): reads
+    ``manifest.json`` (campaign) or ``config.json`` (run) only;
+    ``truth model not stored`` when neither holds a configuration that validates.
+    """
+    root = Path(results_dir)
+    for name in (MANIFEST, RUN_CONFIG):
+        path = root / name
+        if path.exists():
+            try:
+                raw = _read_json(path).get("config")
+            except ReportError:
+                break
+            return world_of(_stored_config(raw, path, []))
+    return world_of(None)
 
 
 def arch_label(slug: str) -> str:
@@ -498,10 +536,17 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         point = _reported_point(runs, config)
     selected = runs if point is None else runs[runs["point"].astype(str) == point]
     chosen = _pick_seed(selected, seed)
+    sensitivity = _campaign_sensitivity(root)
+    design = sensitivity is not None or _design_manifest(meta, runs)
     if point is not None:
+        rest = (
+            "the sensitivity indices use every design point"
+            if design
+            else "the sweep tables and figures use every point"
+        )
         notes.append(
-            f"Per-seed figures, the seed table and the distributions use grid point `{point}` "
-            f"({point_values(selected)}); the sweep tables and figures use every point."
+            f"Per-seed figures, the seed table and the distributions use "
+            f"{'design' if design else 'grid'} point `{point}` ({point_values(selected)}); {rest}."
         )
     steps_dir = root / STEPS
     if not steps_dir.exists():
@@ -532,7 +577,36 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         notes=tuple(notes),
         stats=_campaign_stats(root),
         nees=_campaign_nees(steps_dir, point),
+        design=design,
+        sensitivity=sensitivity,
     )
+
+
+def _design_manifest(meta: Mapping[str, Any], runs: pd.DataFrame) -> bool:
+    """A sampled design by its manifest: ``grid`` recorded empty, swept values over points.
+
+    (The manifest records no design kind; a grid campaign records its grid.)
+    A manifest without ``grid`` (hand-made or older campaigns) says nothing.
+    """
+    grid = meta.get("grid")
+    if not isinstance(grid, Mapping) or grid or "point" not in runs.columns:
+        return False
+    return bool(param_columns(runs.columns)) and runs["point"].nunique() > 1
+
+
+def _campaign_sensitivity(root: Path) -> pd.DataFrame | None:
+    """``sensitivity.parquet`` of a ``sobol`` design campaign (``None`` if not stored)."""
+    path = root / SENSITIVITY
+    if not path.exists():
+        return None
+    table = _read_parquet(path)
+    missing = {"arch", "metric", "parameter", "statistic", "value", "ci_low", "ci_high"}
+    missing -= set(table.columns)
+    if missing:
+        raise ReportError(f"{path}: missing columns {', '.join(sorted(missing))}")
+    for column in ("arch", "metric", "parameter", "statistic"):
+        table[column] = table[column].astype(str)
+    return table
 
 
 def _campaign_stats(root: Path) -> pd.DataFrame | None:

@@ -8,7 +8,11 @@ with its captions. One unit and precision per quantity, as on the console:
 decimals). Campaign tables carry the 95 % intervals and paired comparisons
 that the campaign stored in ``ablation.parquet`` / ``sweep.parquet`` (never
 recomputed here); an interval from fewer than :data:`MIN_BOOTSTRAP_N` seeds is
-marked with :data:`UNRELIABLE_MARK`.
+marked with :data:`UNRELIABLE_MARK`. The filter-consistency means of the
+runs (``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
+averaged over the seeds (no interval is stored for them). A sampled design
+(``sweep --design``) gets the table of its Sobol indices
+(``sensitivity.parquet``) instead of a row per design point.
 """
 
 from __future__ import annotations
@@ -21,7 +25,8 @@ import numpy as np
 import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
-from cwrend_cli.report.labels import format_value
+from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
+from cwrend_cli.report.labels import format_value, param_label
 from cwrend_cli.report.load import ReportData, arch_label, param_values
 
 #: Below this many seeds a bootstrap interval is flagged (as on the console).
@@ -35,6 +40,8 @@ DV = ".4f"  # km/s
 MISS = ".2f"  # m (after M_PER_KM)
 FUEL = ".2f"  # %
 SHARE = ".2f"  # a proportion
+CONSISTENCY = ".2f"  # mean NEES / NIS (dimensionless)
+INDEX = ".2f"  # a Sobol index
 
 
 def _fmt(value: Any, spec: str = ".4g") -> str:
@@ -122,7 +129,7 @@ def campaign_table(data: ReportData) -> str:
     stats = data.point_stats()
     header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
               "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
-              "mean success [%]"]  # fmt: skip
+              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)"]  # fmt: skip
     rows = []
     for a in data.archs:
         g = all_runs[all_runs["arch"] == a]
@@ -130,6 +137,8 @@ def campaign_table(data: ReportData) -> str:
         miss = ok["miss_km"].astype(float) * M_PER_KM
         ok_label = f"{len(ok)} / {len(g) - len(ok)}"
         success = _fmt(ok["solve_success_pct"].mean() if "solve_success_pct" in ok else None, ".2f")
+        consistency = [_mean(ok, "mean_nees", CONSISTENCY), _mean(ok, "mean_nis_nominal",
+                                                                 CONSISTENCY)]  # fmt: skip
         if stats is not None:
             get = _lookup(stats[(stats["kind"] == "marginal") & (stats["arch"] == a)])
             rows.append([
@@ -137,7 +146,7 @@ def campaign_table(data: ReportData) -> str:
                 _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "median")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "p95")), MISS, M_PER_KM), _fmt(miss.max(), MISS),
-                _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success,
+                _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success, *consistency,
             ])  # fmt: skip
             continue
         fuel = ok["fuel_penalty_pct"].mean() if "fuel_penalty_pct" in ok else None
@@ -145,9 +154,17 @@ def campaign_table(data: ReportData) -> str:
             arch_label(a), ok_label, _fmt(ok["delta_v_km_s"].mean(), DV),
             _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS),
             _fmt(miss.quantile(0.95) if len(miss) else None, MISS), _fmt(miss.max(), MISS),
-            _fmt(fuel, FUEL), success,
+            _fmt(fuel, FUEL), success, *consistency,
         ])  # fmt: skip
     return markdown_table(header, rows)
+
+
+def _mean(runs: pd.DataFrame, column: str, spec: str) -> str:
+    """Mean of a runs column over the runs (``–`` when not stored, e.g. older campaigns)."""
+    if column not in runs.columns:
+        return "–"
+    values = pd.to_numeric(runs[column], errors="coerce")
+    return _fmt(values.mean() if values.notna().any() else None, spec)
 
 
 def paired_table(data: ReportData) -> str | None:
@@ -190,7 +207,7 @@ def sweep_table(data: ReportData) -> str:
         runs[f"_{param}"] = param_values(runs[param])[0]
         keys.append(f"_{param}")
     stats = data.stats if data.stats is not None and "point" in data.stats.columns else None
-    header = [p.removeprefix(PARAM_PREFIX) for p in data.params] + [
+    header = [param_label(p) for p in data.params] + [
         "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
         "max miss [m]",
     ]  # fmt: skip
@@ -216,6 +233,63 @@ def sweep_table(data: ReportData) -> str:
     return markdown_table(header, rows)
 
 
+def sensitivity_table(data: ReportData) -> str | None:
+    """Sobol indices of a ``sobol`` design: a row per architecture and parameter.
+
+    S1 and ST of the mean miss and of the mean Δv over the seeds of each
+    design point, ``value [low, high]`` (95 %, as stored in
+    ``sensitivity.parquet``). ``None`` without stored indices.
+    """
+    table = data.sensitivity
+    archs = sensitivity_archs(data)
+    if table is None or not archs:
+        return None
+    metrics = [(m, name) for m, name in SENSITIVITY_METRICS if (table["metric"] == m).any()]
+    header = ["architecture", "parameter"] + [
+        f"{stat} {name}" for _, name in metrics for stat in ("S1", "ST")
+    ]
+    get = {
+        (str(r["arch"]), str(r["metric"]), str(r["parameter"]), str(r["statistic"])): r
+        for _, r in table.iterrows()
+    }
+    rows = []
+    for a in archs:
+        for param in dict.fromkeys(table.loc[table["arch"] == a, "parameter"]):
+            cells = [
+                _ci(get.get((a, m, param, stat)), INDEX, bootstrap=False)
+                for m, _ in metrics
+                for stat in ("S1", "ST")
+            ]
+            rows.append([arch_label(a), param_label(param), *cells])
+    return markdown_table(header, rows)
+
+
+def _design_lines(data: ReportData) -> list[str]:
+    """The section of a sampled design: its points, parameters and Sobol indices."""
+    runs = data.runs[data.runs["status"] == "ok"]
+    n_points = int(runs["point"].nunique()) if "point" in runs.columns else 0
+    names = ", ".join(param_label(p) for p in data.params) or "–"
+    lines = [
+        "## Sampled design",
+        "",
+        f"{n_points} design points over {names}; no per-point table or figures (see "
+        "`runs.parquet` and `sweep.parquet` for each point).",
+        "",
+    ]
+    table = sensitivity_table(data)
+    if table is None:
+        return [*lines, "No sensitivity indices stored (only a `sobol` design has them).", ""]
+    stored = data.sensitivity
+    seeds: Any = stored["n_seeds"].min() if stored is not None and "n_seeds" in stored else None
+    about = (
+        "First-order (S1) and total (ST) Sobol indices of the mean over the seeds of each "
+        "design point, 95 % interval in brackets (`sensitivity.parquet`"
+        + (f"; at least {int(float(seeds))} seed(s) per point" if _finite(seeds) else "")
+        + "). ST ≥ S1 up to sampling error; ST − S1 is the share through interactions."
+    )
+    return [*lines, "### Sensitivity indices", "", about, "", table, ""]
+
+
 def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, str]]) -> str:
     """The text of ``report.md``: provenance, notes, tables, then ``figures`` (file, caption)."""
     n_seeds = int(data.ok_runs()["seed"].nunique())
@@ -226,7 +300,7 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
         + (f", config hash `{data.config_hash[:12]}`" if data.config_hash else "")
         + ").",
         f"Per-seed figures (1–5) show noise seed **{data.seed}**"
-        + (f" at grid point `{data.point}`" if data.point else "")
+        + (f" at {'design' if data.design else 'grid'} point `{data.point}`" if data.point else "")
         + (" (the first seed; choose another with `--seed N`)." if n_seeds > 1 else "."),
     ]
     if data.windows:
@@ -252,7 +326,9 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
                       "bootstrap otherwise).", "", pairs, ""]  # fmt: skip
         if _flagged(stats):
             lines += [UNRELIABLE_NOTE, ""]
-    if data.params:
+    if data.design:
+        lines += _design_lines(data)
+    elif data.params:
         names = ", ".join(f"`{p.removeprefix(PARAM_PREFIX)}`" for p in data.params)
         lines += [f"## Sweep of {names} (every grid point)", "", sweep_table(data), ""]
         if _flagged(data.stats if data.stats is not None and "point" in data.stats else None):

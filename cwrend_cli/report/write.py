@@ -24,7 +24,7 @@ from cwrend_cli.output.files import atomic_path
 from cwrend_cli.output.layout import REPORT_DIR
 from cwrend_cli.report.figures import DPI, STYLE, fig_compare, planned_figures
 from cwrend_cli.report.html import report_html
-from cwrend_cli.report.load import Layout, load_results
+from cwrend_cli.report.load import Layout, load_results, results_world
 from cwrend_cli.report.markdown import report_md
 
 
@@ -89,7 +89,20 @@ def write_report(
     )
 
 
-def write_compare_figure(frame: pd.DataFrame, label_a: str, label_b: str, path: Path) -> Path:
-    """Draw :func:`~cwrend_cli.report.figures.fig_compare` in the report's style; save as PNG."""
+def write_compare_figure(
+    frame: pd.DataFrame,
+    label_a: str,
+    label_b: str,
+    path: Path,
+    *,
+    dirs: tuple[Path, Path] | None = None,
+) -> Path:
+    """Draw :func:`~cwrend_cli.report.figures.fig_compare` in the report's style; save as PNG.
+
+    ``dirs``: the two compared results directories; their simulated worlds
+    (truth model, actuator errors, sensor faults; read from their stored
+    configurations) are then named under the title.
+    """
+    worlds = (results_world(dirs[0]), results_world(dirs[1])) if dirs is not None else None
     with mpl.rc_context(STYLE):
-        return _save(fig_compare(frame, label_a, label_b), path)
+        return _save(fig_compare(frame, label_a, label_b, worlds), path)
