@@ -171,16 +171,24 @@ def _wait_for_tasks(out: Path, proc: subprocess.Popen[str], n: int) -> None:
         time.sleep(0.05)
 
 
+def _kill_mid_campaign(
+    tmp_path: Path, cluster: Cluster, seeds: int, victim: subprocess.Popen[bytes]
+) -> tuple[int, str]:
+    """Start a Dask campaign, kill ``victim`` once two tasks are done; its exit code and stderr."""
+    proc = _start_campaign(tmp_path, cluster, seeds)
+    _wait_for_tasks(tmp_path / "results" / "dask", proc, 2)
+    assert proc.poll() is None, "the kill must land mid-campaign"
+    os.killpg(victim.pid, signal.SIGKILL)
+    _, stderr = proc.communicate(timeout=300)
+    return proc.returncode, stderr
+
+
 def test_a_killed_dask_worker_loses_no_run_and_duplicates_none(
     tmp_path: Path, cluster: Cluster
 ) -> None:
     out = tmp_path / "results" / "dask"
-    proc = _start_campaign(tmp_path, cluster, seeds=16)
-    _wait_for_tasks(out, proc, 2)
-    assert proc.poll() is None, "the kill must land mid-campaign"
-    os.killpg(cluster.workers[0].pid, signal.SIGKILL)
-    _, stderr = proc.communicate(timeout=300)
-    assert proc.returncode == 0, stderr  # Dask reran the dead worker's tasks on the other
+    returncode, stderr = _kill_mid_campaign(tmp_path, cluster, 16, cluster.workers[0])
+    assert returncode == 0, stderr  # Dask reran the dead worker's tasks on the other
     runs = _runs(out)
     assert len(runs) == 32 and (runs["status"] == "ok").all()
     local = _reference(tmp_path, 16)
@@ -192,12 +200,8 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
     tmp_path: Path, cluster: Cluster
 ) -> None:
     out = tmp_path / "results" / "dask"
-    proc = _start_campaign(tmp_path, cluster, seeds=40)
-    _wait_for_tasks(out, proc, 2)
-    assert proc.poll() is None, "the scheduler must stop mid-campaign"
-    os.killpg(cluster.scheduler.pid, signal.SIGKILL)
-    _, stderr = proc.communicate(timeout=300)
-    assert proc.returncode == 3, stderr
+    returncode, stderr = _kill_mid_campaign(tmp_path, cluster, 40, cluster.scheduler)
+    assert returncode == 3, stderr
     assert "campaign stopped:" in stderr and "Traceback" not in stderr
     runs = pd.read_parquet(out / "runs.parquet")
     assert (runs["status"] == "ok").all()  # nothing recorded for the lost scheduler
