@@ -3,6 +3,15 @@
 Every command wraps its body in :func:`user_errors`, so a user mistake (bad
 config, bad override, bad data file) prints ``error: ...`` on stderr and exits
 with code 2, without a traceback. Typer's own usage errors also exit with 2.
+
+Start-up (issue 17): this module imports only what every command needs —
+Typer, Rich's console and the architecture names (numpy) — so that
+``cwrend --help`` and ``cwrend <command> --help`` answer at once. Each
+command imports what it computes with (configuration, campaign, tables,
+recordings: numba, scipy, pandas, pyarrow, rerun, matplotlib) at the top of
+its own body; names needed only in annotations are imported under
+``TYPE_CHECKING`` below. ``tests/test_startup.py`` checks that ``--help``
+loads none of the heavy libraries.
 """
 
 from __future__ import annotations
@@ -13,41 +22,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
-from pydantic import ValidationError
 from rich.console import Console
 
-from cwrend_cli import __version__, campaign, limits
-from cwrend_cli.campaign import ExecutorKind, design, sequential
-from cwrend_cli.config import (
-    ARCHITECTURES,
-    SOCP_ARCHITECTURES,
-    Architecture,
-    CwrendConfig,
-    config_hash,
-    format_validation_error,
-    load_config,
-    parse_archs,
-    resolved_dict,
-    to_json,
-    to_toml,
-)
-from cwrend_cli.config.adapt import windows_of
-from cwrend_cli.console import (
-    RichProgress,
-    ablation_console_table,
-    compare_console_tables,
-    paired_console_table,
-    sensitivity_console_table,
-    summary_console_table,
-    sweep_console_table,
-    until_console_table,
-)
+from cwrend_cli import __version__, limits
 from cwrend_cli.errors import ConfigError, CwrendError
-from cwrend_cli.output import recording
-from cwrend_cli.output.files import check_output_dir, write_parquet, write_run
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     COMPARE_FIGURE,
@@ -57,6 +38,12 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     compare_dir,
 )
+from cwrend_cli.physics.params import ARCHITECTURES, SOCP_ARCHITECTURES
+
+if TYPE_CHECKING:  # annotations only; the commands import these when they run
+    from cwrend_cli import campaign
+    from cwrend_cli.campaign import ExecutorKind, sequential
+    from cwrend_cli.config import Architecture, CwrendConfig
 
 app = typer.Typer(
     name="cwrend",
@@ -97,7 +84,13 @@ def user_errors() -> Iterator[None]:
     except CwrendError as exc:
         _stderr().print("error:", str(exc), markup=False)
         raise typer.Exit(code=exc.exit_code) from None
-    except ValidationError as exc:
+    except Exception as exc:
+        from pydantic import ValidationError  # loaded already if it was raised
+
+        from cwrend_cli.config import format_validation_error
+
+        if not isinstance(exc, ValidationError):
+            raise
         lines = "\n".join(f"  {line}" for line in format_validation_error(exc))
         _stderr().print("error: invalid values\n" + lines, markup=False)
         raise typer.Exit(code=USER_ERROR_EXIT) from None
@@ -174,6 +167,8 @@ def config_show(
 
     Every field is listed, unset optional ones too.
     """
+    from cwrend_cli.config import config_hash, load_config, to_json, to_toml
+
     with user_errors():
         cfg = load_config(file, set_ or ())
         digest = config_hash(cfg)
@@ -188,6 +183,8 @@ def config_show(
 @config_app.command("validate", short_help="Check a configuration: 'OK <hash>' or the errors.")
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
     """Check a configuration; print 'OK <hash>' or the problems (exit code 2)."""
+    from cwrend_cli.config import config_hash, load_config
+
     with user_errors():
         cfg = load_config(file, set_ or ())
         typer.echo(f"OK {config_hash(cfg)}")
@@ -195,6 +192,8 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
 
 def _parse_archs(text: str) -> tuple[Architecture, ...]:
     """``all``, ``all_socp``, ``everything`` or a comma-separated list of architecture slugs."""
+    from cwrend_cli.config import parse_archs
+
     return parse_archs(text)
 
 
@@ -253,6 +252,13 @@ def run(
     references.parquet (each atomically) into the output directory, and
     recording.rrd unless --no-rrd.
     """
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_hash, load_config, resolved_dict
+    from cwrend_cli.config.adapt import windows_of
+    from cwrend_cli.console import summary_console_table
+    from cwrend_cli.output import recording
+    from cwrend_cli.output.files import check_output_dir, write_run
+
     with user_errors():
         cfg = load_config(file, set_ or ())
         archs = _parse_archs(arch)
@@ -480,6 +486,12 @@ def _run_campaign_command(
     opts: CampaignOptions,
     err: Console,
 ) -> None:
+    from cwrend_cli import campaign
+    from cwrend_cli.campaign import design, sequential
+    from cwrend_cli.config import load_config
+    from cwrend_cli.console import until_console_table
+    from cwrend_cli.output import recording
+
     overrides = list(set_ or [])
     if opts.name is not None:
         overrides.append(f"output.name={json.dumps(opts.name)}")
@@ -560,21 +572,31 @@ def _campaign_step(
     err: Console,
 ) -> tuple[campaign.CampaignPlan, campaign.CampaignSummary, campaign.CampaignStatistics]:
     """Plan, run (resuming) and compute the statistics of one campaign invocation."""
+    from cwrend_cli import campaign
+    from cwrend_cli.campaign import design
+    from cwrend_cli.campaign.executors import default_workers
+    from cwrend_cli.console import RichProgress
+
     design_kind: design.Design | None = opts.design  # type: ignore[assignment]
+    executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
+    # the worker count sizes the tasks when output.seeds_per_task is unset (None: a Dask
+    # cluster of unknown size, 16 seeds a task)
+    workers = opts.workers or (default_workers() if executor_kind == "local" else None)
     plan = campaign.plan(
         cfg, archs, seeds, params, allow_large=opts.yes_large, design_kind=design_kind,
-        samples=opts.samples,
+        samples=opts.samples, workers=workers,
     )  # fmt: skip
     if not opts.quiet:
         _announce(err, plan)
-    executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
     progress = RichProgress(err, f"{command} {out.name}", quiet=opts.quiet)
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
     )  # fmt: skip
-    return plan, summary, campaign.write_statistics(out, command, plan.root_seed)
+    with progress.phase("computing statistics"):
+        statistics = campaign.write_statistics(out, command, plan.root_seed)
+    return plan, summary, statistics
 
 
 def _report_campaign(
@@ -587,6 +609,14 @@ def _report_campaign(
     err: Console,
 ) -> None:
     """The console tables and summary line of a finished (or interrupted) campaign."""
+    from cwrend_cli import campaign
+    from cwrend_cli.console import (
+        ablation_console_table,
+        paired_console_table,
+        sensitivity_console_table,
+        sweep_console_table,
+    )
+
     sensitivity = campaign.write_sensitivity(out, plan)
     asked = {r.run_key for r in plan.runs}
     held = campaign.held_run_keys(out)
@@ -842,6 +872,8 @@ def compare(
     """
     with user_errors():
         from cwrend_cli.campaign import compare as cmp
+        from cwrend_cli.console import compare_console_tables
+        from cwrend_cli.output.files import write_parquet
         from cwrend_cli.report import write_compare_figure
 
         metrics = cmp.parse_metrics(metric)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import pandas as pd
@@ -14,12 +15,14 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    ProgressColumn,
     TaskID,
     TextColumn,
     TimeElapsedColumn,
-    TimeRemainingColumn,
 )
+from rich.progress import Task as RichTask
 from rich.table import Table
+from rich.text import Text
 
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
@@ -106,9 +109,24 @@ def _consistency_table(runs: Sequence[RunResult], rows: Sequence[Mapping[str, An
 
 
 class RichProgress:
-    """Progress bar with counts, failures and ETA (a TTY), or plain lines (otherwise)."""
+    """Progress of a campaign: counts, failures, runs/s and ETA, then the statistics phase.
 
-    def __init__(self, console: Console, label: str, quiet: bool = False) -> None:
+    A bar on a terminal, plain lines otherwise (one every 10 s and the last).
+    The rate and the ETA count from the first completed task, not from the
+    start: until then the workers start, load the compiled kernels and compute
+    the references, which says nothing about the pace of the runs (an ETA from
+    the start was 10× off, issue 17). Before a second completion there is no
+    rate and the ETA shows ``–``.
+    """
+
+    def __init__(
+        self,
+        console: Console,
+        label: str,
+        quiet: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._clock = clock
         self._console = console
         self._label = label
         self._quiet = quiet
@@ -118,12 +136,14 @@ class RichProgress:
         self._failed = 0
         self._total = 0
         self._next_report = 0.0
-        self._t0 = time.monotonic()
+        self._t0 = clock()
+        self._first: tuple[float, int] | None = None  # (time, runs done) at the first completion
+        self._last = 0.0  # time of the latest completion
 
     def start(self, total: int, skipped: int) -> None:
         """Begin: ``total`` runs to compute, ``skipped`` already in the campaign."""
         self._total = total
-        self._t0 = time.monotonic()
+        self._t0 = self._clock()
         if self._quiet:
             return
         if skipped:
@@ -135,29 +155,55 @@ class RichProgress:
                 MofNCompleteColumn(),
                 TextColumn("[red]{task.fields[failed]} failed"),
                 TimeElapsedColumn(),
-                TimeRemainingColumn(),
+                _Text(self._rate_text),
+                _Text(self._eta_text),
                 console=self._console,
                 transient=False,
             )
             self._bar.start()
             self._task = self._bar.add_task(self._label, total=total, failed=0)
 
+    def rate(self) -> float | None:
+        """Runs per second since the first completed task (``None`` before a second one)."""
+        if self._first is None or self._done <= self._first[1] or self._last <= self._first[0]:
+            return None
+        return (self._done - self._first[1]) / (self._last - self._first[0])
+
+    def eta(self, now: float | None = None) -> float | None:
+        """Seconds left at ``now`` (default: the clock): remaining runs at :meth:`rate`."""
+        rate = self.rate()
+        if rate is None:
+            return None
+        since = (self._clock() if now is None else now) - self._last
+        return max(0.0, (self._total - self._done) / rate - since)
+
+    def _rate_text(self) -> str:
+        rate = self.rate()
+        return "– runs/s" if rate is None else f"{rate:.3g} runs/s"
+
+    def _eta_text(self) -> str:
+        eta = self.eta()
+        return "ETA –" if eta is None else f"ETA {_duration(eta)}"
+
     def advance(self, ok: int, failed: int) -> None:
         """Runs just completed."""
+        now = self._clock()
         self._done += ok + failed
         self._failed += failed
+        if self._first is None:
+            self._first = (now, self._done)
+        self._last = now
         if self._quiet:
             return
         if self._bar is not None and self._task is not None:
             self._bar.update(self._task, advance=ok + failed, failed=self._failed)
             return
-        elapsed = time.monotonic() - self._t0
+        elapsed = now - self._t0
         if self._done >= self._total or elapsed >= self._next_report:
-            rate = self._done / elapsed if elapsed > 0 else float("nan")
-            eta = (self._total - self._done) / rate if rate > 0 else float("nan")
             self._console.print(
                 f"{self._label}: {self._done}/{self._total} runs, {self._failed} failed, "
-                f"{elapsed:.0f} s elapsed, ETA {eta:.0f} s"
+                f"{elapsed:.0f} s elapsed, {self._rate_text()}, {self._eta_text()}",
+                markup=False,
             )
             self._next_report = elapsed + 10.0
 
@@ -166,6 +212,42 @@ class RichProgress:
         if self._bar is not None:
             self._bar.stop()
             self._bar = None
+
+    @contextmanager
+    def phase(self, text: str) -> Iterator[None]:
+        """Say what happens after the runs (e.g. ``computing statistics``) while it does.
+
+        A spinner on a terminal, one line otherwise; nothing when quiet.
+        """
+        if self._quiet:
+            yield
+        elif self._console.is_terminal:
+            with self._console.status(f"{self._label}: {text}…", spinner="dots"):
+                yield
+        else:
+            self._console.print(f"{self._label}: {text}…", markup=False)
+            yield
+
+
+class _Text(ProgressColumn):
+    """A progress column showing the text of a callable (the campaign-wide rate and ETA)."""
+
+    def __init__(self, text: Callable[[], str]) -> None:
+        super().__init__()
+        self._text = text
+
+    def render(self, task: RichTask) -> Text:
+        return Text(self._text(), style="progress.remaining")
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``3 min 05 s`` or ``2 h 07 min``."""
+    s = round(seconds)
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"
 
 
 #: Below this many seeds a percentile-bootstrap interval is too narrow to trust

@@ -825,3 +825,53 @@ def test_a_disk_without_room_for_the_first_task_stops_before_computing(
     out = tmp_path / "results" / "noroom"
     assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped: disk")
     assert pd.read_parquet(out / "runs.parquet").empty and not (out / "steps").exists()
+
+
+# --- chunking (issue 17) --------------------------------------------------------------
+
+
+def test_default_seeds_per_task_leaves_four_tasks_per_worker_up_to_16_seeds() -> None:
+    from cwrend_cli.campaign.plan import default_seeds_per_task  # the package's `plan` is plan()
+
+    assert default_seeds_per_task(100, 1, 2) == 12  # 9 tasks for 2 workers
+    assert default_seeds_per_task(1000, 1, 2) == 16  # the cap
+    assert default_seeds_per_task(5, 1, 8) == 1  # never fewer than one seed
+    assert default_seeds_per_task(20, 10, 2) == 16  # grid points make tasks too
+    assert default_seeds_per_task(100, 1, None) == 16  # unknown worker count
+
+
+def test_unset_seeds_per_task_follows_the_workers_and_a_set_one_wins() -> None:
+    cfg = CwrendConfig()
+    assert cfg.output.seeds_per_task is None
+    by_workers = campaign.plan(cfg, ["mtf_adaptive"], list(range(100)), workers=2)
+    assert len(by_workers.tasks) == 9 and {len(t.runs) for t in by_workers.tasks} == {12, 4}
+    set_cfg = config_from_dict({"output": {"seeds_per_task": 5}})
+    assert len(campaign.plan(set_cfg, ["mtf_adaptive"], list(range(100)), workers=2).tasks) == 20
+    # the chunking changes the tasks only: the same runs, keys and values
+    default = campaign.plan(cfg, ["mtf_adaptive"], list(range(100)))
+    assert by_workers.runs == default.runs and by_workers.campaign_hash == default.campaign_hash
+
+
+def test_resume_with_another_chunking_computes_only_the_missing_runs(tmp_path: Path) -> None:
+    """Runs are keyed by point, architecture and seed, not by task: any chunking resumes."""
+    cfg = _write_config(tmp_path / "c.toml", "chunks")
+    out = tmp_path / "results" / "chunks"
+    base = ["ablate", str(cfg), "--arch", ADAPTIVE, "--workers", "1", "--no-rrd"]
+    first = _cli(*base, "--seeds", "6", "--set", "output.seeds_per_task=4")
+    assert first.exit_code == 0, first.output
+    second = _cli(*base, "--seeds", "10", "--set", "output.seeds_per_task=3")
+    assert second.exit_code == 0, second.output
+    assert "12 run(s) already done, 8 to compute" in second.stderr
+    assert "8 run(s) computed, 12 already done" in second.stderr
+    whole_cfg = _write_config(tmp_path / "w.toml", "whole")
+    whole = _cli("ablate", str(whole_cfg), "--arch", ADAPTIVE, "--workers", "1", "--no-rrd",
+                 "--seeds", "10")  # fmt: skip
+    assert whole.exit_code == 0, whole.output
+    key = ["run_key"]
+    pd.testing.assert_frame_equal(
+        _runs(out).sort_values(key).reset_index(drop=True),
+        _runs(tmp_path / "results" / "whole").sort_values(key).reset_index(drop=True),
+    )
+    steps = _steps(out)
+    assert len(steps) == 20 * 801  # nothing computed twice
+    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)

@@ -19,6 +19,7 @@ from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict, con
 from cwrend_cli.console import (
     MIN_BOOTSTRAP_N,
     UNRELIABLE_NOTE,
+    RichProgress,
     ablation_console_table,
     summary_console_table,
 )
@@ -216,3 +217,90 @@ def test_run_table_fits_80_columns() -> None:
     assert "…" not in text
     assert max(len(line.rstrip()) for line in text.splitlines()) <= 80
     assert "seed 0" in text.splitlines()[0]  # the seed is in the title
+
+
+# --- progress (issue 17) ---------------------------------------------------------------
+
+
+class _Clock:
+    """A settable clock for :class:`RichProgress`."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _plain_progress(clock: _Clock) -> tuple[RichProgress, io.StringIO]:
+    buf = io.StringIO()
+    return RichProgress(Console(file=buf, width=200), "ablate x", clock=clock), buf
+
+
+def test_progress_rate_and_eta_count_from_the_first_completed_task() -> None:
+    """Start-up (workers, kernels, references) does not enter the rate: 10 s of it here."""
+    clock = _Clock()
+    progress, _ = _plain_progress(clock)
+    progress.start(total=400, skipped=0)
+    clock.now = 10.0  # start-up, then the first task of 40 runs
+    progress.advance(40, 0)
+    assert progress.rate() is None and progress.eta() is None  # one completion: no rate yet
+    clock.now = 12.0
+    progress.advance(40, 0)  # 40 runs in 2 s: 20 runs/s (from the start it would be 6.7)
+    assert progress.rate() == pytest.approx(20.0)
+    assert progress.eta() == pytest.approx(320 / 20.0)
+    clock.now = 13.0  # the ETA counts down between completions
+    assert progress.eta() == pytest.approx(320 / 20.0 - 1.0)
+
+
+def test_progress_lines_show_rate_and_eta() -> None:
+    clock = _Clock()
+    progress, buf = _plain_progress(clock)
+    progress.start(total=100, skipped=0)
+    clock.now = 5.0
+    progress.advance(10, 0)
+    clock.now = 15.0
+    progress.advance(20, 1)
+    lines = buf.getvalue().splitlines()
+    assert lines[0] == "ablate x: 10/100 runs, 0 failed, 5 s elapsed, – runs/s, ETA –"
+    assert lines[1] == "ablate x: 31/100 runs, 1 failed, 15 s elapsed, 2.1 runs/s, ETA 33 s"
+
+
+def test_campaign_says_it_computes_the_statistics(tmp_path: Path) -> None:
+    result = _ablate(_config(tmp_path), "--seeds", "2")
+    assert result.exit_code == 0, result.output
+    assert "ablate c: computing statistics…" in result.stderr
+
+
+def test_quiet_campaign_does_not_announce_the_statistics(tmp_path: Path) -> None:
+    result = _ablate(_config(tmp_path), "--seeds", "2", "-q")
+    assert result.exit_code == 0, result.output
+    assert "computing statistics" not in result.output
+
+
+class _Recorder:
+    """A :class:`~cwrend_cli.campaign.Progress` that keeps every advance."""
+
+    def __init__(self) -> None:
+        self.advances: list[int] = []
+
+    def start(self, total: int, skipped: int) -> None:
+        self.total = total
+
+    def advance(self, ok: int, failed: int) -> None:
+        self.advances.append(ok + failed)
+
+    def close(self) -> None:
+        pass
+
+
+def test_progress_of_a_100_seed_ablation_on_2_workers_moves_often(tmp_path: Path) -> None:
+    """Unset output.seeds_per_task: at least 4 tasks per worker, not 0 → 128 → 200."""
+    cfg = config_from_dict({"output": {"dir": str(tmp_path), "rrd_seeds": 0, "steps_seeds": 0}})
+    plan = campaign.plan(cfg, ADAPTIVE.split(","), list(range(100)), workers=2)
+    assert len(plan.tasks) >= 8
+    recorder = _Recorder()
+    campaign.run_campaign(plan, tmp_path / "p", command="ablate", workers=2, progress=recorder)
+    assert sum(recorder.advances) == recorder.total == 200
+    assert len(recorder.advances) >= 8
+    assert max(recorder.advances) <= 2 * 16

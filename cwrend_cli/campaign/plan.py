@@ -58,6 +58,7 @@ __all__ = [
     "RunSpec",
     "Task",
     "campaign_hash",
+    "default_seeds_per_task",
     "dispersion_seed_sequence",
     "draw_dispersions",
     "grid_points",
@@ -350,6 +351,29 @@ def _check_size(n_points: int, n_seeds: int, n_archs: int, allow_large: bool) ->
         )
 
 
+#: At most this many seeds to a task when ``output.seeds_per_task`` is unset.
+MAX_SEEDS_PER_TASK = 16
+#: Tasks per worker wanted when ``output.seeds_per_task`` is unset (progress and balance).
+TASKS_PER_WORKER = 4
+
+
+def default_seeds_per_task(n_seeds: int, n_points: int, workers: int | None) -> int:
+    """Seeds to a task when ``output.seeds_per_task`` is unset.
+
+    As many as leave at least :data:`TASKS_PER_WORKER` tasks per worker (so
+    the progress bar moves and no worker idles at the end), at most
+    :data:`MAX_SEEDS_PER_TASK` (files and journal writes per run) and at
+    least 1; ``workers=None`` (unknown) gives the maximum. The chunking never
+    changes a number: a run's key and random streams depend on its seed, not
+    on its task, and a resumed campaign skips its done runs whatever the
+    chunking was.
+    """
+    if workers is None:
+        return MAX_SEEDS_PER_TASK
+    per_task = n_seeds * max(n_points, 1) // (TASKS_PER_WORKER * max(workers, 1))
+    return max(1, min(MAX_SEEDS_PER_TASK, per_task))
+
+
 def plan(
     cfg: CwrendConfig,
     archs: Sequence[str],
@@ -359,6 +383,7 @@ def plan(
     allow_large: bool = False,
     design_kind: Design | None = None,
     samples: int | None = None,
+    workers: int | None = None,
 ) -> CampaignPlan:
     """Expand a campaign into tasks, validating every run's resolved config first.
 
@@ -371,6 +396,10 @@ def plan(
 
     With ``design_kind`` the points are sampled from the ranges of
     ``[sweep]`` (:func:`design_points`) instead of forming a grid.
+
+    Seeds per task: ``seeds_per_task``, else ``output.seeds_per_task``, else
+    :func:`default_seeds_per_task` for ``workers`` (the executor's worker
+    count; ``None``: at most 16 seeds a task).
     """
     unknown = [a for a in archs if a not in ALL_ARCHITECTURES]
     if unknown:
@@ -380,7 +409,6 @@ def plan(
         )
     if len(set(seeds)) != len(seeds) or any(not 0 <= s <= MAX_SEED for s in seeds):
         raise ConfigError(f"seeds must be distinct integers in [0, {MAX_SEED}] (2**63 − 1)")
-    seeds_per_task = seeds_per_task or cfg.output.seeds_per_task
     base = resolved_dict(cfg)
     base.pop("sweep", None)
     base.pop("dispersions", None)
@@ -394,6 +422,11 @@ def plan(
         grid = ()
         spec, points = design_points(cfg.sweep, cli_params, design_kind, samples, root)
         _check_size(len(spec.rows), len(seeds), len(archs), allow_large)
+    seeds_per_task = (
+        seeds_per_task
+        or cfg.output.seeds_per_task
+        or default_seeds_per_task(len(seeds), len(points), workers)
+    )
     tasks = []
     digests: list[str] = []
     for pid, params in points:

@@ -40,7 +40,6 @@ from cwrend_cli.config.messages import fmt_num, rules_error
 from cwrend_cli.limits import MAX_SEED, MAX_STEPS
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
-from cwrend_cli.physics.truth import R_EARTH_KM, semi_major_axis_km
 
 __all__ = [
     "ActuatorConfig",
@@ -630,12 +629,13 @@ class OutputConfig(_FrozenModel):
         description="campaigns: write per-step data (steps/ dataset) only for seeds below "
         "this number; unset = every seed, 0 = none (a run's steps take about 200 kB)",
     )
-    seeds_per_task: Int = Field(
-        16,
+    seeds_per_task: Int | None = Field(
+        None,
         ge=1,
         description="campaigns: seeds run together as one task (all architectures), written "
         "to one file per architecture and journaled at once; larger means fewer files and "
-        "faster campaigns, smaller a finer resume and progress; never changes the numbers",
+        "faster campaigns, smaller a finer resume and progress; unset = at least 4 tasks per "
+        "worker, at most 16 seeds a task; never changes the numbers",
     )
     rrd_seeds: Int | None = Field(
         3,
@@ -764,6 +764,10 @@ class CwrendConfig(_FrozenModel):
                 )
             )
         if self.truth.model != "cw":
+            # here, not at the top: physics.truth loads numba and scipy (about 1.5 s), which
+            # `cwrend config validate` and `--help` do not need (issue 17)
+            from cwrend_cli.physics.truth import R_EARTH_KM, semi_major_axis_km
+
             perigee = semi_major_axis_km(sc.mean_motion_rad_s) * (1.0 - self.truth.eccentricity)
             if perigee <= R_EARTH_KM:
                 problems.append(

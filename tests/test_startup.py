@@ -1,0 +1,93 @@
+"""Start-up (issue 17): help and configuration commands load none of the heavy libraries.
+
+A behaviour test, not a timing test: each command runs in a fresh
+interpreter and the modules it loaded are read from ``sys.modules``. The
+wall times are measured by ``python -m benchmarks.bench_startup``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
+#: What every command paid at start-up before issue 17 (about 1.5–4 s together).
+HEAVY = ("numba", "pandas", "scipy", "matplotlib", "rerun", "pyarrow")
+#: Run a command line in-process as ``cwrend`` does, then print the heavy modules loaded.
+SCRIPT = """
+import json, sys
+from cwrend_cli.__main__ import main
+args, watched = json.loads(sys.argv[1]), set(json.loads(sys.argv[2]))
+sys.argv = ["cwrend", *args]
+try:
+    main()
+except SystemExit as exc:
+    code = exc.code
+heavy = sorted({m.split(".")[0] for m in sys.modules} & watched)
+print(json.dumps({"code": code, "heavy": heavy}), file=sys.stderr)
+"""
+
+
+def _loaded(args: list[str]) -> dict[str, object]:
+    proc = subprocess.run(
+        [sys.executable, "-c", SCRIPT, json.dumps(args), json.dumps(HEAVY)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    result: dict[str, object] = json.loads(proc.stderr.strip().splitlines()[-1])
+    return result
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--help"],
+        ["--version"],
+        ["ablate", "--help"],
+        ["sweep", "--help"],
+        ["run", "--help"],
+        ["report", "--help"],
+        ["compare", "--help"],
+        ["config", "show", str(PAPER)],
+        ["config", "show", str(PAPER), "--format", "json"],
+        ["config", "validate", str(PAPER)],
+    ],
+    ids=lambda a: " ".join(Path(x).name for x in a),
+)
+def test_command_loads_no_heavy_library(args: list[str]) -> None:
+    result = _loaded(args)
+    assert result == {"code": 0, "heavy": []}
+
+
+def test_invalid_config_is_reported_without_heavy_libraries(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[schedule]\nbeta = -1\n")
+    assert _loaded(["config", "validate", str(bad)]) == {"code": 2, "heavy": []}
+
+
+def test_a_nonlinear_truth_is_still_checked_against_the_earth(tmp_path: Path) -> None:
+    """The perigee check, whose helpers live with the compiled truth model, still runs."""
+    cfg = tmp_path / "low.toml"
+    cfg.write_text('[truth]\nmodel = "two_body"\neccentricity = 0.9\n')
+    proc = subprocess.run(
+        [sys.executable, "-m", "cwrend_cli", "config", "validate", str(cfg)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert "truth.eccentricity" in proc.stderr and "Earth's radius" in proc.stderr
+
+
+def test_a_campaign_command_still_finds_what_it_needs(tmp_path: Path) -> None:
+    """The commands import their modules themselves: a one-seed ablation runs end to end."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "c"\n')
+    proc = subprocess.run(
+        [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--arch", "mtf_adaptive",
+         "--workers", "1", "--no-rrd"],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "1 run(s) computed" in proc.stderr
