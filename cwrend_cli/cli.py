@@ -873,7 +873,7 @@ def compare(
     with user_errors():
         from cwrend_cli.campaign import compare as cmp
         from cwrend_cli.console import compare_console_tables
-        from cwrend_cli.output.files import write_parquet
+        from cwrend_cli.output.files import make_output_dir, write_parquet
         from cwrend_cli.report import write_compare_figure
 
         metrics = cmp.parse_metrics(metric)
@@ -882,9 +882,9 @@ def compare(
             out = a.resolve().parent / compare_dir(a.resolve().name, b.resolve().name)
             if (out / MANIFEST).exists():
                 raise ConfigError(f"{out} is a campaign directory: name another with --out")
-        out.mkdir(parents=True, exist_ok=True)
+        make_output_dir(out, "name another directory with --out")
         write_parquet(cmp.compare_table(result), out / COMPARE_STATS)
-        write_compare_figure(result.frame, a.name, b.name, out / COMPARE_FIGURE)
+        write_compare_figure(result.frame, a.name, b.name, out / COMPARE_FIGURE, dirs=(a, b))
         if not quiet:
             stdout = Console(highlight=False)
             stdout.print(

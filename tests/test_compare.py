@@ -228,3 +228,24 @@ def test_noise_files_with_the_same_bytes_are_the_same_noise(tmp_path: Path) -> N
         compare.match_runs(a, _hand_made(tmp_path / "b", [8e-4], str(other)))
     with pytest.raises(ConfigError, match=r"no noise\.file"):
         compare.match_runs(a, _hand_made(tmp_path / "b", [8e-4]))
+
+
+def test_the_figure_names_the_worlds_of_both_campaigns(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """cwrend compare passes both directories, so compare.png names each truth model."""
+    import cwrend_cli.report as report
+
+    seen: dict[str, object] = {}
+    real = report.write_compare_figure
+
+    def spy(*args: object, **kwargs: object) -> object:
+        seen.update(kwargs)
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(report, "write_compare_figure", spy)
+    cw = _campaign(tmp_path, "cw", "--seeds", "2")
+    j2 = _campaign(tmp_path, "j2", "--seeds", "2", "--set", 'truth.model="j2"')
+    result = _compare(cw, j2, "--out", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    assert seen["dirs"] == (cw, j2)
