@@ -438,22 +438,17 @@ def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     return out
 
 
-#: Approximate bytes a run adds to a campaign directory (steps, solves, journal).
-_STEPS_BYTES_PER_RUN = 200_000
-_OTHER_BYTES_PER_RUN = 6_000
-_RECORDING_BYTES_PER_SEED = 1_600_000
-
-
 def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
     """Say how many runs and roughly how much disk a large campaign will take."""
+    from cwrend_cli.output.files import estimated_bytes
+
     runs = len(plan.runs)
     if runs <= limits.ANNOUNCE_RUNS:
         return
     seeds, points = len(plan.seeds), max(len({r.point for r in plan.runs}), 1)
     kept = seeds if plan.steps_seeds is None else min(seeds, plan.steps_seeds)
     recorded = seeds if plan.rrd_seeds is None else min(seeds, plan.rrd_seeds)
-    size = runs * _OTHER_BYTES_PER_RUN + runs * kept / seeds * _STEPS_BYTES_PER_RUN
-    size += points * recorded * _RECORDING_BYTES_PER_SEED
+    size = estimated_bytes(runs, runs * kept // seeds, points * recorded)
     err.print(
         f"plan: {runs:,} runs ({points:,} point(s) × {seeds:,} seeds × {len(plan.archs)} "
         f"architectures), about {size / 1e9:.1f} GB of results (per-step data for "
