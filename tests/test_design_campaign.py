@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,9 @@ def test_a_sobol_design_runs_resumes_and_writes_its_indices(tmp_path: Path) -> N
     indices = pd.read_parquet(out / "sensitivity.parquet")
     assert set(indices["parameter"]) == {"schedule.beta", "schedule.kappa_mtf"}
     assert set(indices["statistic"]) == {"S1", "ST"} and (indices["n_seeds"] == 2).all()
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["grid"] == {} and manifest["design"]["design"] == "sobol"
+    assert manifest["design"]["samples"] == 4 and len(manifest["design"]["ranges"]) == 2
     again = runner.invoke(app, args)
     assert again.exit_code == 0 and len(pd.read_parquet(out / "runs.parquet")) == len(runs)
 

@@ -415,6 +415,9 @@ def new_manifest(
         "config": plan_.base,
         "config_hash": plan_.config_hash,
         "grid": {k: list(v) for k, v in plan_.grid},
+        "design": None
+        if plan_.design is None
+        else {**plan_.design.identity(), "samples": plan_.design.samples},
         "seeds": list(plan_.seeds),
         "root_seed": plan_.root_seed,
         "archs": list(plan_.archs),
