@@ -383,6 +383,13 @@ def _earlier_sessions(previous: Mapping[str, Any]) -> list[dict[str, Any]]:
     return []
 
 
+def _design_record(plan_: CampaignPlan) -> dict[str, Any] | None:
+    """A sampled design as the manifest records it (None for a grid)."""
+    if plan_.design is None:
+        return None
+    return {**plan_.design.identity(), "samples": plan_.design.samples}
+
+
 def new_manifest(
     plan_: CampaignPlan,
     *,
@@ -415,9 +422,7 @@ def new_manifest(
         "config": plan_.base,
         "config_hash": plan_.config_hash,
         "grid": {k: list(v) for k, v in plan_.grid},
-        "design": None
-        if plan_.design is None
-        else {**plan_.design.identity(), "samples": plan_.design.samples},
+        "design": _design_record(plan_),
         "seeds": list(plan_.seeds),
         "root_seed": plan_.root_seed,
         "archs": list(plan_.archs),
