@@ -16,7 +16,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
-from matplotlib.collections import PolyCollection
+from matplotlib.collections import PathCollection, PolyCollection
 from matplotlib.container import BarContainer
 from typer.testing import CliRunner
 
@@ -680,6 +680,7 @@ def test_a_design_gets_no_per_point_sweep_figures_or_table(design_dir: Path) -> 
     files = [f.file for f in figures.planned_figures(data)]
     assert "sensitivity.png" in files
     assert not [f for f in files if f.startswith("sweep_")]
+    assert [f for f in files if f.startswith("design_")] == ["design_schedule.beta.png"]
     md = report_md(data, design_dir, [])
     assert "## Sweep of" not in md and "## Sampled design" in md
     assert "2 design points over β [-]" in md
@@ -837,3 +838,22 @@ def test_compare_figure_names_the_truth_models(ablation_dir: Path, tmp_path: Pat
     path = write_compare_figure(_compare_frame(), "cw", "j2", tmp_path / "compare.png",
                                 dirs=(ablation_dir, other))  # fmt: skip
     _check_png(path)
+
+
+def test_design_figure_shows_every_point_and_a_binned_mean_per_architecture(
+    design_dir: Path,
+) -> None:
+    """Issue 19 item 4: a design figure per parameter, labelled by symbol, with bands."""
+    from cwrend_cli.report import figures
+
+    data = load_results(design_dir)
+    fig = figures.fig_design(data, "param.schedule.beta")
+    ax_m, ax_v = (ax for ax in fig.axes if ax.get_title())
+    assert ax_m.get_xlabel() == ax_v.get_xlabel() == "β [-]"
+    ok = data.runs[data.runs["status"] == "ok"]
+    for ax, column, scale in ((ax_m, "miss_km", 1e3), (ax_v, "delta_v_km_s", 1.0)):
+        dots = [c for c in ax.collections if isinstance(c, PathCollection)]
+        drawn = sorted(float(v) for c in dots for v in np.asarray(c.get_offsets())[:, 1])
+        means = ok.groupby(["arch", "point"], observed=True)[column].mean() * scale
+        assert drawn == pytest.approx(sorted(np.maximum(means.to_numpy(), 1e-6)), rel=1e-12)
+        assert len(ax.lines) == len(set(ok["arch"]))  # one binned mean per architecture

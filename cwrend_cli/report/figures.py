@@ -886,6 +886,77 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
     return _finished(fig)
 
 
+#: Bins of a design figure's trend (equal counts of design points).
+_DESIGN_BINS = 8
+
+
+def fig_design(data: ReportData, param: str) -> Figure:
+    """Mean miss and mean Δv of every design point against one sampled parameter.
+
+    A sampled design (``sweep --design``) has hundreds of points, each at its
+    own value of every parameter, so there is no line per value as in
+    :func:`fig_sweep`: each point is a dot (its mean over the seeds), and a
+    trend per architecture is drawn through :data:`_DESIGN_BINS` bins of equal
+    point counts, the mean of the bin's points with its 95 % interval (normal
+    approximation; for the miss, on a log axis, the geometric mean and the
+    interval of the log) as a band. A parameter spanning more than a decade
+    gets a log axis; a categorical one is placed at its categories.
+    """
+    runs = data.runs[data.runs["status"] == "ok"]
+    key = param.removeprefix(PARAM_PREFIX)
+    per_point = runs.groupby(["arch", "point"], observed=True).agg(
+        x=(param, "first"), miss=("miss_km", "mean"), dv=("delta_v_km_s", "mean")
+    )
+    per_point = per_point.reset_index()
+    x_all, numeric = param_values(per_point["x"])
+    levels = sorted(set(x_all)) if not numeric else []
+    xs = np.asarray([levels.index(v) for v in x_all], dtype=float) if not numeric else x_all
+    per_point["_x"] = xs
+    fig = _figure(13, 6.6)
+    ax_m, ax_v = fig.subplots(1, 2)
+    for a in data.archs:
+        g = per_point[per_point["arch"] == a].sort_values("_x")
+        if g.empty:
+            continue
+        c = arch_colour(a, data.archs.index(a))
+        for ax, column, scale, log in ((ax_m, "miss", M_PER_KM, True), (ax_v, "dv", 1.0, False)):
+            y = g[column].to_numpy(dtype=float) * scale
+            if log:
+                y = np.maximum(y, _MISS_FLOOR_M)
+            x = g["_x"].to_numpy(dtype=float)
+            ax.scatter(x, y, s=9, color=c, alpha=0.35, lw=0)
+            # the trend of a log axis is a geometric mean (its band stays positive)
+            t = np.log10(y) if log else y
+            bins = np.array_split(np.arange(len(x)), min(_DESIGN_BINS, len(x)))
+            centre = np.array([x[b].mean() for b in bins])
+            mean = np.array([t[b].mean() for b in bins])
+            half = np.array([
+                1.96 * t[b].std(ddof=1) / np.sqrt(len(b)) if len(b) > 1 else np.nan
+                for b in bins
+            ])  # fmt: skip
+            lo, mid, hi = mean - half, mean, mean + half
+            if log:
+                lo, mid, hi = 10.0**lo, 10.0**mid, 10.0**hi
+            ax.plot(centre, mid, color=c, lw=2.0)
+            ax.fill_between(centre, lo, hi, color=c, alpha=0.15, lw=0)
+    positive = numeric and np.nanmin(xs) > 0
+    for ax in (ax_m, ax_v):
+        ax.set_xlabel(param_label(key))
+        if positive and np.nanmax(xs) / np.nanmin(xs) > 10:
+            ax.set_xscale("log")
+        if not numeric:
+            ax.set_xticks(range(len(levels)), [str(v) for v in levels])
+    ax_m.set_yscale("log")
+    ax_m.set_ylabel("mean terminal miss over seeds [m]")
+    ax_m.set_title("miss per design point (dots); binned geometric mean, 95 % band")
+    ax_v.set_ylabel("mean Δv over seeds [km/s]")
+    ax_v.set_title("Δv per design point (dots); binned mean, 95 % band")
+    _legend_below(fig, _arch_handles_plain([a for a in data.archs if (runs["arch"] == a).any()]),
+                  ncol=4)  # fmt: skip
+    fig.suptitle(f"Sampled design: {param_symbol(key)[0]} ({key})")
+    return _finished(fig)
+
+
 # ---------------------------------------------------------------------------
 # Sensitivity of a sampled design (``sweep --design sobol``)
 # ---------------------------------------------------------------------------
@@ -998,6 +1069,7 @@ class SweepFigureEntry:
     file: str
     caption: str
     draw: Callable[[ReportData, str], Figure]
+    design: bool = False  # drawn for a sampled design's parameters instead of a grid's
 
 
 #: The report's figures, in the order they are drawn and listed in report.md.
@@ -1056,6 +1128,13 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "Median miss and mean Δv against `{key}`.",
         fig_sweep,
     ),
+    SweepFigureEntry(
+        "design_{key}.png",
+        "Mean miss and mean Δv of every design point against `{key}` (dots), with a binned "
+        "mean (geometric for the miss) and its 95 % band per architecture.",
+        fig_design,
+        design=True,
+    ),
     FigureEntry(
         "sensitivity.png",
         "Sensitivity of the sampled design: first-order (S1) and total (ST) Sobol indices of "
@@ -1113,7 +1192,7 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
     world = data.world
     for entry in FIGURES:
         if isinstance(entry, SweepFigureEntry):
-            for param in () if data.design else data.params:
+            for param in data.params if entry.design == data.design else ():
                 key = _file_key(param.removeprefix(PARAM_PREFIX))
                 out.append(
                     PlannedFigure(
