@@ -457,6 +457,16 @@ def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
     )
 
 
+@contextmanager
+def _second_ctrl_c_exits_130(err: Console) -> Iterator[None]:
+    """A Ctrl-C that reaches the command (a second one, while results are summarised): 130."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        err.print("interrupted: completed runs are kept; run the same command to resume")
+        raise typer.Exit(code=130) from None
+
+
 def _campaign(
     command: Literal["ablate", "sweep"],
     file: Path,
@@ -465,95 +475,82 @@ def _campaign(
     opts: CampaignOptions,
 ) -> None:
     err = Console(stderr=True, highlight=False)
-    with user_errors():
-        try:
-            _run_campaign_command(command, file, set_, params, opts, err)
-        except KeyboardInterrupt:  # a second Ctrl-C while results are summarised
-            err.print("interrupted: completed runs are kept; run the same command to resume")
-            raise typer.Exit(code=130) from None
+    with user_errors(), _second_ctrl_c_exits_130(err):
+        from cwrend_cli import campaign
+        from cwrend_cli.campaign import design, sequential
+        from cwrend_cli.config import load_config
+        from cwrend_cli.console import until_console_table
+        from cwrend_cli.output import recording
 
-
-def _run_campaign_command(
-    command: Literal["ablate", "sweep"],
-    file: Path,
-    set_: list[str] | None,
-    params: list[str],
-    opts: CampaignOptions,
-    err: Console,
-) -> None:
-    from cwrend_cli import campaign
-    from cwrend_cli.campaign import design, sequential
-    from cwrend_cli.config import load_config
-    from cwrend_cli.console import until_console_table
-    from cwrend_cli.output import recording
-
-    overrides = list(set_ or [])
-    if opts.name is not None:
-        overrides.append(f"output.name={json.dumps(opts.name)}")
-    if opts.rrd_seeds is not None and not opts.rrd:
-        raise ConfigError("--rrd-seeds sets how many seeds are recorded: drop --no-rrd")
-    if not opts.rrd or opts.rrd_seeds is not None:
-        overrides.append(f"output.rrd_seeds={0 if not opts.rrd else opts.rrd_seeds}")
-    cfg = load_config(file, overrides)
-    if cfg.output.rrd_seeds != 0:
-        recording.check_enabled()
-    if opts.executor not in ("local", "dask"):
-        raise ConfigError(f"--executor {opts.executor!r}: must be 'local' or 'dask'")
-    if opts.address and opts.executor != "dask":
-        raise ConfigError("--address needs --executor dask")
-    if opts.design is not None and opts.design not in design.DESIGNS:
-        raise ConfigError(f"--design {opts.design!r}: one of {', '.join(design.DESIGNS)}")
-    if opts.samples is not None and opts.design is None:
-        raise ConfigError("--samples sets the size of a --design")
-    archs = [a.slug for a in _parse_archs(opts.arch)]
-    out = _campaign_dir(cfg, opts.name)
-    if opts.until is None:
-        seeds = _seeds(opts.seeds, opts.seed_list)
-        plan, summary, statistics = _campaign_step(
-            command, cfg, archs, seeds, params, opts, out, err
-        )
-        achieved: list[sequential.Achieved] = []
-    else:
-        if opts.seeds is not None or opts.seed_list is not None:
-            raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
-        target = sequential.parse_until(opts.until)
-        if opts.max_seeds > limits.MAX_RUNS:
-            raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
-        for n in sequential.seed_counts(opts.batch, opts.max_seeds):
+        overrides = list(set_ or [])
+        if opts.name is not None:
+            overrides.append(f"output.name={json.dumps(opts.name)}")
+        if opts.rrd_seeds is not None and not opts.rrd:
+            raise ConfigError("--rrd-seeds sets how many seeds are recorded: drop --no-rrd")
+        if not opts.rrd or opts.rrd_seeds is not None:
+            overrides.append(f"output.rrd_seeds={0 if not opts.rrd else opts.rrd_seeds}")
+        cfg = load_config(file, overrides)
+        if cfg.output.rrd_seeds != 0:
+            recording.check_enabled()
+        if opts.executor not in ("local", "dask"):
+            raise ConfigError(f"--executor {opts.executor!r}: must be 'local' or 'dask'")
+        if opts.address and opts.executor != "dask":
+            raise ConfigError("--address needs --executor dask")
+        if opts.design is not None and opts.design not in design.DESIGNS:
+            raise ConfigError(f"--design {opts.design!r}: one of {', '.join(design.DESIGNS)}")
+        if opts.samples is not None and opts.design is None:
+            raise ConfigError("--samples sets the size of a --design")
+        archs = [a.slug for a in _parse_archs(opts.arch)]
+        out = _campaign_dir(cfg, opts.name)
+        if opts.until is None:
+            seeds = _seeds(opts.seeds, opts.seed_list)
             plan, summary, statistics = _campaign_step(
-                command, cfg, archs, list(range(n)), params, opts, out, err
+                command, cfg, archs, seeds, params, opts, out, err
             )
-            achieved = sequential.achieved(statistics.frame, target, archs)
-            if summary.interrupted or (
-                sequential.ready(n, opts.batch) and all(a.met for a in achieved)
-            ):
-                break
-            if not opts.quiet and n < opts.max_seeds:
-                widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
-                err.print(
-                    f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
-                    f"> {widest.limit:.3g}); next batch",
-                    markup=False,
+            achieved: list[sequential.Achieved] = []
+        else:
+            if opts.seeds is not None or opts.seed_list is not None:
+                raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
+            target = sequential.parse_until(opts.until)
+            if opts.max_seeds > limits.MAX_RUNS:
+                raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
+            for n in sequential.seed_counts(opts.batch, opts.max_seeds):
+                plan, summary, statistics = _campaign_step(
+                    command, cfg, archs, list(range(n)), params, opts, out, err
                 )
-    _report_campaign(command, plan, summary, statistics, out, opts, err)
-    if achieved and not opts.quiet:
-        Console(highlight=False).print(until_console_table(achieved, opts.until or ""))
-    unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
-    if unmet and not summary.interrupted and not opts.quiet:
-        err.print(f"--until not met within --max-seeds {opts.max_seeds}", markup=False)
-    if summary.interrupted:
-        asked = {r.run_key for r in plan.runs}
-        done = len(asked & campaign.held_run_keys(out))
-        err.print(
-            f"interrupted: {done} of {len(asked)} runs done ({summary.executed} computed now), "
-            f"{summary.failed} failed; run the same command to resume → {out}",
-            soft_wrap=True,
-            markup=False,
-        )
-        raise typer.Exit(code=130)
-    if summary.failed:
-        err.print("some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them")
-        raise typer.Exit(code=1)
+                achieved = sequential.achieved(statistics.frame, target, archs)
+                if summary.interrupted or (
+                    sequential.ready(n, opts.batch) and all(a.met for a in achieved)
+                ):
+                    break
+                if not opts.quiet and n < opts.max_seeds:
+                    widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
+                    err.print(
+                        f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
+                        f"> {widest.limit:.3g}); next batch",
+                        markup=False,
+                    )
+        _report_campaign(command, plan, summary, statistics, out, opts, err)
+        if achieved and not opts.quiet:
+            Console(highlight=False).print(until_console_table(achieved, opts.until or ""))
+        unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
+        if unmet and not summary.interrupted and not opts.quiet:
+            err.print(f"--until not met within --max-seeds {opts.max_seeds}", markup=False)
+        if summary.interrupted:
+            asked = {r.run_key for r in plan.runs}
+            done = len(asked & campaign.held_run_keys(out))
+            err.print(
+                f"interrupted: {done} of {len(asked)} runs done ({summary.executed} computed now), "
+                f"{summary.failed} failed; run the same command to resume → {out}",
+                soft_wrap=True,
+                markup=False,
+            )
+            raise typer.Exit(code=130)
+        if summary.failed:
+            err.print(
+                "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
+            )
+            raise typer.Exit(code=1)
 
 
 def _campaign_step(
