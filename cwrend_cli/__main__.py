@@ -10,6 +10,8 @@ handled by the command.
 
 from __future__ import annotations
 
+import faulthandler
+import signal
 import sys
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell convention).
@@ -17,7 +19,13 @@ INTERRUPTED_EXIT = 130
 
 
 def main() -> None:
-    """Run the command line; Ctrl-C during start-up exits 130 without a traceback."""
+    """Run the command line; Ctrl-C during start-up exits 130 without a traceback.
+
+    ``kill -USR1 <pid>`` prints every thread's stack to stderr (a campaign that
+    seems stuck can say where), without stopping it.
+    """
+    if hasattr(signal, "SIGUSR1"):
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         from cwrend_cli.cli import app
     except KeyboardInterrupt:

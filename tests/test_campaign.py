@@ -875,3 +875,35 @@ def test_resume_with_another_chunking_computes_only_the_missing_runs(tmp_path: P
     steps = _steps(out)
     assert len(steps) == 20 * 801  # nothing computed twice
     pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+
+
+def test_an_executor_that_lost_its_scheduler_does_not_hang_the_campaign(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A Dask client may reconnect forever while its futures wait: the driver gives up (exit 3)."""
+    import concurrent.futures
+    from contextlib import contextmanager
+
+    class _LostClient:
+        status = "connecting"  # what distributed.Client says while it looks for its scheduler
+
+    class _Stalled(concurrent.futures.Executor):
+        _client = _LostClient()
+
+        def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
+            return concurrent.futures.Future()  # never completes
+
+    @contextmanager
+    def stalled(*args: Any, **kwargs: Any) -> Any:
+        yield _Stalled(), 1
+
+    monkeypatch.setattr(driver_module, "open_executor", stalled)
+    monkeypatch.setattr(driver_module, "_POLL_S", 0.05)
+    monkeypatch.setattr(driver_module, "DASK_LOST_AFTER_S", 0.2)
+    monkeypatch.setattr(driver_module, "RETRY_BACKOFF_S", 0.0)
+    cfg = _write_config(tmp_path / "c.toml", "stalled")
+    started = time.monotonic()
+    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 3, result.output
+    assert "was lost 3 times, last: RuntimeError: the executor lost its scheduler" in result.stderr
+    assert time.monotonic() - started < 30

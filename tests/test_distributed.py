@@ -179,7 +179,14 @@ def _kill_mid_campaign(
     _wait_for_tasks(tmp_path / "results" / "dask", proc, 2)
     assert proc.poll() is None, "the kill must land mid-campaign"
     os.killpg(victim.pid, signal.SIGKILL)
-    _, stderr = proc.communicate(timeout=300)
+    try:
+        _, stderr = proc.communicate(timeout=180)
+    except subprocess.TimeoutExpired:  # say where it hangs (faulthandler on SIGUSR1), then fail
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2)
+        proc.kill()
+        _, stderr = proc.communicate()
+        pytest.fail(f"the campaign did not end after the kill:\n{stderr[-6000:]}")
     return proc.returncode, stderr
 
 

@@ -30,9 +30,11 @@ import pandas as pd
 
 from cwrend_cli.campaign import design, statistics
 from cwrend_cli.campaign.executors import (
+    DASK_LOST_AFTER_S,
     ExecutorKind,
     check_address,
     default_workers,
+    executor_alive,
     open_executor,
 )
 from cwrend_cli.campaign.journal import (
@@ -180,6 +182,8 @@ class _PointReferences:
 MAX_TASK_ATTEMPTS = 3
 #: Pause before the executor is reopened after a fault [s]; doubled on each reopening.
 RETRY_BACKOFF_S = 0.5
+#: How often the driver checks that its executor is alive while nothing completes [s].
+_POLL_S = 1.0
 
 
 def _fault_text(exc: BaseException) -> str:
@@ -390,6 +394,7 @@ def _drive(
     fatal: str | None = None
     limit = 2 * parallel
     submitted = 0
+    dead_s = 0.0  # how long the executor has been unable to deliver results
     events_path = out_dir / EVENTS
     try:
         while True:
@@ -420,7 +425,17 @@ def _drive(
                 submitted += 1
             if not in_flight:
                 break
-            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+            finished, _ = wait(in_flight, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+            if not finished:
+                dead_s = 0.0 if executor_alive(executor) else dead_s + _POLL_S
+                if dead_s >= DASK_LOST_AFTER_S:  # its futures would wait forever: all lost
+                    for _, task in in_flight.values():
+                        fault = RuntimeError("the executor lost its scheduler")
+                        fatal = fatal or _count_attempt(task, fault, attempts)
+                        lost.append(task)
+                    in_flight.clear()
+                continue
+            dead_s = 0.0
             for future in sorted(finished, key=lambda f: in_flight[f][0]):  # submission order
                 _, task = in_flight.pop(future)
                 try:

@@ -90,6 +90,21 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+#: How long a Dask client may be without its scheduler before its tasks count as lost [s].
+DASK_LOST_AFTER_S = 20.0
+
+
+def executor_alive(executor: Executor) -> bool:
+    """Whether ``executor`` can still deliver results (a Dask client still has its scheduler).
+
+    A local pool reports its breakage through its futures; a Dask client
+    that lost its scheduler may instead keep reconnecting while its futures
+    wait forever, so the driver asks this when nothing completes.
+    """
+    client = getattr(executor, "_client", None)  # distributed.cfexecutor.ClientExecutor
+    return client is None or getattr(client, "status", "running") == "running"
+
+
 def check_address(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> None:
     """Refuse a malformed or unreachable Dask scheduler address (:class:`ConfigError`, exit 2).
 
@@ -171,6 +186,6 @@ def open_executor(
         parallelism = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
         yield client.get_executor(pure=False), max(parallelism, 1)  # type: ignore[no-untyped-call]
     finally:
-        client.close()  # type: ignore[no-untyped-call]
+        client.close(timeout=DASK_CONNECT_TIMEOUT_S)  # type: ignore[no-untyped-call]
         if cluster is not None:
             cluster.close()
