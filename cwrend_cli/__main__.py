@@ -28,9 +28,10 @@ def main() -> None:
         faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         from cwrend_cli.cli import app
-    except KeyboardInterrupt:
+
+        app()  # Typer turns a Ctrl-C inside a command into exit 130 itself
+    except KeyboardInterrupt:  # while importing, or while Typer builds the command line
         sys.exit(INTERRUPTED_EXIT)
-    app()
 
 
 if __name__ == "__main__":

@@ -110,24 +110,6 @@ class _NoProgress:
         pass
 
 
-class _Counting:
-    """A :class:`Progress` that also counts the runs journaled by this invocation."""
-
-    def __init__(self, inner: Progress) -> None:
-        self.inner = inner
-        self.journaled = 0
-
-    def start(self, total: int, skipped: int) -> None:
-        self.inner.start(total, skipped)
-
-    def advance(self, ok: int, failed: int) -> None:
-        self.journaled += ok + failed
-        self.inner.advance(ok, failed)
-
-    def close(self) -> None:
-        self.inner.close()
-
-
 @dataclass(frozen=True)
 class CampaignSummary:
     """Outcome of one invocation of a campaign."""
@@ -219,7 +201,7 @@ def run_campaign(
     completed task and leaves no partial data: files of unfinished executions
     are removed on resume.
     """
-    progress = _Counting(progress or _NoProgress())
+    progress = progress or _NoProgress()
     if executor_kind == "dask" and address:
         check_address(address)  # before anything is written
     make_output_dir(out_dir, "choose another output.dir or output.name")
@@ -234,7 +216,7 @@ def run_campaign(
 def _run_locked(
     plan_: CampaignPlan,
     out_dir: Path,
-    progress: _Counting,
+    progress: Progress,
     command: str,
     executor_kind: ExecutorKind,
     workers: int | None,
@@ -248,6 +230,7 @@ def _run_locked(
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
     journal = load_journal(out_dir / EVENTS)
+    executions_before = {e.get("execution") for e in journal.runs.values()}
     remove_orphan_files(out_dir, journal.files)
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
     tasks = [
@@ -281,6 +264,9 @@ def _run_locked(
         progress.close()
         journal = load_journal(out_dir / EVENTS)
         records = list(journal.runs.values())
+        # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
+        # journal write and the progress update must not make the count lie)
+        computed = sum(e.get("execution") not in executions_before for e in records)
         ok = sum(r["status"] == "ok" for r in records)
         failed = len(records) - ok
         status = "interrupted" if interrupted else "complete"
@@ -292,7 +278,7 @@ def _run_locked(
                 manifest,
                 finished=time.time(),
                 status=status,
-                computed=progress.journaled,
+                computed=computed,
                 skipped=skipped,
                 counts={"ok": ok, "failed": failed, "runs": len(records)},
             )
@@ -305,9 +291,7 @@ def _run_locked(
             f"and kept ({failed} failed), none was recorded for this fault; fix the cause and run "
             "the same command to compute exactly the missing runs"
         )
-    return CampaignSummary(
-        out_dir, progress.journaled, skipped, ok, failed, interrupted, len(plan_.runs)
-    )
+    return CampaignSummary(out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs))
 
 
 def _check_room(out_dir: Path, plan_: CampaignPlan, first: Task) -> None:
