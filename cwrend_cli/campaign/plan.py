@@ -429,14 +429,18 @@ def plan(
     )
     tasks = []
     digests: list[str] = []
+    noises: dict[tuple[int, str | None, int], NoiseSource] = {}
     for pid, params in points:
         point_cfg = _validated(base, params, f"grid point {pid}")
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
-        noise = noise_source(point_cfg)
-        if noise.file is not None and noise.digest is not None:
-            load_noise_file(noise.file, problem.scenario.n_steps)  # refused before any run
-            digests.append(noise.digest)
+        noise_key = (point_cfg.noise.seed, point_cfg.noise.file, problem.scenario.n_steps)
+        noise = noises.get(noise_key)
+        if noise is None:  # a noise file is hashed and checked once, not once per point
+            noise = noises[noise_key] = noise_source(point_cfg)
+            if noise.file is not None and noise.digest is not None:
+                load_noise_file(noise.file, problem.scenario.n_steps)  # refused before any run
+                digests.append(noise.digest)
         for start in range(0, len(seeds), seeds_per_task):
             chunk = seeds[start : start + seeds_per_task]
             runs: list[RunSpec] = []
