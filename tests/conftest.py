@@ -100,3 +100,27 @@ def paper_costates(
         lam = result.costate
         out[eps] = lam.copy()
     return out
+
+
+@pytest.fixture(scope="session")
+def refused_override() -> Callable[[str], str]:
+    """``cwrend config validate`` of the paper scenario with one ``--set`` that must be refused.
+
+    Checks what every refusal must do (exit code 2, no traceback) and returns
+    stderr, for the test to check the message names the field.
+    """
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from cwrend_cli.cli import app
+
+    paper = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
+
+    def validate(override: str) -> str:
+        result = CliRunner().invoke(app, ["config", "validate", str(paper), "--set", override])
+        assert result.exit_code == 2, result.output
+        assert "Traceback" not in result.output
+        return result.stderr
+
+    return validate

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -306,11 +307,10 @@ def test_actuator_noise_leaves_the_dispersions_alone() -> None:
         ("actuator.wobble=1.0", "actuator.wobble: unknown key"),
     ],
 )
-def test_bad_actuator_values_exit_2_naming_the_field(override: str, message: str) -> None:
-    result = runner.invoke(app, ["config", "validate", str(PAPER), "--set", override])
-    assert result.exit_code == 2
-    assert message in result.stderr
-    assert "Traceback" not in result.output
+def test_bad_actuator_values_exit_2_naming_the_field(
+    override: str, message: str, refused_override: Callable[[str], str]
+) -> None:
+    assert message in refused_override(override)
 
 
 def test_config_show_lists_the_actuator_section() -> None:

@@ -26,6 +26,7 @@ References:
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -233,11 +234,11 @@ def test_a_fault_without_its_draws_is_refused(paper_refs: simulation.References)
         ("degradation.windows.1.bias_drift_km_per_sqrt_s=-1e-4", "bias_drift_km_per_sqrt_s"),
     ],
 )
-def test_bad_fault_values_exit_2_naming_the_field(override: str, message: str) -> None:
-    result = runner.invoke(app, ["config", "validate", str(PAPER), "--set", override])
-    assert result.exit_code == 2
-    assert "degradation.windows." in result.stderr and message in result.stderr
-    assert "Traceback" not in result.output
+def test_bad_fault_values_exit_2_naming_the_field(
+    override: str, message: str, refused_override: Callable[[str], str]
+) -> None:
+    stderr = refused_override(override)
+    assert "degradation.windows." in stderr and message in stderr
 
 
 def test_run_with_a_dropout_set_on_the_command_line(tmp_path: Path) -> None:
