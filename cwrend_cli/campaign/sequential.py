@@ -76,16 +76,6 @@ class Target:
     relative: bool  # half_width is a fraction of |value|
     pair: tuple[str, str] | None = None  # a paired difference A − B, else every architecture
 
-    def describe(self) -> str:
-        """The target as a phrase for the console."""
-        what = f"{self.statistic} {self.metric}"
-        if self.pair:
-            what += f" ({self.pair[0]} − {self.pair[1]})"
-        width = (
-            f"{100 * self.half_width:g} % of the value" if self.relative else f"{self.half_width:g}"
-        )
-        return f"95 % half-width of {what} ≤ {width}"
-
 
 def parse_until(text: str) -> Target:
     """Parse ``--until``; :class:`ConfigError` with the syntax on a bad target."""
