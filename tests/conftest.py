@@ -10,8 +10,10 @@ energy-optimal costate (SPEC §1–2).
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cwrend_cli.config import CwrendConfig
@@ -109,8 +111,6 @@ def refused_override() -> Callable[[str], str]:
     Checks what every refusal must do (exit code 2, no traceback) and returns
     stderr, for the test to check the message names the field.
     """
-    from pathlib import Path
-
     from typer.testing import CliRunner
 
     from cwrend_cli.cli import app
@@ -124,3 +124,32 @@ def refused_override() -> Callable[[str], str]:
         return result.stderr
 
     return validate
+
+
+@pytest.fixture(scope="session")
+def mtf_sweep() -> Callable[..., pd.DataFrame]:
+    """``cwrend sweep`` of a campaign file, ``mtf_adaptive`` only: its ``runs.parquet``.
+
+    ``run(tmp_path, name, body, seeds=2)`` writes ``body`` (TOML after an
+    ``[output]`` table without recordings) to ``tmp_path/<name>.toml``, sweeps
+    it with one worker into ``tmp_path/<name>/`` (exit code 0 checked) and
+    returns the runs sorted by point and seed. The dispersion and sweep tests
+    of the actuator, the sensor faults and the truth model check each run
+    against a single run of its own configuration
+    (:func:`cwrend_cli.campaign.run_case`).
+    """
+    from typer.testing import CliRunner
+
+    from cwrend_cli.cli import app
+
+    def run(tmp_path: Path, name: str, body: str, seeds: int = 2) -> pd.DataFrame:
+        path = tmp_path / f"{name}.toml"
+        path.write_text("[output]\nrrd_seeds = 0\n" + body)
+        args = ["sweep", str(path), "--seeds", str(seeds), "--workers", "1", "--no-rrd", "-q",
+                "--arch", "mtf_adaptive", "--set", f"output.dir={str(tmp_path)!r}"]  # fmt: skip
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 0, result.output
+        runs = pd.read_parquet(tmp_path / name / "runs.parquet")
+        return runs.sort_values(["point", "seed"]).reset_index(drop=True)
+
+    return run

@@ -335,18 +335,11 @@ def test_run_with_actuator_errors_set_on_the_command_line(tmp_path: Path) -> Non
     assert '"magnitude_sigma": 0.01' in (out / "config.json").read_text()
 
 
-def test_a_dispersed_misalignment_is_applied_per_run(tmp_path: Path) -> None:
-    (tmp_path / "disp.toml").write_text(
-        "[output]\nrrd_seeds = 0\n"
-        '[dispersions]\n"actuator.misalignment_deg.2" = { dist = "normal", std = 1.0 }\n'
-    )
-    result = runner.invoke(
-        app,
-        ["sweep", str(tmp_path / "disp.toml"), "--seeds", "2", "--workers", "1", "--no-rrd",
-         "-q", "--arch", "mtf_adaptive", "--set", f"output.dir={str(tmp_path)!r}"],
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
-    runs = pd.read_parquet(tmp_path / "disp" / "runs.parquet").sort_values("seed")
+def test_a_dispersed_misalignment_is_applied_per_run(
+    tmp_path: Path, mtf_sweep: Callable[..., pd.DataFrame]
+) -> None:
+    body = '[dispersions]\n"actuator.misalignment_deg.2" = { dist = "normal", std = 1.0 }\n'
+    runs = mtf_sweep(tmp_path, "disp", body)
     angles = runs["disp.actuator.misalignment_deg.2"].to_numpy()
     assert angles[0] != angles[1] and np.all(np.abs(angles) < 6.0)
     for seed, angle, miss in zip(runs["seed"], angles, runs["miss_km"], strict=True):

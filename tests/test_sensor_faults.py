@@ -254,21 +254,17 @@ def test_run_with_a_dropout_set_on_the_command_line(tmp_path: Path) -> None:
     assert nis.loc[251.0:325.0].isna().all() and nis.loc[326.0:].notna().all()
 
 
-def test_a_dispersed_fault_is_applied_per_run(tmp_path: Path) -> None:
+def test_a_dispersed_fault_is_applied_per_run(
+    tmp_path: Path, mtf_sweep: Callable[..., pd.DataFrame]
+) -> None:
     key = "degradation.windows.1.outlier_probability"
-    (tmp_path / "disp.toml").write_text(
-        "[output]\nrrd_seeds = 0\n[[degradation.windows]]\nstart_s = 250.0\nend_s = 325.0\n"
+    body = (
+        "[[degradation.windows]]\nstart_s = 250.0\nend_s = 325.0\n"
         "r_scale = 300.0\n[[degradation.windows]]\nstart_s = 325.0\nend_s = 400.0\n"
         "r_scale = 300.0\nbias_km = [0.010, -0.008, 0.012]\noutlier_scale = 20.0\n"
         f'[dispersions]\n"{key}" = {{ dist = "uniform", low = 0.0, high = 0.5 }}\n'
     )
-    result = runner.invoke(
-        app,
-        ["sweep", str(tmp_path / "disp.toml"), "--seeds", "2", "--workers", "1", "--no-rrd",
-         "-q", "--arch", "mtf_adaptive", "--set", f"output.dir={str(tmp_path)!r}"],
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
-    runs = pd.read_parquet(tmp_path / "disp" / "runs.parquet").sort_values("seed")
+    runs = mtf_sweep(tmp_path, "disp", body)
     probs = runs[f"disp.{key}"].to_numpy()
     assert probs[0] != probs[1] and np.all((probs >= 0) & (probs <= 0.5))
     for seed, prob, miss in zip(runs["seed"], probs, runs["miss_km"], strict=True):

@@ -271,21 +271,14 @@ def test_a_chief_below_the_surface_is_refused() -> None:
 
 
 def test_a_sweep_over_the_truth_model_and_a_fault_runs_each_point_as_configured(
-    tmp_path: Path,
+    tmp_path: Path, mtf_sweep: Callable[..., pd.DataFrame]
 ) -> None:
     """Issue 15 item 5: the new fields sweep like any other; each point is its config."""
-    (tmp_path / "mismatch.toml").write_text(
-        "[output]\nrrd_seeds = 0\n"
+    body = (
         '[sweep]\n"truth.model" = ["cw", "j2"]\n'
         '"degradation.windows.1.dropout_probability" = [0.0, 0.5]\n'
     )
-    result = runner.invoke(
-        app,
-        ["sweep", str(tmp_path / "mismatch.toml"), "--seeds", "1", "--workers", "1",
-         "--no-rrd", "-q", "--arch", "mtf_adaptive", "--set", f"output.dir={str(tmp_path)!r}"],
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
-    runs = pd.read_parquet(tmp_path / "mismatch" / "runs.parquet")
+    runs = mtf_sweep(tmp_path, "mismatch", body, seeds=1)
     assert len(runs) == 4 and (runs["status"] == "ok").all()
     assert set(runs["param.truth.model"]) == {"cw", "j2"}
     for _, row in runs.iterrows():
