@@ -70,3 +70,133 @@ def test_paired_share_of_seeds_where_mtf_misses_less() -> None:
     assert row["other"].item() == "plain_adaptive"
     assert row["value"].item() == pytest.approx(0.5)  # seeds 0 and 1 of 0–3
     assert row["n"].item() == 4
+
+
+# ---------------------------------------------------------------------------
+# The batched statistics (issue 17) give the numbers of the per-group loop
+# ---------------------------------------------------------------------------
+
+
+def _scipy_interval(x: np.ndarray, fn: object, rng: np.random.Generator) -> tuple[float, float]:
+    """One ``scipy.stats.bootstrap`` call as statistics.bootstrap_ci made it before issue 17."""
+    from scipy import stats
+
+    x = np.asarray(x, dtype=float)
+    if x.size < 2:
+        return float("nan"), float("nan")
+    if np.ptp(x) == 0.0:
+        value = float(fn(x))  # type: ignore[operator]
+        return value, value
+    res = stats.bootstrap(
+        (x,), fn, n_resamples=statistics.N_RESAMPLES, confidence_level=statistics.CONFIDENCE,
+        method="percentile", vectorized=True, rng=rng,
+    )  # fmt: skip
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def test_batched_bootstrap_is_scipy_bootstrap_called_in_order_bit_for_bit() -> None:
+    """Samples of mixed sizes (runs of equal size drawn in one call), constant and short ones."""
+    gen = np.random.default_rng(3)
+    sizes = [5, 5, 5, 1, 40, 40, 3, 3, 0, 2, 40, 5]
+    samples = [gen.lognormal(size=n) for n in sizes]
+    samples[6] = np.full(3, 0.25)  # constant: no draw
+    fns = [statistics.STATISTICS[k] for k in ("mean", "median", "p95")] * 4
+    got = statistics.bootstrap_cis(samples, fns, np.random.default_rng(11))
+    rng = np.random.default_rng(11)
+    want = np.array([_scipy_interval(x, f, rng) for x, f in zip(samples, fns, strict=True)])
+    np.testing.assert_array_equal(got, want)
+
+
+def _old_describe(runs: pd.DataFrame, by: list[str], seed: int) -> pd.DataFrame:
+    """The per-group loop of statistics.describe before issue 17 (the oracle)."""
+    ok = runs[runs["status"] == "ok"]
+    rng = np.random.default_rng(seed)
+    rows = []
+    for keys, group in ok.groupby(by, sort=True, observed=True):
+        ident = dict(zip(by, keys, strict=True))
+        n = len(group)
+        for metric in statistics.METRICS:
+            x = group[metric].to_numpy(dtype=float)
+            for name, fn in statistics.STATISTICS.items():
+                lo, hi = _scipy_interval(x, fn, rng)
+                rows.append({**ident, "kind": "marginal", "metric": metric, "statistic": name,
+                             "value": float(fn(x)), "ci_low": lo, "ci_high": hi,
+                             "n": n})  # fmt: skip
+        for metric, name, fn in statistics.SOLVE_STATISTICS:
+            x = group[metric].to_numpy(dtype=float)
+            rows.append({**ident, "kind": "marginal", "metric": metric, "statistic": name,
+                         "value": float(fn(x)), "ci_low": np.nan, "ci_high": np.nan,
+                         "n": n})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _old_paired(runs: pd.DataFrame, by: list[str], seed: int) -> pd.DataFrame:
+    """The per-group loop of statistics.paired before issue 17 (the oracle)."""
+    ok = runs[runs["status"] == "ok"]
+    rng = np.random.default_rng(seed + 1)
+    rows = []
+    groups = ok.groupby(by, sort=True, observed=True) if by else [((), ok)]
+    for keys, group in groups:
+        ident = dict(zip(by, keys, strict=True))
+        wide = group.pivot_table(index="seed", columns="arch", values=["miss_km", "delta_v_km_s"])
+        for a, b in statistics.PAIRS:
+            if ("miss_km", a) not in wide.columns or ("miss_km", b) not in wide.columns:
+                continue
+            cols = [("miss_km", a), ("miss_km", b), ("delta_v_km_s", a), ("delta_v_km_s", b)]
+            both = wide[cols].dropna()
+            n = len(both)
+            if n == 0:
+                continue
+            less = int((both[("miss_km", a)] < both[("miss_km", b)]).sum())
+            lo, hi = statistics.wilson_ci(less, n)
+            base = {**ident, "kind": "paired", "arch": a, "other": b, "n": n}
+            rows.append({**base, "metric": "miss_km", "statistic": "frac_less",
+                         "value": less / n, "ci_low": lo, "ci_high": hi})  # fmt: skip
+            for metric, name, fn in (("miss_km", "median_diff", np.median),
+                                     ("delta_v_km_s", "mean_diff", np.mean)):  # fmt: skip
+                diff = (both[(metric, a)] - both[(metric, b)]).to_numpy()
+                lo, hi = _scipy_interval(diff, fn, rng)
+                rows.append({**base, "metric": metric, "statistic": name,
+                             "value": float(fn(diff)), "ci_low": lo, "ci_high": hi})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _sweep_runs() -> pd.DataFrame:
+    """Three grid points × 4 architectures: 12, 1 and 3 seeds, failures, a constant metric."""
+    gen = np.random.default_rng(5)
+    archs = ("mtf_adaptive", "mtf_fixed", "plain_adaptive", "plain_fixed")
+    rows = []
+    for point, beta, seeds in (("p0", 0.25, 12), ("p1", 0.5, 1), ("p2", 0.75, 3)):
+        for seed in range(seeds):
+            for arch in archs:
+                rows.append(
+                    {"point": point, "param.schedule.beta": beta, "arch": arch, "seed": seed,
+                     "status": "failed" if (seed, arch) == (2, "mtf_fixed") else "ok",
+                     "miss_km": gen.lognormal(-6), "delta_v_km_s": gen.normal(0.14, 0.002),
+                     "fuel_penalty_pct": 24.0 if point == "p2" else gen.normal(25, 1),
+                     "solve_success_pct": 100.0, "solve_mean_ms": gen.uniform(0.1, 3),
+                     "solve_max_ms": gen.uniform(3, 90), "n_infeasible": int(seed % 2)}
+                )  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+@pytest.mark.parametrize("by", [["arch"], ["point", "param.schedule.beta", "arch"]])
+def test_describe_gives_the_numbers_of_the_per_group_loop(by: list[str]) -> None:
+    runs = _sweep_runs()
+    pd.testing.assert_frame_equal(
+        statistics.describe(runs, by, seed=4), _old_describe(runs, by, 4), check_exact=True
+    )
+
+
+@pytest.mark.parametrize("by", [[], ["point", "param.schedule.beta"]])
+def test_paired_gives_the_numbers_of_the_per_group_loop(by: list[str]) -> None:
+    runs = _sweep_runs()
+    pd.testing.assert_frame_equal(
+        statistics.paired(runs, by, seed=4), _old_paired(runs, by, 4), check_exact=True
+    )
+
+
+def test_no_ok_run_gives_no_rows() -> None:
+    runs = _runs().assign(status="failed")
+    assert statistics.describe(runs, ["arch"]).empty
+    assert statistics.paired(runs).empty
