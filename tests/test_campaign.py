@@ -395,25 +395,35 @@ def _events_done(path: Path) -> int:
     return sum(e["event"] == "task_done" for e in journal.read_events(path))
 
 
-def _assert_same_as_uninterrupted(
-    tmp_path: Path, out: Path, args: list[str], runs: int, extra: str = ""
-) -> None:
-    """``out`` holds exactly what the same subprocess command computes in one go, nothing twice.
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The interrupted campaigns below, computed in one go: a 40-seed ablation of ADAPTIVE.
 
-    ``args`` is ``[python, -m, cwrend_cli, command, config, ...]``; the
-    uninterrupted campaign runs the same options on a copy of the config.
+    Runs are keyed by point, architecture and seed, not by task, worker or
+    session (``test_resume_with_another_chunking_computes_only_the_missing_runs``,
+    ``test_numbers_do_not_depend_on_workers_or_executor``): a campaign of the
+    first ``n`` seeds holds exactly this campaign's runs of those seeds. So one
+    in-process, one-worker campaign is the reference of every kill and Ctrl-C
+    test (it was a subprocess campaign per test, with their chunking and workers).
     """
-    whole_cfg = _write_config(tmp_path / "w.toml", "whole", extra)
-    whole = subprocess.run([*args[:4], str(whole_cfg), *args[5:]], capture_output=True,
-                           text=True, timeout=300)  # fmt: skip
-    assert whole.returncode == 0, whole.stderr
-    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
-    steps = _steps(out)
-    assert len(steps) == runs * 801  # nothing duplicated, nothing left by lost executions
-    pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+    cfg = _write_config(tmp_path_factory.mktemp("uninterrupted") / "w.toml", "whole")
+    result = _cli("ablate", str(cfg), "--seeds", "40", "--arch", ADAPTIVE, "--workers", "1", "-q",
+                  "--no-rrd")  # fmt: skip
+    assert result.exit_code == 0, result.output
+    return cfg.parent / "results" / "whole"
 
 
-def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
+def _assert_same_as_uninterrupted(out: Path, whole: Path, seeds: int) -> None:
+    """``out`` holds exactly the runs and steps of seeds ``0 … seeds - 1`` of ``whole``."""
+    runs, expected = _runs(out), _runs(whole)
+    pd.testing.assert_frame_equal(runs, expected[expected["seed"] < seeds].reset_index(drop=True))
+    steps, expected_steps = _steps(out), _steps(whole)
+    assert len(steps) == seeds * 2 * 801  # nothing duplicated, nothing left by lost executions
+    expected_steps = expected_steps[expected_steps["seed"] < seeds].reset_index(drop=True)
+    pd.testing.assert_frame_equal(steps, expected_steps, check_exact=True)
+
+
+def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path, uninterrupted: Path) -> None:
     """SIGKILL mid-campaign, then resume: same tables as an uninterrupted run, no duplicates."""
     cfg = _write_config(tmp_path / "c.toml", "killed", "seeds_per_task = 4\n")
     out = tmp_path / "results" / "killed"
@@ -430,9 +440,9 @@ def test_killed_campaign_resumes_to_the_same_tables(tmp_path: Path) -> None:
     proc.wait()
     done_before = _events_done(out / "events.jsonl")
     assert 0 < done_before < 6, "the kill should land mid-campaign (6 tasks of 4 seeds)"
-    resumed = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300)
-    assert resumed.returncode == 0, resumed.stderr
-    _assert_same_as_uninterrupted(tmp_path, out, args, runs=48)
+    resumed = _cli(*args[3:])  # the same command, in-process
+    assert resumed.exit_code == 0, resumed.output
+    _assert_same_as_uninterrupted(out, uninterrupted, seeds=24)
 
 
 def _children(pid: int) -> list[int]:
@@ -515,7 +525,9 @@ def test_manifest_keeps_every_session(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
-def test_a_killed_worker_is_replaced_and_its_task_rerun(tmp_path: Path) -> None:
+def test_a_killed_worker_is_replaced_and_its_task_rerun(
+    tmp_path: Path, uninterrupted: Path
+) -> None:
     """kill -9 of one pool worker: every run ends ok, identical to an uninterrupted campaign."""
     cfg = _write_config(tmp_path / "c.toml", "workerkill", "seeds_per_task = 2\n")
     out = tmp_path / "results" / "workerkill"
@@ -536,7 +548,7 @@ def test_a_killed_worker_is_replaced_and_its_task_rerun(tmp_path: Path) -> None:
     assert len(runs) == 48 and (runs["status"] == "ok").all()  # nothing recorded as failed
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["status"] == "complete"
-    _assert_same_as_uninterrupted(tmp_path, out, args, runs=48)
+    _assert_same_as_uninterrupted(out, uninterrupted, seeds=24)
 
 
 def test_a_full_disk_stops_the_campaign_with_exit_3_and_records_no_result(
@@ -710,7 +722,7 @@ def test_a_second_process_on_the_same_campaign_is_refused(tmp_path: Path) -> Non
 
 
 def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
-    tmp_path: Path,
+    tmp_path: Path, uninterrupted: Path
 ) -> None:
     """SIGINT to the process group: exit 130 within seconds, true counts, identical resume."""
     cfg = _write_config(tmp_path / "c.toml", "ctrlc", "seeds_per_task = 2\n")
@@ -734,9 +746,11 @@ def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     assert f"interrupted: {held} of 80 runs done ({held} computed now), 0 failed" in stderr
     assert "run the same command to resume" in stderr and "Traceback" not in stderr
     assert json.loads((out / "manifest.json").read_text())["status"] == "interrupted"
-    resumed = subprocess.run(args, capture_output=True, text=True, timeout=300)
-    assert resumed.returncode == 0, resumed.stderr
-    _assert_same_as_uninterrupted(tmp_path, out, args, runs=80, extra="seeds_per_task = 2\n")
+    # what Ctrl-C left must resume to the same tables: the same command, in-process and on
+    # one worker (a two-worker pool costs ~10 s of start-up; the numbers do not depend on it)
+    resumed = _cli(*args[3 : args.index("--workers")], "--workers", "1", "--no-rrd")
+    assert resumed.exit_code == 0, resumed.output
+    _assert_same_as_uninterrupted(out, uninterrupted, seeds=40)
 
 
 def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) -> None:
