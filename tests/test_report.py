@@ -62,6 +62,23 @@ def _report(results: Path, *args: str):
     return runner.invoke(app, ["report", str(results), *args], catch_exceptions=False)
 
 
+@pytest.fixture(name="unrendered")
+def _unrendered(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Figures drawn but not rasterised: ``Figure.savefig`` writes the PNG signature only.
+
+    For the tests of report.md, of the files a report writes and of the data
+    it reads: every figure is still drawn (its data loaded, its artists made),
+    only the rasterising, ~3 s of a report's ~3.5 s, is left out. The tests
+    that check the PNGs themselves (:func:`_check_png`) rasterise.
+    """
+    from matplotlib.figure import Figure
+
+    def savefig(self: Figure, fname: Any, *args: Any, **kwargs: Any) -> None:
+        Path(fname).write_bytes(PNG_MAGIC)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+
+
 # ---------------------------------------------------------------------------
 # A `cwrend run` directory
 # ---------------------------------------------------------------------------
@@ -108,7 +125,7 @@ def test_report_md_holds_the_table(run_dir: Path, run_report) -> None:
         assert f"]({name})" in md
 
 
-def test_report_is_rewritten_in_place(run_dir: Path, run_report) -> None:
+def test_report_is_rewritten_in_place(run_dir: Path, run_report, unrendered: None) -> None:
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output
     names = sorted(p.name for p in (run_dir / "report").iterdir())
@@ -195,10 +212,17 @@ def ablation_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _write_campaign(root, [("base", {})], seeds=(0, 1, 2), with_refs=True)
 
 
-def test_report_of_a_multi_seed_campaign(ablation_dir: Path) -> None:
-    result = _report(ablation_dir)
+@pytest.fixture(scope="module")
+def ablation_report(ablation_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``cwrend report`` of a copy of the hand-made ablation (figures rasterised): its copy."""
+    root = _copy(ablation_dir, tmp_path_factory.mktemp("reported") / "ablation")
+    result = _report(root)
     assert result.exit_code == 0, result.output
-    report_dir = ablation_dir / "report"
+    return root
+
+
+def test_report_of_a_multi_seed_campaign(ablation_report: Path) -> None:
+    report_dir = ablation_report / "report"
     for name in (*PER_SEED, *MULTI_SEED):
         _check_png(report_dir / name)
     md = (report_dir / "report.md").read_text(encoding="utf-8")
@@ -207,11 +231,12 @@ def test_report_of_a_multi_seed_campaign(ablation_dir: Path) -> None:
     assert "noise seed **0**" in md
 
 
-def test_campaign_seed_selection(ablation_dir: Path) -> None:
-    summary = write_report(ablation_dir, seed=2)
+def test_campaign_seed_selection(ablation_dir: Path, tmp_path: Path, unrendered: None) -> None:
+    root = _copy(ablation_dir, tmp_path / "seed2")
+    summary = write_report(root, seed=2)
     assert summary.layout == "campaign" and summary.seed == 2
     assert "noise seed **2**" in (summary.out_dir / "report.md").read_text(encoding="utf-8")
-    result = _report(ablation_dir, "--seed", "999999")  # exists, but failed: no steps
+    result = _report(root, "--seed", "999999")  # exists, but failed: no steps
     assert result.exit_code == 2 and "error:" in result.output
 
 
@@ -264,7 +289,7 @@ def _scale_control(path: Path, factor: float) -> None:
 
 
 def test_campaign_report_uses_the_references_the_campaign_stored(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, unrendered: None
 ) -> None:
     args = ["sweep", str(PAPER), "-p", "schedule.beta=0.25,0.5", "-n", "2", "-w", "1", "-q",
             "-a", ",".join(CAMPAIGN_ARCHS), "--name", "c",
@@ -287,7 +312,7 @@ def test_campaign_report_uses_the_references_the_campaign_stored(
 
 
 def test_campaign_report_reads_the_reported_points_references(
-    sweep_dir: Path, tmp_path: Path, no_physics: None
+    sweep_dir: Path, tmp_path: Path, no_physics: None, unrendered: None
 ) -> None:
     root = _copy(sweep_dir, tmp_path / "sweep")
     _scale_control(root / "references" / "p_a.parquet", 2.0)  # the reported point
@@ -357,7 +382,9 @@ def _stat(stats: pd.DataFrame, **match: str) -> pd.Series:
     return sel.loc[index]
 
 
-def test_report_md_tables_carry_the_stored_intervals(ablation_dir: Path, tmp_path: Path) -> None:
+def test_report_md_tables_carry_the_stored_intervals(
+    ablation_dir: Path, tmp_path: Path, unrendered: None
+) -> None:
     root = _copy(ablation_dir, tmp_path / "tampered")
     stats = pd.read_parquet(root / "ablation.parquet")
     # shift the stored intervals: the report must show these, never recompute them
@@ -382,7 +409,9 @@ def test_report_md_tables_carry_the_stored_intervals(ablation_dir: Path, tmp_pat
     assert pair[3] == f"{med.value * 1e3:.2f} [{med.ci_low * 1e3:.2f}, {med.ci_high * 1e3:.2f}]\\*"
 
 
-def test_intervals_from_fewer_than_10_seeds_are_flagged(ablation_dir: Path, tmp_path: Path) -> None:
+def test_intervals_from_fewer_than_10_seeds_are_flagged(
+    ablation_dir: Path, tmp_path: Path, unrendered: None
+) -> None:
     note = "fewer than 10 seeds: bootstrap interval unreliable"
     md = report_md(load_results(ablation_dir), ablation_dir, [])  # 3 seeds
     assert note in md
@@ -395,7 +424,9 @@ def test_intervals_from_fewer_than_10_seeds_are_flagged(ablation_dir: Path, tmp_
     assert _row(text.split("## Over")[1], "MTF KF, adaptive ε")[2].endswith("]")
 
 
-def test_report_md_without_a_statistics_file(ablation_dir: Path, tmp_path: Path) -> None:
+def test_report_md_without_a_statistics_file(
+    ablation_dir: Path, tmp_path: Path, unrendered: None
+) -> None:
     root = _copy(ablation_dir, tmp_path / "nostats")
     (root / "ablation.parquet").unlink()
     md = (write_report(root).out_dir / "report.md").read_text(encoding="utf-8")
@@ -481,7 +512,9 @@ def test_sweep_figure_bands_are_the_stored_intervals(sweep_dir: Path, tmp_path: 
     assert _band_limits(bare.axes[0]) == [] and _band_limits(bare.axes[1]) == []
 
 
-def test_point_picks_the_grid_point_of_figs_1_to_5(sweep_dir: Path, tmp_path: Path) -> None:
+def test_point_picks_the_grid_point_of_figs_1_to_5(
+    sweep_dir: Path, tmp_path: Path, unrendered: None
+) -> None:
     root = _copy(sweep_dir, tmp_path / "pick")
     result = _report(root, "--point", "p_b")
     assert result.exit_code == 0, result.output
@@ -516,11 +549,9 @@ def test_fig1_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
         assert all(ax.get_lines()[i].get_linewidth() == figures.REF_LW_FIG1 for i in refs)
 
 
-def test_report_html_is_self_contained(ablation_dir: Path, tmp_path: Path) -> None:
-    root = _copy(ablation_dir, tmp_path / "html")
-    summary = write_report(root)
-    page = (summary.out_dir / "report.html").read_text(encoding="utf-8")
-    pngs = [p for p in summary.files if p.suffix == ".png"]
+def test_report_html_is_self_contained(ablation_report: Path) -> None:
+    page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
+    pngs = list((ablation_report / "report").glob("*.png"))
     assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 1
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
