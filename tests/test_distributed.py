@@ -23,8 +23,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from typer.testing import CliRunner
 
 from cwrend_cli.campaign import journal
+from cwrend_cli.cli import app
 
 pytestmark = pytest.mark.skipif(shutil.which("dask") is None, reason="needs Dask distributed")
 
@@ -103,7 +105,18 @@ class Cluster:
 
 @pytest.fixture
 def cluster(tmp_path: Path) -> Iterator[Cluster]:
+    """A cluster of the test's own, for the tests that kill one of its processes."""
     c = Cluster(tmp_path, workers=2)
+    try:
+        yield c
+    finally:
+        c.stop()
+
+
+@pytest.fixture(scope="module")
+def shared_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
+    """One cluster for the tests that leave it whole (its workers stay warm between them)."""
+    c = Cluster(tmp_path_factory.mktemp("shared_cluster"), workers=2)
     try:
         yield c
     finally:
@@ -140,20 +153,38 @@ def _events_done(out: Path) -> int:
     return sum(e["event"] == "task_done" for e in journal.read_events(out / "events.jsonl"))
 
 
-def _reference(tmp_path: Path, seeds: int) -> Path:
-    result = _cwrend("ablate", str(_config(tmp_path, "local")), "--seeds", str(seeds),
-                     "--arch", ARCHS, "--workers", "1", "-q")  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    return tmp_path / "results" / "local"
+def _cli(*args: str) -> None:
+    """A cwrend command in-process (the local references: nothing distributed about them)."""
+    result = CliRunner().invoke(app, list(args))
+    assert result.exit_code == 0, result.output
 
 
-def test_a_dask_cluster_gives_the_numbers_of_one_worker(tmp_path: Path, cluster: Cluster) -> None:
+@pytest.fixture(scope="module")
+def local(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The 16-seed ablation of ARCHS on one local worker: the numbers every Dask campaign must give.
+
+    Runs are keyed by point, architecture and seed: a campaign of the first n
+    seeds holds exactly this one's runs of those seeds (see :func:`_first_seeds`).
+    """
+    tmp = tmp_path_factory.mktemp("local")
+    _cli("ablate", str(_config(tmp, "local")), "--seeds", "16", "--arch", ARCHS, "--workers", "1",
+         "-q")  # fmt: skip
+    return tmp / "results" / "local"
+
+
+def _first_seeds(frame: pd.DataFrame, seeds: int) -> pd.DataFrame:
+    return frame[frame["seed"] < seeds].reset_index(drop=True)
+
+
+def test_a_dask_cluster_gives_the_numbers_of_one_worker(
+    tmp_path: Path, shared_cluster: Cluster, local: Path
+) -> None:
     result = _cwrend("ablate", str(_config(tmp_path, "dask")), "--seeds", "6", "--arch", ARCHS,
-                     "--executor", "dask", "--address", cluster.address, "-q")  # fmt: skip
+                     "--executor", "dask", "--address", shared_cluster.address, "-q")  # fmt: skip
     assert result.returncode == 0, result.stderr
-    out, local = tmp_path / "results" / "dask", _reference(tmp_path, 6)
-    pd.testing.assert_frame_equal(_runs(out), _runs(local))
-    pd.testing.assert_frame_equal(_steps(out), _steps(local), check_exact=True)
+    out = tmp_path / "results" / "dask"
+    pd.testing.assert_frame_equal(_runs(out), _first_seeds(_runs(local), 6))
+    pd.testing.assert_frame_equal(_steps(out), _first_seeds(_steps(local), 6), check_exact=True)
 
 
 def _start_campaign(tmp_path: Path, cluster: Cluster, seeds: int) -> subprocess.Popen[str]:
@@ -191,14 +222,13 @@ def _kill_mid_campaign(
 
 
 def test_a_killed_dask_worker_loses_no_run_and_duplicates_none(
-    tmp_path: Path, cluster: Cluster
+    tmp_path: Path, cluster: Cluster, local: Path
 ) -> None:
     out = tmp_path / "results" / "dask"
     returncode, stderr = _kill_mid_campaign(tmp_path, cluster, 16, cluster.workers[0])
     assert returncode == 0, stderr  # Dask reran the dead worker's tasks on the other
     runs = _runs(out)
     assert len(runs) == 32 and (runs["status"] == "ok").all()
-    local = _reference(tmp_path, 16)
     pd.testing.assert_frame_equal(runs, _runs(local))
     pd.testing.assert_frame_equal(_steps(out), _steps(local), check_exact=True)
 
@@ -216,7 +246,7 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
 
 
 def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
-    tmp_path: Path, cluster: Cluster
+    tmp_path: Path, shared_cluster: Cluster
 ) -> None:
     """Issue 19: a design campaign end to end on the Dask executor, resumed, equal to local."""
     ranges = '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n'
@@ -224,14 +254,12 @@ def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
         cfg = _config(tmp_path, name)
         cfg.write_text(cfg.read_text() + ranges)
     design = ["--design", "sobol", "--samples", "2", "--arch", "mtf_adaptive", "-q"]
-    dask = ["--executor", "dask", "--address", cluster.address]
+    dask = ["--executor", "dask", "--address", shared_cluster.address]
     first = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "1", *design, *dask)
     assert first.returncode == 0, first.stderr
     resumed = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "2", *design, *dask)
     assert resumed.returncode == 0, resumed.stderr
-    local = _cwrend("sweep", str(tmp_path / "local_design.toml"), "--seeds", "2", *design,
-                    "--workers", "1")  # fmt: skip
-    assert local.returncode == 0, local.stderr
+    _cli("sweep", str(tmp_path / "local_design.toml"), "--seeds", "2", *design, "--workers", "1")
     out, ref = tmp_path / "results" / "dask_design", tmp_path / "results" / "local_design"
     pd.testing.assert_frame_equal(_runs(out), _runs(ref))
     indices = pd.read_parquet(out / "sensitivity.parquet")
