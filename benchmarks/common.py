@@ -58,10 +58,11 @@ class Row:
 
 @dataclass(frozen=True)
 class Captured:
-    """A re-solve met in a closed loop, with its warm start."""
+    """A re-solve met in a closed loop, with its warm start (and the loop's second one)."""
 
     problem: guidance.ShootingProblem
     guess: np.ndarray
+    alternatives: tuple[np.ndarray, ...] = ()
 
 
 def config_with(**dotted: object) -> CwrendConfig:
@@ -77,9 +78,10 @@ def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
     captured: list[Captured] = []
     original = guidance.solve
 
-    def spy(problem, guess, settings=None):
-        captured.append(Captured(problem, np.array(guess, dtype=float)))
-        return original(problem, guess, settings)
+    def spy(problem, guess, settings=None, alternatives=()):
+        alts = tuple(np.array(a, dtype=float) for a in alternatives)
+        captured.append(Captured(problem, np.array(guess, dtype=float), alts))
+        return original(problem, guess, settings, alternatives)
 
     refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, seed)

@@ -487,3 +487,80 @@ def test_fallback_none_makes_only_the_warm_attempt(paper_problem) -> None:
     chain = guidance.solve(problem, guess, guidance.SolverSettings(fallback="chain", max_iter=3))
     assert chain.status is guidance.SolveStatus.CONVERGED
     assert chain.step != "warm"
+
+
+# --- issue 17: the closed-form primer and the choice of warm start -------------------------
+
+#: Closed-form primer vs the state-transition path: both are exact formulas evaluated in
+#: double precision, so they agree to a few ulps of the terms summed (observed ≤ 3e-15
+#: relative to the largest term over 2,000 random draws); 1e-13 leaves ×30 margin while
+#: a wrong sign or coefficient in any derivative is an O(1) error.
+REL_TOL_PRIMER = 1e-13
+
+
+def test_primer_and_its_derivatives_match_the_costate_transition(paper_cfg) -> None:
+    """``_primer`` (one sine/cosine per time) equals ``λ(t) = Φ(−t)ᵀλ₀`` and ``λ̇ = −Aᵀλ``.
+
+    The reference propagates the full costate with the state-transition matrix
+    (:func:`~cwrend_cli.physics.guidance._kernels.costate_at`) and differentiates
+    it with the costate equation three times; times include |t| ≤ 1e-3 s, where
+    ``1 − cos`` and ``3t − 4 sin(nt)/n`` would cancel if formed naively.
+    """
+    from cwrend_cli.physics.dynamics import costate_derivative
+    from cwrend_cli.physics.guidance import _kernels as kern
+
+    n = paper_cfg.scenario.mean_motion_rad_s
+    rng = np.random.default_rng(17)
+    q = np.empty((4, 3))
+    for _ in range(300):
+        lam0 = rng.normal(size=6) * np.array([1e-6, 1e-6, 1e-6, 1e-3, 1e-3, 1e-3])
+        t = rng.uniform(-1e-3, 1e-3) if rng.random() < 0.2 else rng.uniform(-100.0, 900.0)
+        derivs = [np.empty(6) for _ in range(4)]
+        kern.costate_at(n, t, lam0, derivs[0])
+        for j in range(1, 4):
+            costate_derivative(n, derivs[j - 1], derivs[j])
+        kern._primer(n, lam0, t, 3, q)
+        for j in range(4):
+            ref = derivs[j][3:]
+            scale = np.max(np.abs(derivs[j]))  # the largest term of the sum
+            np.testing.assert_allclose(q[j], ref, rtol=0, atol=REL_TOL_PRIMER * scale)
+
+
+def test_best_start_takes_the_highest_dual_value(paper_problem, paper_costates) -> None:
+    """Of several warm starts, the one with the highest dual value ``D`` is taken.
+
+    The dual ``D`` is maximised by the solution, so among {a perturbed costate,
+    the solution, another perturbed costate} the solution is chosen, in any row.
+    """
+    from cwrend_cli.physics.guidance import shooting
+
+    problem = paper_problem(0.0)
+    star = paper_costates[0.0]
+    others = [perturbed(star, 1), perturbed(star, 2)]
+    settings = guidance.SolverSettings()
+    for row in range(3):
+        starts = np.array([*others[:row], star, *others[row:]])
+        assert shooting._best_start(problem, starts, settings) == row
+
+
+def test_alternative_warm_start_is_used_at_eps_zero(paper_problem, paper_costates) -> None:
+    """At ε = 0 a better alternative start is taken: the solution as alternative → 0 iterations."""
+    problem = paper_problem(0.0)
+    guess = perturbed(paper_costates[0.0], 3)
+    result = guidance.solve(problem, guess, alternatives=(paper_costates[0.0],))
+    assert result.status is guidance.SolveStatus.CONVERGED
+    assert result.step == "warm"
+    assert result.iterations == 0
+
+
+def test_alternatives_are_ignored_above_eps_zero(paper_problem, paper_costates) -> None:
+    """At ε > 0 the warm start is the caller's guess whatever the alternatives.
+
+    (There the warm re-solve converges in 2–3 iterations; a choice would only cost.)
+    """
+    problem = paper_problem(0.05)
+    guess = perturbed(paper_costates[0.05], 3)
+    plain = guidance.solve(problem, guess)
+    with_alt = guidance.solve(problem, guess, alternatives=(paper_costates[0.05],))
+    assert with_alt.iterations == plain.iterations > 0
+    np.testing.assert_array_equal(with_alt.costate, plain.costate)

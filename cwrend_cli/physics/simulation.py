@@ -305,22 +305,30 @@ def simulate(
     schedule = resolve_steps(problem)
     correct = gd.resolve_timing == "correct"
     k_next = 0
+    # the plan before the current one (its costate at step k_older): a second warm start
+    older: FloatArray | None = None
+    k_older = 0
     for i, k in enumerate(schedule):
         scalars = sk.advance(
             k_next, k, n_steps, model, truth_model, act, sched, state, scalars, log
         )
         k_next = k + 1
         t_est = (k + 1) * dt
-        horizon = sc.horizon_s - (t_est if correct else k * dt)
+        k_from = k + 1 if correct else k
+        horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
         if socp:
             result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n)
         else:
             shooting = _shooting(sc, state.x_hat, horizon, scalars.eps)
-            result = guidance.solve(shooting, lam_next if correct else lam, settings)
+            alternatives = (
+                () if older is None else (costate_stm(n, (k_from - k_older) * dt) @ older,)
+            )
+            result = guidance.solve(shooting, lam_next if correct else lam, settings, alternatives)
         rec = _record("resolve", k, t_est, result, settings.success_residual)
         solves.append(rec)
         if rec.success and not socp:
+            older, k_older = lam_next.copy(), k + 1
             lam[:] = result.costate if correct else model.lam_step @ result.costate
         else:
             lam[:] = lam_next

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -172,6 +173,24 @@ def _newton(
     return _STATUS[status], out, iters, float(np.hypot(rp, rv))
 
 
+def _best_start(problem: ShootingProblem, starts: np.ndarray, settings: SolverSettings) -> int:
+    gl_x, gl_w = settings.quadrature()
+    return int(
+        kern.best_start(
+            problem.mean_motion_rad_s,
+            np.ascontiguousarray(problem.x0, dtype=float),
+            np.ascontiguousarray(problem.xf, dtype=float),
+            float(problem.horizon_s),
+            float(problem.eps),
+            problem.u_max_km_s2,
+            np.ascontiguousarray(starts, dtype=float),
+            gl_x,
+            gl_w,
+            n_cells(problem.horizon_s),
+        )
+    )
+
+
 def _continuation(
     problem: ShootingProblem, guess: np.ndarray, settings: SolverSettings
 ) -> tuple[SolveStatus, np.ndarray, int, float]:
@@ -226,18 +245,37 @@ def _multiplier_guess(problem: ShootingProblem, settings: SolverSettings) -> np.
 
 
 def solve(
-    problem: ShootingProblem, guess: np.ndarray, settings: SolverSettings | None = None
+    problem: ShootingProblem,
+    guess: np.ndarray,
+    settings: SolverSettings | None = None,
+    alternatives: Sequence[np.ndarray] = (),
 ) -> SolveResult:
     """Solve one shooting problem from the warm start ``guess`` (SPEC §5).
 
     Returns the costate with status ``converged``, ``infeasible`` (a
     certificate that no bounded control reaches ``x_f``) or ``failed``; on
     anything but ``converged`` the returned costate is the caller's guess.
+
+    ``alternatives``: other warm starts (costates at the same time as
+    ``guess``). At ε = 0 the warm attempt starts from whichever of ``guess``
+    and these has the highest dual value (:func:`~cwrend_cli.physics.guidance.
+    _kernels.best_start`); the fallback chain still starts from ``guess``.
+    Why (issue 17): in the fixed-ε closed loops the bang-bang plan alternates
+    between two costate families from one re-solve to the next (a short burn
+    at the start of the plan, executed over a whole step by the sample hold,
+    is over-corrected by the next re-solve), so the plan before the previous
+    one is often the closer start: choosing by ``D`` took the median warm
+    re-solve of seeds 0–9 from 15 to 9 Newton iterations (see
+    ``benchmarks/bench_solver.py``).
     """
     settings = settings or SolverSettings()
     start = time.perf_counter()
     guess = np.asarray(guess, dtype=float)
     total = 0
+    warm = guess
+    if len(alternatives) > 0 and problem.eps < EPS_BANG_BANG:
+        candidates = np.vstack([guess, *alternatives])
+        warm = candidates[_best_start(problem, candidates, settings)]
 
     def done(
         status: SolveStatus,
@@ -259,7 +297,7 @@ def solve(
             controls=controls,
         )
 
-    status, lam, iters, res = _newton(problem, problem.eps, guess, settings)
+    status, lam, iters, res = _newton(problem, problem.eps, warm, settings)
     total += iters
     if status is not SolveStatus.FAILED or settings.fallback == "none":
         return done(status, lam, "warm", res)
