@@ -82,6 +82,12 @@ def solve_cone(
     settings.tol_gap_abs = 1e-10
     settings.tol_gap_rel = 1e-10
     settings.tol_feas = 1e-10
+    # Measured on the 1,264 cone programs of the four socp architectures' closed loops
+    # (seeds 0–3, issue 16/17): without iterative refinement and presolve (our problems
+    # have no redundant rows) 17.4 → 12.4 ms CPU per solve, the same statuses, the plans'
+    # terminal miss ≤ 2.8e-8 km (was ≤ 2.0e-9 km), controls within 1.7e-6 km/s².
+    settings.iterative_refinement_enable = False
+    settings.presolve_enable = False
     solver = clarabel.DefaultSolver(p, q, a, b, cones, settings)
     return solver.solve()
 
