@@ -62,21 +62,35 @@ def _report(results: Path, *args: str):
     return runner.invoke(app, ["report", str(results), *args], catch_exceptions=False)
 
 
-@pytest.fixture(name="unrendered")
-def _unrendered(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Figures drawn but not rasterised: ``Figure.savefig`` writes the PNG signature only.
+def _rasterise_only(monkeypatch: pytest.MonkeyPatch, *names: str) -> None:
+    """Every figure drawn, only those named rasterised: the others' PNG is the signature only.
 
-    For the tests of report.md, of the files a report writes and of the data
-    it reads: every figure is still drawn (its data loaded, its artists made),
-    only the rasterising, ~3 s of a report's ~3.5 s, is left out. The tests
-    that check the PNGs themselves (:func:`_check_png`) rasterise.
+    Rasterising is ~0.3 s a figure, ~3 s of a report's ~3.5 s. Every figure is
+    still drawn (its data loaded, its artists made) and every file written
+    (atomically, by the report), so a test of report.md, of the files written
+    or of the data read loses nothing; the figures a test checks with
+    :func:`_check_png` are rasterised (a figure is known by its file name,
+    which the temporary file of ``atomic_path`` holds: were that to change,
+    ``_check_png`` fails, it cannot pass on a placeholder). The run report and
+    the multi-seed report rasterise every figure.
     """
     from matplotlib.figure import Figure
 
+    real = Figure.savefig
+
     def savefig(self: Figure, fname: Any, *args: Any, **kwargs: Any) -> None:
-        Path(fname).write_bytes(PNG_MAGIC)
+        if any(name in Path(fname).name for name in names):
+            real(self, fname, *args, **kwargs)
+        else:
+            Path(fname).write_bytes(PNG_MAGIC)
 
     monkeypatch.setattr(Figure, "savefig", savefig)
+
+
+@pytest.fixture(name="unrendered")
+def _unrendered(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No figure rasterised (:func:`_rasterise_only`), for tests that check no PNG."""
+    _rasterise_only(monkeypatch)
 
 
 # ---------------------------------------------------------------------------
@@ -266,7 +280,10 @@ def _no_physics(monkeypatch: pytest.MonkeyPatch) -> None:
     _refuse_references(monkeypatch)
 
 
-def test_report_of_a_sweep(sweep_dir: Path, no_physics: None) -> None:
+def test_report_of_a_sweep(
+    sweep_dir: Path, no_physics: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _rasterise_only(monkeypatch, "sweep_schedule.beta.png")  # the per-seed ones: as any campaign
     root = sweep_dir
     summary = write_report(root)
     names = {p.name for p in summary.files}
@@ -330,8 +347,9 @@ def test_campaign_report_reads_the_reported_points_references(
 
 
 def test_campaign_without_stored_references_gets_a_note(
-    ablation_dir: Path, tmp_path: Path, no_physics: None
+    ablation_dir: Path, tmp_path: Path, no_physics: None, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    _rasterise_only(monkeypatch, *PER_SEED, *MULTI_SEED)
     root = _copy(ablation_dir, tmp_path / "old")
     shutil.rmtree(root / "references")  # as written by older versions of cwrend
     summary = write_report(root)
@@ -345,7 +363,10 @@ def test_campaign_without_stored_references_gets_a_note(
     assert "| MTF KF, adaptive ε | 3 / 1 |" in md
 
 
-def test_report_with_an_unusable_stored_config(ablation_dir: Path, tmp_path: Path) -> None:
+def test_report_with_an_unusable_stored_config(
+    ablation_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _rasterise_only(monkeypatch, *PER_SEED)
     root = _copy(ablation_dir, tmp_path / "badcfg")
     manifest = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
     manifest["config"]["schedule"]["beta"] = -1.0
@@ -767,7 +788,10 @@ def test_sensitivity_table_in_report_md(design_dir: Path) -> None:
     ]
 
 
-def test_report_of_a_design_writes_the_sensitivity_figure(design_dir: Path, tmp_path: Path) -> None:
+def test_report_of_a_design_writes_the_sensitivity_figure(
+    design_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _rasterise_only(monkeypatch, "sensitivity.png")
     root = _copy(design_dir, tmp_path / "full")
     summary = write_report(root)
     _check_png(root / "report" / "sensitivity.png")
