@@ -74,23 +74,27 @@ def config_with(**dotted: object) -> CwrendConfig:
 
 
 def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
-    """Re-solve problems (with their warm starts) met by one closed loop."""
+    """Re-solve problems (with the loop's warm starts) met by one closed loop."""
     captured: list[Captured] = []
-    original = guidance.solve
+    original = simulation._resolve
 
-    def spy(problem, guess, settings=None, alternatives=()):
+    def spy(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings):
+        problem = guidance.ShootingProblem(
+            np.array(x_hat), float(horizon_s), float(eps), sc.mean_motion_rad_s,
+            sc.u_max_km_s2, np.array(xf),
+        )  # fmt: skip
         alts = tuple(np.array(a, dtype=float) for a in alternatives)
         captured.append(Captured(problem, np.array(guess, dtype=float), alts))
-        return original(problem, guess, settings, alternatives)
+        return original(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings)
 
     refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, seed)
-    guidance.solve = spy
+    simulation._resolve = spy
     try:
         simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], noise, refs, seed=seed)
     finally:
-        guidance.solve = original
-    return [c for c in captured if c.problem.horizon_s < cfg.scenario.horizon_s]
+        simulation._resolve = original
+    return captured
 
 
 def naive_solve(problem: guidance.ShootingProblem, guess: np.ndarray) -> tuple[float, bool]:

@@ -526,21 +526,31 @@ def test_primer_and_its_derivatives_match_the_costate_transition(paper_cfg) -> N
             np.testing.assert_allclose(q[j], ref, rtol=0, atol=REL_TOL_PRIMER * scale)
 
 
-def test_best_start_takes_the_highest_dual_value(paper_problem, paper_costates) -> None:
-    """Of several warm starts, the one with the highest dual value ``D`` is taken.
+def test_ascent_starts_from_the_highest_dual_value(paper_problem, paper_costates) -> None:
+    """Of several warm starts, the ascent begins at the one with the highest dual value ``D``.
 
-    The dual ``D`` is maximised by the solution, so among {a perturbed costate,
-    the solution, another perturbed costate} the solution is chosen, in any row.
+    ``D`` is maximised by the solution, so among {a perturbed costate, the
+    solution, another perturbed costate}, in any row, the ascent starts at the
+    solution: converged at iteration 0 with exactly that costate.
     """
-    from cwrend_cli.physics.guidance import shooting
-
     problem = paper_problem(0.0)
     star = paper_costates[0.0]
     others = [perturbed(star, 1), perturbed(star, 2)]
-    settings = guidance.SolverSettings()
     for row in range(3):
         starts = np.array([*others[:row], star, *others[row:]])
-        assert shooting._best_start(problem, starts, settings) == row
+        status, lam, iterations, _ = guidance.warm_attempt(
+            problem.mean_motion_rad_s,
+            problem.u_max_km_s2,
+            np.array(problem.x0),
+            np.array(problem.xf),
+            problem.horizon_s,
+            0.0,
+            starts,
+            guidance.SolverSettings(),
+        )
+        assert status is guidance.SolveStatus.CONVERGED
+        assert iterations == 0
+        np.testing.assert_array_equal(lam, star)
 
 
 def test_alternative_warm_start_is_used_at_eps_zero(paper_problem, paper_costates) -> None:

@@ -17,11 +17,14 @@ from cwrend_cli.physics.guidance.shooting import (
     classify_failure,
     control,
     energy_optimal_costate,
+    fallback_chain,
     n_cells,
     shooting_jacobian,
     solve,
     switching_times,
     terminal_state,
+    warm_attempt,
+    warm_starts,
 )
 
 __all__ = [
@@ -33,9 +36,12 @@ __all__ = [
     "classify_failure",
     "control",
     "energy_optimal_costate",
+    "fallback_chain",
     "n_cells",
     "shooting_jacobian",
     "solve",
     "switching_times",
     "terminal_state",
+    "warm_attempt",
+    "warm_starts",
 ]

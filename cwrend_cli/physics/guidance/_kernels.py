@@ -661,7 +661,7 @@ def terminal_residual(
 
 
 @njit(cache=True)
-def best_start(
+def newton_ascent(
     n: float,
     x0: np.ndarray,
     xf: np.ndarray,
@@ -672,54 +672,16 @@ def best_start(
     gl_x: np.ndarray,
     gl_w: np.ndarray,
     n_cells: int,
-) -> int:
-    """Row of ``starts`` (k×6 costates) with the highest dual value ``D``.
-
-    ``D`` is concave and maximised by the solution, so the start with the
-    higher ``D`` is the better one by the ascent's own measure (used to choose
-    between warm starts, :func:`cwrend_cli.physics.guidance.shooting.solve`).
-    """
-    pf = stm(n, -horizon)
-    d = np.empty(6)
-    for i in range(6):
-        acc = 0.0
-        for j in range(6):
-            acc += pf[i, j] * xf[j]
-        d[i] = acc - x0[i]
-    ws = workspace()
-    grad = np.empty(6)
-    hess = np.empty((6, 6))
-    best = 0
-    best_value = -np.inf
-    for r in range(starts.shape[0]):
-        value, _, _ = dual_evaluate(
-            n, starts[r], d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
-        )
-        if value > best_value:
-            best = r
-            best_value = value
-    return best
-
-
-@njit(cache=True)
-def newton_ascent(
-    n: float,
-    x0: np.ndarray,
-    xf: np.ndarray,
-    horizon: float,
-    eps: float,
-    u_max: float,
-    lam_init: np.ndarray,
-    gl_x: np.ndarray,
-    gl_w: np.ndarray,
-    n_cells: int,
     settings_t: tuple[Any, ...],
     lam_out: np.ndarray,
 ) -> tuple[int, int, float, float]:
     """Solve one shooting problem by damped Newton / Levenberg–Marquardt ascent on ``D``.
 
-    Returns ``(status, iterations, ‖Δr(T)‖, ‖Δv(T)‖)``; the costate is
-    written to ``lam_out``. Status: 0 converged, 1 infeasible (certificate
+    ``starts`` (k×6) are warm starts: the ascent begins at the row with the
+    highest dual value ``D`` (concave, maximised by the solution, so the
+    better start by the ascent's own measure; the first row on ties), whose
+    evaluation it reuses. Returns ``(status, iterations, ‖Δr(T)‖, ‖Δv(T)‖)``;
+    the costate is written to ``lam_out``. Status: 0 converged, 1 infeasible (certificate
     found), 2 failed (iteration limit or stalled line search). ``settings_t``
     holds the fields of a :class:`NewtonSettings` as a plain tuple (numba
     resolves a NamedTuple argument several times slower; named again here).
@@ -739,7 +701,7 @@ def newton_ascent(
     hess = np.empty((6, 6))
     grad_t = np.empty(6)
     hess_t = np.empty((6, 6))
-    lam = lam_init.copy()
+    lam = starts[0].copy()
     lam_t = np.empty(6)
     step = np.empty(6)
     res = np.empty(6)
@@ -752,6 +714,16 @@ def newton_ascent(
     value, cert, _ = dual_evaluate(
         n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, ws
     )
+    for r in range(1, starts.shape[0]):
+        value_t, cert_t, _ = dual_evaluate(
+            n, starts[r], d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad_t, hess_t, ws
+        )
+        if value_t > value:
+            lam[:] = starts[r]
+            grad[:] = grad_t
+            hess[:, :] = hess_t
+            value = value_t
+            cert = cert_t
     mu = 0.0
     rp, rv = terminal_residual(n, horizon, grad, res)
     for it in range(settings.max_iter + 1):

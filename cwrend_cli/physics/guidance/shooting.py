@@ -151,43 +151,63 @@ def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
     return np.linalg.solve(e[:6, 6:], problem.xf - e[:6, :6] @ problem.x0)
 
 
-def _newton(
-    problem: ShootingProblem, eps: float, guess: np.ndarray, settings: SolverSettings
+def warm_attempt(
+    n: float,
+    u_max_km_s2: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    eps: float,
+    starts: np.ndarray,
+    settings: SolverSettings,
 ) -> tuple[SolveStatus, np.ndarray, int, float]:
+    """One Newton ascent from the best of ``starts`` (k×6): ``(status, λ(0), iterations, res.)``.
+
+    The compiled ascent with no Python object built around it: the closed
+    loop calls it for every re-solve (:mod:`cwrend_cli.physics.simulation`)
+    and builds a :class:`ShootingProblem` only when the fallback chain must
+    run. ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s]. Arrays must be
+    float64 and C-contiguous.
+    """
     gl_x, gl_w = settings.quadrature()
     out = np.empty(6)
     status, iters, rp, rv = kern.newton_ascent(
+        n, x0, xf, horizon_s, eps, u_max_km_s2, starts, gl_x, gl_w, n_cells(horizon_s),
+        settings.newton_fields, out,
+    )  # fmt: skip
+    return _STATUS[status], out, iters, float(np.hypot(rp, rv))
+
+
+def warm_starts(guess: np.ndarray, alternatives: Sequence[np.ndarray], eps: float) -> np.ndarray:
+    """The rows the warm attempt chooses from: ``guess`` and, at ε = 0, the ``alternatives``.
+
+    Why the alternatives (issue 17): in the fixed-ε closed loops the
+    bang-bang plan alternates between two costate families from one re-solve
+    to the next (a short burn at the start of the plan, executed over a whole
+    step by the sample hold, is over-corrected by the next re-solve), so the
+    plan before the previous one is often the closer start: starting from the
+    one with the higher dual value took the median warm re-solve of seeds 0–9
+    from 15 to 10 Newton iterations. At ε > 0 the warm re-solve converges in
+    2–3 iterations from ``guess``, and a choice would only cost evaluations.
+    """
+    guess = np.asarray(guess, dtype=float)
+    if len(alternatives) == 0 or eps >= EPS_BANG_BANG:
+        return np.ascontiguousarray(guess.reshape(1, 6))
+    return np.ascontiguousarray(np.vstack([guess, *alternatives]), dtype=float)
+
+
+def _newton(
+    problem: ShootingProblem, eps: float, guess: np.ndarray, settings: SolverSettings
+) -> tuple[SolveStatus, np.ndarray, int, float]:
+    return warm_attempt(
         problem.mean_motion_rad_s,
+        problem.u_max_km_s2,
         np.ascontiguousarray(problem.x0, dtype=float),
         np.ascontiguousarray(problem.xf, dtype=float),
         float(problem.horizon_s),
         float(eps),
-        problem.u_max_km_s2,
-        np.ascontiguousarray(guess, dtype=float),
-        gl_x,
-        gl_w,
-        n_cells(problem.horizon_s),
-        settings.newton_fields,
-        out,
-    )
-    return _STATUS[status], out, iters, float(np.hypot(rp, rv))
-
-
-def _best_start(problem: ShootingProblem, starts: np.ndarray, settings: SolverSettings) -> int:
-    gl_x, gl_w = settings.quadrature()
-    return int(
-        kern.best_start(
-            problem.mean_motion_rad_s,
-            np.ascontiguousarray(problem.x0, dtype=float),
-            np.ascontiguousarray(problem.xf, dtype=float),
-            float(problem.horizon_s),
-            float(problem.eps),
-            problem.u_max_km_s2,
-            np.ascontiguousarray(starts, dtype=float),
-            gl_x,
-            gl_w,
-            n_cells(problem.horizon_s),
-        )
+        np.ascontiguousarray(np.asarray(guess, dtype=float).reshape(1, 6)),
+        settings,
     )
 
 
@@ -258,24 +278,51 @@ def solve(
 
     ``alternatives``: other warm starts (costates at the same time as
     ``guess``). At ε = 0 the warm attempt starts from whichever of ``guess``
-    and these has the highest dual value (:func:`~cwrend_cli.physics.guidance.
-    _kernels.best_start`); the fallback chain still starts from ``guess``.
-    Why (issue 17): in the fixed-ε closed loops the bang-bang plan alternates
-    between two costate families from one re-solve to the next (a short burn
-    at the start of the plan, executed over a whole step by the sample hold,
-    is over-corrected by the next re-solve), so the plan before the previous
-    one is often the closer start: choosing by ``D`` took the median warm
-    re-solve of seeds 0–9 from 15 to 9 Newton iterations (see
-    ``benchmarks/bench_solver.py``).
+    and these has the highest dual value (:func:`warm_starts`); the fallback
+    chain still starts from ``guess``.
     """
     settings = settings or SolverSettings()
     start = time.perf_counter()
     guess = np.asarray(guess, dtype=float)
-    total = 0
-    warm = guess
-    if len(alternatives) > 0 and problem.eps < EPS_BANG_BANG:
-        candidates = np.vstack([guess, *alternatives])
-        warm = candidates[_best_start(problem, candidates, settings)]
+    status, lam, iters, res = warm_attempt(
+        problem.mean_motion_rad_s,
+        problem.u_max_km_s2,
+        np.ascontiguousarray(problem.x0, dtype=float),
+        np.ascontiguousarray(problem.xf, dtype=float),
+        float(problem.horizon_s),
+        float(problem.eps),
+        warm_starts(guess, alternatives, problem.eps),
+        settings,
+    )
+    if status is not SolveStatus.FAILED or settings.fallback == "none":
+        return SolveResult(
+            costate=lam if status is SolveStatus.CONVERGED else guess,
+            status=status,
+            step="warm",
+            iterations=iters,
+            residual_km=res,
+            wall_time_s=time.perf_counter() - start,
+            eps=problem.eps,
+            horizon_s=problem.horizon_s,
+        )
+    return fallback_chain(problem, guess, settings, iters, res, start)
+
+
+def fallback_chain(
+    problem: ShootingProblem,
+    guess: np.ndarray,
+    settings: SolverSettings,
+    warm_iterations: int,
+    warm_residual: float,
+    start: float,
+) -> SolveResult:
+    """The fallback chain after a failed warm attempt (module docstring), as :func:`solve` ends.
+
+    ``warm_iterations`` and ``warm_residual`` are the failed attempt's;
+    ``start`` the :func:`time.perf_counter` at which the re-solve began (its
+    wall time includes the warm attempt).
+    """
+    total = warm_iterations
 
     def done(
         status: SolveStatus,
@@ -297,11 +344,7 @@ def solve(
             controls=controls,
         )
 
-    status, lam, iters, res = _newton(problem, problem.eps, warm, settings)
-    total += iters
-    if status is not SolveStatus.FAILED or settings.fallback == "none":
-        return done(status, lam, "warm", res)
-    first_res = res
+    first_res = warm_residual
     # The plan of last resort first (issue 16): held controls of the cone program at the
     # same ε; cheaper than the continuations and as good (measured, shooting.py docstring).
     plan = convex.solve(_grid(problem, settings), problem.eps, problem.mean_motion_rad_s)
@@ -311,11 +354,11 @@ def solve(
     if plan.status is SolveStatus.INFEASIBLE and classify_failure(problem) is plan.status:
         # the grid's certificate, confirmed for the continuous problem (issue 16, item 3)
         return done(plan.status, guess, "socp_plan", first_res)
-    starts: list[tuple[str, np.ndarray | None]] = [
+    restarts: list[tuple[str, np.ndarray | None]] = [
         ("continuation_warm", guess),
         ("continuation_energy", None),
     ]
-    for step, start_guess in starts:
+    for step, start_guess in restarts:
         if start_guess is None:
             start_guess = energy_optimal_costate(problem)
         status, lam, iters, res = _continuation(problem, start_guess, settings)
