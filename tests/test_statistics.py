@@ -72,6 +72,16 @@ def test_paired_share_of_seeds_where_mtf_misses_less() -> None:
     assert row["n"].item() == 4
 
 
+def test_paired_compares_each_cone_program_architecture_with_its_shooting_one() -> None:
+    """Issue 16, item 5: ``mtf_adaptive_socp`` vs ``mtf_adaptive`` on the same seeds."""
+    runs = _runs().replace({"arch": {"plain_adaptive": "mtf_adaptive_socp"}})
+    out = statistics.paired(runs)
+    row = out[(out["statistic"] == "frac_less") & (out["arch"] == "mtf_adaptive_socp")]
+    assert row["other"].item() == "mtf_adaptive"
+    assert row["value"].item() == pytest.approx(0.5)  # seeds 2 and 3 of 0–3 (2.5 m < 3, 4 m)
+    assert row["n"].item() == 4
+
+
 # ---------------------------------------------------------------------------
 # The batched statistics (issue 17) give the numbers of the per-group loop
 # ---------------------------------------------------------------------------

@@ -40,12 +40,18 @@ FloatArray = npt.NDArray[np.float64]
 #: A statistic reducing along ``axis`` (``np.mean``, ``np.median``, ...).
 Statistic = Callable[..., Any]
 
-#: Pairs compared seed by seed (first vs second), when both are in a campaign.
+#: Pairs compared seed by seed (first vs second), when both are in a campaign: the
+#: estimators, the schedules, and each cone-program architecture against its
+#: shooting counterpart (issue 16, item 5).
 PAIRS = (
     ("mtf_adaptive", "plain_adaptive"),
     ("mtf_adaptive", "mtf_fixed"),
     ("plain_adaptive", "plain_fixed"),
     ("mtf_fixed", "plain_fixed"),
+    ("plain_fixed_socp", "plain_fixed"),
+    ("mtf_fixed_socp", "mtf_fixed"),
+    ("plain_adaptive_socp", "plain_adaptive"),
+    ("mtf_adaptive_socp", "mtf_adaptive"),
 )
 
 
@@ -237,10 +243,15 @@ def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFra
     )
 
 
-def paired(runs: pd.DataFrame, by: Sequence[str] = (), seed: int = 0) -> pd.DataFrame:
+def paired(
+    runs: pd.DataFrame,
+    by: Sequence[str] = (),
+    seed: int = 0,
+    pairs: Sequence[tuple[str, str]] = PAIRS,
+) -> pd.DataFrame:
     """Seed-by-seed comparisons of architecture pairs (on the same noise).
 
-    For each pair (A, B) in :data:`PAIRS` present in the campaign: the share of
+    For each pair (A, B) in ``pairs`` present in the campaign: the share of
     seeds where A misses less than B (Wilson CI), the median of
     ``miss_A − miss_B`` and the mean of ``Δv_A − Δv_B`` (bootstrap CIs), over
     the seeds of the group where both ran ok. Rows per group and pair:
@@ -259,7 +270,7 @@ def paired(runs: pd.DataFrame, by: Sequence[str] = (), seed: int = 0) -> pd.Data
     else:
         keys, bounds = [()], np.array([0, len(wide)])
     columns: set[Any] = set(wide.columns)
-    present = [(a, b) for a, b in PAIRS if ("miss_km", a) in columns and ("miss_km", b) in columns]
+    present = [(a, b) for a, b in pairs if ("miss_km", a) in columns and ("miss_km", b) in columns]
     blocks = {
         (a, b): wide[
             [("miss_km", a), ("miss_km", b), ("delta_v_km_s", a), ("delta_v_km_s", b)]
