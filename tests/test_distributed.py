@@ -96,6 +96,9 @@ class Cluster:
         with Client(self.address, timeout="30s") as client:  # type: ignore[no-untyped-call]
             client.wait_for_workers(n, timeout=60)  # type: ignore[no-untyped-call]
 
+    def alive(self) -> bool:
+        return all(proc.poll() is None for proc in [*self.workers, self.scheduler])
+
     def stop(self) -> None:
         for proc in [*self.workers, self.scheduler]:
             if proc.poll() is None:
@@ -103,24 +106,29 @@ class Cluster:
             proc.wait()
 
 
-@pytest.fixture
-def cluster(tmp_path: Path) -> Iterator[Cluster]:
-    """A cluster of the test's own, for the tests that kill one of its processes."""
-    c = Cluster(tmp_path, workers=2)
-    try:
-        yield c
-    finally:
-        c.stop()
-
-
 @pytest.fixture(scope="module")
-def shared_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
-    """One cluster for the tests that leave it whole (its workers stay warm between them)."""
-    c = Cluster(tmp_path_factory.mktemp("shared_cluster"), workers=2)
+def _clusters() -> Iterator[list[Cluster]]:
+    """The clusters the module started; all stopped at its end."""
+    started: list[Cluster] = []
     try:
-        yield c
+        yield started
     finally:
-        c.stop()
+        for c in started:
+            c.stop()
+
+
+@pytest.fixture
+def cluster(_clusters: list[Cluster], tmp_path_factory: pytest.TempPathFactory) -> Cluster:
+    """A scheduler and two workers, every process alive.
+
+    Shared by the tests (the workers stay warm from one campaign to the next);
+    after a test killed one of its processes, the next test gets a new cluster.
+    """
+    if not _clusters or not _clusters[-1].alive():
+        if _clusters:
+            _clusters[-1].stop()
+        _clusters.append(Cluster(tmp_path_factory.mktemp("cluster"), workers=2))
+    return _clusters[-1]
 
 
 def _config(tmp_path: Path, name: str) -> Path:
@@ -177,14 +185,35 @@ def _first_seeds(frame: pd.DataFrame, seeds: int) -> pd.DataFrame:
 
 
 def test_a_dask_cluster_gives_the_numbers_of_one_worker(
-    tmp_path: Path, shared_cluster: Cluster, local: Path
+    tmp_path: Path, cluster: Cluster, local: Path
 ) -> None:
     result = _cwrend("ablate", str(_config(tmp_path, "dask")), "--seeds", "6", "--arch", ARCHS,
-                     "--executor", "dask", "--address", shared_cluster.address, "-q")  # fmt: skip
+                     "--executor", "dask", "--address", cluster.address, "-q")  # fmt: skip
     assert result.returncode == 0, result.stderr
     out = tmp_path / "results" / "dask"
     pd.testing.assert_frame_equal(_runs(out), _first_seeds(_runs(local), 6))
     pd.testing.assert_frame_equal(_steps(out), _first_seeds(_steps(local), 6), check_exact=True)
+
+
+def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
+    tmp_path: Path, cluster: Cluster
+) -> None:
+    """Issue 19: a design campaign end to end on the Dask executor, resumed, equal to local."""
+    ranges = '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n'
+    for name in ("dask_design", "local_design"):
+        cfg = _config(tmp_path, name)
+        cfg.write_text(cfg.read_text() + ranges)
+    design = ["--design", "sobol", "--samples", "2", "--arch", "mtf_adaptive", "-q"]
+    dask = ["--executor", "dask", "--address", cluster.address]
+    first = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "1", *design, *dask)
+    assert first.returncode == 0, first.stderr
+    resumed = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "2", *design, *dask)
+    assert resumed.returncode == 0, resumed.stderr
+    _cli("sweep", str(tmp_path / "local_design.toml"), "--seeds", "2", *design, "--workers", "1")
+    out, ref = tmp_path / "results" / "dask_design", tmp_path / "results" / "local_design"
+    pd.testing.assert_frame_equal(_runs(out), _runs(ref))
+    indices = pd.read_parquet(out / "sensitivity.parquet")
+    pd.testing.assert_frame_equal(indices, pd.read_parquet(ref / "sensitivity.parquet"))
 
 
 def _start_campaign(tmp_path: Path, cluster: Cluster, seeds: int) -> subprocess.Popen[str]:
@@ -243,24 +272,3 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
     runs = pd.read_parquet(out / "runs.parquet")
     assert (runs["status"] == "ok").all()  # nothing recorded for the lost scheduler
     assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped:")
-
-
-def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
-    tmp_path: Path, shared_cluster: Cluster
-) -> None:
-    """Issue 19: a design campaign end to end on the Dask executor, resumed, equal to local."""
-    ranges = '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n'
-    for name in ("dask_design", "local_design"):
-        cfg = _config(tmp_path, name)
-        cfg.write_text(cfg.read_text() + ranges)
-    design = ["--design", "sobol", "--samples", "2", "--arch", "mtf_adaptive", "-q"]
-    dask = ["--executor", "dask", "--address", shared_cluster.address]
-    first = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "1", *design, *dask)
-    assert first.returncode == 0, first.stderr
-    resumed = _cwrend("sweep", str(tmp_path / "dask_design.toml"), "--seeds", "2", *design, *dask)
-    assert resumed.returncode == 0, resumed.stderr
-    _cli("sweep", str(tmp_path / "local_design.toml"), "--seeds", "2", *design, "--workers", "1")
-    out, ref = tmp_path / "results" / "dask_design", tmp_path / "results" / "local_design"
-    pd.testing.assert_frame_equal(_runs(out), _runs(ref))
-    indices = pd.read_parquet(out / "sensitivity.parquet")
-    pd.testing.assert_frame_equal(indices, pd.read_parquet(ref / "sensitivity.parquet"))
