@@ -1,0 +1,184 @@
+"""Markdown tables of the README's two 1,000-seed studies (issues 15 and 16), from campaign results.
+
+    python -m benchmarks.study_tables mismatch IDEAL ACTUATOR OUTLIERS
+    python -m benchmarks.study_tables methods ABLATION [--mean-hold SWEEP]
+
+``mismatch``: three ``cwrend sweep campaigns/mismatch*.toml`` directories
+(truth model × hold; ideal sensors and actuator, with actuator errors, with
+outliers): per hold, the mean miss with its 95 % bootstrap interval for each
+truth model × architecture × variant, then the paired share of seeds where
+MTF-adaptive misses less than plain-adaptive (Wilson interval), all read
+from each campaign's ``sweep.parquet``.
+
+``methods``: a ``cwrend ablate --arch everything`` directory (shooting and
+cone-program architectures on the same seeds, hold sample): per
+architecture the miss, Δv, fuel penalty, re-solve time and statuses, then
+each cone-program architecture against its shooting counterpart on the same
+seeds (:func:`cwrend_cli.campaign.statistics.paired`). With ``--mean-hold``
+(the README's ``paper-1000`` sweep) the shooting architectures with
+``hold = "mean"``, correct timing and the fallback chain are added and
+paired with the cone-program ones too (same seeds, hence the same noise).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.sweep_table import ARCH_ORDER, _ci
+from cwrend_cli.campaign import statistics
+
+VARIANTS = (
+    "ideal sensors & actuator",
+    "+ actuator errors 1 %, 1° (1σ, per step)",
+    "+ 5 % outliers ×20 (nominal periods)",
+)
+TRUTHS = ("cw", "two_body", "j2")
+SOCP_PAIRS = tuple((f"{a}_socp", a) for a in ARCH_ORDER)
+MEAN_HOLD = "{}, hold mean"
+
+
+def _stat(stats: pd.DataFrame, metric: str, statistic: str, scale: float, spec: str) -> str:
+    row = stats[(stats["metric"] == metric) & (stats["statistic"] == statistic)]
+    if row.empty:
+        return "–"
+    r = row.iloc[0]
+    return _ci(r["value"], r["ci_low"], r["ci_high"], scale, spec)
+
+
+def mismatch(dirs: list[Path]) -> str:
+    """The mismatch tables: hold × truth × architecture rows, one column per variant."""
+    sweeps = [pd.read_parquet(d / "sweep.parquet") for d in dirs]
+    lines: list[str] = []
+    for hold in ("mean", "sample"):
+        lines += [
+            f'Mean miss [m] (95 % CI), `hold = "{hold}"`:',
+            "",
+            "| truth | architecture | " + " | ".join(VARIANTS) + " |",
+            "|---|---|" + "---|" * len(VARIANTS),
+        ]
+        for truth in TRUTHS:
+            for arch in ARCH_ORDER:
+                cells = []
+                for s in sweeps:
+                    g = s[
+                        (s["param.guidance.hold"] == hold)
+                        & (s["param.truth.model"] == truth)
+                        & (s["arch"] == arch)
+                        & (s["kind"] == "marginal")
+                    ]
+                    cells.append(_stat(g, "miss_km", "mean", 1e3, ".2f"))
+                lines.append(f"| {truth} | {arch} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += [
+        "P(MTF-adaptive misses less than plain-adaptive) on the same seeds (95 % Wilson):",
+        "",
+        "| hold | truth | " + " | ".join(VARIANTS) + " |",
+        "|---|---|" + "---|" * len(VARIANTS),
+    ]
+    for hold in ("mean", "sample"):
+        for truth in TRUTHS:
+            cells = []
+            for s in sweeps:
+                g = s[
+                    (s["param.guidance.hold"] == hold)
+                    & (s["param.truth.model"] == truth)
+                    & (s["kind"] == "paired")
+                    & (s["arch"] == "mtf_adaptive")
+                    & (s["other"] == "plain_adaptive")
+                ]
+                cells.append(_stat(g, "miss_km", "frac_less", 1.0, ".2f"))
+            lines.append(f"| {hold} | {truth} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _mean_hold_runs(sweep: Path) -> pd.DataFrame:
+    """The shooting runs of the ``paper-1000`` sweep with hold mean, correct timing, chain."""
+    runs = pd.read_parquet(sweep / "runs.parquet")
+    keep = (
+        (runs["param.guidance.hold"] == "mean")
+        & (runs["param.guidance.resolve_timing"] == "correct")
+        & (runs["param.solver.fallback"] == "chain")
+    )
+    out = runs[keep].copy()
+    out["arch"] = out["arch"].map(MEAN_HOLD.format)
+    return out
+
+
+def methods(ablation: Path, mean_hold: Path | None) -> str:
+    """The shooting vs cone-program tables of an ``--arch everything`` ablation."""
+    runs = pd.read_parquet(ablation / "runs.parquet")
+    order = [*ARCH_ORDER, *(f"{a}_socp" for a in ARCH_ORDER)]
+    pairs: list[tuple[str, str]] = list(SOCP_PAIRS)
+    if mean_hold is not None:
+        extra = _mean_hold_runs(mean_hold)
+        seeds = set(runs["seed"])
+        extra = extra[extra["seed"].isin(seeds)]
+        runs = pd.concat([runs, extra[runs.columns.intersection(extra.columns)]])
+        order += [MEAN_HOLD.format(a) for a in ARCH_ORDER]
+        pairs += [(f"{a}_socp", MEAN_HOLD.format(a)) for a in ARCH_ORDER]
+    stats = statistics.describe(runs, ["arch"])
+    ok = runs[runs["status"] == "ok"]
+    lines = [
+        "| architecture | n | mean miss [m] (95 % CI) | median miss [m] (95 % CI) | p95 miss [m] "
+        "| mean Δv [km/s] (95 % CI) | fuel penalty [%] | re-solve mean / max [ms] "
+        "| infeasible | failed |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for arch in order:
+        g = stats[(stats["arch"] == arch) & (stats["kind"] == "marginal")]
+        r = ok[ok["arch"] == arch]
+        if g.empty or r.empty:
+            continue
+        p95 = g[(g["metric"] == "miss_km") & (g["statistic"] == "p95")]["value"].iloc[0] * 1e3
+        n_solves = r["n_solves"].sum()
+        lines.append(
+            f"| {arch} | {len(r)} | {_stat(g, 'miss_km', 'mean', 1e3, '.2f')} | "
+            f"{_stat(g, 'miss_km', 'median', 1e3, '.2f')} | {p95:.2f} | "
+            f"{_stat(g, 'delta_v_km_s', 'mean', 1.0, '.4f')} | "
+            f"{r['fuel_penalty_pct'].mean():.1f} | "
+            f"{r['solve_mean_ms'].mean():.2f} / {r['solve_max_ms'].max():.1f} | "
+            f"{100 * r['n_infeasible'].sum() / n_solves:.2f} % | "
+            f"{100 * r['n_failed'].sum() / n_solves:.2f} % |"
+        )
+    paired = statistics.paired(runs, pairs=pairs)
+    lines += [
+        "",
+        "| cone program | vs shooting | n | P(cone program misses less) (95 % Wilson) "
+        "| median miss difference [m] (95 % CI) | mean Δv difference [km/s] (95 % CI) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for a, b in pairs:
+        g = paired[(paired["arch"] == a) & (paired["other"] == b)]
+        if g.empty:
+            continue
+        lines.append(
+            f"| {a} | {b} | {int(g['n'].iloc[0])} | "
+            f"{_stat(g, 'miss_km', 'frac_less', 1.0, '.3f')} | "
+            f"{_stat(g, 'miss_km', 'median_diff', 1e3, '.2f')} | "
+            f"{_stat(g, 'delta_v_km_s', 'mean_diff', 1.0, '.5f')} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="study", required=True)
+    mm = sub.add_parser("mismatch", help="issue 15: truth models, actuator errors, outliers")
+    mm.add_argument("dirs", type=Path, nargs=3, metavar="DIR")
+    me = sub.add_parser("methods", help="issue 16: shooting vs cone-program guidance")
+    me.add_argument("ablation", type=Path)
+    me.add_argument("--mean-hold", type=Path, default=None)
+    args = parser.parse_args()
+    np.seterr(all="ignore")
+    if args.study == "mismatch":
+        print(mismatch(args.dirs))
+    else:
+        print(methods(args.ablation, args.mean_hold))
+
+
+if __name__ == "__main__":
+    main()
