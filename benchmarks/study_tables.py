@@ -49,6 +49,16 @@ def _stat(stats: pd.DataFrame, metric: str, statistic: str, scale: float, spec: 
     return _ci(r["value"], r["ci_low"], r["ci_high"], scale, spec)
 
 
+def _point(sweep: pd.DataFrame, hold: str, truth: str, arch: str, kind: str) -> pd.DataFrame:
+    """The statistics rows of one grid point (hold, truth model) and architecture."""
+    return sweep[
+        (sweep["param.guidance.hold"] == hold)
+        & (sweep["param.truth.model"] == truth)
+        & (sweep["arch"] == arch)
+        & (sweep["kind"] == kind)
+    ]
+
+
 def mismatch(dirs: list[Path]) -> str:
     """The mismatch tables: hold × truth × architecture rows, one column per variant."""
     sweeps = [pd.read_parquet(d / "sweep.parquet") for d in dirs]
@@ -62,15 +72,10 @@ def mismatch(dirs: list[Path]) -> str:
         ]
         for truth in TRUTHS:
             for arch in ARCH_ORDER:
-                cells = []
-                for s in sweeps:
-                    g = s[
-                        (s["param.guidance.hold"] == hold)
-                        & (s["param.truth.model"] == truth)
-                        & (s["arch"] == arch)
-                        & (s["kind"] == "marginal")
-                    ]
-                    cells.append(_stat(g, "miss_km", "mean", 1e3, ".2f"))
+                cells = [
+                    _stat(_point(s, hold, truth, arch, "marginal"), "miss_km", "mean", 1e3, ".2f")
+                    for s in sweeps
+                ]
                 lines.append(f"| {truth} | {arch} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += [
@@ -83,13 +88,8 @@ def mismatch(dirs: list[Path]) -> str:
         for truth in TRUTHS:
             cells = []
             for s in sweeps:
-                g = s[
-                    (s["param.guidance.hold"] == hold)
-                    & (s["param.truth.model"] == truth)
-                    & (s["kind"] == "paired")
-                    & (s["arch"] == "mtf_adaptive")
-                    & (s["other"] == "plain_adaptive")
-                ]
+                g = _point(s, hold, truth, "mtf_adaptive", "paired")
+                g = g[g["other"] == "plain_adaptive"]
                 cells.append(_stat(g, "miss_km", "frac_less", 1.0, ".2f"))
             lines.append(f"| {hold} | {truth} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
