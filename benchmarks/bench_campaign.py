@@ -12,9 +12,12 @@ numba cache and spawning workers:
 2. a Monte Carlo campaign of the two adaptive architectures and the
    four-architecture ablation, ``--runs`` and 5 × ``--runs`` runs each, with
    1 and 2 workers: end-to-end wall time, throughput once started (from the
-   difference), the speed-up, and peak memory (largest process RSS);
-3. the same adaptive campaign with ``--big`` runs (steps written for the
-   first 20 seeds only) to show that memory stays flat.
+   difference), the speed-up, peak memory (largest process RSS), and the
+   2-worker efficiency: throughput against the compute bound 2 / (in-process
+   ``simulate`` time per run of the same architectures, seeds 0–19);
+3. the same adaptive campaign with ``--runs`` and ``--big`` runs (steps
+   written for the first 20 seeds only): peak memory and its ratio, to show
+   that memory stays flat.
 """
 
 from __future__ import annotations
@@ -128,12 +131,54 @@ def throughput(tmp: Path, runs: int, more: int) -> list[Row]:
                 )
             )
         rows.append(Row("campaign", f"{label}: speed-up 2 vs 1 worker", rates[2] / rates[1], "×"))
+        if not extra:
+            per_run = simulate_time_per_run(archs.split(",") if archs != "all" else None)
+            bound = 2.0 / per_run
+            rows.append(
+                Row(
+                    "campaign",
+                    f"{label}: 2-worker efficiency",
+                    100.0 * rates[2] / bound,
+                    "%",
+                    target=">= 80",
+                    note=f"{rates[2]:.0f} runs/s against 2 / {per_run * 1e3:.2f} ms ="
+                    f" {bound:.0f} runs/s (in-process simulate time per run, issue 17)",
+                )
+            )
     return rows
+
+
+def simulate_time_per_run(slugs: list[str] | None, seeds: int = 20) -> float:
+    """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four), seeds 0 … S−1.
+
+    The compute bound of a campaign: what a worker cannot avoid (one closed
+    loop per run), timed in this process after a warm-up run per architecture.
+    """
+    from cwrend_cli import campaign
+    from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+
+    cfg = CwrendConfig()
+    problem = problem_of(cfg)
+    refs = simulation.open_loop_references(problem)
+    archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
+    for arch in archs:
+        simulation.simulate(problem, arch, campaign.standard_normal_for(cfg, 0), refs)
+    total = 0.0
+    for seed in range(seeds):
+        noise = campaign.standard_normal_for(cfg, seed)
+        for arch in archs:
+            start = time.perf_counter()
+            simulation.simulate(problem, arch, noise, refs, seed=seed)
+            total += time.perf_counter() - start
+    return total / (seeds * len(archs))
 
 
 def memory(tmp: Path, runs: int, big: int) -> list[Row]:
     """Section 3: peak memory for a small and a big campaign (flat in the number of runs)."""
     rows = []
+    peaks: list[float] = []
     for n in (runs, big):
         args = [
             "ablate",
@@ -149,6 +194,7 @@ def memory(tmp: Path, runs: int, big: int) -> list[Row]:
             *_common(tmp, f"mem{n}"),
         ]
         wall, rss = cwrend(args)
+        peaks.append(rss)
         rows.append(
             Row(
                 "memory",
@@ -158,6 +204,16 @@ def memory(tmp: Path, runs: int, big: int) -> list[Row]:
                 note=f"{n / wall:.0f} runs/s",
             )
         )
+    rows.append(
+        Row(
+            "memory",
+            f"peak RSS, {big} runs / {runs} runs",
+            peaks[1] / peaks[0],
+            "×",
+            target="<= 1.1",
+            note="flat in the number of runs (issue 17)",
+        )
+    )
     return rows
 
 
