@@ -486,7 +486,8 @@ def test_workers_exit_when_the_campaign_is_killed(tmp_path: Path) -> None:
 
 def test_steps_seeds_limits_the_per_step_data(tmp_path: Path) -> None:
     cfg = _write_config(tmp_path / "c.toml", "lean", "steps_seeds = 1\n")
-    result = _cli("ablate", str(cfg), "--seeds", "2", "--arch", "mtf_adaptive", "-q", "--no-rrd")
+    result = _cli("ablate", str(cfg), "--seeds", "2", "--arch", "mtf_adaptive", "-q", "--no-rrd",
+                  "--workers", "1")  # fmt: skip
     assert result.exit_code == 0, result.output
     out = tmp_path / "results" / "lean"
     assert not (out / "recordings").exists()
