@@ -2,6 +2,7 @@
 
     python -m benchmarks.study_tables mismatch IDEAL ACTUATOR OUTLIERS
     python -m benchmarks.study_tables methods ABLATION [--mean-hold SWEEP]
+    python -m benchmarks.study_tables fallbacks SWEEP
 
 ``mismatch``: three ``cwrend sweep campaigns/mismatch*.toml`` directories
 (truth model × hold; ideal sensors and actuator, with actuator errors, with
@@ -18,6 +19,13 @@ seeds (:func:`cwrend_cli.campaign.statistics.paired`). With ``--mean-hold``
 (the README's ``paper-1000`` sweep) the shooting architectures with
 ``hold = "mean"``, correct timing and the fallback chain are added and
 paired with the cone-program ones too (same seeds, hence the same noise).
+
+``fallbacks``: any campaign directory (its ``solves/`` dataset): per grid
+point and architecture, the re-solves that ended ``failed``, the runs whose
+chain used the cone program's plan of last resort (``socp_plan``), and the
+worst miss of those runs against the worst miss of the runs that never
+needed it (issue 16's criterion: the plan of last resort must not make a
+run an outlier).
 """
 
 from __future__ import annotations
@@ -164,6 +172,37 @@ def methods(ablation: Path, mean_hold: Path | None) -> str:
     return "\n".join(lines)
 
 
+def fallbacks(campaign: Path) -> str:
+    """Failed re-solves and runs rescued by ``socp_plan``, per grid point and architecture."""
+    runs = pd.read_parquet(campaign / "runs.parquet")
+    solves = pd.read_parquet(campaign / "solves", columns=["run_key", "status", "fallback_step"])
+    rescued = set(solves.loc[solves["fallback_step"] == "socp_plan", "run_key"])
+    failed = solves[solves["status"] == "failed"].groupby("run_key").size()
+    params = [c for c in runs.columns if c.startswith("param.")]
+    names = [c.removeprefix("param.").split(".")[-1] for c in params]
+    runs = runs[runs["status"] == "ok"].assign(
+        rescued=lambda r: r["run_key"].isin(rescued),
+        n_failed_solves=lambda r: r["run_key"].map(failed).fillna(0).astype(int),
+    )
+    lead = "".join(f"| {n} " for n in names)
+    lines = [
+        lead + "| architecture | runs | failed re-solves | runs using "
+        "socp_plan | worst miss, those runs [m] | worst miss, the others [m] |",
+        "|" + "---|" * (len(names) + 6),
+    ]
+    for keys, group in runs.groupby([*params, "arch"], sort=True, observed=True):
+        keys = keys if isinstance(keys, tuple) else (keys,)
+        used = group[group["rescued"]]
+        others = group[~group["rescued"]]
+        worst_used = f"{1e3 * used['miss_km'].max():.2f}" if len(used) else "–"
+        worst_others = f"{1e3 * others['miss_km'].max():.2f}" if len(others) else "–"
+        lines.append(
+            "".join(f"| {k} " for k in keys) + f"| {len(group)} | "
+            f"{int(group['n_failed_solves'].sum())} | {len(used)} | {worst_used} | {worst_others} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="study", required=True)
@@ -172,12 +211,16 @@ def main() -> None:
     me = sub.add_parser("methods", help="issue 16: shooting vs cone-program guidance")
     me.add_argument("ablation", type=Path)
     me.add_argument("--mean-hold", type=Path, default=None)
+    fb = sub.add_parser("fallbacks", help="issue 16: failed re-solves and socp_plan rescues")
+    fb.add_argument("campaign", type=Path)
     args = parser.parse_args()
     np.seterr(all="ignore")
     if args.study == "mismatch":
         print(mismatch(args.dirs))
-    else:
+    elif args.study == "methods":
         print(methods(args.ablation, args.mean_hold))
+    else:
+        print(fallbacks(args.campaign))
 
 
 if __name__ == "__main__":
