@@ -605,17 +605,22 @@ def _report_campaign(
     from cwrend_cli.console import (
         ablation_console_table,
         paired_console_table,
+        phase,
         sensitivity_console_table,
         sweep_console_table,
     )
 
-    sensitivity = campaign.write_sensitivity(out, plan)
+    label = f"{command} {out.name}"
+    sobol = plan.design is not None and plan.design.kind == "sobol"
+    with phase(err, f"{label}: computing Sobol indices", quiet=opts.quiet or not sobol):
+        sensitivity = campaign.write_sensitivity(out, plan)
     asked = {r.run_key for r in plan.runs}
     held = campaign.held_run_keys(out)
     if held - asked and not opts.quiet:
         # a re-run naming fewer seeds, architectures or points than the directory holds:
         # report on exactly the runs asked for; the statistics file covers them all
-        statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
+        with phase(err, f"{label}: computing statistics of the runs named"):
+            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
         err.print(
             f"note: the tables cover the {len(asked & held)} run(s) this command names; "

@@ -10,7 +10,10 @@ point's first task is submitted (once per distinct scenario and solver),
 hands them to the tasks and writes them to ``references/<point>.parquet``.
 :func:`write_statistics` writes ``ablation.parquet`` / ``sweep.parquet``
 from ``runs.parquet``. Progress is reported through the :class:`Progress`
-protocol.
+protocol, run by run where the executor signals runs (the local pool and
+in-process; a Dask cluster per task, see
+:func:`~cwrend_cli.campaign.executors.run_signals`); the journal still
+records a task only when it comes back.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from cwrend_cli.campaign.executors import (
     default_workers,
     executor_alive,
     open_executor,
+    run_signals,
 )
 from cwrend_cli.campaign.journal import (
     append_events,
@@ -93,7 +97,8 @@ class Progress(Protocol):
         """``total`` runs to execute now; ``skipped`` already done."""
 
     def advance(self, ok: int, failed: int) -> None:
-        """Runs just completed."""
+        """Runs just completed (usually one); negative for the runs of a task execution
+        that did not come back, which were counted and will run again."""
 
     def close(self) -> None:
         """The campaign stopped."""
@@ -166,6 +171,47 @@ MAX_TASK_ATTEMPTS = 3
 RETRY_BACKOFF_S = 0.5
 #: How often the driver checks that its executor is alive while nothing completes [s].
 _POLL_S = 1.0
+#: How often the driver delivers the per-run signals to the progress [s].
+_SIGNAL_POLL_S = 0.1
+
+
+class _RunTally:
+    """Runs signalled per task execution in flight, settled when the execution ends.
+
+    Each signal advances the progress by one run at once. When the execution
+    comes back, the difference between its outcomes and the runs signalled is
+    advanced (all of them for an executor without signals; signals still in
+    the queue then are ignored, the outcomes count). When it is lost, the runs
+    it signalled are taken back: they will run again.
+    """
+
+    def __init__(self, progress: Progress) -> None:
+        self._progress = progress
+        self._open: dict[int, list[int]] = {}  # token → [ok, failed] signalled
+
+    def open(self, token: int) -> None:
+        """Execution ``token`` is about to be submitted."""
+        self._open[token] = [0, 0]
+
+    def heard(self, token: int, ok: bool) -> None:
+        """A run of execution ``token`` finished (a :data:`~executors.RunListener`)."""
+        counts = self._open.get(token)
+        if counts is None:  # the execution was settled already
+            return
+        counts[0 if ok else 1] += 1
+        self._progress.advance(int(ok), int(not ok))
+
+    def completed(self, token: int, ok: int, failed: int) -> None:
+        """Execution ``token`` came back with ``ok`` and ``failed`` runs."""
+        heard_ok, heard_failed = self._open.pop(token, [0, 0])
+        if (ok, failed) != (heard_ok, heard_failed):
+            self._progress.advance(ok - heard_ok, failed - heard_failed)
+
+    def lost(self, token: int) -> None:
+        """Execution ``token`` did not come back."""
+        heard_ok, heard_failed = self._open.pop(token, [0, 0])
+        if heard_ok or heard_failed:
+            self._progress.advance(-heard_ok, -heard_failed)
 
 
 def _fault_text(exc: BaseException) -> str:
@@ -261,30 +307,33 @@ def _run_locked(
         stopped = str(exc)
         raise
     finally:
-        progress.close()
-        journal = load_journal(out_dir / EVENTS)
-        records = list(journal.runs.values())
-        # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
-        # journal write and the progress update must not make the count lie)
-        computed = sum(e.get("execution") not in executions_before for e in records)
-        ok = sum(r["status"] == "ok" for r in records)
-        failed = len(records) - ok
-        status = "interrupted" if interrupted else "complete"
-        if stopped is not None:
-            status = f"stopped: {stopped}"
-        try:  # under a full disk these may fail too: the journal stays the record
-            write_parquet(runs_table(records, _file_metadata(plan_)), out_dir / RUNS)
-            finish_manifest(
-                manifest,
-                finished=time.time(),
-                status=status,
-                computed=computed,
-                skipped=skipped,
-                counts={"ok": ok, "failed": failed, "runs": len(records)},
-            )
-            write_json(manifest, out_dir / MANIFEST)
-        except OSError as exc:
-            stopped = stopped or _fault_text(exc)
+        # the bar stays (complete) while runs.parquet is written: about 1 s per 10,000 runs
+        try:
+            journal = load_journal(out_dir / EVENTS)
+            records = list(journal.runs.values())
+            # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
+            # journal write and the progress update must not make the count lie)
+            computed = sum(e.get("execution") not in executions_before for e in records)
+            ok = sum(r["status"] == "ok" for r in records)
+            failed = len(records) - ok
+            status = "interrupted" if interrupted else "complete"
+            if stopped is not None:
+                status = f"stopped: {stopped}"
+            try:  # under a full disk these may fail too: the journal stays the record
+                write_parquet(runs_table(records, _file_metadata(plan_)), out_dir / RUNS)
+                finish_manifest(
+                    manifest,
+                    finished=time.time(),
+                    status=status,
+                    computed=computed,
+                    skipped=skipped,
+                    counts={"ok": ok, "failed": failed, "runs": len(records)},
+                )
+                write_json(manifest, out_dir / MANIFEST)
+            except OSError as exc:
+                stopped = stopped or _fault_text(exc)
+        finally:
+            progress.close()
     if stopped is not None:
         raise InfrastructureError(
             f"campaign stopped: {stopped}. {len(records)} of {len(plan_.runs)} run(s) are done "
@@ -379,7 +428,10 @@ def _drive(
     limit = 2 * parallel
     submitted = 0
     dead_s = 0.0  # how long the executor has been unable to deliver results
+    checked = time.monotonic()  # when the executor was last asked whether it is alive
     events_path = out_dir / EVENTS
+    tally = _RunTally(progress)
+    signals = run_signals(executor, tally.heard)
     try:
         while True:
             while fatal is None and not lost and len(in_flight) < limit and queue:
@@ -390,6 +442,7 @@ def _drive(
                 except OSError as exc:  # writing the point's references failed
                     fatal = _fault_text(exc)
                     break
+                tally.open(submitted)
                 try:
                     future = executor.submit(
                         execute_task,
@@ -400,8 +453,10 @@ def _drive(
                         plan_.steps_seeds,
                         _file_metadata(plan_),
                         plan_.run_timeout_s,
+                        signals.signal(submitted),
                     )
                 except RuntimeError as exc:  # a broken pool refuses new work
+                    tally.lost(submitted)
                     fatal = _count_attempt(task, exc, attempts)
                     lost.append(task)
                     break
@@ -409,22 +464,30 @@ def _drive(
                 submitted += 1
             if not in_flight:
                 break
-            finished, _ = wait(in_flight, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+            timeout = min(_SIGNAL_POLL_S, _POLL_S)
+            finished, _ = wait(in_flight, timeout=timeout, return_when=FIRST_COMPLETED)
+            signals.poll()
+            now = time.monotonic()
             if not finished:
-                dead_s = 0.0 if executor_alive(executor) else dead_s + _POLL_S
+                if now - checked >= _POLL_S:
+                    dead_s = 0.0 if executor_alive(executor) else dead_s + (now - checked)
+                    checked = now
                 if dead_s >= DASK_LOST_AFTER_S:  # its futures would wait forever: all lost
-                    for _, task in in_flight.values():
+                    for token, task in in_flight.values():
+                        tally.lost(token)
                         fault = RuntimeError("the executor lost its scheduler")
                         fatal = fatal or _count_attempt(task, fault, attempts)
                         lost.append(task)
                     in_flight.clear()
                 continue
             dead_s = 0.0
+            checked = now
             for future in sorted(finished, key=lambda f: in_flight[f][0]):  # submission order
-                _, task = in_flight.pop(future)
+                token, task = in_flight.pop(future)
                 try:
                     outcome = future.result()
                 except Exception as exc:  # the execution did not come back: not a result
+                    tally.lost(token)
                     fatal = fatal or _count_attempt(task, exc, attempts)
                     lost.append(task)
                     continue
@@ -433,7 +496,7 @@ def _drive(
                 except OSError as exc:  # the journal itself cannot be written: stop now
                     raise _StopError(_fault_text(exc)) from None
                 n_ok = sum(o.status == "ok" for o in outcome.outcomes)
-                progress.advance(n_ok, len(outcome.outcomes) - n_ok)
+                tally.completed(token, n_ok, len(outcome.outcomes) - n_ok)
     except BaseException:
         for future in in_flight:
             future.cancel()

@@ -10,6 +10,21 @@
 
 No scheduling logic lives here: the campaign driver submits tasks and
 collects them as they complete, whatever executor it was given.
+
+**Per-run signals** (issue 17: a progress bar that advances per run, not per
+task of up to 16 seeds). :func:`run_signals` gives the driver a
+:class:`RunSignals` for its executor: ``signal(token)`` is what the driver
+hands a task (:func:`~cwrend_cli.campaign.worker.execute_task` calls it with
+``True``/``False`` after each run), ``poll()`` delivers the signals that
+arrived to the driver's listener. The local pool carries them on one
+``multiprocessing`` queue that each worker inherits at start (a pipe write
+of a few bytes per run, about 10 µs, beside runs of 5–90 ms); in-process
+(``--workers 1``) the listener is called at once. A **Dask** cluster keeps
+per-task granularity: its workers may be on other machines, which a local
+queue does not reach, and a Dask queue or pub/sub would cost a scheduler
+round trip per run; the driver then counts a task's runs when it completes.
+Signals are only progress: the journal records a task when it comes back,
+as before.
 """
 
 from __future__ import annotations
@@ -17,6 +32,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import queue
 import signal
 import socket
 import threading
@@ -24,7 +40,10 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
-from typing import Literal, ParamSpec, TypeVar
+from dataclasses import dataclass
+from multiprocessing.context import BaseContext
+from multiprocessing.queues import Queue
+from typing import Literal, ParamSpec, Protocol, TypeVar
 from urllib.parse import urlsplit
 
 from cwrend_cli.errors import ConfigError
@@ -54,9 +73,22 @@ class InlineExecutor(Executor):
         return future
 
 
-def _worker_init() -> None:
-    """Pool workers ignore Ctrl-C (the parent stops them) and exit if the parent dies."""
+#: This pool worker's end of the per-run signal queue (set by :func:`_worker_init`).
+_RUN_QUEUE: Queue[tuple[int, bool]] | None = None
+
+
+def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
+    """Pool workers ignore Ctrl-C (the parent stops them) and exit if the parent dies.
+
+    ``runs`` is the pool's per-run signal queue; a worker never waits on it
+    at exit (``cancel_join_thread``), so a sibling killed while writing to it
+    cannot hold up the others.
+    """
+    global _RUN_QUEUE
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if runs is not None:
+        runs.cancel_join_thread()
+        _RUN_QUEUE = runs
     parent = os.getppid()
 
     def watch() -> None:
@@ -133,6 +165,94 @@ def check_address(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> No
         ) from None
 
 
+class _SignallingPool(ProcessPoolExecutor):
+    """A process pool of ``workers`` spawned workers that signal each finished run on ``runs``."""
+
+    def __init__(self, runs: Queue[tuple[int, bool]], workers: int, context: BaseContext) -> None:
+        super().__init__(
+            max_workers=workers, mp_context=context, initializer=_worker_init, initargs=(runs,)
+        )
+        self.runs = runs
+
+
+#: Called by the driver for each finished run: (token of the task execution, run ok).
+RunListener = Callable[[int, bool], None]
+#: Called by a task after each run: whether it was ok.
+RunSignal = Callable[[bool], None]
+
+
+class RunSignals(Protocol):
+    """Per-run signals from the tasks of one executor to the driver (see the module)."""
+
+    def signal(self, token: int) -> RunSignal | None:
+        """What to hand the task execution ``token`` (``None``: it reports per task)."""
+
+    def poll(self) -> None:
+        """Deliver the signals that arrived to the listener (never blocks)."""
+
+
+@dataclass(frozen=True)
+class _QueuedSignal:
+    """A task's signal in a pool worker: the token and the worker's queue (picklable)."""
+
+    token: int
+
+    def __call__(self, ok: bool) -> None:
+        if _RUN_QUEUE is not None:  # else not in a pool worker: the task reports when it ends
+            _RUN_QUEUE.put_nowait((self.token, ok))
+
+
+class _QueueSignals:
+    """The local pool's signals: put by the workers, delivered by :meth:`poll`."""
+
+    def __init__(self, runs: Queue[tuple[int, bool]], listener: RunListener) -> None:
+        self._runs = runs
+        self._listener = listener
+
+    def signal(self, token: int) -> RunSignal | None:
+        return _QueuedSignal(token)
+
+    def poll(self) -> None:
+        while True:
+            try:
+                token, ok = self._runs.get_nowait()
+            except (queue.Empty, OSError, ValueError, EOFError):  # empty, or closed
+                return
+            self._listener(token, ok)
+
+
+class _DirectSignals:
+    """In-process tasks (``--workers 1``): the listener hears each run at once."""
+
+    def __init__(self, listener: RunListener) -> None:
+        self._listener = listener
+
+    def signal(self, token: int) -> RunSignal | None:
+        return lambda ok: self._listener(token, ok)
+
+    def poll(self) -> None:
+        pass
+
+
+class _NoSignals:
+    """An executor whose tasks report per task (Dask, see the module)."""
+
+    def signal(self, token: int) -> RunSignal | None:
+        return None
+
+    def poll(self) -> None:
+        pass
+
+
+def run_signals(executor: Executor, listener: RunListener) -> RunSignals:
+    """The per-run signals of ``executor`` (opened by :func:`open_executor`) for ``listener``."""
+    if isinstance(executor, InlineExecutor):
+        return _DirectSignals(listener)
+    if isinstance(executor, _SignallingPool):
+        return _QueueSignals(executor.runs, listener)
+    return _NoSignals()
+
+
 @contextmanager
 def open_executor(
     kind: ExecutorKind = "local", workers: int | None = None, address: str | None = None
@@ -143,11 +263,9 @@ def open_executor(
         if n == 1:
             yield InlineExecutor(), 1
             return
-        pool = ProcessPoolExecutor(
-            max_workers=n,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_worker_init,
-        )
+        context = multiprocessing.get_context("spawn")
+        runs: Queue[tuple[int, bool]] = context.Queue()
+        pool = _SignallingPool(runs, n, context)
         for _ in range(n):  # start the workers now, while the driver prepares the first tasks
             pool.submit(_started)
         try:
@@ -157,6 +275,7 @@ def open_executor(
             raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
+            runs.close()
         return
     try:
         from distributed import Client, LocalCluster

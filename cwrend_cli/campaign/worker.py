@@ -36,7 +36,7 @@ from __future__ import annotations
 import hashlib
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -211,6 +211,7 @@ def execute_task(
     steps_seeds: int | None = None,
     metadata: Mapping[str, str] | None = None,
     run_timeout_s: float | None = None,
+    on_run: Callable[[bool], None] | None = None,
 ) -> TaskOutcome:
     """Run a task's runs, write their steps/solves files and return their outcomes.
 
@@ -237,6 +238,10 @@ def execute_task(
     number of steps). An exception that escapes this function (an I/O error
     writing the files) is an infrastructure fault: the driver retries or
     stops, and records nothing.
+
+    ``on_run`` is called after each run with whether it was ok (the driver's
+    per-run progress, :func:`cwrend_cli.campaign.executors.run_signals`); it
+    only informs: the outcome returned is what counts.
     """
     outcomes: list[RunOutcome] = []
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
@@ -282,6 +287,8 @@ def execute_task(
             kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
             text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
             outcomes.append(RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0))
+        if on_run is not None:
+            on_run(outcomes[-1].status == "ok")
     files: list[str] = []
     digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
     for arch, items in sorted(results.items()):
