@@ -22,7 +22,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from benchmarks import bench_campaign, bench_convex, bench_solver
+from benchmarks import bench_campaign, bench_convex, bench_solver, bench_startup
 from benchmarks.common import PUBLISHED, Row
 
 RESULTS = Path(__file__).resolve().parent / "results.json"
@@ -92,7 +92,8 @@ def main() -> None:
     seeds, runs, big = (5, 100, 400) if args.quick else (20, 200, 2000)
     start = time.perf_counter()
     rows = (
-        bench_solver.run(seeds=seeds, naive=3)
+        bench_startup.run(reps=5)  # first: fresh processes, before the machine warms up
+        + bench_solver.run(seeds=seeds, naive=3)
         + bench_convex.run(seeds=seeds)
         + bench_campaign.run(runs=runs, big=big)
     )

@@ -2,6 +2,8 @@
 
     python -m benchmarks.bench_startup [--before TREE] [--reps 10]
 
+Also part of ``python -m benchmarks`` (:func:`run`: median of 5, as rows).
+
 Wall time (median of ``--reps`` fresh processes, interleaved) of ``cwrend --help``,
 ``cwrend ablate --help``, ``cwrend config validate campaigns/paper.toml`` and
 ``cwrend config show …``, each beside the baseline measured in the same run:
@@ -22,6 +24,10 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from benchmarks.common import Row
 
 HERE = Path(__file__).resolve().parents[1]
 PAPER = HERE / "campaigns" / "paper.toml"
@@ -67,6 +73,34 @@ def measure(reps: int, before: Path | None) -> dict[tuple[str, str], float]:
         for key, argv, tree in cases if rep % 2 == 0 else cases[::-1]:
             times[key].append(wall_time(argv, tree))
     return {key: statistics.median(t) for key, t in times.items()}
+
+
+def run(reps: int = 5) -> list[Row]:
+    """The rows of ``python -m benchmarks``: each command beside the heavy imports, same run.
+
+    Median of ``reps`` fresh processes per command; the ratio column is the
+    heavy imports' time over the command's (issue 17: ≥ 5×, i.e. the command
+    takes ≤ 20 % of them).
+    """
+    from benchmarks.common import Row  # numpy and the campaign: not for the standalone script
+
+    medians = measure(reps, None)
+    heavy = medians[HEAVY[0], ""]
+    rows = [Row("start-up", HEAVY[0], heavy, "s", note="what every command paid before issue 17")]
+    for label, _, target in COMMANDS:
+        now = medians[label, "after"]
+        rows.append(
+            Row(
+                "start-up",
+                label,
+                now,
+                "s",
+                baseline=heavy,
+                target=f"<= {target}" if target is not None else "",
+                note=f"{now / heavy:.0%} of the heavy imports (≤ 20 %); median of {reps}",
+            )
+        )
+    return rows
 
 
 def main() -> None:

@@ -5,13 +5,15 @@ config, bad override, bad data file) prints ``error: ...`` on stderr and exits
 with code 2, without a traceback. Typer's own usage errors also exit with 2.
 
 Start-up (issue 17): this module imports only what every command needs —
-Typer, Rich's console and the architecture names (numpy) — so that
-``cwrend --help`` and ``cwrend <command> --help`` answer at once. Each
-command imports what it computes with (configuration, campaign, tables,
-recordings: numba, scipy, pandas, pyarrow, rerun, matplotlib) at the top of
-its own body; names needed only in annotations are imported under
-``TYPE_CHECKING`` below. ``tests/test_startup.py`` checks that ``--help``
-loads none of the heavy libraries.
+Typer and Rich's console — so that ``cwrend --help`` and ``cwrend <command>
+--help`` answer at once. Each command imports what it computes with
+(configuration, campaign, tables, recordings: numba, scipy, pandas, pyarrow,
+rerun, matplotlib) at the top of its own body; names needed only in
+annotations are imported under ``TYPE_CHECKING`` below. The architecture
+names of the help text are written out here (:data:`ARCH_SLUGS`), since the
+physics' own table imports numpy (0.1 s); ``tests/test_startup.py`` checks
+they are the physics' names and that ``--help`` loads none of the heavy
+libraries, nor pydantic (see :class:`_Group`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 from rich.console import Console
+from typer.core import TyperCommand, TyperGroup
 
 from cwrend_cli import __version__, limits
 from cwrend_cli.errors import ConfigError, CwrendError
@@ -38,14 +41,47 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     compare_dir,
 )
-from cwrend_cli.physics.params import ARCHITECTURES, SOCP_ARCHITECTURES
 
 if TYPE_CHECKING:  # annotations only; the commands import these when they run
     from cwrend_cli import campaign
     from cwrend_cli.campaign import ExecutorKind, sequential
     from cwrend_cli.config import Architecture, CwrendConfig
 
+#: The architectures of ``--arch all`` and ``all_socp`` (the keys of
+#: ``physics.params.ARCHITECTURES`` and ``SOCP_ARCHITECTURES``, checked by a test).
+ARCH_SLUGS = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
+SOCP_ARCH_SLUGS = tuple(f"{a}_socp" for a in ARCH_SLUGS)
+
+
+def _help_flag_off(option: typer.core.TyperOption | None) -> typer.core.TyperOption | None:
+    """``--help`` unset is ``False``, not ``None``.
+
+    Typer 0.29 coerces a flag's ``None`` through a pydantic ``TypeAdapter``,
+    so every ``cwrend <command>`` imported pydantic (about 80 ms) just to find
+    that the group's ``--help`` was not given; a ``bool`` is left as it is.
+    Older Typer versions have ``False`` already.
+    """
+    if option is not None and option.default is None:
+        option.default = False
+    return option
+
+
+class _Group(TyperGroup):
+    """A command group whose unset ``--help`` costs no import (:func:`_help_flag_off`)."""
+
+    def get_help_option(self, ctx: typer.Context) -> typer.core.TyperOption | None:  # type: ignore[override]
+        return _help_flag_off(super().get_help_option(ctx))
+
+
+class _Command(TyperCommand):
+    """A command whose unset ``--help`` costs no import (:func:`_help_flag_off`)."""
+
+    def get_help_option(self, ctx: typer.Context) -> typer.core.TyperOption | None:  # type: ignore[override]
+        return _help_flag_off(super().get_help_option(ctx))
+
+
 app = typer.Typer(
+    cls=_Group,
     name="cwrend",
     help="Robust low-thrust rendezvous campaigns: CW dynamics, MTF Kalman filter, "
     "innovation-adaptive homotopy guidance (Candan & Servadio, AAS 26-893).",
@@ -56,6 +92,7 @@ app = typer.Typer(
     rich_markup_mode=None,
 )
 config_app = typer.Typer(
+    cls=_Group,
     help="Inspect and check configuration files.",
     no_args_is_help=True,
     add_completion=False,
@@ -149,7 +186,9 @@ def main(
     """cwrend: batch campaigns for robust low-thrust rendezvous."""
 
 
-@config_app.command("show", short_help="Print the resolved configuration and its hash.")
+@config_app.command(
+    "show", cls=_Command, short_help="Print the resolved configuration and its hash."
+)
 def config_show(
     file: ConfigFile,
     set_: SetOption = None,
@@ -180,7 +219,9 @@ def config_show(
             typer.echo(f"config_hash: {digest}", err=True)
 
 
-@config_app.command("validate", short_help="Check a configuration: 'OK <hash>' or the errors.")
+@config_app.command(
+    "validate", cls=_Command, short_help="Check a configuration: 'OK <hash>' or the errors."
+)
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
     """Check a configuration; print 'OK <hash>' or the problems (exit code 2)."""
     from cwrend_cli.config import config_hash, load_config
@@ -199,14 +240,16 @@ def _parse_archs(text: str) -> tuple[Architecture, ...]:
 
 ARCH_HELP = (
     "Architecture slug(s), comma-separated, or a group: 'all' (the paper's four, shooting: "
-    + ", ".join(ARCHITECTURES)
+    + ", ".join(ARCH_SLUGS)
     + "), 'all_socp' (the same with the cone-program re-solve: "
-    + ", ".join(SOCP_ARCHITECTURES)
+    + ", ".join(SOCP_ARCH_SLUGS)
     + ") or 'everything' (both)."
 )
 
 
-@app.command("run", short_help="One seed of the chosen architectures and the references.")
+@app.command(
+    "run", cls=_Command, short_help="One seed of the chosen architectures and the references."
+)
 def run(
     file: ConfigFile,
     arch: Annotated[
@@ -657,7 +700,9 @@ def _report_campaign(
         )
 
 
-@app.command("ablate", short_help="Compare the architectures on the same noise per seed.")
+@app.command(
+    "ablate", cls=_Command, short_help="Compare the architectures on the same noise per seed."
+)
 def ablate(
     file: ConfigFile,
     seeds: SeedsOption = None,
@@ -708,7 +753,9 @@ def ablate(
     _campaign("ablate", file, set_, [], opts)
 
 
-@app.command("sweep", short_help="Grid × architectures × seeds, [dispersions] per run.")
+@app.command(
+    "sweep", cls=_Command, short_help="Grid × architectures × seeds, [dispersions] per run."
+)
 def sweep(
     file: ConfigFile,
     param: Annotated[
@@ -773,7 +820,9 @@ def sweep(
 # ---------------------------------------------------------------------------
 
 
-@app.command("report", short_help="Figures (PNG) and report.md into RESULTS_DIR/report/.")
+@app.command(
+    "report", cls=_Command, short_help="Figures (PNG) and report.md into RESULTS_DIR/report/."
+)
 def report(
     results_dir: Annotated[
         Path,
@@ -826,7 +875,9 @@ def report(
 # ---------------------------------------------------------------------------
 
 
-@app.command("compare", short_help="Paired differences A − B of two campaigns' shared runs.")
+@app.command(
+    "compare", cls=_Command, short_help="Paired differences A − B of two campaigns' shared runs."
+)
 def compare(
     a: Annotated[Path, typer.Argument(help="Campaign directory A (ablate or sweep).", metavar="A")],
     b: Annotated[

@@ -32,9 +32,9 @@ print(json.dumps({"code": code, "heavy": heavy}), file=sys.stderr)
 """
 
 
-def _loaded(args: list[str]) -> dict[str, object]:
+def _loaded(args: list[str], watched: tuple[str, ...] = HEAVY) -> dict[str, object]:
     proc = subprocess.run(
-        [sys.executable, "-c", SCRIPT, json.dumps(args), json.dumps(HEAVY)],
+        [sys.executable, "-c", SCRIPT, json.dumps(args), json.dumps(watched)],
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     result: dict[str, object] = json.loads(proc.stderr.strip().splitlines()[-1])
@@ -91,3 +91,35 @@ def test_a_campaign_command_still_finds_what_it_needs(tmp_path: Path) -> None:
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "1 run(s) computed" in proc.stderr
+
+
+#: What a help text needs even less: numpy (0.1 s, the physics' architecture table) and
+#: pydantic (0.08 s, Typer 0.29 coercing an unset --help flag), issue 17 item 4.
+HELP_FREE = (*HEAVY, "numpy", "pydantic")
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--help"],
+        ["ablate", "--help"],
+        ["sweep", "--help"],
+        ["run", "--help"],
+        ["report", "--help"],
+        ["compare", "--help"],
+        ["config", "--help"],
+        ["config", "validate", "--help"],
+    ],
+    ids=" ".join,
+)
+def test_help_loads_neither_numpy_nor_pydantic(args: list[str]) -> None:
+    assert _loaded(args, HELP_FREE) == {"code": 0, "heavy": []}
+
+
+def test_the_help_names_the_physics_architectures() -> None:
+    """The help text's architecture names are written out in cli.py: they must be the physics'."""
+    from cwrend_cli import cli
+    from cwrend_cli.physics.params import ARCHITECTURES, SOCP_ARCHITECTURES
+
+    assert tuple(ARCHITECTURES) == cli.ARCH_SLUGS
+    assert tuple(SOCP_ARCHITECTURES) == cli.SOCP_ARCH_SLUGS
