@@ -210,3 +210,29 @@ def test_no_ok_run_gives_no_rows() -> None:
     runs = _runs().assign(status="failed")
     assert statistics.describe(runs, ["arch"]).empty
     assert statistics.paired(runs).empty
+
+
+def test_percentile_interval_is_scipy_quantile_bit_for_bit() -> None:
+    """Scales from 1e-8 to 1e2, rounded values (ties), a row with NaN, one row."""
+    from scipy import stats
+
+    gen = np.random.default_rng(2)
+    alpha = np.asarray((1 - statistics.CONFIDENCE) / 2)
+    p = np.stack((alpha, 1 - alpha), axis=-1)
+    for k, scale in ((7, 1e-8), (1, 1.0), (30, 1e2)):
+        theta = gen.normal(size=(k, statistics.N_RESAMPLES)) * scale
+        for rows in (theta, np.round(theta, 1)):
+            np.testing.assert_array_equal(
+                statistics.percentile_interval(rows), stats.quantile(rows, p, axis=-1)
+            )
+    with_nan = gen.normal(size=(3, statistics.N_RESAMPLES))
+    with_nan[1, 5] = np.nan
+    np.testing.assert_array_equal(
+        statistics.percentile_interval(with_nan), stats.quantile(with_nan, p, axis=-1)
+    )
+
+
+def test_the_wilson_z_is_the_normal_quantile() -> None:
+    from scipy.special import ndtri
+
+    assert ndtri(0.5 + statistics.CONFIDENCE / 2) == statistics.Z_TWO_SIDED

@@ -41,7 +41,6 @@ from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
-from scipy.stats import qmc
 
 from cwrend_cli.errors import ConfigError
 
@@ -155,6 +154,8 @@ def unit_samples(design: Design, n: int, dims: int, root_seed: int) -> np.ndarra
     if n < 1 or dims < 1:
         raise ConfigError(f"--samples {n}: a design needs at least one sample and one range")
     if design == "lhs":
+        from scipy.stats import qmc  # imported when used: scipy.stats takes 0.5–1 s to import
+
         lhs = qmc.LatinHypercube(d=dims, scramble=True, seed=_generator(root_seed))
         return np.asarray(lhs.random(n), dtype=float)
     if design == "random":
