@@ -153,3 +153,26 @@ def mtf_sweep() -> Callable[..., pd.DataFrame]:
         return runs.sort_values(["point", "seed"]).reset_index(drop=True)
 
     return run
+
+
+class RecordingProgress:
+    """A :class:`~cwrend_cli.campaign.Progress` that keeps every advance (runs, signed)."""
+
+    def __init__(self) -> None:
+        self.advances: list[int] = []
+        self.total = 0
+
+    def start(self, total: int, skipped: int) -> None:
+        self.total = total
+
+    def advance(self, ok: int, failed: int) -> None:
+        self.advances.append(ok + failed)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture
+def recording_progress() -> type[RecordingProgress]:
+    """The class of a progress object that records each advance (one per campaign run)."""
+    return RecordingProgress

@@ -278,28 +278,14 @@ def test_quiet_campaign_does_not_announce_the_statistics(tmp_path: Path) -> None
     assert "computing statistics" not in result.output
 
 
-class _Recorder:
-    """A :class:`~cwrend_cli.campaign.Progress` that keeps every advance."""
-
-    def __init__(self) -> None:
-        self.advances: list[int] = []
-
-    def start(self, total: int, skipped: int) -> None:
-        self.total = total
-
-    def advance(self, ok: int, failed: int) -> None:
-        self.advances.append(ok + failed)
-
-    def close(self) -> None:
-        pass
-
-
-def test_progress_of_a_100_seed_ablation_on_2_workers_moves_often(tmp_path: Path) -> None:
+def test_progress_of_a_100_seed_ablation_on_2_workers_moves_often(
+    tmp_path: Path, recording_progress
+) -> None:
     """Unset output.seeds_per_task: at least 4 tasks per worker, not 0 → 128 → 200."""
     cfg = config_from_dict({"output": {"dir": str(tmp_path), "rrd_seeds": 0, "steps_seeds": 0}})
     plan = campaign.plan(cfg, ADAPTIVE.split(","), list(range(100)), workers=2)
     assert len(plan.tasks) >= 8
-    recorder = _Recorder()
+    recorder = recording_progress()
     campaign.run_campaign(plan, tmp_path / "p", command="ablate", workers=2, progress=recorder)
     assert sum(recorder.advances) == recorder.total == 200
     assert len(recorder.advances) >= 8

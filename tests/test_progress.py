@@ -27,23 +27,6 @@ from cwrend_cli.config import config_from_dict
 from cwrend_cli.console import Mark, progress_pace
 
 
-class _Recorder:
-    """A :class:`~cwrend_cli.campaign.Progress` that keeps every advance (runs, signed)."""
-
-    def __init__(self) -> None:
-        self.advances: list[int] = []
-        self.total = 0
-
-    def start(self, total: int, skipped: int) -> None:
-        self.total = total
-
-    def advance(self, ok: int, failed: int) -> None:
-        self.advances.append(ok + failed)
-
-    def close(self) -> None:
-        pass
-
-
 def _plan(tmp_path: Path, seeds: int, per_task: int) -> campaign.CampaignPlan:
     cfg = config_from_dict({"output": {"dir": str(tmp_path), "rrd_seeds": 0, "steps_seeds": 0}})
     return campaign.plan(cfg, ["mtf_adaptive"], list(range(seeds)), seeds_per_task=per_task)
@@ -52,16 +35,18 @@ def _plan(tmp_path: Path, seeds: int, per_task: int) -> campaign.CampaignPlan:
 # --- the driver reports runs ------------------------------------------------------------
 
 
-def test_a_task_of_4_seeds_in_process_advances_4_times_by_one_run(tmp_path: Path) -> None:
+def test_a_task_of_4_seeds_in_process_advances_4_times_by_one_run(
+    tmp_path: Path, recording_progress
+) -> None:
     """Before issue 17 the progress saw one advance of 4 when the task came back."""
     plan = _plan(tmp_path, 4, 4)
     assert len(plan.tasks) == 1
-    recorder = _Recorder()
+    recorder = recording_progress()
     campaign.run_campaign(plan, tmp_path / "c", command="ablate", workers=1, progress=recorder)
     assert recorder.advances == [1, 1, 1, 1]
 
 
-def test_pool_workers_signal_each_run(tmp_path: Path) -> None:
+def test_pool_workers_signal_each_run(tmp_path: Path, recording_progress) -> None:
     """2 workers, 2 tasks of 4 runs: the bar moves run by run, and counts each run once.
 
     A task's last signals may still be in the queue when its result arrives;
@@ -69,7 +54,7 @@ def test_pool_workers_signal_each_run(tmp_path: Path) -> None:
     happen, rarely), and ignores them when they arrive.
     """
     plan = _plan(tmp_path, 8, 4)
-    recorder = _Recorder()
+    recorder = recording_progress()
     campaign.run_campaign(plan, tmp_path / "c", command="ablate", workers=2, progress=recorder)
     assert sum(recorder.advances) == recorder.total == 8
     assert len(recorder.advances) >= 6 and min(recorder.advances) >= 1
@@ -83,17 +68,17 @@ def _thread_pool(*args: Any, **kwargs: Any) -> Iterator[tuple[ThreadPoolExecutor
 
 
 def test_an_executor_without_signals_advances_per_task(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, recording_progress
 ) -> None:
     monkeypatch.setattr(driver_module, "open_executor", _thread_pool)
     plan = _plan(tmp_path, 4, 2)
-    recorder = _Recorder()
+    recorder = recording_progress()
     campaign.run_campaign(plan, tmp_path / "c", command="ablate", workers=2, progress=recorder)
     assert recorder.advances == [2, 2]
 
 
 def test_the_runs_of_a_lost_execution_are_taken_back(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, recording_progress
 ) -> None:
     """Two runs signalled, then the execution is lost: −2, and the retried task's 4 runs."""
     monkeypatch.setattr(driver_module, "RETRY_BACKOFF_S", 0.0)
@@ -111,7 +96,7 @@ def test_the_runs_of_a_lost_execution_are_taken_back(
 
     monkeypatch.setattr(driver_module, "execute_task", lost_once)
     plan = _plan(tmp_path, 4, 4)
-    recorder = _Recorder()
+    recorder = recording_progress()
     summary = campaign.run_campaign(
         plan, tmp_path / "c", command="ablate", workers=1, progress=recorder
     )
