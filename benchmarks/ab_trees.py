@@ -44,8 +44,13 @@ def wall_time(tree: Path, out: Path, seeds: int, archs: str, workers: int) -> fl
         "--set", f'output.dir="{out}"', "--name", "ab",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(tree)}
+    out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # cwd outside both trees: `python -m` puts the working directory first on sys.path
+    # (and spawned workers inherit it), so run from a tree it would shadow PYTHONPATH
+    subprocess.run(
+        cmd, env=env, cwd=out, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     return time.perf_counter() - start
 
 
