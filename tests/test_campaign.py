@@ -722,6 +722,16 @@ def test_a_second_process_on_the_same_campaign_is_refused(tmp_path: Path) -> Non
 # --- Ctrl-C (issue 20, item 4) -------------------------------------------------
 
 
+def _sigint_default() -> None:
+    """In the child: SIGINT at its default, as in a terminal.
+
+    A process started with SIGINT ignored (a shell's ``cmd &``) passes that on,
+    and Python then installs no KeyboardInterrupt handler: Ctrl-C would do
+    nothing and these tests would test the harness, not cwrend.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     tmp_path: Path, uninterrupted: Path
 ) -> None:
@@ -731,7 +741,7 @@ def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     args = [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "--seeds", "40", "--arch",
             ADAPTIVE, "--workers", "2", "--no-rrd"]  # fmt: skip
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)  # fmt: skip
+                            start_new_session=True, preexec_fn=_sigint_default)  # fmt: skip
     deadline = time.monotonic() + 120
     while _events_done(out / "events.jsonl") < 2 and time.monotonic() < deadline:
         time.sleep(0.02)
@@ -759,6 +769,7 @@ def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) ->
     proc = subprocess.Popen(
         [sys.executable, "-m", "cwrend_cli", "ablate", str(cfg), "-n", "50", "--workers", "1"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=_sigint_default,
     )  # fmt: skip
     time.sleep(0.3)  # importing numba, scipy and pandas takes about a second
     os.killpg(proc.pid, signal.SIGINT)
