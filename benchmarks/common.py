@@ -76,24 +76,21 @@ def config_with(**dotted: object) -> CwrendConfig:
 def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
     """Re-solve problems (with the loop's warm starts) met by one closed loop."""
     captured: list[Captured] = []
-    original = simulation._resolve
+    original = guidance.solve_state
 
-    def spy(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings):
-        problem = guidance.ShootingProblem(
-            np.array(x_hat), float(horizon_s), float(eps), sc.mean_motion_rad_s,
-            sc.u_max_km_s2, np.array(xf),
-        )  # fmt: skip
+    def spy(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives=()):
+        problem = guidance.ShootingProblem(x0, float(horizon_s), float(eps), n, u_max, xf)
         alts = tuple(np.array(a, dtype=float) for a in alternatives)
         captured.append(Captured(problem, np.array(guess, dtype=float), alts))
-        return original(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings)
+        return original(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives)
 
     refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, seed)
-    simulation._resolve = spy
+    guidance.solve_state = spy
     try:
         simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], noise, refs, seed=seed)
     finally:
-        simulation._resolve = original
+        guidance.solve_state = original
     return captured
 
 

@@ -289,19 +289,20 @@ def test_second_warm_start_is_the_plan_before_the_previous_one(
     (:func:`cwrend_cli.physics.guidance.solve` takes the one with the higher
     dual value at ε = 0). Checked on the fixed-ε paper run, seed 0.
     """
+    from cwrend_cli.physics import guidance
     from cwrend_cli.physics.dynamics import costate_stm
 
     cfg = config_from_dict({"guidance": {"resolve_timing": timing}})
     calls: list[tuple[float, np.ndarray, tuple[np.ndarray, ...], bool]] = []
-    original = simulation._resolve
+    original = guidance.solve_state
 
-    def spy(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings):
-        result = original(sc, xf, x_hat, horizon_s, eps, guess, alternatives, settings)
+    def spy(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives=()):
+        result = original(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives)
         ok = result.converged and result.residual_km < settings.success_residual
         calls.append((horizon_s, np.array(guess), tuple(alternatives), ok))
         return result
 
-    monkeypatch.setattr(simulation, "_resolve", spy)
+    monkeypatch.setattr(guidance, "solve_state", spy)
     simulation.simulate(problem_of(cfg), ARCHITECTURES["mtf_fixed"], standard_normal(0), paper_refs)
     n = cfg.scenario.mean_motion_rad_s
     assert calls[0][2] == ()  # nothing older than the open-loop plan at the first re-solve

@@ -35,7 +35,6 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -326,9 +325,10 @@ def simulate(
                 () if older is None else (costate_stm(n, (k_from - k_older) * dt) @ older,)
             )
             guess = lam_next if correct else lam
-            result = _resolve(
-                sc, xf, state.x_hat, horizon, scalars.eps, guess, alternatives, settings
-            )
+            result = guidance.solve_state(
+                n, sc.u_max_km_s2, state.x_hat, xf, horizon, scalars.eps, guess, settings,
+                alternatives,
+            )  # fmt: skip
         rec = _record("resolve", k, t_est, result, settings.success_residual)
         solves.append(rec)
         if rec.success and not socp:
@@ -373,51 +373,6 @@ def simulate(
         nees=log.nees,
         dropout=dropout,
         outlier=outlier,
-    )
-
-
-def _resolve(
-    sc: Scenario,
-    xf: FloatArray,
-    x_hat: FloatArray,
-    horizon_s: float,
-    eps: float,
-    guess: FloatArray,
-    alternatives: tuple[FloatArray, ...],
-    settings: guidance.SolverSettings,
-) -> guidance.SolveResult:
-    """One shooting re-solve of the loop: :func:`guidance.solve`, without its set-up cost.
-
-    The warm attempt runs straight on the loop's arrays
-    (:func:`~cwrend_cli.physics.guidance.shooting.warm_attempt`); the
-    :class:`~cwrend_cli.physics.guidance.ShootingProblem` (validated copies)
-    is built only when the fallback chain has to run. Same numbers as
-    :func:`guidance.solve` (issue 17: the Python work around each re-solve
-    was about a third of an adaptive run).
-    """
-    start = time.perf_counter()
-    status, lam, iters, res = guidance.warm_attempt(
-        sc.mean_motion_rad_s,
-        sc.u_max_km_s2,
-        np.array(x_hat, dtype=float),
-        xf,
-        float(horizon_s),
-        float(eps),
-        guidance.warm_starts(guess, alternatives, eps),
-        settings,
-    )
-    if status is guidance.SolveStatus.FAILED and settings.fallback == "chain":
-        problem = _shooting(sc, x_hat, horizon_s, eps)
-        return guidance.fallback_chain(problem, np.array(guess), settings, iters, res, start)
-    return guidance.SolveResult(
-        costate=lam if status is guidance.SolveStatus.CONVERGED else np.array(guess),
-        status=status,
-        step="warm",
-        iterations=iters,
-        residual_km=res,
-        wall_time_s=time.perf_counter() - start,
-        eps=float(eps),
-        horizon_s=float(horizon_s),
     )
 
 

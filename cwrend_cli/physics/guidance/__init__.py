@@ -17,14 +17,13 @@ from cwrend_cli.physics.guidance.shooting import (
     classify_failure,
     control,
     energy_optimal_costate,
-    fallback_chain,
     n_cells,
     shooting_jacobian,
     solve,
+    solve_state,
     switching_times,
     terminal_state,
     warm_attempt,
-    warm_starts,
 )
 
 __all__ = [
@@ -36,12 +35,11 @@ __all__ = [
     "classify_failure",
     "control",
     "energy_optimal_costate",
-    "fallback_chain",
     "n_cells",
     "shooting_jacobian",
     "solve",
+    "solve_state",
     "switching_times",
     "terminal_state",
     "warm_attempt",
-    "warm_starts",
 ]

@@ -206,7 +206,7 @@ def _newton(
         np.ascontiguousarray(problem.xf, dtype=float),
         float(problem.horizon_s),
         float(eps),
-        np.ascontiguousarray(np.asarray(guess, dtype=float).reshape(1, 6)),
+        warm_starts(guess, (), eps),
         settings,
     )
 
@@ -281,34 +281,65 @@ def solve(
     and these has the highest dual value (:func:`warm_starts`); the fallback
     chain still starts from ``guess``.
     """
-    settings = settings or SolverSettings()
-    start = time.perf_counter()
-    guess = np.asarray(guess, dtype=float)
-    status, lam, iters, res = warm_attempt(
+    return solve_state(
         problem.mean_motion_rad_s,
         problem.u_max_km_s2,
-        np.ascontiguousarray(problem.x0, dtype=float),
-        np.ascontiguousarray(problem.xf, dtype=float),
-        float(problem.horizon_s),
-        float(problem.eps),
-        warm_starts(guess, alternatives, problem.eps),
+        problem.x0,
+        problem.xf,
+        problem.horizon_s,
+        problem.eps,
+        guess,
+        settings or SolverSettings(),
+        alternatives,
+    )
+
+
+def solve_state(
+    n: float,
+    u_max_km_s2: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    eps: float,
+    guess: np.ndarray,
+    settings: SolverSettings,
+    alternatives: Sequence[np.ndarray] = (),
+) -> SolveResult:
+    """:func:`solve` on plain values: the closed loop's re-solve (issue 17).
+
+    The warm attempt runs straight on the arrays given; the validated
+    :class:`ShootingProblem` (copies) is built only when the fallback chain
+    has to run, because the Python work around each re-solve was about a
+    third of an adaptive closed-loop run.
+    """
+    start = time.perf_counter()
+    guess = np.array(guess, dtype=float)
+    status, lam, iters, res = warm_attempt(
+        n,
+        u_max_km_s2,
+        np.ascontiguousarray(x0, dtype=float),
+        np.ascontiguousarray(xf, dtype=float),
+        float(horizon_s),
+        float(eps),
+        warm_starts(guess, alternatives, eps),
         settings,
     )
-    if status is not SolveStatus.FAILED or settings.fallback == "none":
-        return SolveResult(
-            costate=lam if status is SolveStatus.CONVERGED else guess,
-            status=status,
-            step="warm",
-            iterations=iters,
-            residual_km=res,
-            wall_time_s=time.perf_counter() - start,
-            eps=problem.eps,
-            horizon_s=problem.horizon_s,
-        )
-    return fallback_chain(problem, guess, settings, iters, res, start)
+    if status is SolveStatus.FAILED and settings.fallback == "chain":
+        problem = ShootingProblem(x0, float(horizon_s), float(eps), n, u_max_km_s2, xf)
+        return _fallback_chain(problem, guess, settings, iters, res, start)
+    return SolveResult(
+        costate=lam if status is SolveStatus.CONVERGED else guess,
+        status=status,
+        step="warm",
+        iterations=iters,
+        residual_km=res,
+        wall_time_s=time.perf_counter() - start,
+        eps=float(eps),
+        horizon_s=float(horizon_s),
+    )
 
 
-def fallback_chain(
+def _fallback_chain(
     problem: ShootingProblem,
     guess: np.ndarray,
     settings: SolverSettings,
@@ -316,7 +347,7 @@ def fallback_chain(
     warm_residual: float,
     start: float,
 ) -> SolveResult:
-    """The fallback chain after a failed warm attempt (module docstring), as :func:`solve` ends.
+    """The fallback chain after a failed warm attempt (module docstring): how a re-solve ends.
 
     ``warm_iterations`` and ``warm_residual`` are the failed attempt's;
     ``start`` the :func:`time.perf_counter` at which the re-solve began (its
