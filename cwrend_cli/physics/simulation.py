@@ -322,7 +322,9 @@ def simulate(
             result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n)
         else:
             alternatives = (
-                () if older is None else (costate_stm(n, (k_from - k_older) * dt) @ older,)
+                (costate_stm(n, (k_from - k_older) * dt) @ older,)
+                if older is not None and guidance.uses_alternatives(scalars.eps)
+                else ()
             )
             guess = lam_next if correct else lam
             result = guidance.solve_state(

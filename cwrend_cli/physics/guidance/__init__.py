@@ -23,6 +23,7 @@ from cwrend_cli.physics.guidance.shooting import (
     solve_state,
     switching_times,
     terminal_state,
+    uses_alternatives,
     warm_attempt,
 )
 
@@ -41,5 +42,6 @@ __all__ = [
     "solve_state",
     "switching_times",
     "terminal_state",
+    "uses_alternatives",
     "warm_attempt",
 ]
