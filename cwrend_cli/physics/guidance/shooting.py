@@ -163,11 +163,10 @@ def warm_attempt(
 ) -> tuple[SolveStatus, np.ndarray, int, float]:
     """One Newton ascent from the best of ``starts`` (k×6): ``(status, λ(0), iterations, res.)``.
 
-    The compiled ascent with no Python object built around it: the closed
-    loop calls it for every re-solve (:mod:`cwrend_cli.physics.simulation`)
-    and builds a :class:`ShootingProblem` only when the fallback chain must
-    run. ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s]. Arrays must be
-    float64 and C-contiguous.
+    The compiled ascent on plain arrays, with no Python object built around
+    it: the warm attempt of :func:`solve_state` and every Newton solve of the
+    fallback chain. ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s].
+    Arrays must be float64 and C-contiguous.
     """
     gl_x, gl_w = settings.quadrature()
     out = np.empty(6)
