@@ -21,6 +21,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from collections import Counter
 
@@ -40,7 +41,7 @@ EPS0_P99_RATIO_TARGET = "<= 20"
 def _warm_times(eps: float, seeds: int, hold: str) -> tuple[list[Captured], np.ndarray, list]:
     """Warm re-solves of the fixed-ε closed loops (both estimators, seeds 0 … S−1), timed."""
     settings = simulation.solver_settings(problem_of(CwrendConfig()))
-    settings = guidance.SolverSettings(**{**settings.__dict__, "fallback": "none"})
+    settings = dataclasses.replace(settings, fallback="none")
     cfg = config_with(schedule__eps_fixed=eps, guidance__hold=hold)
     probs = [
         c for slug in ("plain_fixed", "mtf_fixed") for s in range(seeds)
@@ -150,7 +151,7 @@ def all_resolves(seeds: int) -> list[Row]:
     for slug in ARCHITECTURES:
         probs = [p for s in range(seeds) for p in capture_resolves(base, slug, s)]
         for fallback in ("chain", "none"):
-            s = guidance.SolverSettings(**{**settings.__dict__, "fallback": fallback})
+            s = dataclasses.replace(settings, fallback=fallback)
             results = [guidance.solve(c.problem, c.guess, s, c.alternatives) for c in probs]
             t = np.array([r.wall_time_s * 1e3 for r in results])
             counts = Counter(r.status.value for r in results)
