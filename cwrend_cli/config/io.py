@@ -17,9 +17,8 @@ import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import tomli_w
 from pydantic import ValidationError
 
@@ -28,7 +27,9 @@ from cwrend_cli.config.overrides import parse_override, set_dotted
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING
-from cwrend_cli.physics.params import FloatArray
+
+if TYPE_CHECKING:
+    from cwrend_cli.physics.params import FloatArray
 
 __all__ = [
     "NOISE_COLUMNS",
@@ -236,6 +237,7 @@ def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:
     file is unreadable, lacks a column, has the wrong number of rows (one per
     step is required) or holds a non-finite value.
     """
+    import numpy as np
     import pandas as pd
 
     path = Path(path)

@@ -19,8 +19,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
-import numpy as np
-
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_VALUES_PER_KEY
@@ -195,6 +193,8 @@ def _range_values(key: str, spec: str) -> tuple[float, ...]:
             raise ConfigError(
                 f"sweep {key} = {spec!r}: num must be between 1 and {MAX_VALUES_PER_KEY:,}"
             )
+        import numpy as np  # not at the top: the configuration imports no numpy (issue 17)
+
         values = np.linspace(float(start), float(stop), count)
     except ValueError:
         raise ConfigError(

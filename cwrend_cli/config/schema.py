@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal, Self
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Self
 
-import numpy as np
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -40,6 +40,9 @@ from cwrend_cli.config.messages import fmt_num, rules_error
 from cwrend_cli.limits import MAX_SEED, MAX_STEPS
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "ActuatorConfig",
@@ -80,7 +83,7 @@ _NOISE_SUFFIXES = (".csv", ".parquet", ".pq")
 class _FrozenModel(BaseModel):
     """Base of every config model: unknown keys rejected, immutable, finite floats."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, defer_build=True)
 
 
 def _is_whole_multiple(value: float, step: float) -> bool:
@@ -171,7 +174,8 @@ def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple
     spellings of the same matrix validate (and hash) identically.
     """
     shape_msg = f"must have {n} entries (diagonal) or be a {n}x{n} matrix"
-    if isinstance(value, np.ndarray):
+    numpy = sys.modules.get("numpy")  # an array exists only once numpy is loaded (issue 17:
+    if numpy is not None and isinstance(value, numpy.ndarray):  # the config imports no numpy)
         value = value.tolist()
     if not isinstance(value, (list, tuple)):
         raise ValueError(shape_msg)
@@ -195,6 +199,8 @@ def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple
         if any(d <= 0.0 for d in diag):
             raise ValueError("must be positive definite (diagonal entries must be > 0)")
         return diag
+
+    import numpy as np  # a full matrix only: a config of diagonals loads no numpy
 
     mat = np.array(value, dtype=np.float64)
     scale = float(np.max(np.abs(mat)))

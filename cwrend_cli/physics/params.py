@@ -17,13 +17,32 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import numpy as np
-import numpy.typing as npt
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
 
-#: A float64 array (shapes are given in docstrings).
-FloatArray = npt.NDArray[np.float64]
+    #: A float64 array (shapes are given in docstrings).
+    FloatArray = npt.NDArray[np.float64]
+else:
+
+    def __getattr__(name: str) -> object:
+        """``FloatArray`` (``numpy.typing.NDArray[numpy.float64]``), built on first use.
+
+        These parameters import no numpy (issue 17: ``cwrend config validate`` and the
+        configuration models use them, and numpy costs about 0.1 s to import); the
+        modules that compute import numpy anyway.
+        """
+        if name != "FloatArray":
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        import numpy as np
+        import numpy.typing as npt
+
+        alias = npt.NDArray[np.float64]
+        globals()["FloatArray"] = alias
+        return alias
+
 
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
@@ -33,6 +52,8 @@ Covariance = tuple[float, ...] | tuple[tuple[float, ...], ...]
 
 def covariance_matrix(value: Covariance) -> FloatArray:
     """A fresh float64 matrix from a stored (diagonal or full) covariance."""
+    import numpy as np
+
     arr = np.array(value, dtype=np.float64)
     return np.asarray(np.diag(arr) if arr.ndim == 1 else arr, dtype=np.float64)
 
@@ -55,6 +76,8 @@ class Scenario:
 
     def time_grid(self) -> FloatArray:
         """Grid times t_k = k Δt, k = 0 … N [s]."""
+        import numpy as np
+
         return np.asarray(np.arange(self.n_steps + 1) * self.dt_s, dtype=np.float64)
 
 
