@@ -5,15 +5,16 @@ config, bad override, bad data file) prints ``error: ...`` on stderr and exits
 with code 2, without a traceback. Typer's own usage errors also exit with 2.
 
 Start-up (issue 17): this module imports only what every command needs —
-Typer and Rich's console — so that ``cwrend --help`` and ``cwrend <command>
---help`` answer at once. Each command imports what it computes with
-(configuration, campaign, tables, recordings: numba, scipy, pandas, pyarrow,
-rerun, matplotlib) at the top of its own body; names needed only in
+Typer — so that ``cwrend --help``, ``cwrend <command> --help`` and ``cwrend
+config validate`` answer at once; Rich's console is imported when a command
+prints through it (:func:`_console`). Each command imports what it computes
+with (configuration, campaign, tables, recordings: numba, scipy, pandas,
+pyarrow, rerun, matplotlib) at the top of its own body; names needed only in
 annotations are imported under ``TYPE_CHECKING`` below. The architecture
-names of the help text are written out here (:data:`ARCH_SLUGS`), since the
-physics' own table imports numpy (0.1 s); ``tests/test_startup.py`` checks
-they are the physics' names and that ``--help`` loads none of the heavy
-libraries, nor pydantic (see :class:`_Group`).
+names of the help text are written out here (:data:`ARCH_SLUGS`), so that
+the help imports no physics; ``tests/test_startup.py`` checks they are the
+physics' names and that ``--help`` loads none of the heavy libraries, nor
+pydantic (see :class:`_Group`), and ``config validate`` no numpy nor Rich.
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
-from rich.console import Console
 from typer.core import TyperCommand, TyperGroup
 
 from cwrend_cli import __version__, limits
@@ -43,6 +43,8 @@ from cwrend_cli.output.layout import (
 )
 
 if TYPE_CHECKING:  # annotations only; the commands import these when they run
+    from rich.console import Console
+
     from cwrend_cli import campaign
     from cwrend_cli.campaign import ExecutorKind, sequential
     from cwrend_cli.config import Architecture, CwrendConfig
@@ -103,9 +105,21 @@ app.add_typer(config_app, name="config")
 USER_ERROR_EXIT = 2
 
 
+def _console(*, stderr: bool = False, soft_wrap: bool = False) -> Console:
+    """A Rich console without highlighting, on stdout or the current stderr.
+
+    Rich is imported here, when a command prints through it, not with this
+    module: ``cwrend --help`` and ``cwrend config validate`` print plain text
+    and load no Rich (about 20 ms).
+    """
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False, soft_wrap=soft_wrap)
+
+
 def _stderr() -> Console:
     """A console on the current stderr (looked up at call time, so tests can capture it)."""
-    return Console(stderr=True, highlight=False, soft_wrap=True)
+    return _console(stderr=True, soft_wrap=True)
 
 
 @contextmanager
@@ -314,7 +328,7 @@ def run(
             slug = archs[0].slug if len(archs) == 1 else "multi"
             out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
         check_output_dir(out, "choose another --out or output.dir")  # before computing
-        console = Console(stderr=True, highlight=False)
+        console = _console(stderr=True)
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)
         else:
@@ -333,9 +347,7 @@ def run(
                     f"display); open the file elsewhere with `rerun {rrd_path}`"
                 )
         if not quiet:
-            Console(highlight=False).print(
-                summary_console_table(case, title=f"cwrend run · {file}")
-            )
+            _console().print(summary_console_table(case, title=f"cwrend run · {file}"))
             console.print(f"results written to {written}", soft_wrap=True, markup=False)
 
 
@@ -517,7 +529,7 @@ def _campaign(
     params: list[str],
     opts: CampaignOptions,
 ) -> None:
-    err = Console(stderr=True, highlight=False)
+    err = _console(stderr=True)
     with user_errors(), _second_ctrl_c_exits_130(err):
         from cwrend_cli import campaign
         from cwrend_cli.campaign import design, sequential
@@ -575,7 +587,7 @@ def _campaign(
                     )
         _report_campaign(command, plan, summary, statistics, out, opts, err)
         if achieved and not opts.quiet:
-            Console(highlight=False).print(until_console_table(achieved, opts.until or ""))
+            _console().print(until_console_table(achieved, opts.until or ""))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         if unmet and not summary.interrupted and not opts.quiet:
             err.print(f"--until not met within --max-seeds {opts.max_seeds}", markup=False)
@@ -673,7 +685,7 @@ def _report_campaign(
     if opts.quiet:
         return
     stats = statistics.frame
-    stdout = Console(highlight=False)
+    stdout = _console()
     if not stats.empty:
         if command == "ablate":
             stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
@@ -934,7 +946,7 @@ def compare(
         write_parquet(cmp.compare_table(result), out / COMPARE_STATS)
         write_compare_figure(result.frame, a.name, b.name, out / COMPARE_FIGURE, dirs=(a, b))
         if not quiet:
-            stdout = Console(highlight=False)
+            stdout = _console()
             stdout.print(
                 f"cwrend compare: {result.compared} run pair(s) on the same noise\n"
                 f"A = {a}\nB = {b}",
