@@ -280,10 +280,15 @@ def simulate(
         override=np.zeros(n_steps, dtype=np.bool_),
         dropout=meas.dropout,
     )
+    # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
+    plan_costate: FloatArray | None = None
+    k_plan = 0
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
         result = convex.solve(_grid(sc, x_hat0, sc.horizon_s), eps0, n)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         _hold_plan(result, 0, model)
+        if solves[-1].success:
+            plan_costate = result.costate
     sched = schedule_params(sch)
     # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
     truth_model = truth.truth_model(problem.truth, sc)
@@ -319,7 +324,12 @@ def simulate(
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
         if socp:
-            result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n)
+            warm = (
+                costate_stm(n, (k_from - k_plan) * dt) @ plan_costate
+                if plan_costate is not None
+                else None
+            )
+            result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n, warm=warm)
         else:
             alternatives = (
                 (costate_stm(n, (k_from - k_older) * dt) @ older,)
@@ -333,6 +343,8 @@ def simulate(
             )  # fmt: skip
         rec = _record("resolve", k, t_est, result, settings.success_residual)
         solves.append(rec)
+        if rec.success and socp:
+            plan_costate, k_plan = result.costate, k_from
         if rec.success and not socp:
             older, k_older = lam_next.copy(), k + 1
             lam[:] = result.costate if correct else model.lam_step @ result.costate

@@ -297,6 +297,19 @@ def costate_from_multiplier(g: GridProblem, n: float, z_terminal: np.ndarray) ->
     return costate
 
 
+def multiplier_from_costate(g: GridProblem, n: float, costate: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`costate_from_multiplier`: Clarabel's scaled terminal multiplier.
+
+    ``costate`` is ``λ`` at the grid's start. The terminal multiplier is the
+    same object for every re-solve with the same final time, so an earlier
+    plan's costate propagated to this grid's start gives this program's
+    multiplier of that plan.
+    """
+    z_eq = np.linalg.solve(stm(n, g.blocks.shape[0] * g.dt_s).T, costate)
+    z: np.ndarray = z_eq / (g.row_scale * g.dt_s * g.u_max_km_s2)
+    return z
+
+
 def min_miss_controls(g: GridProblem, velocity_weight_s: float) -> np.ndarray | None:
     """Bounded grid controls (N, 3) minimising ``‖Δr(T)‖² + (w‖Δv(T)‖)²`` (SOC epigraph).
 
