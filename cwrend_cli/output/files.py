@@ -128,13 +128,30 @@ def make_output_dir(path: str | Path, setting: str) -> Path:
 
 
 def write_parquet(table: pa.Table, path: str | Path) -> Path:
-    """Write ``table`` to ``path`` atomically (temp file + rename)."""
+    """Write ``table`` to ``path`` atomically (temp file + rename).
+
+    Snappy-compressed, strings dictionary-encoded and floats byte-stream-split:
+    what a worker spends most of its non-simulation time on is encoding and
+    compressing per-step floats, which do not compress much. Splitting their
+    bytes by significance lets Snappy find the repeats (the sign and
+    exponent bytes): the steps file of a 16-seed task is about 9 % smaller
+    than with Zstandard and its write 25–35 % cheaper (issue 17). Encodings
+    of the file only: the table read back is the one written (values, types,
+    metadata).
+    """
     path = Path(path)
     # Dictionary encoding pays off for the repeated strings only; on float columns it
     # costs half the write time and makes the file larger.
     strings = [f.name for f in table.schema if pa.types.is_string(f.type)]
+    floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd", use_dictionary=strings)
+        pq.write_table(
+            table,
+            tmp,
+            compression="snappy",
+            use_dictionary=strings,
+            use_byte_stream_split=floats or False,
+        )
     return path
 
 

@@ -427,7 +427,9 @@ SUMMARY_SCHEMA = pa.schema(
 def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
     """A ``summary.parquet`` / ``runs.parquet`` row of one run (metrics: SPEC §7 convention)."""
     metrics = run_metrics(result, fuel_delta_v_km_s)
-    return {"arch": result.arch, "seed": result.seed, **dataclasses.asdict(metrics)}
+    # its fields are numbers: no deep copy (dataclasses.asdict) needed
+    fields = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
+    return {"arch": result.arch, "seed": result.seed, **fields}
 
 
 def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
