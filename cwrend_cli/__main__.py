@@ -2,10 +2,10 @@
 
 :func:`main` imports the command line inside a guard, so that a Ctrl-C
 while it loads exits quietly with code 130 instead of printing an import
-traceback. The command line itself loads only Typer, Rich and numpy; the heavy
-libraries (numba, scipy, pandas, pyarrow, rerun, matplotlib: 1–4 s) load in
-the commands that compute (see :mod:`cwrend_cli.cli`), where a Ctrl-C is
-handled by the command.
+traceback. The command line itself loads only Typer (and the pydantic it
+converts arguments with); Rich, numpy and the heavy libraries (numba, scipy,
+pandas, pyarrow, rerun, matplotlib: 1–4 s) load in the commands that use
+them (see :mod:`cwrend_cli.cli`), where a Ctrl-C is handled by the command.
 """
 
 from __future__ import annotations
