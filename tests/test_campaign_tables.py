@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pytest
@@ -21,6 +22,7 @@ from cwrend_cli.output.tables import (
     CAMPAIGN_STEPS_SCHEMA,
     campaign_solves_table,
     campaign_steps_table,
+    row_norm,
     solves_table,
     steps_table,
 )
@@ -80,3 +82,15 @@ def test_campaign_solves_table_holds_each_runs_solves_in_turn(
     expected = _per_run(runs, solves_table, _extra(runs), CAMPAIGN_SOLVES_SCHEMA)
     assert table.schema.remove_metadata().equals(CAMPAIGN_SOLVES_SCHEMA.remove_metadata())
     pd.testing.assert_frame_equal(table.to_pandas(), expected.to_pandas(), check_exact=True)
+
+
+def test_row_norm_is_numpys_row_norm_bit_for_bit() -> None:
+    rng = np.random.default_rng(17)
+    v = rng.standard_normal((200_000, 3)) * np.exp(rng.uniform(-300, 300, (200_000, 3)))
+    special = [0.0, -0.0, np.inf, -np.inf, np.nan, 5e-324, 1e-160, 1e154, 1e308, -3.0, 4.0]
+    v[: len(special) ** 2, 0] = np.repeat(special, len(special))
+    v[: len(special) ** 2, 1] = np.tile(special, len(special))
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = np.linalg.norm(v, axis=1)
+        got = row_norm(*np.ascontiguousarray(v.T))
+    np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))

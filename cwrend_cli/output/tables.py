@@ -305,50 +305,72 @@ STEPS_SCHEMA = pa.schema(
 
 
 def _stacked(results: Sequence[RunResult], attr: str) -> np.ndarray:
-    """``attr`` of ``results``, one run's rows after another's (one copy; none for one run)."""
+    """Per-step ``attr`` (one value a row) of ``results``, one run's rows after another's."""
     if len(results) == 1:
         return np.asarray(getattr(results[0], attr))
     return np.concatenate([getattr(r, attr) for r in results])
+
+
+def _components(results: Sequence[RunResult], attr: str) -> np.ndarray:
+    """Per-step vectors ``attr`` (N × k a run) of ``results`` as k contiguous rows (k × ΣN).
+
+    One copy, in the layout Arrow takes without copying a column again.
+    """
+    parts = [getattr(r, attr).T for r in results]
+    rows = np.empty((parts[0].shape[0], sum(p.shape[1] for p in parts)), dtype=parts[0].dtype)
+    return np.concatenate(parts, axis=1, out=rows)
+
+
+def row_norm(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """‖(x, y, z)‖ element by element, bit for bit ``np.linalg.norm(v, axis=1)`` of v = [x y z].
+
+    That norm sums the squares of a row left to right, ``(x² + y²) + z²``,
+    which this writes out on contiguous columns (10× faster than the
+    reduction over rows of three; tests/test_campaign_tables.py checks
+    that both agree on every bit).
+    """
+    norm: np.ndarray = np.sqrt((x * x + y * y) + z * z)
+    return norm
 
 
 def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     """The :data:`STEPS_SCHEMA` columns but ``arch`` of ``results``, one run after another.
 
     Built from each quantity's arrays stacked once (not a table per run):
-    row for row the same values as each run's own (the norms are per row).
+    row for row the same values as each run's own.
     """
     lengths = [r.t_s.size for r in results]
-    x_true = _stacked(results, "x_true")
-    x_hat = _stacked(results, "x_hat")
-    u = _stacked(results, "u")
-    u_cmd = _stacked(results, "u_cmd")
-    y = _stacked(results, "y")
+    x_true = _components(results, "x_true")
+    x_hat = _components(results, "x_hat")
+    u = _components(results, "u")
+    u_cmd = _components(results, "u_cmd")
+    y = _components(results, "y")
     cols: dict[str, Any] = {
         "seed": np.repeat(np.array([r.seed for r in results], dtype=np.int64), lengths),
         "step": np.concatenate([np.arange(n, dtype=np.int64) for n in lengths]),
         "t_s": _stacked(results, "t_s"),
     }
     for i, a in enumerate(_AXES):
-        cols[f"{a}_km"] = x_true[:, i]
+        cols[f"{a}_km"] = x_true[i]
     for i, a in enumerate(_VEL):
-        cols[f"{a}_km_s"] = x_true[:, 3 + i]
+        cols[f"{a}_km_s"] = x_true[3 + i]
     for i, a in enumerate(_AXES):
-        cols[f"{a}_hat_km"] = x_hat[:, i]
+        cols[f"{a}_hat_km"] = x_hat[i]
     for i, a in enumerate(_VEL):
-        cols[f"{a}_hat_km_s"] = x_hat[:, 3 + i]
+        cols[f"{a}_hat_km_s"] = x_hat[3 + i]
     # the control the actuator applied (RunResult.u; the command is RunResult.u_cmd)
     for i, a in enumerate(_AXES):
-        cols[f"u{a}_km_s2"] = u[:, i]
-    cols["u_norm_km_s2"] = np.linalg.norm(u, axis=1)
+        cols[f"u{a}_km_s2"] = u[i]
+    cols["u_norm_km_s2"] = row_norm(*u)
     for i, a in enumerate(_AXES):
-        cols[f"ucmd_{a}_km_s2"] = u_cmd[:, i]
+        cols[f"ucmd_{a}_km_s2"] = u_cmd[i]
     for i, a in enumerate(_AXES):
-        cols[f"meas_{a}_km"] = y[:, i]
+        cols[f"meas_{a}_km"] = y[i]
     for name in ("nis", "mtf_ratio", "score", "score_filtered", "eps"):
         cols[name] = _stacked(results, name)
-    cols["pos_err_km"] = np.linalg.norm(x_true[:, :3], axis=1)
-    cols["est_err_km"] = np.linalg.norm(x_hat[:, :3] - x_true[:, :3], axis=1)
-    cols["est_vel_err_km_s"] = np.linalg.norm(x_hat[:, 3:] - x_true[:, 3:], axis=1)
+    cols["pos_err_km"] = row_norm(*x_true[:3])
+    cols["est_err_km"] = row_norm(*(x_hat[:3] - x_true[:3]))
+    cols["est_vel_err_km_s"] = row_norm(*(x_hat[3:] - x_true[3:]))
     cols["trace_p"] = _stacked(results, "trace_p")
     cols["nees"] = _stacked(results, "nees")
     cols["degradation_window"] = _stacked(results, "window").astype(np.int64)
