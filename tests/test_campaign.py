@@ -561,11 +561,11 @@ def test_a_full_disk_stops_the_campaign_with_exit_3_and_records_no_result(
     real_write = worker_module.write_parquet
     calls = {"n": 0}
 
-    def filling_disk(table: Any, path: Path) -> None:
+    def filling_disk(table: Any, path: Path, **options: Any) -> None:
         calls["n"] += 1
         if calls["n"] > 6:  # the first three tasks' steps and solves fit; then the disk is full
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
-        real_write(table, path)
+        real_write(table, path, **options)
 
     monkeypatch.setattr(worker_module, "write_parquet", filling_disk)
     args = ["ablate", str(cfg), "--seeds", "6", "--arch", "mtf_adaptive", "--workers", "1", "-q"]

@@ -28,7 +28,7 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -96,7 +96,14 @@ def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None
     A ``kill -9`` or a full disk can only tear the last line; the next append
     first ends such a torn line, so the tear stays one unparsable line that
     :func:`read_events` drops, never glued to the events that follow.
+
+    The data files a ``task_done`` event names (relative to the journal's
+    directory) are flushed to disk first: workers write them without waiting
+    for the disk (issue 17), and a task counts once its event is in the
+    journal, so the event must never be on disk before its files.
     """
+    root = Path(path).parent
+    _flush(root / f for e in events if e.get("event") == "task_done" for f in e.get("files", ()))
     text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
     with open(path, "ab") as fh:
         if fh.tell() > 0:
@@ -107,6 +114,16 @@ def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None
         fh.write(text.encode("utf-8"))
         fh.flush()
         os.fsync(fh.fileno())
+
+
+def _flush(paths: Iterable[Path]) -> None:
+    """Wait until the contents of the files ``paths`` are on disk."""
+    for path in paths:
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def _json_default(value: Any) -> Any:

@@ -230,6 +230,11 @@ def execute_task(
     ``recordings/<point>.s<seed>.rrd``. A recording that cannot be written is
     reported in the outcome's ``warnings``; the runs stay valid.
 
+    The steps/solves files are complete when this returns but not
+    necessarily on disk: the driver's journal flushes them before it records
+    the task (:func:`cwrend_cli.campaign.journal.append_events`), so a
+    worker does not wait for the disk between its tasks.
+
     ``metadata`` goes into the schema metadata of the steps/solves files
     (the campaign's ``config_hash`` and ``campaign_hash``, issue 18 item 5).
 
@@ -304,7 +309,9 @@ def execute_task(
                 "point": [s.point for s, _ in chosen],
             }
             rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
-            write_parquet(build([r for _, r in chosen], extra, metadata), Path(out_dir) / rel)
+            table = build([r for _, r in chosen], extra, metadata)
+            # not waiting for the disk: the journal flushes the files before it records the task
+            write_parquet(table, Path(out_dir) / rel, durable=False)
             files.append(rel)
     warnings: list[str] = []
     for seed in record_seeds:

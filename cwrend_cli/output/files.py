@@ -44,11 +44,18 @@ __all__ = ["atomic_path", "write_json", "write_parquet", "write_run"]
 
 
 @contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
+def atomic_path(path: Path, *, durable: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; move it onto ``path`` on success.
 
     The one way cwrend writes a file: readers (and a resumed campaign) see
     either nothing or the complete file, never a partial one.
+
+    ``durable``: the file is on disk before it is moved into place, so a
+    crash of the machine leaves the old file or the complete new one.
+    ``False`` leaves that wait to whoever records the file: a campaign
+    worker's steps/solves files, which the journal flushes before it records
+    their task (:func:`cwrend_cli.campaign.journal.append_events`), so the
+    worker computes on instead of waiting for the disk.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -56,8 +63,9 @@ def atomic_path(path: Path) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
-        with open(tmp_path, "rb") as fh:
-            os.fsync(fh.fileno())
+        if durable:
+            with open(tmp_path, "rb") as fh:
+                os.fsync(fh.fileno())
         os.chmod(tmp_path, 0o644)  # mkstemp creates 0600; results are ordinary files
         os.replace(tmp_path, path)
     finally:
@@ -127,8 +135,8 @@ def make_output_dir(path: str | Path, setting: str) -> Path:
     return out
 
 
-def write_parquet(table: pa.Table, path: str | Path) -> Path:
-    """Write ``table`` to ``path`` atomically (temp file + rename).
+def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) -> Path:
+    """Write ``table`` to ``path`` atomically (temp file + rename; ``durable``: atomic_path).
 
     Snappy-compressed, strings dictionary-encoded and floats byte-stream-split:
     what a worker spends most of its non-simulation time on is encoding and
@@ -144,7 +152,7 @@ def write_parquet(table: pa.Table, path: str | Path) -> Path:
     # costs half the write time and makes the file larger.
     strings = [f.name for f in table.schema if pa.types.is_string(f.type)]
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
-    with atomic_path(path) as tmp:
+    with atomic_path(path, durable=durable) as tmp:
         pq.write_table(
             table,
             tmp,
