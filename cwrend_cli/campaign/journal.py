@@ -14,7 +14,8 @@ Layout of ``<output.dir>/<name>/``::
 
 The journal is the truth: a task execution counts once its ``task_done``
 event (written in the same append as its run events) is in
-``events.jsonl``; data files of executions that never completed are
+``events.jsonl`` (appended once the files it names are on disk, which the
+workers leave to it); data files of executions that never completed are
 orphans, removed on resume. References are deterministic functions of their
 grid point, rewritten whenever needed, so they are never orphans. Here: the
 names, appending and reading events, the journal's state, orphan removal,

@@ -2,7 +2,9 @@
 
 A file is written to a temporary name in its directory, flushed to disk and
 moved into place with :func:`os.replace`, so a reader (a report, a resumed
-campaign) or a ``kill -9`` never sees a half-written file. Here too: the
+campaign) or a ``kill -9`` never sees a half-written file (a campaign
+worker's steps/solves files are flushed by the journal instead, before it
+records their task: :func:`atomic_path`'s ``durable``). Here too: the
 Parquet and JSON writers built on it, and :func:`write_run`, the directory of
 ``cwrend run``. The Arrow schemas of the tables live in
 :mod:`cwrend_cli.output.tables`.
