@@ -42,6 +42,8 @@ from cwrend_cli.physics.guidance._kernels import (
     STATUS_INFEASIBLE,
     NewtonSettings,
     _cholesky_solve,
+    damped_direction,
+    step_accepted,
 )
 
 #: Relative margin on ``Σ‖A_jᵀν‖`` before a positive certificate counts: far above the
@@ -120,7 +122,7 @@ def grid_dual(
 
 @njit(cache=True)
 def _gram(a: np.ndarray, out: np.ndarray) -> None:
-    """``Σ_j A_j A_jᵀ``: the Levenberg–Marquardt metric (the Hessian's scale on a full burn)."""
+    """``Σ_j A_j A_jᵀ``: the Hessian's scale on a full burn (its diagonal is the LM metric)."""
     for i in range(6):
         for j in range(6):
             acc = 0.0
@@ -190,8 +192,11 @@ def grid_dual_ascent(
     search; the caller then solves the program with Clarabel).
     """
     settings = NewtonSettings(*settings_t)
-    metric = np.empty((6, 6))
-    _gram(a, metric)
+    gram = np.empty((6, 6))
+    _gram(a, gram)
+    metric = np.empty(6)  # the Levenberg–Marquardt metric: diag Σ A_j A_jᵀ
+    for i in range(6):
+        metric[i] = gram[i, i]
     steps = a.shape[0]
     nu = nu0.copy()
     grad = np.empty(6)
@@ -222,11 +227,7 @@ def grid_dual_ascent(
         rp_t = rp
         rv_t = rv
         for _attempt in range(settings.max_damping_tries):
-            damping = max(mu, settings.damping_floor)
-            for i in range(6):
-                for j in range(6):
-                    mat[i, j] = -hess[i, j] + damping * metric[i, j]
-            if not _cholesky_solve(mat, grad, step):
+            if not damped_direction(hess, metric, max(mu, settings.damping_floor), grad, mat, step):
                 mu = max(settings.damping_growth * mu, settings.damping_start_indefinite)
                 continue
             slope = 0.0
@@ -238,13 +239,8 @@ def grid_dual_ascent(
                     nu_t[i] = nu[i] + alpha * step[i]
                 value_t, cert_t = grid_dual(a, b, nu_t, c1, c2, grad_t, hess_t, u_t)
                 rp_t, rv_t = _miss(grad_t, row_scale)
-                if value_t >= value + settings.armijo * alpha * slope:
-                    accepted = True
-                elif alpha == 1.0 and value_t >= value - settings.flat_rtol * (abs(value) + 1e-300):
-                    # D flat to rounding near the optimum: accept a full step that reduces the miss
-                    accepted = (rp_t / settings.tol_pos_km) ** 2 + (
-                        rv_t / settings.tol_vel_km_s
-                    ) ** 2 < merit
+                merit_t = (rp_t / settings.tol_pos_km) ** 2 + (rv_t / settings.tol_vel_km_s) ** 2
+                accepted = step_accepted(value_t, value, alpha, slope, merit_t, merit, settings_t)
                 if accepted:
                     break
                 alpha *= 0.5

@@ -645,6 +645,51 @@ def _cholesky_solve(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
 
 
 @njit(cache=True)
+def damped_direction(
+    hess: np.ndarray,
+    metric: np.ndarray,
+    damping: float,
+    grad: np.ndarray,
+    mat: np.ndarray,
+    step: np.ndarray,
+) -> bool:
+    """The Levenberg–Marquardt step: solve ``(−H + damping·diag(metric)) s = G`` into ``step``.
+
+    False if the damped matrix is not positive definite (then damp more).
+    Shared by every dual ascent (this module's and :mod:`._grid_kernels`).
+    """
+    for i in range(6):
+        for j in range(6):
+            mat[i, j] = -hess[i, j]
+        mat[i, i] += damping * metric[i]
+    return _cholesky_solve(mat, grad, step)
+
+
+@njit(cache=True)
+def step_accepted(
+    value_t: float,
+    value: float,
+    alpha: float,
+    slope: float,
+    merit_t: float,
+    merit: float,
+    settings_t: tuple[Any, ...],
+) -> bool:
+    """Whether a dual ascent accepts the trial point (:class:`NewtonSettings`).
+
+    Armijo on the dual, ``D(λ + αs) ≥ D(λ) + armijo·α·∇Dᵀs``; or, for a full
+    step that leaves ``D`` flat to rounding (``flat_rtol``, near the
+    optimum), a reduction of the terminal-miss merit ``merit_t < merit``.
+    """
+    settings = NewtonSettings(*settings_t)
+    if value_t >= value + settings.armijo * alpha * slope:
+        return True
+    if alpha == 1.0 and value_t >= value - settings.flat_rtol * (abs(value) + 1e-300):
+        return merit_t < merit
+    return False
+
+
+@njit(cache=True)
 def terminal_residual(
     n: float, horizon: float, grad: np.ndarray, out: np.ndarray
 ) -> tuple[float, float]:
@@ -738,11 +783,7 @@ def newton_ascent(
         merit = (rp / tol_pos) ** 2 + (rv / tol_vel) ** 2
         accepted = False
         for _attempt in range(settings.max_damping_tries):
-            for i in range(6):
-                for j in range(6):
-                    mat[i, j] = -hess[i, j]
-                mat[i, i] += max(mu, settings.damping_floor) * metric[i]
-            if not _cholesky_solve(mat, grad, step):
+            if not damped_direction(hess, metric, max(mu, settings.damping_floor), grad, mat, step):
                 mu = max(settings.damping_growth * mu, settings.damping_start_indefinite)
                 continue
             slope = 0.0
@@ -768,13 +809,8 @@ def newton_ascent(
                     ws,
                 )
                 rp_t, rv_t = terminal_residual(n, horizon, grad_t, res)
-                if value_t >= value + settings.armijo * alpha * slope:
-                    accepted = True
-                elif alpha == 1.0 and value_t >= value - settings.flat_rtol * (abs(value) + 1e-300):
-                    # D is flat to rounding near the optimum: accept a full step
-                    # that reduces the terminal residual.
-                    merit_t = (rp_t / tol_pos) ** 2 + (rv_t / tol_vel) ** 2
-                    accepted = merit_t < merit
+                merit_t = (rp_t / tol_pos) ** 2 + (rv_t / tol_vel) ** 2
+                accepted = step_accepted(value_t, value, alpha, slope, merit_t, merit, settings_t)
                 if accepted:
                     break
                 alpha *= 0.5
