@@ -272,3 +272,24 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
     runs = pd.read_parquet(out / "runs.parquet")
     assert (runs["status"] == "ok").all()  # nothing recorded for the lost scheduler
     assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped:")
+
+
+def test_dask_log_lines_are_silenced_below_critical() -> None:
+    """Every distributed/tornado logger, including those distributed's own logging
+    configuration sets explicitly (``tornado.application`` at ERROR), stays quiet: a
+    lost scheduler is reported by cwrend, not by a tornado traceback."""
+    import logging
+
+    import distributed  # noqa: F401  (applies Dask's logging configuration)
+
+    from cwrend_cli.campaign import executors
+
+    executors._quiet_dask_logs()
+    names = [
+        name
+        for name in logging.root.manager.loggerDict
+        if name.split(".")[0] in ("distributed", "tornado")
+    ]
+    assert "tornado.application" in names
+    for name in [*names, "asyncio"]:
+        assert logging.getLogger(name).getEffectiveLevel() == logging.CRITICAL, name

@@ -100,6 +100,27 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     threading.Thread(target=watch, name="cwrend-parent-watch", daemon=True).start()
 
 
+def _quiet_dask_logs() -> None:
+    """Silence Dask's loggers below CRITICAL in this process.
+
+    cwrend reports a lost scheduler or worker itself (exit 3, the manifest):
+    Dask's own log lines with tracebacks would only bury that message.
+    Importing distributed applies its logging configuration, which sets some
+    child loggers explicitly (``tornado.application`` at ERROR, so the
+    ``tornado`` level alone does not reach it: a lost-scheduler test once
+    printed a tornado traceback); so every existing ``distributed.*`` /
+    ``tornado.*`` logger is set, and ``asyncio``, whose "exception was never
+    retrieved" reports of the abandoned connections carry tracebacks too.
+    """
+    names = [
+        name
+        for name in logging.root.manager.loggerDict
+        if name.split(".")[0] in ("distributed", "tornado")
+    ]
+    for name in ("distributed", "tornado", "asyncio", *names):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 def _terminate_workers(pool: ProcessPoolExecutor) -> None:
     """Stop a pool's worker processes now (SIGTERM; they ignore Ctrl-C).
 
@@ -283,10 +304,7 @@ def open_executor(
         raise ConfigError(
             "--executor dask needs Dask distributed: pip install 'cwrend[dask]'"
         ) from None
-    # cwrend reports a lost scheduler or worker itself (exit 3, the manifest): Dask's own
-    # log lines with tracebacks would only bury that message
-    for name in ("distributed", "distributed.client", "distributed.worker", "tornado"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
+    _quiet_dask_logs()
     cluster = None
     if address:
         try:
