@@ -257,6 +257,49 @@ def test_dual_ascent_agrees_with_clarabel(eps: float) -> None:
     assert cost(controls) <= cost(ref_controls) * (1.0 + 1e-12)
 
 
+@pytest.mark.parametrize("eps", [0.3, 1e-3])
+def test_grid_dual_gradient_and_hessian_are_its_derivatives(eps: float) -> None:
+    """``grid_dual``'s gradient and Hessian are the derivatives of its value (central differences).
+
+    At a ν where steps coast, ramp and thrust fully (the cold start of the
+    800 s problem, which puts the busiest step at half throttle, scaled by
+    1.5; no step within 1e-4 of a kink, where the Hessian jumps), with
+    relative steps h = 1e-6 of ‖ν‖:
+    gradient and Hessian within 1e-8 relative to their norms (central
+    differences err by O(h²) ~1e-12 plus rounding ~1e-16/1e-6 = 1e-10;
+    observed ≤ 3e-10 and 6e-11). A ν exactly on a kink would not do: the
+    difference quotient there averages the two one-sided Hessians.
+    """
+    from cwrend_cli.physics.guidance import _grid_kernels as gk
+
+    g = _full_grid()
+    a, b = convex._scaled_rows(g)
+    c1, c2 = 1.0 - eps, eps
+    nu = np.empty(6)
+    assert gk.cold_start(a, b, c1, c2, nu)
+    nu *= 1.5
+    grad, hess, u = np.empty(6), np.empty((6, 6)), np.empty((a.shape[0], 3))
+    gk.grid_dual(a, b, nu, c1, c2, grad, hess, u)
+    levels = np.linalg.norm(u, axis=1)
+    assert np.any(levels == 0.0) and np.any(levels == 1.0)
+    assert np.any((levels > 0.0) & (levels < 1.0))
+    raw = (np.linalg.norm(np.einsum("jab,a->jb", a, nu), axis=1) - c1) / (2 * c2)
+    assert np.min(np.minimum(np.abs(raw), np.abs(raw - 1.0))) > 1e-4
+    h = 1e-6 * np.linalg.norm(nu)
+    fd_grad, fd_hess = np.empty(6), np.empty((6, 6))
+    g_t, h_t, u_t = np.empty(6), np.empty((6, 6)), np.empty_like(u)
+    for i in range(6):
+        e = np.zeros(6)
+        e[i] = h
+        up, _ = gk.grid_dual(a, b, nu + e, c1, c2, g_t, h_t, u_t)
+        grad_up = g_t.copy()
+        down, _ = gk.grid_dual(a, b, nu - e, c1, c2, g_t, h_t, u_t)
+        fd_grad[i] = (up - down) / (2 * h)
+        fd_hess[:, i] = (grad_up - g_t) / (2 * h)
+    assert np.linalg.norm(fd_grad - grad) <= 1e-8 * np.linalg.norm(grad)
+    assert np.linalg.norm(fd_hess - hess) <= 1e-8 * np.linalg.norm(hess)
+
+
 def test_dual_plan_is_the_pointwise_minimiser_of_its_lagrangian() -> None:
     """KKT by construction: each control is the smoothed law of its step's ``y_j = A_jᵀν``.
 
