@@ -135,8 +135,19 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "kind": _col("initial or resolve (solves); marginal or paired (statistics)", "-"),
     "horizon_s": _col("horizon of the solve"),
     "status": _col("solve outcome (solves) or run outcome ok/failed (runs)", "-"),
-    "fallback_step": _col("solver step of the fallback chain that produced the result", "-"),
-    "iterations": _col("solver iterations", "-"),
+    "fallback_step": _col(
+        "solver step that produced the result: warm (the warm Newton attempt), a step of the "
+        "fallback chain, socp_plan (its cone-program plan of last resort), or socp (the "
+        "cone-program method)",
+        "-",
+    ),
+    "iterations": _col(
+        "iterations of the solver that answered, summed over the steps of the fallback "
+        "chain: Newton iterations of the shooting ascent; for a cone program, of its dual "
+        "ascent where the quadratic weight max(eps, 1e-6) is at least 1e-3, else Clarabel's "
+        "interior-point iterations",
+        "-",
+    ),
     "residual_km": _col("terminal residual norm of the solve"),
     "wall_time_ms": _col("wall time of the solve"),
     "success": _col("converged with residual below solver.success_residual", "-"),
