@@ -1,5 +1,9 @@
 """Start-up (issue 17): help and configuration commands load none of the heavy libraries.
 
+Nor numpy and Rich for ``config validate/show`` and the help (numpy, about 0.1 s,
+loads in the commands that compute and for a covariance given as a full
+matrix; Rich, about 20 ms, when a command prints through it).
+
 A behaviour test, not a timing test: each command runs in a fresh
 interpreter and the modules it loaded are read from ``sys.modules``. The
 wall times are measured by ``python -m benchmarks.bench_startup``.
@@ -123,3 +127,48 @@ def test_the_help_names_the_physics_architectures() -> None:
 
     assert tuple(ARCHITECTURES) == cli.ARCH_SLUGS
     assert tuple(SOCP_ARCHITECTURES) == cli.SOCP_ARCH_SLUGS
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["config", "validate", str(PAPER)],
+        ["config", "validate", str(PAPER), "--set", "schedule.beta=0.5"],
+        ["config", "show", str(PAPER)],
+        ["--help"],
+        ["ablate", "--help"],
+    ],
+    ids=lambda a: " ".join(Path(x).name for x in a),
+)
+def test_command_loads_no_numpy_nor_rich(args: list[str]) -> None:
+    """``config validate/show`` and the help load no numpy nor Rich (numpy ~0.1 s, Rich ~20 ms:
+    loaded by the commands that compute, by a full covariance matrix, and by Rich output)."""
+    assert _loaded(args, ("numpy", "rich")) == {"code": 0, "heavy": []}
+
+
+def test_a_full_covariance_matrix_is_still_checked(tmp_path: Path) -> None:
+    """The positive-definiteness check of a full matrix (numpy, loaded for it) still runs."""
+    cfg = tmp_path / "full.toml"
+    cfg.write_text(
+        "[estimator]\nr_nominal_km2 = [[1e-6, 2e-6, 0], [2e-6, 1e-6, 0], [0, 0, 1e-6]]\n"
+    )
+    result = _loaded(["config", "validate", str(cfg)], ("numpy", "rich"))
+    assert result == {"code": 2, "heavy": ["numpy", "rich"]}  # the error is printed by Rich
+    proc = subprocess.run(
+        [sys.executable, "-m", "cwrend_cli", "config", "validate", str(cfg)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert "estimator.r_nominal_km2" in proc.stderr and "positive definite" in proc.stderr
+
+
+def test_the_array_alias_of_the_physics_parameters_is_numpy_s() -> None:
+    """``physics.params.FloatArray`` is built on first use (the module imports no numpy)."""
+    import numpy as np
+    import numpy.typing as npt
+
+    from cwrend_cli.physics import params
+
+    assert params.FloatArray == npt.NDArray[np.float64]
+    with pytest.raises(AttributeError):
+        _ = params.NotAName  # type: ignore[attr-defined]
