@@ -172,3 +172,20 @@ def test_the_array_alias_of_the_physics_parameters_is_numpy_s() -> None:
     assert params.FloatArray == npt.NDArray[np.float64]
     with pytest.raises(AttributeError):
         _ = params.NotAName  # type: ignore[attr-defined]
+
+
+def test_a_campaign_worker_loads_neither_pandas_nor_the_driver() -> None:
+    """A spawned worker imports ``cwrend_cli.campaign.worker`` (its task function's module):
+    that must not bring pandas (~0.3 s) nor the driver, whose names the package imports on
+    first use; the package's public names still resolve (``campaign.plan`` the function)."""
+    script = (
+        "import json, sys, cwrend_cli.campaign.worker\n"
+        "loaded = ['pandas' in sys.modules, 'cwrend_cli.campaign.driver' in sys.modules]\n"
+        "from cwrend_cli import campaign\n"
+        "print(json.dumps([*loaded, callable(campaign.plan), campaign.run_campaign.__module__]))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == [False, False, True, "cwrend_cli.campaign.driver"]

@@ -37,10 +37,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:  # pandas is imported by sensitivity() only: a worker plans no design
+    import pandas as pd
 
 from cwrend_cli.errors import ConfigError
 
@@ -241,6 +243,8 @@ def sensitivity(
     ``ci_low``, ``ci_high`` (95 %), ``n_seeds`` (the fewest ok seeds of a
     point). An architecture with a point without ok runs gets no rows.
     """
+    import pandas as pd
+
     ok = runs[runs["status"] == "ok"]
     out = []
     for arch, group in ok.groupby("arch", sort=True, observed=True):

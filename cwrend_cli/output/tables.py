@@ -27,11 +27,13 @@ import dataclasses
 import json
 import operator
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
+
+if TYPE_CHECKING:  # frames are only passed in: a campaign worker never loads pandas
+    import pandas as pd
 
 from cwrend_cli import __version__
 from cwrend_cli.physics.metrics import reference_metrics, run_metrics
