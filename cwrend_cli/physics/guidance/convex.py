@@ -137,7 +137,9 @@ def plan_controls(
     Two solvers, one program (module docstring): the dual ascent when the
     quadratic weight is at least :data:`DUAL_MIN_WEIGHT`, started from
     ``warm`` (a costate at the grid's start from an earlier plan) or cold;
-    Clarabel below that weight, and whenever the ascent does not converge.
+    below that weight Clarabel, on the steps that the ascent at
+    ``DUAL_MIN_WEIGHT`` screens (:func:`_clarabel_plan`); Clarabel on every
+    step whenever the ascent neither converges nor certifies infeasibility.
     ``iterations`` counts the iterations of the solver that answered.
     """
     weight = max(float(eps), regularisation)
