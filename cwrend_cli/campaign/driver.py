@@ -275,10 +275,7 @@ def _run_locked(
     if force:
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
-    journal = load_journal(out_dir / EVENTS)
-    executions_before = {e.get("execution") for e in journal.runs.values()}
-    remove_orphan_files(out_dir, journal.files)
-    done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
+    executions_before, done = _journal_before(out_dir, retry_failed)
     tasks = [
         replace(t, runs=tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
     ]
@@ -341,6 +338,20 @@ def _run_locked(
             "the same command to compute exactly the missing runs"
         )
     return CampaignSummary(out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs))
+
+
+def _journal_before(out_dir: Path, retry_failed: bool) -> tuple[set[object], set[str]]:
+    """Clean the orphans of a campaign directory; its executions with runs and its done runs.
+
+    Done: ok runs, failed ones too unless ``retry_failed``. The journal's
+    state is released on return, so the campaign never holds it while it
+    runs, nor beside the state read again at its end.
+    """
+    journal = load_journal(out_dir / EVENTS)
+    remove_orphan_files(out_dir, journal.files)
+    executions = {e.get("execution") for e in journal.runs.values()}
+    done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
+    return executions, done
 
 
 def _check_room(out_dir: Path, plan_: CampaignPlan, first: Task) -> None:

@@ -68,6 +68,7 @@ __all__ = [
     "events_of",
     "finish_manifest",
     "iso",
+    "iter_events",
     "load_journal",
     "new_manifest",
     "read_events",
@@ -135,20 +136,33 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def read_events(path: str | Path) -> list[dict[str, Any]]:
-    """All complete events of a journal; a torn or unparsable line is dropped."""
+def iter_events(path: str | Path) -> Iterator[dict[str, Any]]:
+    """The complete events of a journal, one at a time, read line by line.
+
+    A torn or unparsable line is dropped (a torn last line included); a
+    missing journal has no events. Only one line is held at a time, so
+    reading costs memory for what the caller keeps, not for the file.
+    """
     path = Path(path)
     if not path.exists():
-        return []
-    events = []
-    for line in path.read_bytes().splitlines():
-        try:
-            event = json.loads(line)
-        except ValueError:  # torn, not JSON, not UTF-8
-            continue
-        if isinstance(event, dict):
-            events.append(event)
-    return events
+        return
+    with open(path, "rb") as fh:
+        for chunk in fh:  # split on b"\n"; the \r-separated pieces as bytes.splitlines does
+            for line in chunk.splitlines():
+                try:
+                    event = json.loads(line)
+                except ValueError:  # torn, not JSON, not UTF-8
+                    continue
+                if isinstance(event, dict):
+                    yield event
+
+
+def read_events(path: str | Path) -> list[dict[str, Any]]:
+    """All complete events of a journal; a torn or unparsable line is dropped.
+
+    Holds every event: for a large journal prefer :func:`iter_events`.
+    """
+    return list(iter_events(path))
 
 
 def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str, Any]]:
@@ -204,15 +218,48 @@ class JournalState:
 
 
 def load_journal(path: str | Path) -> JournalState:
-    """Runs and files of every task execution that completed (its ``task_done`` was written)."""
-    events = read_events(path)
-    done_tasks = {e["execution"]: e for e in events if e.get("event") == "task_done"}
-    runs: dict[str, Mapping[str, Any]] = {}
-    for e in events:
-        if e.get("event") in ("run_finished", "run_failed") and e.get("execution") in done_tasks:
-            runs[e["run_key"]] = e
-    files = frozenset(f for e in done_tasks.values() for f in e.get("files", ()))
-    return JournalState(runs, files)
+    """Runs and files of every task execution that completed (its ``task_done`` was written).
+
+    Streams the journal (:func:`iter_events`) and keeps what the state needs:
+    per run key its latest outcome event (by position in the journal) of an
+    execution with a ``task_done`` anywhere in the journal, and the files the
+    ``task_done`` events name. An execution's outcome events precede its
+    ``task_done`` (one append), so they wait in a buffer per execution until
+    it arrives; ``run_started`` and other events are dropped at once. Memory:
+    the latest outcome per run plus the outcomes of executions not (yet)
+    done, not the file.
+    """
+    # run_key -> [first position, latest position, latest event] of a done execution's outcomes
+    runs: dict[str, list[Any]] = {}
+    pending: dict[Any, list[tuple[int, dict[str, Any]]]] = {}  # not-done execution -> outcomes
+    files: dict[Any, Sequence[str]] = {}  # done execution -> the files of its last task_done
+
+    def keep(position: int, event: dict[str, Any]) -> None:
+        latest = runs.get(event["run_key"])
+        if latest is None:
+            runs[event["run_key"]] = [position, position, event]
+        elif latest[1] < position:
+            latest[1:] = [position, event]
+        else:
+            latest[0] = min(latest[0], position)
+
+    for position, event in enumerate(iter_events(path)):
+        kind = event.get("event")
+        if kind in ("run_finished", "run_failed"):
+            execution = event.get("execution")
+            if execution in files:  # a later event of an execution already done counts too
+                keep(position, event)
+            else:
+                pending.setdefault(execution, []).append((position, event))
+        elif kind == "task_done":
+            files[event["execution"]] = event.get("files", ())
+            for buffered in pending.pop(event["execution"], ()):
+                keep(*buffered)
+    ordered = sorted(runs.items(), key=lambda item: int(item[1][0]))  # first seen, as before
+    return JournalState(
+        {key: entry[2] for key, entry in ordered},
+        frozenset(f for named in files.values() for f in named),
+    )
 
 
 def remove_orphan_files(root: str | Path, keep: frozenset[str]) -> list[str]:
@@ -356,7 +403,7 @@ def check_same_campaign(
         # each journal record names its campaign: a lost manifest cannot hide another one
         others = {
             str(e["campaign_hash"])
-            for e in read_events(out_dir / EVENTS)
+            for e in iter_events(out_dir / EVENTS)
             if "campaign_hash" in e and e["campaign_hash"] != plan_.campaign_hash
         }
         if others:
