@@ -35,6 +35,10 @@ def _outcome(run_key: str, execution: str, status: str = "ok", **extra: Any) -> 
     }
 
 
+def _kept(event: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: event[k] for k in journal.RUN_FIELDS if k in event}
+
+
 def _started(run_key: str, execution: str) -> dict[str, Any]:
     return {"event": "run_started", "run_key": run_key, "execution": execution}
 
@@ -49,13 +53,14 @@ def _write(path: Path, events: Sequence[Mapping[str, Any]]) -> Path:
 
 
 def _reference(path: Path) -> journal.JournalState:
-    """The state as the journal was read before it streamed (the whole file at once)."""
+    """The state as the journal was read before it streamed (the whole file at once; of each
+    outcome event the fields kept)."""
     events = journal.read_events(path)
     done_tasks = {e["execution"]: e for e in events if e.get("event") == "task_done"}
     runs: dict[str, Mapping[str, Any]] = {}
     for e in events:
         if e.get("event") in ("run_finished", "run_failed") and e.get("execution") in done_tasks:
-            runs[e["run_key"]] = e
+            runs[e["run_key"]] = {k: e[k] for k in journal.RUN_FIELDS if k in e}
     files = frozenset(f for e in done_tasks.values() for f in e.get("files", ()))
     return journal.JournalState(runs, files)
 
@@ -85,7 +90,7 @@ def test_an_execution_without_task_done_counts_for_nothing(tmp_path: Path) -> No
         [_outcome("k1", "x"), _done("x", "f/x"), _outcome("k2", "y"), _outcome("k1", "y")],
     )
     state = _state(path)
-    assert dict(state.runs) == {"k1": _outcome("k1", "x")}
+    assert dict(state.runs) == {"k1": _kept(_outcome("k1", "x"))}
     assert state.files == {"f/x"}
 
 
@@ -147,6 +152,17 @@ def test_a_torn_last_line_is_tolerated(tmp_path: Path) -> None:
     assert journal.read_events(path)[-1] == _outcome("k2", "y")
 
 
+def test_of_an_outcome_the_state_keeps_what_runs_parquet_and_the_driver_read(
+    tmp_path: Path,
+) -> None:
+    event = _outcome("k", "x", time="2026-12-01T00:00:00.000+00:00", campaign_hash="h" * 64,
+                     cwrend_version="0.1.0", duration_s=0.5)  # fmt: skip
+    path = _write(tmp_path / "events.jsonl", [event, _done("x")])
+    kept = _state(path).runs["k"]
+    assert set(kept) == set(journal.RUN_FIELDS)
+    assert kept == {k: event[k] for k in journal.RUN_FIELDS}
+
+
 def test_a_missing_journal_is_empty(tmp_path: Path) -> None:
     assert list(journal.iter_events(tmp_path / "events.jsonl")) == []
     state = journal.load_journal(tmp_path / "events.jsonl")
@@ -179,3 +195,11 @@ def test_loading_a_journal_holds_the_runs_not_the_file(tmp_path: Path) -> None:
         tracemalloc.stop()
     assert len(state.runs) == 2000
     assert peak - kept < 1_000_000  # measured ~0.2 MB; reading the whole file: > 8 MB
+
+
+def test_the_names_and_repeated_texts_of_the_runs_kept_are_held_once(tmp_path: Path) -> None:
+    path = _write(tmp_path / "events.jsonl", [_outcome("k1", "x"), _outcome("k2", "x"), _done("x")])
+    one, two = _state(path).runs.values()
+    ((name_one, _),), ((name_two, _),) = one["metrics"].items(), two["metrics"].items()
+    assert name_one is name_two
+    assert one["execution"] is two["execution"] and one["point"] is two["point"]
