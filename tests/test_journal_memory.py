@@ -198,8 +198,10 @@ def test_loading_a_journal_holds_the_runs_not_the_file(tmp_path: Path) -> None:
 
 
 def test_the_names_and_repeated_texts_of_the_runs_kept_are_held_once(tmp_path: Path) -> None:
-    path = _write(tmp_path / "events.jsonl", [_outcome("k1", "x"), _outcome("k2", "x"), _done("x")])
+    runs = [_outcome(k, "x", params={"estimator": "mtf"}) for k in ("k1", "k2")]
+    path = _write(tmp_path / "events.jsonl", [*runs, _done("x")])
     one, two = _state(path).runs.values()
     ((name_one, _),), ((name_two, _),) = one["metrics"].items(), two["metrics"].items()
     assert name_one is name_two
+    assert one["params"]["estimator"] is two["params"]["estimator"]
     assert one["execution"] is two["execution"] and one["point"] is two["point"]
