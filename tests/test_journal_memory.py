@@ -205,3 +205,20 @@ def test_the_names_and_repeated_texts_of_the_runs_kept_are_held_once(tmp_path: P
     assert name_one is name_two
     assert one["params"]["estimator"] is two["params"]["estimator"]
     assert one["execution"] is two["execution"] and one["point"] is two["point"]
+
+
+def test_a_rerun_torn_before_its_task_done_counts_for_nothing(tmp_path: Path) -> None:
+    """A task rerun under its earlier name (``--retry-failed`` of a task whose runs all
+    failed) and killed before its ``task_done``: its runs keep their earlier outcome.
+
+    Before, any outcome of an execution name that had completed once counted, so the torn
+    rerun's runs counted as ok while its files, named by no ``task_done``, were removed as
+    orphans on resume.
+    """
+    path = _write(
+        tmp_path / "events.jsonl",
+        [_outcome("k", "x", status="failed"), _done("x", "f/1"), _outcome("k", "x")],
+    )
+    state = journal.load_journal(path)
+    assert state.runs["k"]["status"] == "failed"
+    assert state.files == {"f/1"}

@@ -257,11 +257,11 @@ def load_journal(path: str | Path) -> JournalState:
     """Runs and files of every task execution that completed (its ``task_done`` was written).
 
     Streams the journal (:func:`iter_events`) and keeps what the state needs:
-    per run key its latest outcome event (by position in the journal) of an
-    execution with a ``task_done`` anywhere in the journal, and the files the
-    ``task_done`` events name. An execution's outcome events precede its
-    ``task_done`` (one append), so they wait in a buffer per execution until
-    it arrives; ``run_started`` and other events are dropped at once. Memory:
+    per run key its latest outcome event (by position in the journal) that a
+    ``task_done`` of its execution follows, and the files the ``task_done``
+    events name. An execution's outcome events precede its ``task_done`` (one
+    append), so they wait in a buffer per execution until it arrives;
+    ``run_started`` and other events are dropped at once. Memory:
     the latest outcome per run plus the outcomes of executions not (yet)
     done, not the file; of each outcome only its :data:`RUN_FIELDS` are kept
     (:func:`_kept`).
@@ -285,11 +285,10 @@ def load_journal(path: str | Path) -> JournalState:
         kind = event.get("event")
         if kind in ("run_finished", "run_failed"):
             execution = event.get("execution")
-            event = _kept(event, shared)
-            if execution in files:  # a later event of an execution already done counts too
-                keep(position, event)
-            else:
-                pending.setdefault(execution, []).append((position, event))
+            # counts once a task_done of its execution follows it: the name of an execution
+            # repeats when a task is rerun, and a rerun torn before its task_done counts for
+            # nothing (its files are orphans), even if an earlier run of the name completed
+            pending.setdefault(execution, []).append((position, _kept(event, shared)))
         elif kind == "task_done":
             files[event["execution"]] = event.get("files", ())
             for buffered in pending.pop(event["execution"], ()):
