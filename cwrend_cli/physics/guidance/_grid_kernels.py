@@ -122,7 +122,7 @@ def grid_dual(
 
 @njit(cache=True)
 def _gram(a: np.ndarray, out: np.ndarray) -> None:
-    """``Σ_j A_j A_jᵀ``: the Hessian's scale on a full burn (its diagonal is the LM metric)."""
+    """``Σ_j A_j A_jᵀ``: the Hessian's scale on a full burn (the cold start solves with it)."""
     for i in range(6):
         for j in range(6):
             acc = 0.0
@@ -192,11 +192,12 @@ def grid_dual_ascent(
     search; the caller then solves the program with Clarabel).
     """
     settings = NewtonSettings(*settings_t)
-    gram = np.empty((6, 6))
-    _gram(a, gram)
     metric = np.empty(6)  # the Levenberg–Marquardt metric: diag Σ A_j A_jᵀ
     for i in range(6):
-        metric[i] = gram[i, i]
+        acc = 0.0
+        for s in range(a.shape[0]):
+            acc += a[s, i, 0] * a[s, i, 0] + a[s, i, 1] * a[s, i, 1] + a[s, i, 2] * a[s, i, 2]
+        metric[i] = acc
     steps = a.shape[0]
     nu = nu0.copy()
     grad = np.empty(6)

@@ -162,7 +162,7 @@ def plan_controls(
     if weight >= DUAL_MIN_WEIGHT:
         # Clarabel's terminal multiplier is z = −ν (its KKT reads ∇f + Aᵀz = 0)
         return status, u * g.u_max_km_s2, feasibility.costate_from_multiplier(g, n, -nu), iterations
-    return _clarabel_plan(g, linear, weight, n, keep=_screen(g, nu, linear))
+    return _clarabel_plan(g, linear, weight, n, keep=_screen(_step_norms(a, nu), linear))
 
 
 def _scaled_rows(g: feasibility.GridProblem) -> tuple[np.ndarray, np.ndarray]:
@@ -188,16 +188,16 @@ def _ascent(
     return _ASCENT_STATUS[status], nu, u, int(iterations)
 
 
-def _step_norms(g: feasibility.GridProblem, nu: np.ndarray) -> np.ndarray:
-    """``‖A_jᵀν‖`` per step: a step thrusts in the optimum iff it exceeds ``1 − ε``."""
-    a, _ = _scaled_rows(g)
+def _step_norms(a: np.ndarray, nu: np.ndarray) -> np.ndarray:
+    """``‖A_jᵀν‖`` per step (``a``: :func:`_scaled_rows`): a step thrusts in the optimum iff
+    it exceeds ``1 − ε``."""
     norms: np.ndarray = np.linalg.norm(np.einsum("jab,a->jb", a, nu), axis=1)
     return norms
 
 
-def _screen(g: feasibility.GridProblem, nu: np.ndarray, linear: float) -> np.ndarray:
-    """Steps that may thrust by the multiplier ``ν``: ``‖A_jᵀν‖ ≥ (1 − ε)(1 − SCREEN_MARGIN)``."""
-    return np.flatnonzero(_step_norms(g, nu) >= linear * (1.0 - SCREEN_MARGIN))
+def _screen(norms: np.ndarray, linear: float) -> np.ndarray:
+    """Steps that may thrust by their :func:`_step_norms`: ``≥ (1 − ε)(1 − SCREEN_MARGIN)``."""
+    return np.flatnonzero(norms >= linear * (1.0 - SCREEN_MARGIN))
 
 
 def _clarabel_plan(
@@ -223,6 +223,7 @@ def _clarabel_plan(
     steps = g.blocks.shape[0]
     used = 0
     if keep is not None:
+        a, _ = _scaled_rows(g)
         for _round in range(SCREEN_ROUNDS):
             if keep.size == 0 or keep.size == steps:
                 break
@@ -233,15 +234,16 @@ def _clarabel_plan(
             used += iterations
             if not feasibility.solved(sol):
                 break
-            norms = _step_norms(g, -np.asarray(sol.z[:6]))
+            z = np.asarray(sol.z[:6])  # −ν
+            norms = _step_norms(a, -z)
             outside = np.ones(steps, dtype=bool)
             outside[keep] = False
             if not np.any(norms[outside] > linear):
                 u = np.zeros((steps, 3))
-                u[keep] = _controls(sub, sol)
-                costate = feasibility.costate_from_multiplier(g, n, np.asarray(sol.z[:6]))
+                u[keep] = feasibility.held_controls(sub, sol)
+                costate = feasibility.costate_from_multiplier(g, n, z)
                 return SolveStatus.CONVERGED, u, costate, used
-            keep = np.union1d(keep, _screen(g, -np.asarray(sol.z[:6]), linear))
+            keep = np.union1d(keep, _screen(norms, linear))
     sol, iterations = _clarabel_program(g, linear, weight)
     used += iterations
     if not feasibility.solved(sol):
@@ -253,7 +255,7 @@ def _clarabel_plan(
         status = SolveStatus.INFEASIBLE if infeasible else SolveStatus.FAILED
         return status, np.zeros((steps, 3)), np.full(6, np.nan), used
     costate = feasibility.costate_from_multiplier(g, n, np.asarray(sol.z[:6]))
-    return SolveStatus.CONVERGED, _controls(g, sol), costate, used
+    return SolveStatus.CONVERGED, feasibility.held_controls(g, sol), costate, used
 
 
 def _clarabel_program(g: feasibility.GridProblem, linear: float, weight: float) -> tuple[Any, int]:
@@ -280,17 +282,6 @@ def _clarabel_program(g: feasibility.GridProblem, linear: float, weight: float) 
     ]
     sol = feasibility.solve_cone(p, q, a, b, cones)
     return sol, int(sol.iterations)
-
-
-def _controls(g: feasibility.GridProblem, sol: Any) -> np.ndarray:
-    """The held controls [km/s²] of a solved program, projected onto ``‖u‖ ≤ u_max``."""
-    steps = g.blocks.shape[0]
-    u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3) * g.u_max_km_s2
-    # Interior-point iterates may exceed the bound by the solver tolerance: project.
-    norms = np.linalg.norm(u, axis=1)
-    over = norms > g.u_max_km_s2
-    u[over] *= (g.u_max_km_s2 / norms[over])[:, None]
-    return u
 
 
 def terminal_miss(g: feasibility.GridProblem, controls: np.ndarray) -> float:

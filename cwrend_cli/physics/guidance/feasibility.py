@@ -92,6 +92,20 @@ def solve_cone(
     return solver.solve()
 
 
+def held_controls(g: GridProblem, sol: Any) -> np.ndarray:
+    """The controls (N, 3) [km/s²] of a solved program whose first 3N variables are ``ũ``.
+
+    Interior-point solutions may exceed the bound by the solver tolerance:
+    they are projected onto ``‖u‖ ≤ u_max``.
+    """
+    steps = g.blocks.shape[0]
+    u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3) * g.u_max_km_s2
+    norms = np.linalg.norm(u, axis=1)
+    over = norms > g.u_max_km_s2
+    u[over] *= (g.u_max_km_s2 / norms[over])[:, None]
+    return u
+
+
 def solved(sol: Any) -> bool:
     return bool(sol.status in (clarabel.SolverStatus.Solved, clarabel.SolverStatus.AlmostSolved))
 
@@ -342,9 +356,4 @@ def min_miss_controls(g: GridProblem, velocity_weight_s: float) -> np.ndarray | 
     )
     if not solved(sol):
         return None
-    u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3) * g.u_max_km_s2
-    # Interior-point solutions may exceed the bound by the solver tolerance: project.
-    norms = np.linalg.norm(u, axis=1)
-    over = norms > g.u_max_km_s2
-    u[over] *= (g.u_max_km_s2 / norms[over])[:, None]
-    return u
+    return held_controls(g, sol)
