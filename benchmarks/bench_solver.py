@@ -5,8 +5,10 @@
 1. the warm attempt of every re-solve met in the fixed-ε closed loops of the
    paper scenario (both estimators, seeds 0 … S−1) at ε ∈ {1, 0.3, 0.05, 0}
    (``schedule.eps_fixed``): time, Newton iterations, the ε = 0 / ε = 0.05
-   ratios of issue 17, and a naive SciPy port on a handful of the same
-   problems (ratio = speed-up);
+   ratios of issue 17, a naive SciPy port on a handful of the same
+   problems (ratio = speed-up), and at ε = 0 the dual ascent alone on the
+   same re-solves (``switching_max_iter = 0``, the solver before issue 17's
+   switching-time Newton; ratio = speed-up);
 2. every re-solve of the four architectures over seeds 0 … S−1 with the
    fallback chain and with ``fallback = "none"``: success among the feasible
    ones, share certified infeasible and where, time, the step that succeeded;
@@ -38,17 +40,55 @@ EPS0_MEDIAN_RATIO_TARGET = "<= 5"
 EPS0_P99_RATIO_TARGET = "<= 20"
 
 
-def _warm_times(eps: float, seeds: int, hold: str) -> tuple[list[Captured], np.ndarray, list]:
-    """Warm re-solves of the fixed-ε closed loops (both estimators, seeds 0 … S−1), timed."""
+def _warm_times(
+    eps: float, seeds: int, hold: str, probs: list[Captured] | None = None, switching: bool = True
+) -> tuple[list[Captured], np.ndarray, list]:
+    """Warm re-solves of the fixed-ε closed loops (both estimators, seeds 0 … S−1), timed.
+
+    ``probs``: re-solve these instead of capturing them; ``switching=False``:
+    the dual ascent alone at ε = 0 (``switching_max_iter = 0``, the solver
+    before issue 17's switching-time Newton), the baseline of the same run.
+    """
     settings = simulation.solver_settings(problem_of(CwrendConfig()))
     settings = dataclasses.replace(settings, fallback="none")
-    cfg = config_with(schedule__eps_fixed=eps, guidance__hold=hold)
-    probs = [
-        c for slug in ("plain_fixed", "mtf_fixed") for s in range(seeds)
-        for c in capture_resolves(cfg, slug, s)
-    ]  # fmt: skip
+    if not switching:
+        settings = dataclasses.replace(settings, switching_max_iter=0)
+    if probs is None:
+        cfg = config_with(schedule__eps_fixed=eps, guidance__hold=hold)
+        probs = [
+            c for slug in ("plain_fixed", "mtf_fixed") for s in range(seeds)
+            for c in capture_resolves(cfg, slug, s)
+        ]  # fmt: skip
     results = [guidance.solve(c.problem, c.guess, settings, c.alternatives) for c in probs]
     return probs, np.array([r.wall_time_s * 1e3 for r in results]), results
+
+
+def _ascent_alone_rows(
+    section: str, label: str, probs: list[Captured], t: np.ndarray, iters: np.ndarray
+) -> list[Row]:
+    """The ε = 0 figures against the dual ascent alone on the same re-solves (same run)."""
+    _, t0, results0 = _warm_times(0.0, 0, "", probs, switching=False)
+    iters0 = np.array([r.iterations for r in results0])
+    return [
+        Row(
+            section,
+            f"{label}: median vs the dual ascent alone",
+            float(np.median(t)),
+            "ms",
+            baseline=float(np.median(t0)),
+            note=f"ascent alone {np.median(t0):.3f} ms, p99 {np.percentile(t0, 99):.2f} ms,"
+            f" median iterations {np.median(iters0):.0f} (here {np.median(iters):.0f});"
+            " ratio = speed-up",
+        ),
+        Row(
+            section,
+            f"{label}: mean vs the dual ascent alone",
+            float(np.mean(t)),
+            "ms",
+            baseline=float(np.mean(t0)),
+            note=f"mean iterations {iters.mean():.1f} vs {iters0.mean():.1f}",
+        ),
+    ]
 
 
 def warm_resolves(naive: int, seeds: int = 20) -> list[Row]:
@@ -106,6 +146,7 @@ def warm_resolves(naive: int, seeds: int = 20) -> list[Row]:
             )
         )
         if eps == 0.0:
+            rows += _ascent_alone_rows(section, "ε = 0", probs, t, iters)
             p99 = float(np.percentile(t, 99))
             rows.append(
                 Row(
@@ -127,11 +168,13 @@ def warm_resolves(naive: int, seeds: int = 20) -> list[Row]:
                     note=f"{p99:.3f} ms / {medians[0.05]:.3f} ms",
                 )
             )
-    _, t_mean, results_mean = _warm_times(0.0, seeds, "mean")
+    probs_mean, t_mean, results_mean = _warm_times(0.0, seeds, "mean")
     iters_mean = np.array([r.iterations for r in results_mean])
+    section = f"re-solve (warm, seeds 0–{seeds - 1})"
+    rows += _ascent_alone_rows(section, "ε = 0, hold = mean", probs_mean, t_mean, iters_mean)
     rows.append(
         Row(
-            f"re-solve (warm, seeds 0–{seeds - 1})",
+            section,
             "ε = 0, hold = mean: median",
             float(np.median(t_mean)),
             "ms",

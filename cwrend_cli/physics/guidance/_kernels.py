@@ -515,6 +515,68 @@ def _regime_terms(p: float, eps: float) -> tuple[float, float, float]:
 
 
 @njit(cache=True)
+def node_primer(lam0: np.ndarray, w: np.ndarray) -> tuple[float, float, float, float]:
+    """``λ_v = W(τ)ᵀ λ₀`` (three components) and ``p = ‖λ_v‖`` from ``w = W(τ)``."""
+    q0 = w[0, 0] * lam0[0] + w[1, 0] * lam0[1] + w[3, 0] * lam0[3] + w[4, 0] * lam0[4]
+    q1 = w[0, 1] * lam0[0] + w[1, 1] * lam0[1] + w[3, 1] * lam0[3] + w[4, 1] * lam0[4]
+    q2 = w[2, 2] * lam0[2] + w[5, 2] * lam0[5]
+    return q0, q1, q2, np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+
+
+@njit(cache=True)
+def add_control_node(
+    w: np.ndarray,
+    q0: float,
+    q1: float,
+    q2: float,
+    p: float,
+    wk: float,
+    phi: float,
+    dphi: float,
+    u_max: float,
+    want_hess: bool,
+    grad: np.ndarray,
+    hess: np.ndarray,
+    wq: np.ndarray,
+) -> None:
+    """Add one quadrature node (weight ``wk``) of ``∫ W u dτ`` and of its ``λ₀``-derivative.
+
+    ``u = −u_max φ q̂`` with throttle ``φ`` and its slope ``φ'`` at ``p``;
+    the derivative ``∂u/∂λ₀ = −u_max [φ' q̂q̂ᵀ + (φ/p)(I − q̂q̂ᵀ)] Wᵀ`` goes
+    into the upper triangle of ``hess``. Shared by the dual evaluation and
+    the switching-time Newton (:mod:`._switching_kernels`).
+    """
+    qh0 = q0 / p
+    qh1 = q1 / p
+    qh2 = q2 / p
+    c = -u_max * phi
+    for i in range(6):
+        wq[i] = w[i, 0] * qh0 + w[i, 1] * qh1 + w[i, 2] * qh2
+        grad[i] += wk * c * wq[i]
+    if want_hess:
+        a_iso = -u_max * wk * phi / p
+        a_rad = -u_max * wk * (dphi - phi / p)
+        for i in range(6):
+            for j in range(i, 6):
+                ww = w[i, 0] * w[j, 0] + w[i, 1] * w[j, 1] + w[i, 2] * w[j, 2]
+                val = a_iso * ww + a_rad * wq[i] * wq[j]
+                hess[i, j] += val
+
+
+@njit(cache=True)
+def terminal_offset(n: float, x0: np.ndarray, xf: np.ndarray, horizon: float) -> np.ndarray:
+    """``d = Φ(−T) x_f − x₀``: the target in the initial frame (module docstring)."""
+    pf = stm(n, -horizon)
+    d = np.empty(6)
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += pf[i, j] * xf[j]
+        d[i] = acc - x0[i]
+    return d
+
+
+@njit(cache=True)
 def dual_evaluate(
     n: float,
     lam0: np.ndarray,
@@ -561,32 +623,13 @@ def dual_evaluate(
             tau = mid + half * gl_x[k]
             wk = half * gl_w[k]
             input_kernel(n, tau, w)
-            q0 = w[0, 0] * lam0[0] + w[1, 0] * lam0[1] + w[3, 0] * lam0[3] + w[4, 0] * lam0[4]
-            q1 = w[0, 1] * lam0[0] + w[1, 1] * lam0[1] + w[3, 1] * lam0[3] + w[4, 1] * lam0[4]
-            q2 = w[2, 2] * lam0[2] + w[5, 2] * lam0[5]
-            p = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+            q0, q1, q2, p = node_primer(lam0, w)
             int_p += wk * p
             phi, dphi, psi = _regime_terms(p, eps)
             if phi == 0.0 and dphi == 0.0:
                 continue
             int_psi += wk * psi
-            # u = −u_max φ q̂ ; accumulate ∫ W u
-            qh0 = q0 / p
-            qh1 = q1 / p
-            qh2 = q2 / p
-            c = -u_max * phi
-            for i in range(6):
-                wq[i] = w[i, 0] * qh0 + w[i, 1] * qh1 + w[i, 2] * qh2
-                grad[i] += wk * c * wq[i]
-            if want_hess:
-                # ∂u/∂λ₀ = −u_max [φ' q̂q̂ᵀ + (φ/p)(I − q̂q̂ᵀ)] Wᵀ
-                a_iso = -u_max * wk * phi / p
-                a_rad = -u_max * wk * (dphi - phi / p)
-                for i in range(6):
-                    for j in range(i, 6):
-                        ww = w[i, 0] * w[j, 0] + w[i, 1] * w[j, 1] + w[i, 2] * w[j, 2]
-                        val = a_iso * ww + a_rad * wq[i] * wq[j]
-                        hess[i, j] += val
+            add_control_node(w, q0, q1, q2, p, wk, phi, dphi, u_max, want_hess, grad, hess, wq)
     if want_hess and eps < EPS_BANG_BANG:
         # Jump terms at ε = 0: −u_max W q̂q̂ᵀWᵀ/|ṗ| at each switching time.
         lam = ws[WS_LAM]  # λ(t_s), written by _speed_and_rate below
@@ -734,13 +777,7 @@ def newton_ascent(
     settings = NewtonSettings(*settings_t)
     tol_pos = settings.tol_pos_km
     tol_vel = settings.tol_vel_km_s
-    pf = stm(n, -horizon)
-    d = np.empty(6)
-    for i in range(6):
-        acc = 0.0
-        for j in range(6):
-            acc += pf[i, j] * xf[j]
-        d[i] = acc - x0[i]
+    d = terminal_offset(n, x0, xf, horizon)
     ws = workspace()
     grad = np.empty(6)
     hess = np.empty((6, 6))

@@ -49,6 +49,7 @@ import scipy.linalg
 
 from cwrend_cli.physics.dynamics import cw_system, stm
 from cwrend_cli.physics.guidance import _kernels as kern
+from cwrend_cli.physics.guidance import _switching_kernels as switching
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
 
@@ -96,6 +97,9 @@ class SolverSettings:
         1e-4  # SPEC §5: a solve succeeds if converged and ‖x(T)−x_f‖ below this
     )
     dt_grid_s: float = 1.0  # zero-order-hold grid of the convex checks
+    #: Newton steps of the switching-time Newton tried first at ε = 0 (0: the dual ascent
+    #: only, as before issue 17); see :mod:`._switching_kernels`.
+    switching_max_iter: int = 12
 
     def newton(self) -> kern.NewtonSettings:
         """Settings of the compiled Newton ascent (its other constants at their defaults)."""
@@ -165,14 +169,17 @@ def warm_attempt(
 
     The compiled ascent on plain arrays, with no Python object built around
     it: the warm attempt of :func:`solve_state` and every Newton solve of the
-    fallback chain. ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s].
+    fallback chain. At ε = 0 the switching-time Newton runs first
+    (``settings.switching_max_iter`` steps; its answer confirmed by the full
+    dual evaluation, else the damped ascent goes on; the iterations are the
+    sum of both). ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s].
     Arrays must be float64 and C-contiguous.
     """
     gl_x, gl_w = settings.quadrature()
     out = np.empty(6)
-    status, iters, rp, rv = kern.newton_ascent(
+    status, iters, rp, rv = switching.bang_bang_ascent(
         n, x0, xf, horizon_s, eps, u_max_km_s2, starts, gl_x, gl_w, n_cells(horizon_s),
-        settings.newton_fields, out,
+        settings.newton_fields, settings.switching_max_iter, out,
     )  # fmt: skip
     return _STATUS[status], out, iters, float(np.hypot(rp, rv))
 
