@@ -30,6 +30,8 @@ REL_TOL_JOINT_JACOBIAN = 1e-6
 #: Dual values (the remaining Δv by strong duality) of the two answers, relative:
 #: both meet the terminal tolerance 1e-9 km, so D differs by ≲ ‖G‖‖δλ‖ (observed ≤ 1e-14).
 REL_TOL_DUAL_VALUE = 1e-12
+#: The default number of switching-Newton steps.
+ON = guidance.SolverSettings().switching_max_iter
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,7 +80,7 @@ def settings(switching_max_iter: int) -> guidance.SolverSettings:
 def solve_both(r: Resolve) -> tuple[guidance.SolveResult, guidance.SolveResult]:
     """(with the switching Newton first, the dual ascent alone)."""
     return tuple(  # type: ignore[return-value]
-        guidance.solve(r.problem, r.guess, settings(k), r.alternatives) for k in (12, 0)
+        guidance.solve(r.problem, r.guess, settings(k), r.alternatives) for k in (ON, 0)
     )
 
 
@@ -201,7 +203,7 @@ def switching_alone(r: Resolve) -> tuple[bool, np.ndarray]:
     lam = np.empty(6)
     solved, _ = sk.switching_newton(
         n, best_start(r), d, horizon, p.u_max_km_s2, gl_x, gl_w,
-        shooting.n_cells(horizon), 1e-9, 1e-12, 12, lam,
+        shooting.n_cells(horizon), 1e-9, 1e-12, ON, lam,
     )  # fmt: skip
     return solved, lam
 
@@ -248,7 +250,7 @@ def test_final_burn_detaching_from_the_horizon_is_solved(resolves: list[Resolve]
             rtol=0,
             atol=1e-6,
         )
-        assert horizon - guidance.switching_times(r.problem, lam)[-1] < 2.0
+        assert guidance.switching_times(r.problem, lam)[-1] < horizon
         solved_here += 1
     assert solved_here >= 1
 
@@ -261,7 +263,7 @@ def test_a_wrong_structure_falls_back_to_the_ascent(paper_problem) -> None:
     """
     problem = paper_problem(0.0)
     start = guidance.energy_optimal_costate(problem)
-    first = guidance.solve(problem, start, settings(12))
+    first = guidance.solve(problem, start, settings(ON))
     alone = guidance.solve(problem, start, settings(0))
     assert first.converged and alone.converged
     a, b = dual_value(problem, first.costate), dual_value(problem, alone.costate)
