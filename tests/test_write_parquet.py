@@ -62,3 +62,21 @@ def test_floats_are_byte_stream_split_and_strings_dictionary_encoded(tmp_path: P
         assert "BYTE_STREAM_SPLIT" in columns[name].encodings
     assert "RLE_DICTIONARY" in columns["run_key"].encodings
     assert "RLE_DICTIONARY" not in columns["n"].encodings
+
+
+def test_statistics_for_the_columns_readers_filter_by_not_the_floats(tmp_path: Path) -> None:
+    """Min/max statistics on the key columns (ints, bools, strings), none on the floats.
+
+    Readers prune row groups by run key, step or status; the float columns'
+    statistics took half of a steps file's write (issue 17, ``write_parquet``).
+    """
+    path = write_parquet(_table(), tmp_path / "t.parquet")
+    group = pq.ParquetFile(path).metadata.row_group(0)
+    stats = {group.column(i).path_in_schema: group.column(i).statistics for i in range(5)}
+    assert stats["x_km"] is None and stats["ratio"] is None
+    assert stats["n"].has_min_max and (stats["n"].min, stats["n"].max) == (0, 5)
+    assert stats["run_key"].has_min_max and (stats["run_key"].min, stats["run_key"].max) == (
+        "a",
+        "c",
+    )
+    assert stats["ok"].has_min_max

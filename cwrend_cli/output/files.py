@@ -145,15 +145,20 @@ def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) ->
     compressing per-step floats, which do not compress much. Splitting their
     bytes by significance lets Snappy find the repeats (the sign and
     exponent bytes): the steps file of a 16-seed task is about 9 % smaller
-    than with Zstandard and its write 25–35 % cheaper (issue 17). Encodings
-    of the file only: the table read back is the one written (values, types,
-    metadata).
+    than with Zstandard and its write 25–35 % cheaper (issue 17). Min/max
+    statistics are written for the columns that are not floats (run keys,
+    points, steps, statuses: what a reader filters row groups by) and not
+    for the floats, where they took half of the write (0.73 → 0.37 ms per
+    adaptive run's 801 steps, measured on a 16-seed task) for a pruning no
+    reader of these one-row-group files gets. Encodings of the file only:
+    the table read back is the one written (values, types, metadata).
     """
     path = Path(path)
     # Dictionary encoding pays off for the repeated strings only; on float columns it
     # costs half the write time and makes the file larger.
     strings = [f.name for f in table.schema if pa.types.is_string(f.type)]
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
+    others = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
     with atomic_path(path, durable=durable) as tmp:
         pq.write_table(
             table,
@@ -161,6 +166,7 @@ def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) ->
             compression="snappy",
             use_dictionary=strings,
             use_byte_stream_split=floats or False,
+            write_statistics=others or False,
         )
     return path
 

@@ -749,6 +749,49 @@ def terminal_residual(
 
 
 @njit(cache=True)
+def best_start(
+    n: float,
+    starts: np.ndarray,
+    d: np.ndarray,
+    horizon: float,
+    eps: float,
+    u_max: float,
+    gl_x: np.ndarray,
+    gl_w: np.ndarray,
+    n_cells: int,
+    want_hess: bool,
+    grad: np.ndarray,
+    hess: np.ndarray,
+    ws: Workspace,
+) -> tuple[int, float, float]:
+    """The row of ``starts`` with the highest dual value (the first on ties).
+
+    Returns ``(row, D, certificate value)``; ``grad`` (and ``hess`` if
+    ``want_hess``) hold that row's evaluation. ``D`` is concave and maximised
+    by the solution, so this is the better start by the ascent's own measure.
+    """
+    grad_t = np.empty(6)
+    hess_t = np.empty((6, 6))
+    value, cert, _ = dual_evaluate(
+        n, starts[0], d, horizon, eps, u_max, gl_x, gl_w, n_cells, want_hess, grad, hess, ws
+    )
+    best = 0
+    for r in range(1, starts.shape[0]):
+        value_t, cert_t, _ = dual_evaluate(
+            n, starts[r], d, horizon, eps, u_max, gl_x, gl_w, n_cells, want_hess, grad_t,
+            hess_t, ws,
+        )  # fmt: skip
+        if value_t > value:
+            best = r
+            grad[:] = grad_t
+            if want_hess:
+                hess[:, :] = hess_t
+            value = value_t
+            cert = cert_t
+    return best, value, cert
+
+
+@njit(cache=True)
 def newton_ascent(
     n: float,
     x0: np.ndarray,
@@ -783,7 +826,6 @@ def newton_ascent(
     hess = np.empty((6, 6))
     grad_t = np.empty(6)
     hess_t = np.empty((6, 6))
-    lam = starts[0].copy()
     lam_t = np.empty(6)
     step = np.empty(6)
     res = np.empty(6)
@@ -793,19 +835,10 @@ def newton_ascent(
     for i in range(3):
         metric[i] = u_max * horizon**3 / 3.0
         metric[i + 3] = u_max * horizon
-    value, cert, _ = dual_evaluate(
-        n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, ws
+    best, value, cert = best_start(
+        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, ws
     )
-    for r in range(1, starts.shape[0]):
-        value_t, cert_t, _ = dual_evaluate(
-            n, starts[r], d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad_t, hess_t, ws
-        )
-        if value_t > value:
-            lam[:] = starts[r]
-            grad[:] = grad_t
-            hess[:, :] = hess_t
-            value = value_t
-            cert = cert_t
+    lam = starts[best].copy()
     mu = 0.0
     rp, rv = terminal_residual(n, horizon, grad, res)
     for it in range(settings.max_iter + 1):

@@ -431,19 +431,10 @@ def bang_bang_ascent(
     grad = np.empty(6)
     hess = np.empty((6, 6))
     res = np.empty(6)
-    best = 0
-    best_value = 0.0
-    best_cert = 0.0
-    for r in range(starts.shape[0]):
-        value, cert, _ = kern.dual_evaluate(
-            n, starts[r], d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
-        )
-        if r == 0 or value > best_value:
-            best = r
-            best_value = value
-            best_cert = cert
+    best, _, best_cert = kern.best_start(
+        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
+    )
     start = starts[best].copy()
-    kern.dual_evaluate(n, start, d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws)
     rp, rv = kern.terminal_residual(n, horizon, grad, res)
     if (rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s) or best_cert > 0.0:
         return kern.newton_ascent(
