@@ -69,6 +69,7 @@ def _ascent_alone_rows(
     """The ε = 0 figures against the dual ascent alone on the same re-solves (same run)."""
     _, t0, results0 = _warm_times(0.0, 0, "", probs, switching=False)
     iters0 = np.array([r.iterations for r in results0])
+    failed0 = sum(r.status.value == "failed" for r in results0)
     return [
         Row(
             section,
@@ -77,8 +78,8 @@ def _ascent_alone_rows(
             "ms",
             baseline=float(np.median(t0)),
             note=f"ascent alone {np.median(t0):.3f} ms, p99 {np.percentile(t0, 99):.2f} ms,"
-            f" median iterations {np.median(iters0):.0f} (here {np.median(iters):.0f});"
-            " ratio = speed-up",
+            f" median iterations {np.median(iters0):.0f} (here {np.median(iters):.0f}),"
+            f" failed warm attempts {failed0}; ratio = speed-up",
         ),
         Row(
             section,
