@@ -284,3 +284,34 @@ def test_switching_off_is_the_ascent_bit_for_bit(resolves: list[Resolve]) -> Non
         out_b = kern.newton_ascent(*args, *tail, lam_b)
         assert out_a == out_b
         np.testing.assert_array_equal(lam_a, lam_b)
+
+
+def test_the_loop_reuses_the_kernels_compiled_for_the_references() -> None:
+    """One compiled signature of the ascent serves the references and the closed loop.
+
+    ``ShootingProblem`` holds read-only arrays, which numba compiles as
+    another type: the fixed-ε loop's first re-solve then compiled every
+    kernel again inside its timed call (3 s on a cold cache, shown as the
+    solves' maximum in the first run's table). ``solve`` passes writable
+    copies. Checked in a fresh process (this one has called the kernels
+    with other arrays).
+    """
+    import subprocess
+    import sys
+
+    script = (
+        "from cwrend_cli import campaign\n"
+        "from cwrend_cli.config import ARCHITECTURES, CwrendConfig\n"
+        "from cwrend_cli.config.adapt import problem_of\n"
+        "from cwrend_cli.physics import simulation\n"
+        "from cwrend_cli.physics.guidance import _switching_kernels\n"
+        "cfg = CwrendConfig(); p = problem_of(cfg)\n"
+        "refs = simulation.open_loop_references(p)\n"
+        "noise = campaign.standard_normal_for(cfg, 0)\n"
+        "simulation.simulate(p, ARCHITECTURES['plain_fixed'], noise, refs)\n"
+        "print(len(_switching_kernels.bang_bang_ascent.signatures))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True
+    )
+    assert out.stdout.split() == ["1"]

@@ -219,8 +219,10 @@ def _newton(
     return warm_attempt(
         problem.mean_motion_rad_s,
         problem.u_max_km_s2,
-        np.ascontiguousarray(problem.x0, dtype=float),
-        np.ascontiguousarray(problem.xf, dtype=float),
+        # writable copies: numba compiles a read-only array (ShootingProblem's) as another
+        # type, so the closed loop's first re-solve compiled every kernel again (3 s cold)
+        np.array(problem.x0, dtype=float),
+        np.array(problem.xf, dtype=float),
         float(problem.horizon_s),
         float(eps),
         warm_starts(guess, (), eps),
@@ -301,8 +303,8 @@ def solve(
     return solve_state(
         problem.mean_motion_rad_s,
         problem.u_max_km_s2,
-        problem.x0,
-        problem.xf,
+        np.array(problem.x0),  # writable copies: see _newton
+        np.array(problem.xf),
         problem.horizon_s,
         problem.eps,
         guess,
