@@ -9,7 +9,8 @@ the paper's sample hold) that the warm start lacks, the burn's length is
 the burn's direction is opposite to the warm start's primer (the sample hold
 over-executes a sub-second burn, which the next re-solve takes back), so the
 dual's quadratic model is poor all the way. The median warm re-solve took 10
-damped iterations, the ε = 0.05 one 2–3.
+damped iterations, the ε = 0.05 one 2–3; with this module first, 5 (3 with
+the mean hold), most of them cheap (seeds 0–19, README "Performance").
 
 This module solves the same optimality conditions with the switching times as
 unknowns beside ``λ₀``, the classical switching-time shooting: with the burns
@@ -57,13 +58,6 @@ MAX_BURNS = 16
 #: Longest quadrature arc of a burn [s]: with ``‖λ̇_v‖ ≤ 1e-2/s`` on the paper's plans the
 #: integrand's complex singularities lie ≥ 100 s off the axis, 5 half-arcs away.
 MAX_ARC_S = 40.0
-#: Newton stops when the terminal miss of the joint system plus what its switching-time
-#: errors ``δt_k = |‖λ_v(t_k)‖ − 1| / |ṗ(t_k)|`` can add (about ``u_max Σδt_k`` in
-#: velocity, ``u_max T Σδt_k`` in position) is within the tolerances, so that the full
-#: evaluation confirms it. A tolerance on ``‖λ_v‖ − 1`` alone (1e-13) left, where
-#: ``|ṗ|`` is 1e-5/s, time errors of 1e-8 s and velocity misses of 2–6e-12 km/s that
-#: the full evaluation rejected (78 of 3,120 re-solves, seeds 0–19); a tenth of the
-#: tolerances for the times alone stalled at the rounding floor where ``|ṗ|`` ~ 1e-6/s.
 #: Most structure changes of one solve.
 MAX_CHANGES = 4
 
@@ -356,6 +350,13 @@ def switching_newton(
             first_miss = rp
         elif rp > 100.0 * first_miss + 1e-6:
             return False, it
+        # Newton stops when the terminal miss of the joint system plus what its switching-time
+        # errors ``δt_k = |‖λ_v(t_k)‖ − 1| / |ṗ(t_k)|`` can add (about ``u_max Σδt_k`` in
+        # velocity, ``u_max T Σδt_k`` in position) is within the tolerances, so that the full
+        # evaluation confirms it. A tolerance on ``‖λ_v‖ − 1`` alone (1e-13) left, where
+        # ``|ṗ|`` is 1e-5/s, time errors of 1e-8 s and velocity misses of 2–6e-12 km/s that
+        # the full evaluation rejected (78 of 3,120 re-solves, seeds 0–19); a tenth of the
+        # tolerances for the times alone stalled at the rounding floor where ``|ṗ|`` ~ 1e-6/s.
         dt_sum = 0.0  # switching-time errors [s]
         for k in range(6, m):
             dt_sum += abs(f[k]) / max(abs(jac[k, k]), kern.MIN_SWITCH_RATE)
