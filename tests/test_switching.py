@@ -315,3 +315,28 @@ def test_the_loop_reuses_the_kernels_compiled_for_the_references() -> None:
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True
     )
     assert out.stdout.split() == ["1"]
+
+
+def test_the_config_switches_it_off() -> None:
+    """``solver.switching_newton_steps = 0`` reaches the solver: the fixed-ε loop of before.
+
+    Same run (plain KF, seed 0): with the setting at 0 the re-solves take
+    the dual ascent's iterations (median 10 or more over the coast), with
+    the default fewer; both end with the same statuses.
+    """
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_from_dict
+
+    runs = {}
+    for steps in (0, ON):
+        cfg = config_from_dict({"solver": {"switching_newton_steps": steps}})
+        problem = problem_of(cfg)
+        assert simulation.solver_settings(problem).switching_max_iter == steps
+        refs = simulation.open_loop_references(problem)
+        noise = campaign.standard_normal_for(cfg, 0)
+        runs[steps] = simulation.simulate(problem, ARCHITECTURES["plain_fixed"], noise, refs)
+    off, on = (
+        np.array([s.iterations for s in runs[k].solves if s.kind == "resolve"]) for k in (0, ON)
+    )
+    assert [s.status for s in runs[0].solves] == [s.status for s in runs[ON].solves]
+    assert on.sum() < 0.75 * off.sum()

@@ -419,6 +419,14 @@ class SolverConfig(_FrozenModel):
         le=64,
         description="quadrature nodes per step for the control integral [-]",
     )
+    switching_newton_steps: Int = Field(
+        _PAPER.solver.switching_newton_steps,
+        ge=0,
+        le=1000,
+        description="at eps = 0, steps of the switching-time Newton tried before the dual "
+        "ascent (its answer is kept only when the full evaluation confirms it); 0 = the "
+        "dual ascent alone, the solver before issue 17 [-]",
+    )
 
 
 class DegradationWindow(_FrozenModel):

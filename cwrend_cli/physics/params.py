@@ -151,6 +151,7 @@ class Solver:
     tol_vel_km_s: float = 1e-12  # Newton tolerance on the terminal velocity [km/s]
     max_iter: int = 50  # Newton iterations per attempt [-]
     quadrature_nodes: int = 12  # Gauss–Legendre nodes per arc [-]
+    switching_newton_steps: int = 20  # ε = 0: switching-time Newton steps first (0: ascent only)
 
 
 @dataclass(frozen=True)

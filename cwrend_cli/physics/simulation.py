@@ -124,6 +124,7 @@ def solver_settings(problem: Problem) -> guidance.SolverSettings:
         fallback=s.fallback,
         success_residual=s.success_residual,
         dt_grid_s=problem.scenario.dt_s,
+        switching_max_iter=s.switching_newton_steps,
     )
 
 
