@@ -98,8 +98,17 @@ def dual_value(problem: guidance.ShootingProblem, lam: np.ndarray) -> float:
 
 def best_start(r: Resolve) -> np.ndarray:
     """The warm start the solver takes: of the guess and alternatives, the highest dual value."""
+    p = r.problem
+    n, horizon = p.mean_motion_rad_s, p.horizon_s
+    gl_x, gl_w = guidance.SolverSettings().quadrature()
     rows = shooting.warm_starts(r.guess, r.alternatives, 0.0)
-    return np.ascontiguousarray(max(rows, key=lambda lam: dual_value(r.problem, lam)))
+    d = kern.terminal_offset(n, p.x0, p.xf, horizon)
+    grad, hess = np.empty(6), np.empty((6, 6))
+    row, _, _ = kern.best_start(
+        n, rows, d, horizon, 0.0, p.u_max_km_s2, gl_x, gl_w, shooting.n_cells(horizon), False,
+        grad, hess, kern.workspace(),
+    )  # fmt: skip
+    return rows[row].copy()
 
 
 def primer(problem: guidance.ShootingProblem, lam: np.ndarray, t: float) -> tuple[float, float]:

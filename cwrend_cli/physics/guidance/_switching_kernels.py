@@ -328,7 +328,7 @@ def switching_newton(
     """
     times = np.empty((MAX_BURNS, 2))
     kinds = np.empty((MAX_BURNS, 2), dtype=np.int64)
-    lam_out[:] = lam_start
+    lam_out[:] = lam_start  # then the last iterate, written after each step
     nb = initial_burns(n, lam_start, horizon, n_cells, times, kinds)
     if nb < 0:
         return False, 0
@@ -362,7 +362,6 @@ def switching_newton(
             dt_sum += abs(f[k]) / max(abs(jac[k, k]), kern.MIN_SWITCH_RATE)
         drift = u_max * dt_sum  # what they can add to the terminal velocity [km/s]
         if rp + drift * horizon <= tol_pos and rv + drift <= tol_vel:
-            lam_out[:] = lam
             nb, changed = update_structure(n, lam, horizon, nb, times, kinds)
             if not changed:
                 return True, it
@@ -371,7 +370,6 @@ def switching_newton(
                 return False, it
             continue
         if it >= max_iter:
-            lam_out[:] = lam
             return False, it
         for i in range(m):
             f[i] = -f[i]

@@ -175,8 +175,13 @@ def warm_attempt(
     (``settings.switching_max_iter`` steps; its answer confirmed by the full
     dual evaluation, else the damped ascent goes on; the iterations are the
     sum of both). ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s].
-    Arrays must be float64 and C-contiguous.
+    ``starts`` must be float64 and C-contiguous; ``x0`` and ``xf`` are made
+    so, and writable: numba compiles a read-only array (a ShootingProblem's)
+    as another type, so a read-only state here made the closed loop's first
+    re-solve compile every kernel again inside its timed call (3 s cold).
     """
+    x0 = np.require(x0, dtype=float, requirements=["C", "W"])
+    xf = np.require(xf, dtype=float, requirements=["C", "W"])
     gl_x, gl_w = settings.quadrature()
     out = np.empty(6)
     status, iters, rp, rv = switching.bang_bang_ascent(
@@ -219,10 +224,8 @@ def _newton(
     return warm_attempt(
         problem.mean_motion_rad_s,
         problem.u_max_km_s2,
-        # writable copies: numba compiles a read-only array (ShootingProblem's) as another
-        # type, so the closed loop's first re-solve compiled every kernel again (3 s cold)
-        np.array(problem.x0, dtype=float),
-        np.array(problem.xf, dtype=float),
+        problem.x0,
+        problem.xf,
         float(problem.horizon_s),
         float(eps),
         warm_starts(guess, (), eps),
@@ -303,8 +306,8 @@ def solve(
     return solve_state(
         problem.mean_motion_rad_s,
         problem.u_max_km_s2,
-        np.array(problem.x0),  # writable copies: see _newton
-        np.array(problem.xf),
+        problem.x0,
+        problem.xf,
         problem.horizon_s,
         problem.eps,
         guess,
@@ -336,8 +339,8 @@ def solve_state(
     status, lam, iters, res = warm_attempt(
         n,
         u_max_km_s2,
-        np.ascontiguousarray(x0, dtype=float),
-        np.ascontiguousarray(xf, dtype=float),
+        x0,
+        xf,
         float(horizon_s),
         float(eps),
         warm_starts(guess, alternatives, eps),
