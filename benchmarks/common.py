@@ -56,13 +56,8 @@ class Row:
         return {**asdict(self), "ratio": self.ratio, "met": self.met}
 
 
-@dataclass(frozen=True)
-class Captured:
-    """A re-solve met in a closed loop, with its warm start (and the loop's second one)."""
-
-    problem: guidance.ShootingProblem
-    guess: np.ndarray
-    alternatives: tuple[np.ndarray, ...] = ()
+#: A re-solve met in a closed loop, with its warm start (and the loop's second one).
+Captured = simulation.ResolveInput
 
 
 def config_with(**dotted: object) -> CwrendConfig:
@@ -76,21 +71,11 @@ def config_with(**dotted: object) -> CwrendConfig:
 def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
     """Re-solve problems (with the loop's warm starts) met by one closed loop."""
     captured: list[Captured] = []
-    original = guidance.solve_state
-
-    def spy(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives=()):
-        problem = guidance.ShootingProblem(x0, float(horizon_s), float(eps), n, u_max, xf)
-        alts = tuple(np.array(a, dtype=float) for a in alternatives)
-        captured.append(Captured(problem, np.array(guess, dtype=float), alts))
-        return original(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives)
-
     refs = simulation.open_loop_references(problem_of(cfg))
     noise = campaign.standard_normal_for(cfg, seed)
-    guidance.solve_state = spy
-    try:
-        simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], noise, refs, seed=seed)
-    finally:
-        guidance.solve_state = original
+    simulation.simulate(
+        problem_of(cfg), ARCHITECTURES[slug], noise, refs, seed=seed, observe=captured.append
+    )
     return captured
 
 

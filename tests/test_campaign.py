@@ -771,11 +771,28 @@ def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) ->
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         preexec_fn=_sigint_default,
     )  # fmt: skip
-    time.sleep(0.3)  # importing numba, scipy and pandas takes about a second
+    # Ctrl-C while the command imports its heavy libraries: once numpy's core is loaded (a
+    # fixed 0.3 s could fall before the interpreter's own start-up was over on a loaded
+    # machine, where a Ctrl-C is Python's fatal error, not cwrend's)
+    _wait_until_loaded(proc.pid, "_multiarray_umath")
     os.killpg(proc.pid, signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr + stdout
+
+
+def _wait_until_loaded(pid: int, library: str, timeout_s: float = 20.0) -> None:
+    """Wait until process ``pid`` has mapped a library named ``library`` (/proc; else 0.3 s)."""
+    maps = Path(f"/proc/{pid}/maps")
+    if not maps.exists():
+        time.sleep(0.3)  # importing numba, scipy and pandas takes about a second
+        return
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if library in maps.read_text():
+            return
+        time.sleep(0.002)
+    raise AssertionError(f"process {pid} did not load {library} in {timeout_s} s")
 
 
 def test_a_lost_manifest_does_not_let_another_config_reuse_the_runs(tmp_path: Path) -> None:

@@ -44,8 +44,9 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cwrend_cli",
     ),
 }
-#: Third-party packages the physics core may use: numerics only.
-PHYSICS_THIRD_PARTY = frozenset({"numpy", "scipy", "numba", "clarabel"})
+#: Third-party packages the physics core may use: numerics only (llvmlite: numba's compiler,
+#: for the compiled clock of physics/_clock.py).
+PHYSICS_THIRD_PARTY = frozenset({"numpy", "scipy", "numba", "llvmlite", "clarabel"})
 
 
 def _module_name(path: Path) -> str:

@@ -34,11 +34,7 @@ REL_TOL_DUAL_VALUE = 1e-12
 ON = guidance.SolverSettings().switching_max_iter
 
 
-@dataclasses.dataclass(frozen=True)
-class Resolve:
-    problem: guidance.ShootingProblem
-    guess: np.ndarray
-    alternatives: tuple[np.ndarray, ...]
+Resolve = simulation.ResolveInput
 
 
 @pytest.fixture(scope="module")
@@ -47,20 +43,11 @@ def resolves() -> list[Resolve]:
     cfg = CwrendConfig()
     problem = problem_of(cfg)
     found: list[Resolve] = []
-    original = guidance.solve_state
-
-    def spy(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives=()):  # type: ignore[no-untyped-def]
-        shooting_problem = guidance.ShootingProblem(x0, float(horizon_s), float(eps), n, u_max, xf)
-        alts = tuple(np.array(a, dtype=float) for a in alternatives)
-        found.append(Resolve(shooting_problem, np.array(guess, dtype=float), alts))
-        return original(n, u_max, x0, xf, horizon_s, eps, guess, settings, alternatives)
-
     refs = simulation.open_loop_references(problem)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(guidance, "solve_state", spy)
-        simulation.simulate(
-            problem, ARCHITECTURES["plain_fixed"], campaign_noise(cfg), refs, seed=0
-        )
+    simulation.simulate(
+        problem, ARCHITECTURES["plain_fixed"], campaign_noise(cfg), refs, seed=0,
+        observe=found.append,
+    )  # fmt: skip
     assert len(found) > 70
     return found
 

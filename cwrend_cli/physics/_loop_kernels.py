@@ -19,9 +19,15 @@ and covariance the row holds (the posterior; the prior on a dropout row)
 against the true state: χ² with 6 degrees of freedom, mean 6, for a
 consistent filter. One 6×6 Cholesky solve per step (:func:`nees`).
 
-The loop runs in compiled code between re-solves; :func:`advance` stops right
-after the ε update of a step that has a re-solve due, and the Python driver
-performs the re-solve and sets the costate. Its inputs are a few typed
+With the shooting method the whole run is compiled (:func:`resolve_loop`,
+issue 17): at each step with a re-solve due, right after its ε update, the
+warm attempt of the re-solve runs here (the switching-time Newton and dual
+ascent of :mod:`cwrend_cli.physics.guidance._switching_kernels`), and a
+successful one sets the costate; the first that does not succeed returns
+to the Python driver, which ends it (fallback chain) and calls again. The
+cone-program method uses :func:`advance`, which stops right after the ε
+update of a step that has a re-solve due; the Python driver re-solves and
+sets the costate. The inputs are a few typed
 tuples (numba compiles NamedTuples of floats and arrays): the constant
 :class:`LoopModel`, :class:`~cwrend_cli.physics.truth.TruthModel`,
 :class:`~cwrend_cli.physics.actuator.ActuatorModel` and
@@ -37,20 +43,25 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
+from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
-from cwrend_cli.physics.dynamics import zoh_step
+from cwrend_cli.physics.dynamics import costate_stm, zoh_step
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
+    EPS_BANG_BANG,
     MAX_QUAD_BREAKS,
+    STATUS_CONVERGED,
     WS_LAM_T,
     WS_SWITCHES,
     Workspace,
     arc_bounds,
     control_from_costate,
     costate_at,
+    n_cells,
     quadrature_breaks,
     workspace,
 )
+from cwrend_cli.physics.guidance._switching_kernels import bang_bang_ascent
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 from cwrend_cli.physics.truth import TRUTH_CW, TruthModel, truth_step
 
@@ -244,13 +255,30 @@ def _advance(
     log_t: tuple[Any, ...],
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
-    model = LoopModel(*model_t)
-    truth = TruthModel(*truth_t)
-    act = ActuatorModel(*act_t)
-    sched = ScheduleParams(*sched_t)
-    state = LoopState(*state_t)
     scalars = LoopScalars(*scalars_t)
-    log = StepLog(*log_t)
+    return _steps(
+        k_start, k_stop, n_steps, LoopModel(*model_t), TruthModel(*truth_t),
+        ActuatorModel(*act_t), ScheduleParams(*sched_t), LoopState(*state_t),
+        scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _steps(
+    k_start: int,
+    k_stop: int,
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    eps: float,
+    sbar: float,
+    first: bool,
+    log: StepLog,
+) -> tuple[float, float, bool]:
+    """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one."""
     m = model
     ws = workspace()
     u = np.empty(3)
@@ -258,7 +286,6 @@ def _advance(
     lam_next = np.empty(6)
     chol = np.empty((6, 7))  # nees() scratch
     x_true, x_hat, p, lam = state.x_true, state.x_hat, state.p, state.lam
-    eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     for k in range(k_start, min(k_stop + 1, n_steps)):
         eps_k = eps
         # control from the current costate and ε (Eqs. 8–10), held over the step
@@ -357,3 +384,166 @@ def _propagate_costate(lam_step: np.ndarray, lam: np.ndarray, scratch: np.ndarra
             acc += lam_step[i, j] * lam[j]
         scratch[i] = acc
     lam[:] = scratch
+
+
+# ---------------------------------------------------------------------------
+# The shooting re-solves inside the compiled loop (issue 17)
+# ---------------------------------------------------------------------------
+
+
+class ResolveModel(NamedTuple):
+    """What the compiled shooting re-solves of a run hold constant."""
+
+    steps: np.ndarray  # (R,) int64: the steps k with a re-solve due (simulation.resolve_steps)
+    xf: np.ndarray  # (6,) target state [km, km/s]
+    horizon_s: float  # the scenario's horizon T [s]
+    correct: bool  # guidance.resolve_timing = "correct" (else "reference")
+    success_residual: float  # a re-solve succeeds below this terminal residual [km] (SPEC §5)
+    newton: tuple[Any, ...]  # the fields of the solver's NewtonSettings
+    switching_max_iter: int  # steps of the switching-time Newton at ε = 0
+    stop_every: bool  # return after every warm attempt (a re-solve observer is watching)
+
+
+class ResolveCarry(NamedTuple):
+    """What the re-solves hand on, updated in place."""
+
+    older: np.ndarray  # (6,) the costate of the plan before the current one, at step k_older
+    k_older: np.ndarray  # (1,) int64: its step; −1 while there is none
+    warm: np.ndarray  # (6,) the costate of the last warm attempt (read after a stop)
+    starts: np.ndarray  # (2, 6) the warm starts of the last warm attempt, rows 0 … n_starts − 1
+    n_starts: np.ndarray  # (1,) int64
+
+
+class SolveLog(NamedTuple):
+    """One row per scheduled re-solve (row i: ``ResolveModel.steps[i]``)."""
+
+    t_s: np.ndarray  # (R,) time of the estimate the re-solve starts from [s]
+    horizon_s: np.ndarray  # (R,) remaining horizon [s]
+    eps: np.ndarray  # (R,) ε of the re-solve
+    status: np.ndarray  # (R,) int64: guidance._kernels.STATUS_* of the re-solve
+    iterations: np.ndarray  # (R,) int64
+    residual_km: np.ndarray  # (R,) hypot(‖Δr(T)‖, ‖Δv(T)‖)
+    wall_time_ms: np.ndarray  # (R,)
+    success: np.ndarray  # (R,) bool: converged and residual below success_residual
+
+
+def resolve_loop(
+    i_start: int,
+    k_start: int,
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    resolve: ResolveModel,
+    state: LoopState,
+    scalars: LoopScalars,
+    carry: ResolveCarry,
+    log: StepLog,
+    solves: SolveLog,
+) -> tuple[int, LoopScalars]:
+    """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
+
+    Each re-solve is its warm attempt (:func:`~cwrend_cli.physics.guidance.
+    _switching_kernels.bang_bang_ascent`, from the propagated costate and, at
+    ε = 0, the plan before it, as :func:`cwrend_cli.physics.guidance.solve_state`
+    starts it), timed (:mod:`cwrend_cli.physics._clock`) and written to row i
+    of ``solves``. A successful one becomes the plan, as in the Python loop
+    of :func:`cwrend_cli.physics.simulation.simulate`: its costate drives the
+    control (held controls cleared), the propagated previous plan becomes
+    ``carry.older``. The first re-solve that does not succeed stops the loop
+    right after its warm attempt (its costate in ``carry.warm``, its row
+    written, the costate not yet set; ``resolve.stop_every``: every re-solve
+    stops so): the caller ends it (fallback chain, records) and calls again
+    from ``i + 1``. Returns ``(i, scalars)``: the
+    index of that re-solve, or ``len(resolve.steps)`` once every re-solve
+    succeeded and every step up to the end has run.
+
+    Same conventions as :func:`advance`: the typed tuples cross as plain
+    tuples and are named again inside.
+    """
+    i, eps, sbar, first = _resolve_loop(
+        i_start, k_start, n_steps, tuple(model), tuple(truth), tuple(act), tuple(sched),
+        tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
+    )  # fmt: skip
+    return i, LoopScalars(eps, sbar, first)
+
+
+@njit(cache=True)
+def _resolve_loop(
+    i_start: int,
+    k_start: int,
+    n_steps: int,
+    model_t: tuple[Any, ...],
+    truth_t: tuple[Any, ...],
+    act_t: tuple[Any, ...],
+    sched_t: tuple[Any, ...],
+    resolve_t: tuple[Any, ...],
+    state_t: tuple[Any, ...],
+    scalars_t: tuple[Any, ...],
+    carry_t: tuple[Any, ...],
+    log_t: tuple[Any, ...],
+    solves_t: tuple[Any, ...],
+) -> tuple[int, float, float, bool]:
+    """:func:`resolve_loop` on the plain tuples of its typed arguments."""
+    m = LoopModel(*model_t)
+    truth = TruthModel(*truth_t)
+    act = ActuatorModel(*act_t)
+    sched = ScheduleParams(*sched_t)
+    rs = ResolveModel(*resolve_t)
+    state = LoopState(*state_t)
+    scalars = LoopScalars(*scalars_t)
+    carry = ResolveCarry(*carry_t)
+    log = StepLog(*log_t)
+    solves = SolveLog(*solves_t)
+    eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
+    lam = state.lam
+    k_next = k_start
+    n_resolves = rs.steps.shape[0]
+    for i in range(i_start, n_resolves):
+        k = rs.steps[i]
+        eps, sbar, first = _steps(
+            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+        )
+        k_next = k + 1
+        k_from = k + 1 if rs.correct else k
+        horizon = rs.horizon_s - k_from * m.dt
+        # the warm starts of shooting.warm_starts: np.dot, as numpy's @ in the Python loop
+        lam_next = np.dot(m.lam_step, lam)
+        with_older = eps < EPS_BANG_BANG and carry.k_older[0] >= 0
+        starts = np.empty((2 if with_older else 1, 6))
+        starts[0] = lam_next if rs.correct else lam
+        if with_older:
+            back = costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
+            starts[1] = np.dot(back, carry.older)
+        t0 = monotonic_s()
+        status, iters, rp, rv = bang_bang_ascent(
+            m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
+            n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm,
+        )  # fmt: skip
+        wall = monotonic_s() - t0
+        residual = np.hypot(rp, rv)
+        carry.starts[: starts.shape[0]] = starts
+        carry.n_starts[0] = starts.shape[0]
+        ok = status == STATUS_CONVERGED and residual < rs.success_residual and not rs.stop_every
+        solves.t_s[i] = (k + 1) * m.dt
+        solves.horizon_s[i] = horizon
+        solves.eps[i] = eps
+        solves.status[i] = status
+        solves.iterations[i] = iters
+        solves.residual_km[i] = residual
+        solves.wall_time_ms[i] = wall * 1e3
+        solves.success[i] = ok
+        if not ok:
+            return i, eps, sbar, first  # the caller ends this re-solve
+        carry.older[:] = lam_next
+        carry.k_older[0] = k + 1
+        if rs.correct:
+            lam[:] = carry.warm
+        else:
+            lam[:] = np.dot(m.lam_step, carry.warm)
+        m.override[k + 1 :] = False  # a costate plan: no held controls from here on
+    eps, sbar, first = _steps(
+        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+    )
+    return n_resolves, eps, sbar, first

@@ -1,10 +1,15 @@
 """Closed-loop receding-horizon simulation of one architecture (SPEC §3–5).
 
 An architecture is estimator {plain, MTF} × schedule {fixed, adaptive}: the
-same loop with two switches. The step loop runs compiled
-(:mod:`cwrend_cli.physics._loop_kernels`) between re-solves; re-solves go through
-:func:`cwrend_cli.guidance.solve`. Nothing here writes files: the result is a
-plain :class:`RunResult` that :mod:`cwrend_cli.output.tables` and the recorders consume.
+same loop with two switches. The loop runs compiled
+(:mod:`cwrend_cli.physics._loop_kernels`): with the shooting method, its
+re-solves too, each the warm attempt of
+:func:`cwrend_cli.physics.guidance.solve_state`; only a re-solve whose warm
+attempt does not succeed comes back here to end (the fallback chain,
+minimum-miss controls; :func:`_shooting_resolves`). The cone-program method
+re-solves here between compiled stretches of steps (:func:`_cone_resolves`).
+Nothing here writes files: the result is a plain :class:`RunResult` that
+:mod:`cwrend_cli.output.tables` and the recorders consume.
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
@@ -35,6 +40,8 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,6 +110,20 @@ class RunResult:
     def resolves(self) -> tuple[SolveRecord, ...]:
         """The receding-horizon re-solves (without the initial solve)."""
         return tuple(s for s in self.solves if s.kind == "resolve")
+
+
+@dataclass(frozen=True)
+class ResolveInput:
+    """What one shooting re-solve of a closed loop started from (for a re-solve observer)."""
+
+    step: int  # loop step k whose re-solve this is
+    problem: guidance.ShootingProblem  # from the estimate at its time, the remaining horizon, ε
+    guess: FloatArray  # the warm start (the current plan's costate at the re-solve's time)
+    alternatives: tuple[FloatArray, ...]  # at ε = 0: the plan before it, propagated (else ())
+
+
+#: Called with each shooting re-solve's input, before the re-solve ends (instrumentation).
+ResolveObserver = Callable[[ResolveInput], None]
 
 
 @dataclass(frozen=True)
@@ -225,6 +246,7 @@ def simulate(
     seed: int = 0,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
+    observe: ResolveObserver | None = None,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
 
@@ -233,6 +255,11 @@ def simulate(
     where its σ is zero). ``fault_draws``: the draws of the degradation
     windows' sensor faults (required for the kinds some window switches on,
     :func:`cwrend_cli.physics.sensors.draw_faults`).
+
+    ``observe`` (tests, benchmarks): called with the input of every shooting
+    re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
+    attempt used). Watching changes no number: each re-solve then ends in
+    Python instead of compiled code, with the same arithmetic.
     """
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
@@ -283,7 +310,6 @@ def simulate(
     )
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
-    k_plan = 0
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
         result = convex.solve(_grid(sc, x_hat0, sc.horizon_s), eps0, n)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
@@ -309,56 +335,12 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    correct = gd.resolve_timing == "correct"
-    xf = np.asarray(sc.xf, dtype=float)
-    k_next = 0
-    # the plan before the current one (its costate at step k_older): a second warm start
-    older: FloatArray | None = None
-    k_older = 0
-    for i, k in enumerate(schedule):
-        scalars = sk.advance(
-            k_next, k, n_steps, model, truth_model, act, sched, state, scalars, log
-        )
-        k_next = k + 1
-        t_est = (k + 1) * dt
-        k_from = k + 1 if correct else k
-        horizon = sc.horizon_s - k_from * dt
-        lam_next = model.lam_step @ lam
-        if socp:
-            warm = (
-                costate_stm(n, (k_from - k_plan) * dt) @ plan_costate
-                if plan_costate is not None
-                else None
-            )
-            result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n, warm=warm)
-        else:
-            alternatives = (
-                (costate_stm(n, (k_from - k_older) * dt) @ older,)
-                if older is not None and guidance.uses_alternatives(scalars.eps)
-                else ()
-            )
-            guess = lam_next if correct else lam
-            result = guidance.solve_state(
-                n, sc.u_max_km_s2, state.x_hat, xf, horizon, scalars.eps, guess, settings,
-                alternatives,
-            )  # fmt: skip
-        rec = _record("resolve", k, t_est, result, settings.success_residual)
-        solves.append(rec)
-        if rec.success and socp:
-            plan_costate, k_plan = result.costate, k_from
-        if rec.success and not socp:
-            older, k_older = lam_next.copy(), k + 1
-            lam[:] = result.costate if correct else model.lam_step @ result.costate
-        else:
-            lam[:] = lam_next
-        if rec.success:
-            _hold_plan(result, k + 1, model)
-        if result.status is guidance.SolveStatus.INFEASIBLE and problem.solver.on_infeasible == (
-            "min_miss"
-        ):
-            stop = schedule[i + 1] if i + 1 < len(schedule) else n_steps - 1
-            _apply_min_miss(sc, state.x_hat, t_est, k + 1, stop, model.u_override, model.override)
-    sk.advance(k_next, n_steps, n_steps, model, truth_model, act, sched, state, scalars, log)
+    if socp:
+        solves += _cone_resolves(problem, schedule, model, truth_model, act, sched, state, scalars,
+                                 log, plan_costate)  # fmt: skip
+    else:
+        solves += _shooting_resolves(problem, settings, schedule, model, truth_model, act, sched,
+                                     state, scalars, log, observe)  # fmt: skip
 
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
@@ -389,6 +371,191 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
     )
+
+
+def _shooting_resolves(
+    problem: Problem,
+    settings: guidance.SolverSettings,
+    schedule: list[int],
+    model: sk.LoopModel,
+    truth_model: truth.TruthModel,
+    act: actuator.ActuatorModel,
+    sched: sk.ScheduleParams,
+    state: sk.LoopState,
+    scalars: sk.LoopScalars,
+    log: sk.StepLog,
+    observe: ResolveObserver | None,
+) -> list[SolveRecord]:
+    """Run the loop with its shooting re-solves; the re-solves' records.
+
+    The common case runs compiled from start to end
+    (:func:`~cwrend_cli.physics._loop_kernels.resolve_loop`: each re-solve's
+    warm attempt, and the plan it makes when it succeeds). A re-solve whose
+    warm attempt does not succeed returns here, where it ends as
+    :func:`cwrend_cli.physics.guidance.solve_state` ends one
+    (:func:`~cwrend_cli.physics.guidance.after_warm`: the fallback chain),
+    then the plan, the minimum-miss controls of an infeasible one and its
+    record, and the compiled loop goes on from the next re-solve. With an
+    observer every re-solve ends here, after it has been shown the input.
+    """
+    sc = problem.scenario
+    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    correct = problem.guidance.resolve_timing == "correct"
+    xf = np.asarray(sc.xf, dtype=float)
+    count = len(schedule)
+    resolve = sk.ResolveModel(
+        steps=np.asarray(schedule, dtype=np.int64),
+        xf=xf,
+        horizon_s=sc.horizon_s,
+        correct=correct,
+        success_residual=settings.success_residual,
+        newton=settings.newton_fields,
+        switching_max_iter=settings.switching_max_iter,
+        stop_every=observe is not None,
+    )
+    carry = sk.ResolveCarry(
+        older=np.zeros(6),
+        k_older=np.full(1, -1, dtype=np.int64),
+        warm=np.zeros(6),
+        starts=np.zeros((2, 6)),
+        n_starts=np.zeros(1, dtype=np.int64),
+    )
+    rows = sk.SolveLog(
+        t_s=np.empty(count),
+        horizon_s=np.empty(count),
+        eps=np.empty(count),
+        status=np.empty(count, dtype=np.int64),
+        iterations=np.empty(count, dtype=np.int64),
+        residual_km=np.empty(count),
+        wall_time_ms=np.empty(count),
+        success=np.empty(count, dtype=np.bool_),
+    )
+    ended: dict[int, SolveRecord] = {}  # the re-solves ended here (after the compiled warm attempt)
+    lam = state.lam
+    i, k_start = 0, 0
+    while True:
+        i, scalars = sk.resolve_loop(
+            i, k_start, n_steps, model, truth_model, act, sched, resolve, state, scalars, carry,
+            log, rows,
+        )  # fmt: skip
+        if i == count:
+            break
+        k = schedule[i]
+        horizon = float(rows.horizon_s[i])
+        if observe is not None:
+            starts = [carry.starts[r].copy() for r in range(int(carry.n_starts[0]))]
+            shooting = guidance.ShootingProblem(
+                state.x_hat, horizon, float(rows.eps[i]), n, sc.u_max_km_s2, xf
+            )
+            observe(ResolveInput(k, shooting, starts[0], tuple(starts[1:])))
+        lam_next = model.lam_step @ lam
+        guess = lam_next if correct else lam.copy()
+        warm = (
+            guidance.KERNEL_STATUS[int(rows.status[i])],
+            carry.warm.copy(),
+            int(rows.iterations[i]),
+            float(rows.residual_km[i]),
+        )
+        began = time.perf_counter() - float(rows.wall_time_ms[i]) * 1e-3
+        result = guidance.after_warm(
+            n, sc.u_max_km_s2, state.x_hat, xf, horizon, scalars.eps, guess, settings, warm, began
+        )
+        rec = ended[i] = _record("resolve", k, (k + 1) * dt, result, settings.success_residual)
+        if rec.success:
+            carry.older[:] = lam_next
+            carry.k_older[0] = k + 1
+            lam[:] = result.costate if correct else model.lam_step @ result.costate
+            _hold_plan(result, k + 1, model)
+        else:
+            lam[:] = lam_next
+        _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
+        i, k_start = i + 1, k + 1
+    columns = zip(
+        schedule, rows.t_s.tolist(), rows.horizon_s.tolist(), rows.eps.tolist(),
+        rows.status.tolist(), rows.iterations.tolist(), rows.residual_km.tolist(),
+        rows.wall_time_ms.tolist(), rows.success.tolist(), strict=True,
+    )  # fmt: skip
+    return [
+        ended.get(j)
+        or SolveRecord("resolve", k, t, h, e, _STATUS_NAMES[c], "warm", it, res, wall, ok)
+        for j, (k, t, h, e, c, it, res, wall, ok) in enumerate(columns)
+    ]
+
+
+#: Status names of the kernels' status codes (``SolveRecord.status``).
+_STATUS_NAMES = {code: status.value for code, status in guidance.KERNEL_STATUS.items()}
+
+
+def _cone_resolves(
+    problem: Problem,
+    schedule: list[int],
+    model: sk.LoopModel,
+    truth_model: truth.TruthModel,
+    act: actuator.ActuatorModel,
+    sched: sk.ScheduleParams,
+    state: sk.LoopState,
+    scalars: sk.LoopScalars,
+    log: sk.StepLog,
+    plan_costate: FloatArray | None,
+) -> list[SolveRecord]:
+    """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
+
+    Driven from Python between compiled stretches of steps. Each re-solve
+    starts from the last successful plan's costate propagated to its time
+    (``plan_costate``: the initial plan's, or None); a successful one holds its
+    controls; the costate is propagated either way.
+    """
+    sc = problem.scenario
+    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    correct = problem.guidance.resolve_timing == "correct"
+    threshold = problem.solver.success_residual
+    lam = state.lam
+    records: list[SolveRecord] = []
+    k_next, k_plan = 0, 0
+    for i, k in enumerate(schedule):
+        scalars = sk.advance(
+            k_next, k, n_steps, model, truth_model, act, sched, state, scalars, log
+        )
+        k_next = k + 1
+        k_from = k + 1 if correct else k
+        horizon = sc.horizon_s - k_from * dt
+        lam_next = model.lam_step @ lam
+        warm = (
+            costate_stm(n, (k_from - k_plan) * dt) @ plan_costate
+            if plan_costate is not None
+            else None
+        )
+        result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n, warm=warm)
+        rec = _record("resolve", k, (k + 1) * dt, result, threshold)
+        records.append(rec)
+        if rec.success:
+            plan_costate, k_plan = result.costate, k_from
+            _hold_plan(result, k + 1, model)
+        lam[:] = lam_next
+        _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
+    sk.advance(k_next, n_steps, n_steps, model, truth_model, act, sched, state, scalars, log)
+    return records
+
+
+def _min_miss_if_infeasible(
+    problem: Problem,
+    result: guidance.SolveResult,
+    schedule: list[int],
+    i: int,
+    x_hat: FloatArray,
+    model: sk.LoopModel,
+) -> None:
+    """After an infeasible re-solve ``i`` with ``solver.on_infeasible = "min_miss"``: hold the
+    minimum-miss controls until the next re-solve (SPEC §5)."""
+    if not (
+        result.status is guidance.SolveStatus.INFEASIBLE
+        and problem.solver.on_infeasible == "min_miss"
+    ):
+        return
+    sc = problem.scenario
+    k = schedule[i]
+    stop = schedule[i + 1] if i + 1 < len(schedule) else sc.n_steps - 1
+    _apply_min_miss(sc, x_hat, (k + 1) * sc.dt_s, k + 1, stop, model.u_override, model.override)
 
 
 def _grid(sc: Scenario, x_hat: FloatArray, horizon_s: float) -> feasibility.GridProblem:

@@ -12,8 +12,10 @@ program (the ``socp`` method and the shooting chain's plan of last resort);
 from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
 from cwrend_cli.physics.guidance.shooting import (
     EPS_BANG_BANG,
+    KERNEL_STATUS,
     ShootingProblem,
     SolverSettings,
+    after_warm,
     classify_failure,
     control,
     energy_optimal_costate,
@@ -29,10 +31,12 @@ from cwrend_cli.physics.guidance.shooting import (
 
 __all__ = [
     "EPS_BANG_BANG",
+    "KERNEL_STATUS",
     "ShootingProblem",
     "SolveResult",
     "SolveStatus",
     "SolverSettings",
+    "after_warm",
     "classify_failure",
     "control",
     "energy_optimal_costate",

@@ -103,6 +103,12 @@ Workspace = np.ndarray
 
 
 @njit(cache=True)
+def n_cells(horizon_s: float) -> int:
+    """Coarse cells of the switching-time search over ``horizon_s``: ≤ 40 s each, at least 4."""
+    return max(4, int(np.ceil(horizon_s / 40.0)))
+
+
+@njit(cache=True)
 def workspace() -> Workspace:
     """A fresh :data:`Workspace` (its rows are named by the ``WS_*`` constants)."""
     return np.empty((WS_ROWS, MAX_BREAKS))

@@ -56,7 +56,8 @@ from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
 EPS_BANG_BANG = kern.EPS_BANG_BANG
 
 
-_STATUS = {
+#: The kernels' status codes (``_kernels.STATUS_*``) as statuses.
+KERNEL_STATUS = {
     kern.STATUS_CONVERGED: SolveStatus.CONVERGED,
     kern.STATUS_INFEASIBLE: SolveStatus.INFEASIBLE,
     kern.STATUS_FAILED: SolveStatus.FAILED,
@@ -131,7 +132,7 @@ def _gauss_legendre(k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def n_cells(horizon_s: float) -> int:
     """Coarse cells of the switching-time search: at most 40 s each, at least 4."""
-    return max(4, int(np.ceil(horizon_s / 40.0)))
+    return int(kern.n_cells(float(horizon_s)))
 
 
 def control(costate_v: np.ndarray, eps: float, u_max_km_s2: float) -> np.ndarray:
@@ -188,7 +189,7 @@ def warm_attempt(
         n, x0, xf, horizon_s, eps, u_max_km_s2, starts, gl_x, gl_w, n_cells(horizon_s),
         settings.newton_fields, settings.switching_max_iter, out,
     )  # fmt: skip
-    return _STATUS[status], out, iters, float(np.hypot(rp, rv))
+    return KERNEL_STATUS[status], out, iters, float(np.hypot(rp, rv))
 
 
 def uses_alternatives(eps: float) -> bool:
@@ -336,7 +337,7 @@ def solve_state(
     """
     start = time.perf_counter()
     guess = np.array(guess, dtype=float)
-    status, lam, iters, res = warm_attempt(
+    warm = warm_attempt(
         n,
         u_max_km_s2,
         x0,
@@ -346,6 +347,29 @@ def solve_state(
         warm_starts(guess, alternatives, eps),
         settings,
     )
+    return after_warm(n, u_max_km_s2, x0, xf, horizon_s, eps, guess, settings, warm, start)
+
+
+def after_warm(
+    n: float,
+    u_max_km_s2: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    eps: float,
+    guess: np.ndarray,
+    settings: SolverSettings,
+    warm: tuple[SolveStatus, np.ndarray, int, float],
+    start: float,
+) -> SolveResult:
+    """How a re-solve ends once its warm attempt ``warm`` (:func:`warm_attempt`) is known.
+
+    The fallback chain when it failed (and ``settings.fallback == "chain"``),
+    else the warm attempt's result. ``start`` is the :func:`time.perf_counter`
+    at which the re-solve began. Also the end of the re-solves whose warm
+    attempt the compiled closed loop made (:mod:`cwrend_cli.physics._loop_kernels`).
+    """
+    status, lam, iters, res = warm
     if status is SolveStatus.FAILED and settings.fallback == "chain":
         problem = ShootingProblem(x0, float(horizon_s), float(eps), n, u_max_km_s2, xf)
         return _fallback_chain(problem, guess, settings, iters, res, start)
