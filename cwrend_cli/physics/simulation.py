@@ -335,12 +335,11 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
+    loop = _Loop(model, truth_model, act, sched, state, log)
     if socp:
-        solves += _cone_resolves(problem, schedule, model, truth_model, act, sched, state, scalars,
-                                 log, plan_costate)  # fmt: skip
+        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
-        solves += _shooting_resolves(problem, settings, schedule, model, truth_model, act, sched,
-                                     state, scalars, log, observe)  # fmt: skip
+        solves += _shooting_resolves(problem, settings, schedule, loop, scalars, observe)
 
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
@@ -373,17 +372,33 @@ def simulate(
     )
 
 
+@dataclass(frozen=True)
+class _Loop:
+    """The compiled loop's parts of one run (constant models, the state and log it updates)."""
+
+    model: sk.LoopModel
+    truth: truth.TruthModel
+    act: actuator.ActuatorModel
+    sched: sk.ScheduleParams
+    state: sk.LoopState
+    log: sk.StepLog
+
+    def advance(
+        self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
+    ) -> sk.LoopScalars:
+        """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
+        return sk.advance(
+            k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
+            scalars, self.log,
+        )  # fmt: skip
+
+
 def _shooting_resolves(
     problem: Problem,
     settings: guidance.SolverSettings,
     schedule: list[int],
-    model: sk.LoopModel,
-    truth_model: truth.TruthModel,
-    act: actuator.ActuatorModel,
-    sched: sk.ScheduleParams,
-    state: sk.LoopState,
+    loop: _Loop,
     scalars: sk.LoopScalars,
-    log: sk.StepLog,
     observe: ResolveObserver | None,
 ) -> list[SolveRecord]:
     """Run the loop with its shooting re-solves; the re-solves' records.
@@ -398,6 +413,7 @@ def _shooting_resolves(
     record, and the compiled loop goes on from the next re-solve. With an
     observer every re-solve ends here, after it has been shown the input.
     """
+    model, state = loop.model, loop.state
     sc = problem.scenario
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
     correct = problem.guidance.resolve_timing == "correct"
@@ -435,8 +451,8 @@ def _shooting_resolves(
     i, k_start = 0, 0
     while True:
         i, scalars = sk.resolve_loop(
-            i, k_start, n_steps, model, truth_model, act, sched, resolve, state, scalars, carry,
-            log, rows,
+            i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
+            scalars, carry, loop.log, rows,
         )  # fmt: skip
         if i == count:
             break
@@ -489,13 +505,8 @@ _STATUS_NAMES = {code: status.value for code, status in guidance.KERNEL_STATUS.i
 def _cone_resolves(
     problem: Problem,
     schedule: list[int],
-    model: sk.LoopModel,
-    truth_model: truth.TruthModel,
-    act: actuator.ActuatorModel,
-    sched: sk.ScheduleParams,
-    state: sk.LoopState,
+    loop: _Loop,
     scalars: sk.LoopScalars,
-    log: sk.StepLog,
     plan_costate: FloatArray | None,
 ) -> list[SolveRecord]:
     """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
@@ -505,6 +516,7 @@ def _cone_resolves(
     (``plan_costate``: the initial plan's, or None); a successful one holds its
     controls; the costate is propagated either way.
     """
+    model, state = loop.model, loop.state
     sc = problem.scenario
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
     correct = problem.guidance.resolve_timing == "correct"
@@ -513,9 +525,7 @@ def _cone_resolves(
     records: list[SolveRecord] = []
     k_next, k_plan = 0, 0
     for i, k in enumerate(schedule):
-        scalars = sk.advance(
-            k_next, k, n_steps, model, truth_model, act, sched, state, scalars, log
-        )
+        scalars = loop.advance(k_next, k, n_steps, scalars)
         k_next = k + 1
         k_from = k + 1 if correct else k
         horizon = sc.horizon_s - k_from * dt
@@ -533,7 +543,7 @@ def _cone_resolves(
             _hold_plan(result, k + 1, model)
         lam[:] = lam_next
         _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
-    sk.advance(k_next, n_steps, n_steps, model, truth_model, act, sched, state, scalars, log)
+    loop.advance(k_next, n_steps, n_steps, scalars)
     return records
 
 
