@@ -23,7 +23,9 @@ between the fixture's earlier platform and an AMD EPYC ``znver3`` every run
 differed, by at most 9.5e-10 relative, in the miss of a fixed-ε run; most
 by 1e-12–1e-15). There the floats are compared to :data:`PLATFORM_RTOL`
 relative (of the value, or of the column's Σ|x| for a history's sums) and
-everything else (integers, flags, statuses, strings) exactly. 1e-8 is ten
+everything else (integers, flags, statuses, strings) exactly, except the
+solver residuals, which are rounding noise below the solver's tolerance
+(:data:`PLATFORM_NOISE_COLUMNS`). 1e-8 is ten
 times the largest platform difference measured and a hundred times below
 a change at the solver's tolerance (a miss moved by 1e-9 km of ~1e-3 km is
 1e-6 relative), so a change of the numerics still fails.
@@ -63,6 +65,12 @@ PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 SEEDS = 3
 #: Relative tolerance of the floats where the platform differs from the fixture's (docstring).
 PLATFORM_RTOL = 1e-8
+#: History columns whose bits are rounding noise, compared only on the fixture's platform: a
+#: converged re-solve's terminal residual is below the solver's tolerance (1e-9 km) by
+#: whatever the last Newton step left, and differed in all 24 runs between the fixture's
+#: earlier platform and an AMD EPYC znver3 (the statuses, iterations and success flags that
+#: say what it means were identical, and are compared exactly everywhere).
+PLATFORM_NOISE_COLUMNS = frozenset({"residual_km"})
 #: Columns that hold wall-clock times: they differ on every run by nature.
 TIMING_COLUMNS = frozenset({"duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms"})
 #: Columns renamed since the fixture was made: old name → new name (same values).
@@ -264,7 +272,8 @@ def test_same_histories(
         expected = _renamed(stored_run[dataset])
         got = numbers[campaign][key][dataset]
         _new_columns(got, expected, NEW_HISTORY_COLUMNS)
-        changed = sorted(c for c in expected if not _same_column(got[c], expected[c], exact))
+        compared = [c for c in expected if exact or c not in PLATFORM_NOISE_COLUMNS]
+        changed = sorted(c for c in compared if not _same_column(got[c], expected[c], exact))
         assert not changed, f"{key} ({'exact' if exact else 'other platform'}): {changed}"
 
 
