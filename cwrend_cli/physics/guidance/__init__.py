@@ -25,7 +25,6 @@ from cwrend_cli.physics.guidance.shooting import (
     solve_state,
     switching_times,
     terminal_state,
-    uses_alternatives,
     warm_attempt,
 )
 
@@ -46,6 +45,5 @@ __all__ = [
     "solve_state",
     "switching_times",
     "terminal_state",
-    "uses_alternatives",
     "warm_attempt",
 ]

@@ -413,7 +413,9 @@ def bang_bang_ascent(
     is handed to :func:`switching_newton` unless it is already converged or
     certifies infeasibility; its answer is accepted only when the full dual
     evaluation confirms the terminal miss within the tolerances. Otherwise
-    ``newton_ascent`` runs as it would alone, from ``starts``, or, when the
+    ``newton_ascent`` runs as it would alone (from the start it would choose
+    among ``starts``, given alone so that the others are not evaluated a
+    second time), or, when the
     switching Newton reached a consistent structure that the evaluation did
     not confirm, from that start and this near plan (the better by the dual
     value; the start on ties); the iterations reported are the sum of both.
@@ -434,10 +436,13 @@ def bang_bang_ascent(
         n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
     )
     start = starts[best].copy()
+    # the ascent below would choose this row again (same dual values): hand it only this one
+    chosen = np.empty((1, 6))
+    chosen[0] = start
     rp, rv = kern.terminal_residual(n, horizon, grad, res)
     if (rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s) or best_cert > 0.0:
         return kern.newton_ascent(
-            n, x0, xf, horizon, eps, u_max, starts, gl_x, gl_w, n_cells, settings_t, lam_out
+            n, x0, xf, horizon, eps, u_max, chosen, gl_x, gl_w, n_cells, settings_t, lam_out
         )
     lam = np.empty(6)
     solved, iters = switching_newton(
@@ -462,6 +467,6 @@ def bang_bang_ascent(
         return status, iters + more, rp, rv
     # Newton diverged or stalled: its iterate says nothing; the ascent exactly as without it
     status, more, rp, rv = kern.newton_ascent(
-        n, x0, xf, horizon, eps, u_max, starts, gl_x, gl_w, n_cells, settings_t, lam_out
+        n, x0, xf, horizon, eps, u_max, chosen, gl_x, gl_w, n_cells, settings_t, lam_out
     )
     return status, iters + more, rp, rv

@@ -192,15 +192,6 @@ def warm_attempt(
     return KERNEL_STATUS[status], out, iters, float(np.hypot(rp, rv))
 
 
-def uses_alternatives(eps: float) -> bool:
-    """Whether a re-solve at ``eps`` chooses among warm starts (:func:`warm_starts`).
-
-    Only bang-bang ones do. Callers ask it before preparing alternatives they
-    would otherwise compute for nothing.
-    """
-    return eps < EPS_BANG_BANG
-
-
 def warm_starts(guess: np.ndarray, alternatives: Sequence[np.ndarray], eps: float) -> np.ndarray:
     """The rows the warm attempt chooses from: ``guess`` and, at ε = 0, the ``alternatives``.
 
@@ -214,7 +205,7 @@ def warm_starts(guess: np.ndarray, alternatives: Sequence[np.ndarray], eps: floa
     2–3 iterations from ``guess``, and a choice would only cost evaluations.
     """
     guess = np.asarray(guess, dtype=float)
-    if len(alternatives) == 0 or not uses_alternatives(eps):
+    if len(alternatives) == 0 or eps >= EPS_BANG_BANG:
         return np.ascontiguousarray(guess.reshape(1, 6))
     return np.ascontiguousarray(np.vstack([guess, *alternatives]), dtype=float)
 
