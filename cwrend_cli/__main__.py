@@ -6,6 +6,10 @@ traceback. The command line itself loads only Typer (and the pydantic it
 converts arguments with); Rich, numpy and the heavy libraries (numba, scipy,
 pandas, pyarrow, rerun, matplotlib: 1–4 s) load in the commands that use
 them (see :mod:`cwrend_cli.cli`), where a Ctrl-C is handled by the command.
+
+:func:`main` is the program: when the command has ended with an exit code,
+the process ends without the interpreter's teardown (:mod:`cwrend_cli.teardown`,
+0.5–0.8 s once the heavy libraries are loaded), after the exit handlers.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ from __future__ import annotations
 import faulthandler
 import signal
 import sys
+
+from cwrend_cli.teardown import end_without_teardown
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell convention).
 INTERRUPTED_EXIT = 130
@@ -26,12 +32,19 @@ def main() -> None:
     """
     if hasattr(signal, "SIGUSR1"):
         faulthandler.register(signal.SIGUSR1, all_threads=True)
+    exit_code: list[int] = []  # the command's, once it has ended with one
+    end_without_teardown(lambda: exit_code[0] if exit_code else None)
     try:
-        from cwrend_cli.cli import app
+        try:
+            from cwrend_cli.cli import app
 
-        app()  # Typer turns a Ctrl-C inside a command into exit 130 itself
-    except KeyboardInterrupt:  # while importing, or while Typer builds the command line
-        sys.exit(INTERRUPTED_EXIT)
+            app()  # Typer turns a Ctrl-C inside a command into exit 130 itself
+        except KeyboardInterrupt:  # while importing, or while Typer builds the command line
+            sys.exit(INTERRUPTED_EXIT)
+    except SystemExit as exc:
+        if exc.code is None or isinstance(exc.code, int):  # a message the interpreter prints
+            exit_code.append(exc.code or 0)
+        raise
 
 
 if __name__ == "__main__":

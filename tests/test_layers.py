@@ -32,6 +32,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cwrend_cli.physics",
         "cwrend_cli.errors",
         "cwrend_cli.limits",
+        "cwrend_cli.lazy",
+        "cwrend_cli.teardown",
         "cwrend_cli",
     ),
     "report": (
@@ -41,6 +43,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cwrend_cli.physics.params",
         "cwrend_cli.physics.metrics",
         "cwrend_cli.errors",
+        "cwrend_cli.lazy",
         "cwrend_cli",
     ),
 }

@@ -265,6 +265,28 @@ def test_disabled_rerun_is_a_user_error(
     assert not (tmp_path / "x.rrd").exists()
 
 
+@pytest.mark.parametrize(
+    "value", ["off", "OFF", "Off", "0", "false", "FALSE", " off", "on", "1", "", "no", None]
+)
+def test_the_early_check_reads_rerun_as_rerun_does(
+    value: str | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``check_enabled`` (no rerun import) refuses exactly when Rerun's own streams are off."""
+    import rerun as rr
+
+    if value is None:
+        monkeypatch.delenv("RERUN", raising=False)
+    else:
+        monkeypatch.setenv("RERUN", value)
+    rerun_enabled = rr.is_enabled(rr.RecordingStream("cwrend-test"))
+    try:
+        recording.check_enabled()
+        refused = False
+    except recording.RecordingError:
+        refused = True
+    assert refused == (not rerun_enabled)
+
+
 def test_palette_covers_every_architecture() -> None:
     assert set(recording.ARCH_COLOURS) == set(ARCHITECTURES)
     assert len(set(recording.ARCH_COLOURS.values())) == len(ARCHITECTURES)

@@ -189,3 +189,28 @@ def test_a_campaign_worker_loads_neither_pandas_nor_the_driver() -> None:
     )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout) == [False, False, True, "cwrend_cli.campaign.driver"]
+
+
+def test_the_campaign_console_loads_neither_figures_nor_rerun() -> None:
+    """The campaign commands' console imports ``report.labels`` alone: not the figures,
+    matplotlib and ``scipy.stats`` (about 1 s) the report package's names bring, nor
+    rerun (the early ``RERUN=off`` check reads the environment); those names still
+    resolve on first use and an unknown one is an ``AttributeError``."""
+    script = (
+        "import json, sys, cwrend_cli.console\n"
+        "from cwrend_cli.output import recording\n"
+        "recording.check_enabled()\n"
+        "loaded = sorted(m for m in ('matplotlib', 'scipy.stats', 'rerun') if m in sys.modules)\n"
+        "from cwrend_cli import report\n"
+        "try:\n"
+        "    report.no_such_name\n"
+        "    unknown = 'resolved'\n"
+        "except AttributeError:\n"
+        "    unknown = 'AttributeError'\n"
+        "print(json.dumps([loaded, report.write_report.__module__, unknown]))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == [[], "cwrend_cli.report.write", "AttributeError"]

@@ -52,6 +52,7 @@ from cwrend_cli.campaign.worker import (
     standard_normal,
     standard_normal_for,
 )
+from cwrend_cli.lazy import lazy_attributes
 
 #: Names of the driver and the executors, imported on first use (PEP 562): a worker
 #: process imports ``cwrend_cli.campaign.worker``, hence this package, and needs neither
@@ -83,18 +84,7 @@ if TYPE_CHECKING:
     )
     from cwrend_cli.campaign.executors import ExecutorKind
 else:
-
-    def __getattr__(name: str) -> object:
-        """A driver or executors name of :data:`__all__`, imported on first use."""
-        module = _LAZY.get(name)
-        if module is None:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        import importlib
-
-        value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-        globals()[name] = value
-        return value
-
+    __getattr__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "BASE_POINT",

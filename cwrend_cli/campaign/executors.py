@@ -47,6 +47,7 @@ from typing import Literal, ParamSpec, Protocol, TypeVar
 from urllib.parse import urlsplit
 
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.teardown import end_without_teardown
 
 ExecutorKind = Literal["local", "dask"]
 
@@ -80,6 +81,9 @@ _RUN_QUEUE: Queue[tuple[int, bool]] | None = None
 def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     """Pool workers ignore Ctrl-C (the parent stops them) and exit if the parent dies.
 
+    They end without the interpreter's teardown (:mod:`cwrend_cli.teardown`:
+    0.5–0.6 s of every campaign's end, which waits for its workers to exit).
+
     ``runs`` is the pool's per-run signal queue; a worker never waits on it
     at exit (``cancel_join_thread``), so a sibling killed while writing to it
     cannot hold up the others.
@@ -98,6 +102,7 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
                 os._exit(1)
 
     threading.Thread(target=watch, name="cwrend-parent-watch", daemon=True).start()
+    end_without_teardown(lambda: 0)
 
 
 def _quiet_dask_logs() -> None:

@@ -1,0 +1,50 @@
+"""Ending without the interpreter's teardown (:mod:`cwrend_cli.teardown`, issue 17).
+
+Each case runs in a fresh interpreter: the behaviour is the process's exit.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPT = """
+import atexit, sys
+from cwrend_cli.teardown import end_without_teardown
+end_without_teardown(lambda: {code})
+atexit.register(lambda: open(sys.argv[1], "w").write("ran"))  # registered later: runs first
+sys.stdout.write("buffered, not yet flushed")
+"""
+
+
+def _run(code: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    marker = tmp_path / "marker"
+    return subprocess.run(
+        [sys.executable, "-c", SCRIPT.format(code=code), str(marker)],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+
+
+def test_the_process_ends_with_the_given_code_after_later_exit_handlers(tmp_path: Path) -> None:
+    proc = _run("3", tmp_path)
+    assert proc.returncode == 3
+    assert (tmp_path / "marker").read_text() == "ran"
+    assert proc.stdout == "buffered, not yet flushed"  # the standard streams were flushed
+
+
+def test_an_unknown_code_leaves_the_usual_exit(tmp_path: Path) -> None:
+    proc = _run("None", tmp_path)
+    assert proc.returncode == 0
+    assert (tmp_path / "marker").read_text() == "ran"
+    assert proc.stdout == "buffered, not yet flushed"
+
+
+def test_cwrend_keeps_its_exit_codes(tmp_path: Path) -> None:
+    """A bad config file exits 2 with its message, as before the teardown was skipped."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "cwrend_cli", "config", "validate", str(tmp_path / "no.toml")],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert "config file not found" in proc.stderr
