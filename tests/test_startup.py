@@ -174,6 +174,15 @@ def test_the_array_alias_of_the_physics_parameters_is_numpy_s() -> None:
         _ = params.NotAName  # type: ignore[attr-defined]
 
 
+def _printed(script: str) -> object:
+    """What ``script``, run in a fresh interpreter, prints as JSON (it must exit 0)."""
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)
+
+
 def test_a_campaign_worker_loads_neither_pandas_nor_the_driver() -> None:
     """A spawned worker imports ``cwrend_cli.campaign.worker`` (its task function's module):
     that must not bring pandas (~0.3 s) nor the driver, whose names the package imports on
@@ -184,11 +193,7 @@ def test_a_campaign_worker_loads_neither_pandas_nor_the_driver() -> None:
         "from cwrend_cli import campaign\n"
         "print(json.dumps([*loaded, callable(campaign.plan), campaign.run_campaign.__module__]))"
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
-    )
-    assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout) == [False, False, True, "cwrend_cli.campaign.driver"]
+    assert _printed(script) == [False, False, True, "cwrend_cli.campaign.driver"]
 
 
 def test_the_campaign_console_loads_neither_figures_nor_rerun() -> None:
@@ -209,8 +214,4 @@ def test_the_campaign_console_loads_neither_figures_nor_rerun() -> None:
         "    unknown = 'AttributeError'\n"
         "print(json.dumps([loaded, report.write_report.__module__, unknown]))"
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
-    )
-    assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout) == [[], "cwrend_cli.report.write", "AttributeError"]
+    assert _printed(script) == [[], "cwrend_cli.report.write", "AttributeError"]
