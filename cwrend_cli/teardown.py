@@ -6,11 +6,13 @@ AMD EPYC guest: ``python -c "import cwrend_cli.campaign.worker, pandas,
 pyarrow, rerun"`` exits 0.55–0.64 s after its last statement). Nothing of
 cwrend needs that teardown: files are written whole and renamed in place
 (:func:`cwrend_cli.output.files.atomic_path`), recordings are flushed before
-they are renamed, and the exit handlers that do matter (multiprocessing's,
-rerun's, logging's, registered after this one) still run first.
+they are renamed, and the exit handlers that do matter still run.
 
 :func:`end_without_teardown` registers an exit handler that runs after every
-handler registered later (``atexit`` runs them last-in, first-out), flushes
+handler registered later (``atexit`` runs them last-in, first-out: rerun's,
+and multiprocessing's in ``cwrend`` itself), shuts logging down if it was
+imported (its handler was registered earlier in a pool worker, whose
+initializer runs after ``logging`` is imported, and would not run), flushes
 the standard streams and ends the process with ``os._exit``. The campaign's
 pool workers use it from their initializer; ``cwrend`` itself from
 :func:`cwrend_cli.__main__.main`, with the exit code of the command.
@@ -37,6 +39,9 @@ def end_without_teardown(exit_code: Callable[[], int | None]) -> None:
         code = exit_code()
         if code is None:
             return
+        logging = sys.modules.get("logging")
+        if logging is not None:  # flush and close its handlers, as its own exit handler does
+            logging.shutdown()
         for stream in (sys.stdout, sys.stderr):
             # a closed pipe (``| head``) or a closed stream has nothing left to flush
             with contextlib.suppress(OSError, ValueError):

@@ -40,6 +40,26 @@ def test_an_unknown_code_leaves_the_usual_exit(tmp_path: Path) -> None:
     assert proc.stdout == "buffered, not yet flushed"
 
 
+def test_logging_set_up_before_it_is_still_shut_down(tmp_path: Path) -> None:
+    """A pool worker imports logging before its initializer registers the handler: the
+    records a buffering logging handler holds still reach their file at exit."""
+    log = tmp_path / "log.txt"
+    script = (
+        "import logging, logging.handlers, sys\n"
+        "target = logging.FileHandler(sys.argv[1])\n"
+        "held = logging.handlers.MemoryHandler(100, logging.CRITICAL, target)\n"
+        "logging.getLogger().addHandler(held)\n"
+        "from cwrend_cli.teardown import end_without_teardown\n"
+        "end_without_teardown(lambda: 0)\n"
+        "logging.getLogger().warning('held until shutdown')\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script, str(log)], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert log.read_text() == "held until shutdown\n"
+
+
 def test_cwrend_keeps_its_exit_codes(tmp_path: Path) -> None:
     """A bad config file exits 2 with its message, as before the teardown was skipped."""
     proc = subprocess.run(
