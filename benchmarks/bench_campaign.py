@@ -14,7 +14,10 @@ numba cache and spawning workers:
    1 and 2 workers: end-to-end wall time, throughput once started (from the
    difference), the speed-up, peak memory (largest process RSS), and the
    2-worker efficiency: throughput against the compute bound 2 / (in-process
-   ``simulate`` time per run of the same architectures, seeds 0–19); and
+   ``simulate`` time per run of the same runs as the difference, timed beside
+   its campaigns, three times: :func:`efficiency`); the
+   machine's own ceiling for that figure (two processes running nothing but
+   closed loops at once, against one alone: :func:`compute_ceiling`); and
    where the difference goes, from each campaign's journal and files: the
    runs themselves (first run started → last task journaled) and what
    follows them (``runs.parquet``, statistics), with the efficiency of the
@@ -29,10 +32,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -166,34 +171,94 @@ def throughput(tmp: Path, runs: int, more: int, reps: int = 1) -> list[Row]:
             )
         rows.append(Row("campaign", f"{label}: speed-up 2 vs 1 worker", rates[2] / rates[1], "×"))
         if not extra:
-            per_run = simulate_time_per_run(archs.split(",") if archs != "all" else None)
-            bound = 2.0 / per_run
-            running_rate = (more - runs) / split[2][0]
-            rows.append(
-                Row(
-                    "campaign",
-                    f"{label}: 2-worker efficiency",
-                    100.0 * rates[2] / bound,
-                    "%",
-                    target=">= 80",
-                    note=f"{rates[2]:.0f} runs/s against 2 / {per_run * 1e3:.2f} ms ="
-                    f" {bound:.0f} runs/s (in-process simulate time per run, each run's best"
-                    " of 3; issue 17)",
-                )
-            )
-            rows.append(
-                Row(
-                    "campaign",
-                    f"{label}: 2-worker efficiency of the running phase",
-                    100.0 * running_rate / bound,
-                    "%",
-                    note=f"the same from the difference of the running phases alone (journal:"
-                    f" first run started -> last task journaled): {running_rate:.0f} runs/s;"
-                    f" start-up and what follows the runs (runs.parquet, statistics:"
-                    f" {split[2][1]:+.2f} s for {more - runs} more runs) left out",
-                )
-            )
+            rows += efficiency(tmp, label, archs, n_archs, runs, more, max(reps, 3))
     return rows
+
+
+def efficiency(
+    tmp: Path, label: str, archs: str, n_archs: int, runs: int, more: int, reps: int = 3
+) -> list[Row]:
+    """The 2-worker efficiency (issue 17), ``reps`` times with its bound measured beside it.
+
+    Efficiency: the 2-worker throughput ``(more − runs) / Δwall`` against the
+    compute bound 2 / (in-process ``simulate`` time per run), on the runs the
+    difference ran (seeds ``runs / n_archs`` … ``more / n_archs − 1``: a
+    fixed-ε run's cost varies with its seed). On a shared machine whose speed
+    drifts 1.3–2× between minutes, a bound timed minutes away from its
+    campaigns measures the drift, so each repetition times the bound (one
+    pass over the runs) just before and just after its pair of campaigns and
+    divides by their mean; the row is the median repetition, with the range
+    and the CPU time the hypervisor stole meanwhile (``/proc/stat``) in the
+    note. Also: the bound as measured until 2026-12-02 (seeds 0–19, each
+    run's best of 3, once), and the machine's own 2-process ceiling
+    (:func:`compute_ceiling`).
+    """
+    slugs = archs.split(",") if archs != "all" else None
+    seeds = range(runs // n_archs, more // n_archs)
+    found: list[tuple[float, float, float, float]] = []  # efficiency, running, bound [s], stolen
+    for _ in range(reps):
+        stolen = _stolen_s()
+        before = simulate_time_per_run(slugs, seeds)
+        small, big = (_timed(tmp, "eff", n // n_archs, archs, 2, ()) for n in (runs, more))
+        per_run = 0.5 * (before + simulate_time_per_run(slugs, seeds))
+        bound = 2.0 / per_run
+        found.append(
+            (
+                (more - runs) / (big.wall - small.wall) / bound,
+                (more - runs) / (big.running - small.running) / bound,
+                per_run,
+                _stolen_s() - stolen,
+            )
+        )
+    found.sort()
+    eff, running, per_run, _ = found[len(found) // 2]
+    old_bound = simulate_time_per_run(slugs, range(20), repeat=3, best=True)
+    alone, together = compute_ceiling(slugs)
+    ceiling = together / (2.0 * alone)
+    values = ", ".join(f"{100 * f[0]:.1f} %" for f in found)
+    stolen = ", ".join(f"{f[3]:.2f} s" for f in found)
+    return [
+        Row(
+            "campaign",
+            f"{label}: 2-worker efficiency",
+            100.0 * eff,
+            "%",
+            target=">= 80",
+            note=f"median of {reps} ({values}; CPU stolen by the host meanwhile: {stolen});"
+            f" this one {2 * eff / per_run:.0f} runs/s against 2 / {per_run * 1e3:.2f} ms"
+            f" (in-process simulate time per run of seeds {seeds.start}-{seeds.stop - 1}, timed"
+            f" before and after its campaigns); against the bound as measured until 2026-12-02"
+            f" (seeds 0-19, best of 3: {old_bound * 1e3:.2f} ms):"
+            f" {100.0 * eff * old_bound / per_run:.1f} %",
+        ),
+        Row(
+            "campaign",
+            f"{label}: 2-process compute ceiling",
+            100.0 * ceiling,
+            "%",
+            note=f"closed loops only, no campaign: 2 processes at once {together:.0f} runs/s,"
+            f" one alone {alone:.0f} runs/s (compute_ceiling); the 2-worker efficiency"
+            f" against it: {100.0 * eff / ceiling:.1f} %",
+        ),
+        Row(
+            "campaign",
+            f"{label}: 2-worker efficiency of the running phase",
+            100.0 * running,
+            "%",
+            note="the same repetition from the difference of the running phases alone"
+            " (journal: first run started -> last task journaled): start-up and what follows"
+            " the runs (runs.parquet, statistics) left out",
+        ),
+    ]
+
+
+def _stolen_s() -> float:
+    """CPU time the hypervisor has taken from this machine since boot [s] (``/proc/stat``)."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
 
 
 @dataclass(frozen=True, order=True)
@@ -214,14 +279,19 @@ def _timed(
     return _Campaign(wall, rss, running, after)
 
 
-def simulate_time_per_run(slugs: list[str] | None, seeds: int = 20, repeat: int = 3) -> float:
-    """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four), seeds 0 … S−1.
+def simulate_time_per_run(
+    slugs: list[str] | None, seeds: Sequence[int], repeat: int = 1, best: bool = False
+) -> float:
+    """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four) on ``seeds``.
 
     The compute bound of a campaign: what a worker cannot avoid (one closed
     loop per run), timed in this process after a warm-up run per
-    architecture. Each run is timed ``repeat`` times and its best time kept:
-    a shared machine only ever adds to a run's time, and a bound inflated by
-    a disturbed run would flatter the efficiency it divides.
+    architecture. Each run is timed ``repeat`` times and its median kept, or
+    with ``best`` its fastest time. :func:`efficiency` times it on the runs
+    the campaign's difference ran, once, beside the campaigns: a fixed-ε
+    run's cost varies with its seed (seeds 50–249 cost 10 % more than seeds
+    0–19, measured 2026-12-02), and the fastest of three runs sits 10–15 %
+    below a run's typical time, which a campaign's one execution is not.
     """
     from cwrend_cli import campaign
     from cwrend_cli.config import ARCHITECTURES, CwrendConfig
@@ -234,17 +304,76 @@ def simulate_time_per_run(slugs: list[str] | None, seeds: int = 20, repeat: int 
     archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
     for arch in archs:
         simulation.simulate(problem, arch, campaign.standard_normal_for(cfg, 0), refs)
-    best: dict[tuple[int, str], float] = {}
+    times: dict[tuple[int, str], list[float]] = {}
     for _ in range(repeat):
-        for seed in range(seeds):
+        for seed in seeds:
             noise = campaign.standard_normal_for(cfg, seed)
             for arch in archs:
                 start = time.perf_counter()
                 simulation.simulate(problem, arch, noise, refs, seed=seed)
-                elapsed = time.perf_counter() - start
-                key = (seed, arch.slug)
-                best[key] = min(best.get(key, elapsed), elapsed)
-    return sum(best.values()) / len(best)
+                times.setdefault((seed, arch.slug), []).append(time.perf_counter() - start)
+    pick = min if best else statistics.median
+    return sum(pick(t) for t in times.values()) / len(times)
+
+
+def compute_ceiling(slugs: list[str] | None, duration_s: float = 8.0) -> tuple[float, float]:
+    """(one process alone, two at once) simulate throughput [runs/s], nothing but closed loops.
+
+    What two processes on this machine can do at best, with no campaign at
+    all: each runs :func:`_loop_rate` (the architectures over seeds 0–19,
+    whole cycles, for ``duration_s``) after its warm-up, released together.
+    ``together / (2 × alone)`` is the machine's own 2-process efficiency
+    ceiling for this work (shared caches, memory bandwidth, a hypervisor's
+    vCPUs), which no campaign design can exceed.
+    """
+    alone = _loop_rates(slugs, 1, duration_s)
+    together = _loop_rates(slugs, 2, duration_s)
+    return alone[0], sum(together)
+
+
+def _loop_rates(slugs: list[str] | None, n: int, duration_s: float) -> list[float]:
+    """Start ``n`` processes of :func:`_loop_rate`, release them at once, return their rates."""
+    code = (
+        "import sys; from benchmarks.bench_campaign import _loop_rate;"
+        f" _loop_rate({slugs!r}, {duration_s!r})"
+    )
+    pipes = {"stdin": subprocess.PIPE, "stdout": subprocess.PIPE, "text": True}
+    procs = [subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, **pipes) for _ in range(n)]
+    for proc in procs:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    for proc in procs:
+        assert proc.stdin is not None
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+    rates = [float(proc.communicate()[0]) for proc in procs]
+    assert all(proc.returncode == 0 for proc in procs)
+    return rates
+
+
+def _loop_rate(slugs: list[str] | None, duration_s: float, seeds: int = 20) -> None:
+    """Child of :func:`_loop_rates`: warm up, say ready, wait for go, print runs/s."""
+    from cwrend_cli import campaign
+    from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+
+    cfg = CwrendConfig()
+    problem = problem_of(cfg)
+    refs = simulation.open_loop_references(problem)
+    archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
+    noises = [campaign.standard_normal_for(cfg, seed) for seed in range(seeds)]
+    for arch in archs:
+        simulation.simulate(problem, arch, noises[0], refs)
+    print("ready", flush=True)
+    sys.stdin.readline()
+    start = time.perf_counter()
+    runs = 0
+    while time.perf_counter() - start < duration_s:
+        for seed, noise in enumerate(noises):
+            for arch in archs:
+                simulation.simulate(problem, arch, noise, refs, seed=seed)
+                runs += 1
+    print(runs / (time.perf_counter() - start), flush=True)
 
 
 def memory(tmp: Path, runs: int, big: int) -> list[Row]:
