@@ -71,10 +71,20 @@ def solve_both(r: Resolve) -> tuple[guidance.SolveResult, guidance.SolveResult]:
     )
 
 
+def _ends(problem: guidance.ShootingProblem) -> tuple[np.ndarray, np.ndarray]:
+    """``x0`` and ``xf`` as writable copies, as the library passes them to the kernels.
+
+    A ShootingProblem's arrays are read-only, which numba compiles as another
+    type: called with them, ``newton_ascent`` and ``bang_bang_ascent`` were
+    compiled a second time for this module alone (about 5 s of the suite).
+    """
+    return np.array(problem.x0, dtype=float), np.array(problem.xf, dtype=float)
+
+
 def dual_value(problem: guidance.ShootingProblem, lam: np.ndarray) -> float:
     gl_x, gl_w = guidance.SolverSettings().quadrature()
     n, horizon = problem.mean_motion_rad_s, problem.horizon_s
-    d = kern.terminal_offset(n, problem.x0, problem.xf, horizon)
+    d = kern.terminal_offset(n, *_ends(problem), horizon)
     grad, hess = np.empty(6), np.empty((6, 6))
     value, _, _ = kern.dual_evaluate(
         n, np.ascontiguousarray(lam), d, horizon, 0.0, problem.u_max_km_s2, gl_x, gl_w,
@@ -89,7 +99,7 @@ def best_start(r: Resolve) -> np.ndarray:
     n, horizon = p.mean_motion_rad_s, p.horizon_s
     gl_x, gl_w = guidance.SolverSettings().quadrature()
     rows = shooting.warm_starts(r.guess, r.alternatives, 0.0)
-    d = kern.terminal_offset(n, p.x0, p.xf, horizon)
+    d = kern.terminal_offset(n, *_ends(p), horizon)
     grad, hess = np.empty(6), np.empty((6, 6))
     row, _, _ = kern.best_start(
         n, rows, d, horizon, 0.0, p.u_max_km_s2, gl_x, gl_w, shooting.n_cells(horizon), False,
@@ -128,7 +138,7 @@ def test_joint_jacobian_matches_finite_differences(resolves: list[Resolve]) -> N
     p = r.problem
     n, horizon, u_max = p.mean_motion_rad_s, p.horizon_s, p.u_max_km_s2
     gl_x, gl_w = guidance.SolverSettings().quadrature()
-    d = kern.terminal_offset(n, p.x0, p.xf, horizon)
+    d = kern.terminal_offset(n, *_ends(p), horizon)
     times = np.empty((sk.MAX_BURNS, 2))
     kinds = np.empty((sk.MAX_BURNS, 2), dtype=np.int64)
     nb = sk.initial_burns(n, r.guess, horizon, shooting.n_cells(horizon), times, kinds)
@@ -196,7 +206,7 @@ def switching_alone(r: Resolve) -> tuple[bool, np.ndarray]:
     p = r.problem
     n, horizon = p.mean_motion_rad_s, p.horizon_s
     gl_x, gl_w = guidance.SolverSettings().quadrature()
-    d = kern.terminal_offset(n, p.x0, p.xf, horizon)
+    d = kern.terminal_offset(n, *_ends(p), horizon)
     lam = np.empty(6)
     solved, _ = sk.switching_newton(
         n, best_start(r), d, horizon, p.u_max_km_s2, gl_x, gl_w,
@@ -243,7 +253,7 @@ def test_the_new_burn_starts_near_the_length_newton_finds(resolves: list[Resolve
         assert (kinds[0, 0], kinds[0, 1], times[0, 1]) == (sk.END_FIXED, sk.END_SWITCH, 0.0)
         size = 6 + 2 * sk.MAX_BURNS
         predicted = sk.predicted_length(
-            n, start, kern.terminal_offset(n, p.x0, p.xf, horizon), horizon, p.u_max_km_s2,
+            n, start, kern.terminal_offset(n, *_ends(p), horizon), horizon, p.u_max_km_s2,
             gl_x, gl_w, nb, times, kinds, np.empty(size), np.empty((size, size)),
         )  # fmt: skip
         solved, lam = switching_alone(r)
@@ -307,7 +317,7 @@ def test_switching_off_is_the_ascent_bit_for_bit(resolves: list[Resolve]) -> Non
     for r in resolves[::7]:
         p = r.problem
         starts = shooting.warm_starts(r.guess, r.alternatives, 0.0)
-        args = (p.mean_motion_rad_s, p.x0, p.xf, p.horizon_s, 0.0, p.u_max_km_s2, starts)
+        args = (p.mean_motion_rad_s, *_ends(p), p.horizon_s, 0.0, p.u_max_km_s2, starts)
         tail = (gl_x, gl_w, shooting.n_cells(p.horizon_s), s.newton_fields)
         lam_a, lam_b = np.empty(6), np.empty(6)
         out_a = sk.bang_bang_ascent(*args, *tail, 0, lam_a)
