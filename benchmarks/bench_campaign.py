@@ -37,12 +37,17 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from benchmarks.common import Row
+
+if TYPE_CHECKING:
+    from cwrend_cli.physics.params import Architecture, FloatArray, Problem
+    from cwrend_cli.physics.simulation import References
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "campaigns" / "paper.toml"
@@ -293,6 +298,29 @@ def simulate_time_per_run(
     0–19, measured 2026-12-02), and the fastest of three runs sits 10–15 %
     below a run's typical time, which a campaign's one execution is not.
     """
+    from cwrend_cli.physics import simulation
+
+    problem, refs, archs, noise_of = _warm_loops(slugs)
+    times: dict[tuple[int, str], list[float]] = {}
+    for _ in range(repeat):
+        for seed in seeds:
+            noise = noise_of(seed)
+            for arch in archs:
+                start = time.perf_counter()
+                simulation.simulate(problem, arch, noise, refs, seed=seed)
+                times.setdefault((seed, arch.slug), []).append(time.perf_counter() - start)
+    pick = min if best else statistics.median
+    return sum(pick(t) for t in times.values()) / len(times)
+
+
+def _warm_loops(
+    slugs: list[str] | None,
+) -> tuple[Problem, References, list[Architecture], Callable[[int], FloatArray]]:
+    """What an in-process timing of runs needs, warmed up: the paper problem, its references.
+
+    Also the architectures ``slugs`` (None: all four), each run once, and the
+    noise of a seed.
+    """
     from cwrend_cli import campaign
     from cwrend_cli.config import ARCHITECTURES, CwrendConfig
     from cwrend_cli.config.adapt import problem_of
@@ -304,16 +332,7 @@ def simulate_time_per_run(
     archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
     for arch in archs:
         simulation.simulate(problem, arch, campaign.standard_normal_for(cfg, 0), refs)
-    times: dict[tuple[int, str], list[float]] = {}
-    for _ in range(repeat):
-        for seed in seeds:
-            noise = campaign.standard_normal_for(cfg, seed)
-            for arch in archs:
-                start = time.perf_counter()
-                simulation.simulate(problem, arch, noise, refs, seed=seed)
-                times.setdefault((seed, arch.slug), []).append(time.perf_counter() - start)
-    pick = min if best else statistics.median
-    return sum(pick(t) for t in times.values()) / len(times)
+    return problem, refs, archs, lambda seed: campaign.standard_normal_for(cfg, seed)
 
 
 def compute_ceiling(slugs: list[str] | None, duration_s: float = 8.0) -> tuple[float, float]:
@@ -352,18 +371,10 @@ def _loop_rates(slugs: list[str] | None, n: int, duration_s: float) -> list[floa
 
 def _loop_rate(slugs: list[str] | None, duration_s: float, seeds: int = 20) -> None:
     """Child of :func:`_loop_rates`: warm up, say ready, wait for go, print runs/s."""
-    from cwrend_cli import campaign
-    from cwrend_cli.config import ARCHITECTURES, CwrendConfig
-    from cwrend_cli.config.adapt import problem_of
     from cwrend_cli.physics import simulation
 
-    cfg = CwrendConfig()
-    problem = problem_of(cfg)
-    refs = simulation.open_loop_references(problem)
-    archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
-    noises = [campaign.standard_normal_for(cfg, seed) for seed in range(seeds)]
-    for arch in archs:
-        simulation.simulate(problem, arch, noises[0], refs)
+    problem, refs, archs, noise_of = _warm_loops(slugs)
+    noises = [noise_of(seed) for seed in range(seeds)]
     print("ready", flush=True)
     sys.stdin.readline()
     start = time.perf_counter()
