@@ -56,6 +56,8 @@ def check_finite(result: RunResult) -> None:
     """
     for attr, label in _FINITE_ROWS:
         values = np.asarray(getattr(result, attr), dtype=float)
+        if np.isfinite(values).all():  # the common case: one pass, no per-row arrays
+            continue
         bad = ~np.isfinite(values.reshape(values.shape[0], -1)).all(axis=1)
         if bad.any():
             row = int(np.argmax(bad))

@@ -119,6 +119,8 @@ def fault_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
 
 def fault_draws(problem: Problem, root_seed: int, seed: int) -> sensors.FaultDraws | None:
     """The sensor-fault draws of realisation ``seed``, or ``None`` when every fault is off."""
+    if not sensors.fault_kinds(problem.degradation.windows).any:
+        return None  # no stream to key (a SeedSequence costs more than the rest of the check)
     return sensors.draw_faults(
         fault_seed_sequence(root_seed, seed), problem.scenario.n_steps, problem.degradation.windows
     )

@@ -24,6 +24,7 @@ the unit of their configuration key (:func:`unit_of`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import operator
 from collections.abc import Iterable, Mapping, Sequence
@@ -251,19 +252,39 @@ def with_conventions(table: pa.Table, metadata: Mapping[str, Any]) -> pa.Table:
     """``table`` with every column's ``unit`` and ``description`` and the file metadata.
 
     ``metadata`` must hold ``config_hash``; ``cwrend_version`` is added. Raises
-    ``KeyError`` for a column without a unit.
+    ``KeyError`` for a column without a unit. The columns are not touched
+    (no copy, no cast): only the schema changes, and the annotated schema of
+    a (schema, metadata) pair is built once per process (:func:`_annotated`;
+    a campaign worker writes two tables a task with the same one).
     """
     if "config_hash" not in metadata:
         raise KeyError("Parquet metadata needs the config_hash")
+    plain = table.schema.remove_metadata()  # what the cache tells apart: names and types
+    existing = tuple(sorted((table.schema.metadata or {}).items()))
+    extra = tuple(sorted((str(k), str(v)) for k, v in metadata.items()))
+    return pa.Table.from_arrays(table.columns, schema=_annotated(plain, existing, extra))
+
+
+@functools.lru_cache(maxsize=64)
+def _annotated(
+    schema: pa.Schema,
+    existing: tuple[tuple[bytes, bytes], ...],
+    metadata: tuple[tuple[str, str], ...],
+) -> pa.Schema:
+    """``schema`` with each field's unit and description, its ``existing`` and the ``metadata``.
+
+    Keyed on the schema without metadata (a ``pa.Schema`` compares equal
+    whatever its metadata) and the two metadata as tuples.
+    """
     fields = [
         f.with_metadata(
             {b"unit": unit_of(f.name).encode(), b"description": description_of(f.name).encode()}
         )
-        for f in table.schema
+        for f in schema
     ]
-    existing = dict(table.schema.metadata or {})
-    existing.update(_metadata(metadata))
-    return table.cast(pa.schema(fields, metadata=existing))
+    file_metadata = dict(existing)
+    file_metadata.update(_metadata(dict(metadata)))
+    return pa.schema(fields, metadata=file_metadata)
 
 
 def check_conventions(table: pa.Table) -> None:

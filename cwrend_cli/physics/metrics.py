@@ -108,14 +108,15 @@ def run_metrics(result: RunResult, fuel_delta_v_km_s: float) -> RunMetrics:
     """Metrics of a closed-loop run; solve statistics over its re-solves."""
     rs = result.resolves
     mean_ms, max_ms = _times([s.wall_time_ms for s in rs])
+    statuses = [s.status for s in rs]
     return RunMetrics(
         delta_v_km_s=result.delta_v_km_s,
         miss_km=result.miss_km,
         fuel_penalty_pct=fuel_penalty_pct(result.delta_v_km_s, fuel_delta_v_km_s),
         n_solves=len(rs),
-        n_converged=sum(s.status == "converged" for s in rs),
-        n_infeasible=sum(s.status == "infeasible" for s in rs),
-        n_failed=sum(s.status == "failed" for s in rs),
+        n_converged=statuses.count("converged"),
+        n_infeasible=statuses.count("infeasible"),
+        n_failed=statuses.count("failed"),
         solve_success_pct=100.0 * sum(s.success for s in rs) / len(rs) if rs else float("nan"),
         solve_mean_ms=mean_ms,
         solve_max_ms=max_ms,
