@@ -6,7 +6,8 @@ most ``_CHUNK_VALUES // N_RESAMPLES`` intervals at once, whatever the sample
 sizes. Behaviour tests, not timings: the block size changes no number (a
 block may end inside a sample and span samples with different statistics),
 and the memory allocated (numpy reports its buffers to ``tracemalloc``) stays
-bounded by a constant when a sample grows.
+bounded by a constant when a sample grows. The statistics of the blocks are
+evaluated in threads while the draws go on; the thread count changes no number.
 """
 
 from __future__ import annotations
@@ -38,6 +39,19 @@ def test_the_block_size_changes_no_number(
     """1 value: one row a block and one interval at a time; 150: blocks ending inside samples;
     2,999 and 16,384: blocks spanning samples of different statistics."""
     whole = _intervals(1 << 30, monkeypatch)  # every sample of a size in one block
+    np.testing.assert_array_equal(_intervals(chunk_values, monkeypatch), whole)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+@pytest.mark.parametrize("chunk_values", [150, 1 << 14])
+def test_the_evaluation_threads_change_no_number(
+    threads: int, chunk_values: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The statistics of drawn blocks are evaluated in threads while the draws go on in order:
+    any thread count gives the intervals of one block at a time, in one thread."""
+    monkeypatch.setattr(statistics, "_evaluation_threads", lambda: 1)
+    whole = _intervals(1 << 30, monkeypatch)
+    monkeypatch.setattr(statistics, "_evaluation_threads", lambda: threads)
     np.testing.assert_array_equal(_intervals(chunk_values, monkeypatch), whole)
 
 
