@@ -176,7 +176,7 @@ def throughput(tmp: Path, runs: int, more: int, reps: int = 1) -> list[Row]:
             )
         rows.append(Row("campaign", f"{label}: speed-up 2 vs 1 worker", rates[2] / rates[1], "×"))
         if not extra:
-            rows += efficiency(tmp, label, archs, n_archs, runs, more, max(reps, 3))
+            rows += efficiency(tmp, label, archs, n_archs, runs, 10 * runs, max(reps, 3))
     return rows
 
 
@@ -188,24 +188,35 @@ def efficiency(
     Efficiency: the 2-worker throughput ``(more − runs) / Δwall`` against the
     compute bound 2 / (in-process ``simulate`` time per run), on the runs the
     difference ran (seeds ``runs / n_archs`` … ``more / n_archs − 1``: a
-    fixed-ε run's cost varies with its seed). On a shared machine whose speed
-    drifts 1.3–2× between minutes, a bound timed minutes away from its
-    campaigns measures the drift, so each repetition times the bound (one
-    pass over the runs) just before and just after its pair of campaigns and
-    divides by their mean; the row is the median repetition, with the range
-    and the CPU time the hypervisor stole meanwhile (``/proc/stat``) in the
-    note. Also: the bound as measured until 2026-12-02 (seeds 0–19, each
-    run's best of 3, once), and the machine's own 2-process ceiling
-    (:func:`compute_ceiling`).
+    fixed-ε run's cost varies with its seed; the bound times every
+    ``stride``-th of them, at most about 300 seeds). On a shared machine whose
+    speed drifts 1.3–2× between minutes (a bound timed before its campaigns
+    once read 7.1 ms and 4.8 ms after them), a bound timed minutes away from
+    its campaigns measures the drift, so each repetition times the bound just
+    before and just after its pair of campaigns and divides by their mean;
+    the row is the median repetition, with the range and the CPU time the
+    hypervisor stole meanwhile (``/proc/stat``) in the note. ``more`` is 10 ×
+    ``runs`` (since 2026-12-02; 5 × before): a campaign's start-up (spawning
+    the workers, loading the kernels) varies by up to 1 s between campaigns
+    here, which a difference of 800 runs (3 s) did not absorb.
+
+    Also: the running phase alone (start-up and statistics left out), the
+    machine's own 2-process ceiling (:func:`compute_ceiling`), and the
+    workers' utilization (:func:`utilization`), which no drift moves: the
+    share of the workers' time that their runs took, from the journal of the
+    same campaign.
     """
     slugs = archs.split(",") if archs != "all" else None
     seeds = range(runs // n_archs, more // n_archs)
-    found: list[tuple[float, float, float, float]] = []  # efficiency, running, bound [s], stolen
+    stride = max(1, len(seeds) // 300)
+    timed = seeds[::stride]
+    found: list[tuple[float, float, float, float, float]] = []
     for _ in range(reps):
         stolen = _stolen_s()
-        before = simulate_time_per_run(slugs, seeds)
+        before = simulate_time_per_run(slugs, timed)
         small, big = (_timed(tmp, "eff", n // n_archs, archs, 2, ()) for n in (runs, more))
-        per_run = 0.5 * (before + simulate_time_per_run(slugs, seeds))
+        used = utilization(tmp / "eff", workers=2)
+        per_run = 0.5 * (before + simulate_time_per_run(slugs, timed))
         bound = 2.0 / per_run
         found.append(
             (
@@ -213,15 +224,17 @@ def efficiency(
                 (more - runs) / (big.running - small.running) / bound,
                 per_run,
                 _stolen_s() - stolen,
+                used,
             )
         )
     found.sort()
-    eff, running, per_run, _ = found[len(found) // 2]
-    old_bound = simulate_time_per_run(slugs, range(20), repeat=3, best=True)
+    eff, running, per_run, _, _ = found[len(found) // 2]
     alone, together = compute_ceiling(slugs)
     ceiling = together / (2.0 * alone)
     values = ", ".join(f"{100 * f[0]:.1f} %" for f in found)
     stolen = ", ".join(f"{f[3]:.2f} s" for f in found)
+    used = sorted(f[4] for f in found)
+    where = f"seeds {seeds.start}-{seeds.stop - 1}" + (f", every {stride}" if stride > 1 else "")
     return [
         Row(
             "campaign",
@@ -231,19 +244,8 @@ def efficiency(
             target=">= 80",
             note=f"median of {reps} ({values}; CPU stolen by the host meanwhile: {stolen});"
             f" this one {2 * eff / per_run:.0f} runs/s against 2 / {per_run * 1e3:.2f} ms"
-            f" (in-process simulate time per run of seeds {seeds.start}-{seeds.stop - 1}, timed"
-            f" before and after its campaigns); against the bound as measured until 2026-12-02"
-            f" (seeds 0-19, best of 3: {old_bound * 1e3:.2f} ms):"
-            f" {100.0 * eff * old_bound / per_run:.1f} %",
-        ),
-        Row(
-            "campaign",
-            f"{label}: 2-process compute ceiling",
-            100.0 * ceiling,
-            "%",
-            note=f"closed loops only, no campaign: 2 processes at once {together:.0f} runs/s,"
-            f" one alone {alone:.0f} runs/s (compute_ceiling); the 2-worker efficiency"
-            f" against it: {100.0 * eff / ceiling:.1f} %",
+            f" (in-process simulate time per run of {where}, timed before and after its"
+            f" campaigns of {runs} and {more} runs)",
         ),
         Row(
             "campaign",
@@ -254,7 +256,40 @@ def efficiency(
             " (journal: first run started -> last task journaled): start-up and what follows"
             " the runs (runs.parquet, statistics) left out",
         ),
+        Row(
+            "campaign",
+            f"{label}: 2-worker utilization by the runs",
+            100.0 * used[len(used) // 2],
+            "%",
+            note=f"median of {reps} ({', '.join(f'{100 * u:.1f} %' for u in used)}): the runs'"
+            f" own durations (journal) over 2 x the running phase of the {more}-run campaign;"
+            " the rest of the workers' time is per-task work (steps/solves Parquet, dispatch);"
+            " measured in the campaign itself, so no drift of the machine moves it",
+        ),
+        Row(
+            "campaign",
+            f"{label}: 2-process compute ceiling",
+            100.0 * ceiling,
+            "%",
+            note=f"closed loops only, no campaign: 2 processes at once {together:.0f} runs/s,"
+            f" one alone {alone:.0f} runs/s (compute_ceiling); the 2-worker efficiency"
+            f" against it: {100.0 * eff / ceiling:.1f} %",
+        ),
     ]
+
+
+def utilization(campaign: Path, workers: int) -> float:
+    """The share of ``workers`` workers' time taken by their runs in a finished campaign.
+
+    Σ of the runs' ``duration_s`` (each run in its worker: noise, closed loop,
+    checks, metrics) over ``workers`` × the running phase (:func:`phases`).
+    What is left is the workers' per-task work (writing the steps and solves
+    files) and waiting for tasks.
+    """
+    events = (json.loads(line) for line in (campaign / "events.jsonl").read_text().splitlines())
+    busy = sum(e["duration_s"] for e in events if e["event"] in ("run_finished", "run_failed"))
+    _, running, _ = phases(campaign)
+    return busy / (workers * running)
 
 
 def _stolen_s() -> float:
