@@ -219,3 +219,23 @@ def test_suffix_table_is_longest_first() -> None:
     suffixes = [s for s, _ in tables.SUFFIX_UNITS]
     for i, s in enumerate(suffixes):
         assert not any(s.endswith(t) and s != t for t in suffixes[:i]), s
+
+
+def test_the_conventions_of_one_table_never_reach_another() -> None:
+    """The annotated schema is built once per (columns, metadata) and reused: tables of the
+    same columns get each their own hashes and schema metadata, and their own values."""
+    schema = pa.schema([("seed", pa.int64()), ("miss_km", pa.float64())])
+    first = pa.table({"seed": [1], "miss_km": [0.5]}, schema=schema)
+    second = pa.table({"seed": [2], "miss_km": [0.25]}, schema=schema.with_metadata({"a": "b"}))
+    a = with_conventions(first, {"config_hash": "h1"})
+    b = with_conventions(second, {"config_hash": "h2"})
+    again = with_conventions(first, {"config_hash": "h1"})
+    same_hash = with_conventions(second, {"config_hash": "h1"})  # equal schemas but for metadata
+    assert a.schema.metadata[b"config_hash"] == b"h1"
+    assert b.schema.metadata[b"config_hash"] == b"h2"
+    assert b"a" not in a.schema.metadata
+    assert b.schema.metadata[b"a"] == b"b"
+    assert same_hash.schema.metadata[b"a"] == b"b"
+    assert again.equals(a, check_metadata=True)
+    assert b.column("miss_km").to_pylist() == [0.25]
+    assert a.schema.field("miss_km").metadata[b"unit"] == b"km"
