@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -111,13 +110,14 @@ def _ablate(tmp: Path, name: str, seeds: int, archs: str, workers: int, *extra: 
     return cwrend(args)
 
 
-def phases(campaign: Path) -> tuple[int, float, float]:
-    """(runs, running [s], after the runs [s]) of a finished campaign directory.
+def phases(campaign: Path) -> tuple[float, float, float]:
+    """(running [s], after the runs [s], busy [s]) of a finished campaign directory.
 
     Running: from the first run's start to the last task's ``task_done`` in
     the journal (the workers at work, the pool already started); after: from
     there to the statistics file written last (``runs.parquet``, the
-    bootstrap statistics).
+    bootstrap statistics); busy: the sum of the runs' own ``duration_s``
+    (each run in its worker: noise, closed loop, checks, metrics).
     """
     events = [json.loads(line) for line in (campaign / "events.jsonl").read_text().splitlines()]
 
@@ -125,8 +125,8 @@ def phases(campaign: Path) -> tuple[int, float, float]:
         return [datetime.fromisoformat(e["time"]).timestamp() for e in events if e["event"] == kind]
 
     first, last = min(when("run_started")), max(when("task_done"))
-    n_runs = len(when("run_finished")) + len(when("run_failed"))
-    return n_runs, last - first, (campaign / "ablation.parquet").stat().st_mtime - last
+    busy = sum(e["duration_s"] for e in events if e["event"] in ("run_finished", "run_failed"))
+    return last - first, (campaign / "ablation.parquet").stat().st_mtime - last, busy
 
 
 def throughput(tmp: Path, runs: int, more: int, reps: int = 1) -> list[Row]:
@@ -202,9 +202,10 @@ def efficiency(
 
     Also: the running phase alone (start-up and statistics left out), the
     machine's own 2-process ceiling (:func:`compute_ceiling`), and the
-    workers' utilization (:func:`utilization`), which no drift moves: the
-    share of the workers' time that their runs took, from the journal of the
-    same campaign.
+    workers' utilization, which no drift moves: the runs' own durations over
+    2 × the running phase of the larger campaign (:func:`phases`, its
+    journal); the rest of the workers' time is per-task work (writing the
+    steps and solves files) and waiting for tasks.
     """
     slugs = archs.split(",") if archs != "all" else None
     seeds = range(runs // n_archs, more // n_archs)
@@ -215,7 +216,7 @@ def efficiency(
         stolen = _stolen_s()
         before = simulate_time_per_run(slugs, timed)
         small, big = (_timed(tmp, "eff", n // n_archs, archs, 2, ()) for n in (runs, more))
-        used = utilization(tmp / "eff", workers=2)
+        used = big.busy / (2 * big.running)  # the workers' utilization by their runs
         per_run = 0.5 * (before + simulate_time_per_run(slugs, timed))
         bound = 2.0 / per_run
         found.append(
@@ -278,20 +279,6 @@ def efficiency(
     ]
 
 
-def utilization(campaign: Path, workers: int) -> float:
-    """The share of ``workers`` workers' time taken by their runs in a finished campaign.
-
-    Σ of the runs' ``duration_s`` (each run in its worker: noise, closed loop,
-    checks, metrics) over ``workers`` × the running phase (:func:`phases`).
-    What is left is the workers' per-task work (writing the steps and solves
-    files) and waiting for tasks.
-    """
-    events = (json.loads(line) for line in (campaign / "events.jsonl").read_text().splitlines())
-    busy = sum(e["duration_s"] for e in events if e["event"] in ("run_finished", "run_failed"))
-    _, running, _ = phases(campaign)
-    return busy / (workers * running)
-
-
 def _stolen_s() -> float:
     """CPU time the hypervisor has taken from this machine since boot [s] (``/proc/stat``)."""
     try:
@@ -309,43 +296,39 @@ class _Campaign:
     rss: float  # MiB, peak of any process
     running: float  # s, first run started -> last task journaled
     after: float  # s, last task journaled -> statistics written
+    busy: float  # s, the runs' own durations summed over the workers
 
 
 def _timed(
     tmp: Path, name: str, seeds: int, archs: str, workers: int, extra: tuple[str, ...]
 ) -> _Campaign:
     wall, rss = _ablate(tmp, name, seeds, archs, workers, *extra)
-    _, running, after = phases(tmp / name)
-    return _Campaign(wall, rss, running, after)
+    return _Campaign(wall, rss, *phases(tmp / name))
 
 
-def simulate_time_per_run(
-    slugs: list[str] | None, seeds: Sequence[int], repeat: int = 1, best: bool = False
-) -> float:
+def simulate_time_per_run(slugs: list[str] | None, seeds: Sequence[int]) -> float:
     """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four) on ``seeds``.
 
     The compute bound of a campaign: what a worker cannot avoid (one closed
     loop per run), timed in this process after a warm-up run per
-    architecture. Each run is timed ``repeat`` times and its median kept, or
-    with ``best`` its fastest time. :func:`efficiency` times it on the runs
-    the campaign's difference ran, once, beside the campaigns: a fixed-ε
-    run's cost varies with its seed (seeds 50–249 cost 10 % more than seeds
-    0–19, measured 2026-12-02), and the fastest of three runs sits 10–15 %
-    below a run's typical time, which a campaign's one execution is not.
+    architecture, each run once. :func:`efficiency` times it on the runs
+    the campaign's difference ran, beside the campaigns: a fixed-ε run's
+    cost varies with its seed (seeds 50–249 cost 10 % more than seeds 0–19,
+    measured 2026-12-02), and the fastest of three runs sits 10–15 % below a
+    run's typical time, which a campaign's one execution is not.
     """
     from cwrend_cli.physics import simulation
 
     problem, refs, archs, noise_of = _warm_loops(slugs)
-    times: dict[tuple[int, str], list[float]] = {}
-    for _ in range(repeat):
-        for seed in seeds:
-            noise = noise_of(seed)
-            for arch in archs:
-                start = time.perf_counter()
-                simulation.simulate(problem, arch, noise, refs, seed=seed)
-                times.setdefault((seed, arch.slug), []).append(time.perf_counter() - start)
-    pick = min if best else statistics.median
-    return sum(pick(t) for t in times.values()) / len(times)
+    total, n = 0.0, 0
+    for seed in seeds:
+        noise = noise_of(seed)
+        for arch in archs:
+            start = time.perf_counter()
+            simulation.simulate(problem, arch, noise, refs, seed=seed)
+            total += time.perf_counter() - start
+            n += 1
+    return total / n
 
 
 def _warm_loops(

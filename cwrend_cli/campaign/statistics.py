@@ -31,7 +31,6 @@ after a campaign's runs.
 
 from __future__ import annotations
 
-import os
 from collections import deque
 from collections.abc import Callable, Hashable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -41,6 +40,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+
+from cwrend_cli.campaign.executors import default_workers
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
 CONFIDENCE = 0.95
@@ -157,17 +158,20 @@ def _resampled_statistics(
     block = max(1, _CHUNK_VALUES // (n * threads))
     stacked = np.concatenate(run)
     blocks = range(0, rows, block)
+
+    def drawn(first: int) -> npt.NDArray[np.int64]:  # the next block's draws, in order
+        return rng.integers(0, n, (min(first + block, rows) - first, n), dtype=np.int64)
+
     if threads == 1 or len(blocks) == 1:
         for first in blocks:
-            index = rng.integers(0, n, (min(first + block, rows) - first, n), dtype=np.int64)
-            _evaluate(theta, stacked, index, first, statistics)
+            _evaluate(theta, stacked, drawn(first), first, statistics)
         return theta.reshape(len(run), N_RESAMPLES)
     with ThreadPoolExecutor(threads, thread_name_prefix="cwrend-bootstrap") as pool:
         evaluating: deque[Future[None]] = deque()
         for first in blocks:
-            index = rng.integers(0, n, (min(first + block, rows) - first, n), dtype=np.int64)
-            evaluating.append(pool.submit(_evaluate, theta, stacked, index, first, statistics))
-            del index
+            evaluating.append(
+                pool.submit(_evaluate, theta, stacked, drawn(first), first, statistics)
+            )
             while len(evaluating) >= threads:  # bounded memory: wait for the oldest block
                 evaluating.popleft().result()
         for pending in evaluating:
@@ -177,11 +181,7 @@ def _resampled_statistics(
 
 def _evaluation_threads() -> int:
     """Threads evaluating bootstrap statistics: the cores available, at most 4."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(4, cores))
+    return max(1, min(4, default_workers()))
 
 
 def _evaluate(
