@@ -249,3 +249,61 @@ def test_the_figure_names_the_worlds_of_both_campaigns(
     result = _compare(cw, j2, "--out", tmp_path / "out")
     assert result.exit_code == 0, result.output
     assert seen["dirs"] == (cw, j2)
+
+
+# --- one side always wins (issue 37, item 1) ------------------------------------------
+
+
+def _one_sided(path: Path, miss_km: float, dv: float, seeds: int = 6) -> Path:
+    """A hand-made ablation directory: every seed with the same miss and Δv offsets."""
+    path.mkdir(parents=True)
+    seed = np.arange(seeds)
+    pd.DataFrame(
+        {
+            "point": "base",
+            "arch": "mtf_adaptive",
+            "seed": seed,
+            "status": "ok",
+            "miss_km": miss_km + 1e-4 * seed,
+            "delta_v_km_s": dv + 1e-3 * seed,
+            "fuel_penalty_pct": 25.0,
+        }
+    ).to_parquet(path / "runs.parquet")
+    (path / "manifest.json").write_text('{"root_seed": 0, "config": {"noise": {"seed": 0}}}')
+    return path
+
+
+def test_compare_where_a_always_wins_has_shares_of_exactly_0_and_1(tmp_path: Path) -> None:
+    """A misses less on every seed and spends more on every seed: P = 1 [.., 1] and 0 [0, ..].
+
+    Six seeds: the Wilson formula alone put the lower end of 0/6 at 2.8e-17 (a negative
+    error bar, and compare.png crashed with "'xerr' must not contain negative values").
+    """
+    a = _one_sided(tmp_path / "a", miss_km=1e-3, dv=0.15)
+    b = _one_sided(tmp_path / "b", miss_km=2e-3, dv=0.14)
+    out = tmp_path / "out"
+    result = _compare(a, b, "--out", out)
+    assert result.exit_code == 0, result.output
+    assert (out / "compare.png").stat().st_size > 0
+    share = _rows(out).set_index("metric")
+    share = share[share["statistic"] == "frac_better"]
+    assert tuple(share.loc["miss_km", ["value", "ci_high"]]) == (1.0, 1.0)
+    assert tuple(share.loc["delta_v_km_s", ["value", "ci_low"]]) == (0.0, 0.0)
+    assert (share["ci_low"] <= share["value"]).all() and (share["value"] <= share["ci_high"]).all()
+
+
+def test_compare_figure_draws_intervals_that_end_a_hair_past_the_estimate() -> None:
+    """An interval end rounded past its estimate draws no bar on that side, never a crash."""
+    from cwrend_cli.report.figures import fig_compare
+
+    rows = [
+        {"kind": "paired", "arch": "mtf_adaptive", "metric": m, "statistic": s, "n": 6,
+         "value": v, "ci_low": lo, "ci_high": hi}
+        for m in ("miss_km", "delta_v_km_s")
+        for s, v, lo, hi in (("mean_diff", -1e-3, -1e-3 + 1e-19, -5e-4),
+                             ("median_diff", -1e-3, -2e-3, -1e-3 - 1e-19),
+                             ("frac_better", 0.0, 2.8e-17, 0.39),
+                             ("frac_tied", 0.0, np.nan, np.nan))
+    ]  # fmt: skip
+    fig = fig_compare(pd.DataFrame(rows), "A", "B")
+    assert fig.axes

@@ -25,6 +25,24 @@ def test_wilson_interval_of_nothing_is_nan() -> None:
     assert all(np.isnan(statistics.wilson_ci(0, 0)))
 
 
+def test_every_wilson_interval_lies_in_the_unit_interval_and_holds_its_share() -> None:
+    """n = 1 … 2,000 and every count k: 0 ≤ low ≤ k/n ≤ high ≤ 1, low = 0 at k = 0, high = 1 at n.
+
+    The formula alone gave 2.8e-17 for 0/3 and 1.0000000000000002 for 16/16
+    (issue 37: a negative error bar in ``cwrend compare``'s figure).
+    """
+    n = np.repeat(np.arange(1, 2001), np.arange(2, 2002))
+    k = np.concatenate([np.arange(m + 1) for m in range(1, 2001)])
+    low, high = statistics.wilson_cis(k, n)
+    share = k / n
+    assert np.all((low >= 0) & (low <= share) & (share <= high) & (high <= 1))
+    assert np.all(low[k == 0] == 0.0)
+    assert np.all(high[k == n] == 1.0)
+    for m in (3, 6, 16, 2000):  # the scalar form is the same interval
+        assert statistics.wilson_ci(0, m)[0] == 0.0
+        assert statistics.wilson_ci(m, m)[1] == 1.0
+
+
 def test_bootstrap_interval_brackets_the_statistic_and_is_reproducible() -> None:
     x = np.random.default_rng(1).normal(10.0, 2.0, size=200)
     a = statistics.bootstrap_ci(x, np.mean, np.random.default_rng(7))

@@ -248,15 +248,34 @@ def bootstrap_ci(
 
 
 def wilson_ci(successes: int, n: int) -> tuple[float, float]:
-    """Wilson score interval of a proportion (95 %)."""
-    if n == 0:
-        return float("nan"), float("nan")
+    """Wilson score interval of a proportion (95 %); NaN for ``n = 0``. See :func:`wilson_cis`."""
+    lo, hi = wilson_cis(np.asarray(successes), np.asarray(n))
+    return float(lo), float(hi)
+
+
+def wilson_cis(successes: npt.ArrayLike, n: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Wilson (1927) score intervals (95 %) of proportions ``successes / n``, element-wise.
+
+    ``centre ± half`` with ``centre = (p + z²/2n) / (1 + z²/n)`` and
+    ``half = z √(p(1−p)/n + z²/4n²) / (1 + z²/n)``. Exact in theory, the
+    formula rounds: at ``p = 0`` its lower end came out 2.8e-17 for some
+    ``n`` and at ``p = 1`` its upper end 1.0000000000000002, so an error bar
+    ``p − low`` went negative. Every interval here lies in [0, 1] and holds
+    its estimate: it is clipped to [0, p] below and [p, 1] above, so the lower
+    end is exactly 0 at no success and the upper exactly 1 when all succeed.
+    NaN where ``n = 0``.
+    """
+    k = np.asarray(successes, dtype=float)
+    size = np.asarray(n, dtype=float)
     z = Z_TWO_SIDED
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return float(centre - half), float(centre + half)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = k / size
+        denom = 1 + z * z / size
+        centre = (p + z * z / (2 * size)) / denom
+        half = z * np.sqrt(p * (1 - p) / size + z * z / (4 * size * size)) / denom
+    lo = np.minimum(np.maximum(centre - half, 0.0), p)
+    hi = np.maximum(np.minimum(centre + half, 1.0), p)
+    return lo, hi
 
 
 def _point_values(samples: Sequence[FloatArray], statistic: Statistic) -> FloatArray:

@@ -1009,10 +1009,10 @@ def fig_sensitivity(data: ReportData) -> Figure:
             for i, (stat, label, colour) in enumerate(SOBOL_INDICES):
                 rows = sel[sel["statistic"] == stat].set_index("parameter").reindex(params)
                 value = rows["value"].to_numpy(dtype=float)
-                err = np.vstack([value - rows["ci_low"].to_numpy(dtype=float),
-                                 rows["ci_high"].to_numpy(dtype=float) - value])  # fmt: skip
+                err = _error_bars(value, rows["ci_low"].to_numpy(dtype=float),
+                                  rows["ci_high"].to_numpy(dtype=float))  # fmt: skip
                 ax.barh(ys + (i - 0.5) * bar, np.nan_to_num(value), height=bar, color=colour,
-                        xerr=np.nan_to_num(err), capsize=3, label=label,
+                        xerr=err, capsize=3, label=label,
                         error_kw={"lw": 1.1, "ecolor": "black"})  # fmt: skip
             ax.axvline(0.0, color="black", lw=0.9)
             ax.axvline(1.0, color="black", lw=0.9, ls=":")  # an index lies in [0, 1]
@@ -1225,6 +1225,20 @@ _COMPARE_AXES: dict[str, tuple[str, float]] = {
 _SHARE_MARKERS = ("s", "^", "v")
 
 
+def _error_bars(value: Any, low: Any, high: Any) -> np.ndarray:
+    """Error bar lengths ``(2, k)`` below and above ``value`` of the interval ``[low, high]``.
+
+    Never negative (matplotlib refuses them): an end that rounding put a hair
+    past the estimate (or an interval that does not hold it) draws no bar on
+    that side; a missing interval (NaN) draws none.
+    """
+    v = np.atleast_1d(np.asarray(value, dtype=float))
+    lo = np.atleast_1d(np.asarray(low, dtype=float))
+    hi = np.atleast_1d(np.asarray(high, dtype=float))
+    bars: np.ndarray = np.clip(np.nan_to_num(np.vstack([v - lo, hi - v])), 0.0, None)
+    return bars
+
+
 def _compare_row_label(first: pd.Series, groups: Sequence[str]) -> str:
     label = arch_label(str(first["arch"]))
     return "\n".join([label, *swept_values(first, groups)])
@@ -1260,14 +1274,14 @@ def fig_compare(
             get = {r.statistic: r for _, r in g[g["metric"] == metric].iterrows()}
             for name, marker, dy in (("mean_diff", "o", 0.13), ("median_diff", "D", -0.13)):
                 r = get[name]
-                err = np.array([[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]]) * scale
-                ax.errorbar(r["value"] * scale, y + dy, xerr=np.nan_to_num(err), fmt=marker,
+                err = _error_bars(r["value"], r["ci_low"], r["ci_high"]) * scale
+                ax.errorbar(r["value"] * scale, y + dy, xerr=err, fmt=marker,
                             color=colour, ms=6, capsize=3, lw=1.6)  # fmt: skip
         for i, metric in enumerate(metrics):
             r = g[(g["metric"] == metric) & (g["statistic"] == "frac_better")].iloc[0]
-            err = np.array([[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]])
+            err = _error_bars(r["value"], r["ci_low"], r["ci_high"])
             dy = 0.2 * (i - (len(metrics) - 1) / 2)
-            axes[-1].errorbar(r["value"], y - dy, xerr=np.nan_to_num(err), color=colour,
+            axes[-1].errorbar(r["value"], y - dy, xerr=err, color=colour,
                               fmt=_SHARE_MARKERS[i % 3], ms=6, capsize=3, lw=1.6)  # fmt: skip
     for ax, metric in zip(axes, metrics, strict=False):
         ax.axvline(0.0, color="black", lw=1)
