@@ -1,12 +1,13 @@
 """Screenshot of a recording as the Rerun viewer opens it (run by hand, never in CI).
 
-Starts a virtual display (Xvfb, with the Composite extension: without it the
-viewer's window stays black), opens the recording with the ``rerun``
+Starts a virtual display (Xvfb started with ``-extension Composite``, which turns the
+Composite extension off: with it on, the viewer's window stays black), opens the
+recording with the ``rerun``
 executable of rerun-sdk (software Vulkan rendering through Mesa's lavapipe),
 waits for it to draw and saves a PNG of the whole screen::
 
     python scripts/viewer_screenshot.py results/paper/recordings/base.s000000.rrd \
-        --out docs/viewer.png --colors 128
+        --out docs/img/viewer.png --colors 128
 
 Needs (Debian/Ubuntu): ``apt-get install xvfb mesa-vulkan-drivers imagemagick``
 (``import`` grabs the screen). Every process it starts is stopped at the end.

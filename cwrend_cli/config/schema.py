@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Self
 
@@ -37,7 +38,7 @@ from pydantic import (
 )
 
 from cwrend_cli.config.messages import fmt_num, rules_error
-from cwrend_cli.limits import MAX_SEED, MAX_STEPS
+from cwrend_cli.limits import MAX_RUN_TIMEOUT_S, MAX_SEED, MAX_SEEDS_PER_TASK, MAX_STEPS
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
 
@@ -67,6 +68,35 @@ Int = Annotated[int, Strict()]
 Vec3 = tuple[Float, Float, Float]
 Vec6 = tuple[Float, Float, Float, Float, Float, Float]
 Angle = Annotated[float, Strict(), Field(ge=-180, le=180)]
+
+# Bounds of the physical quantities (issue 36 item 7). Generous for any rendezvous
+# the CW model describes, finite so that no accepted value overflows the filter or
+# the solver (a value of 1e308 ran for minutes, or recorded inf NIS as an ok run).
+#: |position| [km]: CW relative motion holds for separations far below the orbit
+#: radius (6,800 km for the paper's orbit; the paper starts 31 km away).
+POSITION_MAX_KM = 1e4
+#: |velocity| [km/s]: above the speed of any Earth orbit (7.9 km/s at the surface).
+VELOCITY_MAX_KM_S = 10.0
+#: Diagonal (variance) of a covariance [km², km²/s²]: σ up to POSITION_MAX_KM, VELOCITY_MAX_KM_S.
+POSITION_VARIANCE_MAX_KM2 = POSITION_MAX_KM**2
+VELOCITY_VARIANCE_MAX_KM2_S2 = VELOCITY_MAX_KM_S**2
+#: Smallest variance [km², km²/s²]: σ = 1e-15 km (or km/s), below the float resolution
+#: of the paper's 31 km state (7e-15 km).
+VARIANCE_MIN = 1e-30
+#: Times [s]: 1e6 s (11.6 days) at the coarsest step still has at most MAX_STEPS steps
+#: at dt = 10 s; any rendezvous horizon is shorter.
+TIME_MAX_S = 1e6
+#: Homotopy parameter ε [-] (SPEC §1: the smoothing width of the switching function,
+#: which is of order 1; the paper's continuation starts at 1): at 100 the smoothed
+#: plan is half thrust within 1 %.
+EPS_MAX = 100.0
+#: Dimensionless weights, scales and gains of the schedule and sensor faults [-].
+GAIN_MAX = 1e6
+
+PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
+VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
+#: A relative state [x, y, z, ẋ, ẏ, ż] [km, km/s], each entry bounded.
+State6 = tuple[PositionKm, PositionKm, PositionKm, VelocityKmS, VelocityKmS, VelocityKmS]
 # A covariance as given: n diagonal entries, or a full n×n matrix (rows).
 Covariance = tuple[Float, ...] | tuple[tuple[Float, ...], ...]
 
@@ -109,25 +139,38 @@ class ScenarioConfig(_FrozenModel):
 
     mean_motion_rad_s: Float = Field(
         _PAPER.scenario.mean_motion_rad_s,
-        gt=0,
-        description="CW mean motion n of the target orbit [rad/s]",
+        ge=1e-6,
+        le=1.3e-3,
+        description="CW mean motion n of the target orbit, in [1e-6, 1.3e-3] [rad/s] (an orbit "
+        "at Earth's surface has 1.24e-3; 1e-6 is a 73-day period, beyond GEO's 7.3e-5)",
     )
     horizon_s: Float = Field(
-        _PAPER.scenario.horizon_s, gt=0, description="rendezvous horizon T [s]"
+        _PAPER.scenario.horizon_s,
+        gt=0,
+        le=TIME_MAX_S,
+        description="rendezvous horizon T, in (0, 1e6] [s], a whole multiple of dt_s",
     )
     dt_s: Float = Field(
-        _PAPER.scenario.dt_s, gt=0, description="simulation / filter / control-hold step Δt [s]"
+        _PAPER.scenario.dt_s,
+        ge=1e-3,
+        le=3600,
+        description="simulation / filter / control-hold step Δt, in [1e-3, 3600] [s]",
     )
-    x0: Vec6 = Field(
+    x0: State6 = Field(
         _PAPER.scenario.x0,
-        description="initial relative state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
+        description="initial relative state [x, y, z, ẋ, ẏ, ż] [km, km/s]; positions within "
+        "±1e4 km, velocities within ±10 km/s",
     )
-    xf: Vec6 = Field(
+    xf: State6 = Field(
         _PAPER.scenario.xf,
-        description="target terminal state [x, y, z, ẋ, ẏ, ż] [km, km/s]",
+        description="target terminal state [x, y, z, ẋ, ẏ, ż] [km, km/s]; positions within "
+        "±1e4 km, velocities within ±10 km/s",
     )
     u_max_km_s2: Float = Field(
-        _PAPER.scenario.u_max_km_s2, gt=0, description="maximum control acceleration [km/s²]"
+        _PAPER.scenario.u_max_km_s2,
+        ge=1e-9,
+        le=0.1,
+        description="maximum control acceleration, in [1e-9, 0.1] (about 10 g) [km/s²]",
     )
 
     @field_validator("x0", "xf", mode="before")
@@ -166,13 +209,37 @@ class ScenarioConfig(_FrozenModel):
         return round(self.horizon_s / self.dt_s)
 
 
-def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple[float, ...], ...]:
-    """Check a covariance given as n diagonal entries or an n×n matrix.
+#: Largest variance of each diagonal entry of R (3 positions), Q and P0 (3 positions,
+#: 3 velocities) [km², km²/s²]; an off-diagonal entry of a positive-definite matrix is
+#: bounded by its diagonal (|c_ij| <= sqrt(c_ii c_jj)), so these bound every entry.
+_R_VARIANCE_MAX = (POSITION_VARIANCE_MAX_KM2,) * 3
+_STATE_VARIANCE_MAX = _R_VARIANCE_MAX + (VELOCITY_VARIANCE_MAX_KM2_S2,) * 3
+
+
+def _check_variances(diagonal: Sequence[float], maxima: Sequence[float]) -> None:
+    """Refuse a variance outside [VARIANCE_MIN, its maximum] (issue 36 item 7)."""
+    for i, (d, top) in enumerate(zip(diagonal, maxima, strict=True)):
+        if d <= 0.0:
+            raise ValueError("must be positive definite (diagonal entries must be > 0)")
+        if not VARIANCE_MIN <= d <= top:
+            unit = "km" if top == POSITION_VARIANCE_MAX_KM2 else "km/s"
+            raise ValueError(
+                f"diagonal entry {i} = {fmt_num(d)} must be in [{fmt_num(VARIANCE_MIN)}, "
+                f"{fmt_num(top)}] {unit}² (σ at most {fmt_num(math.sqrt(top))} {unit})"
+            )
+
+
+def _normalise_covariance(
+    value: Any, maxima: Sequence[float]
+) -> tuple[float, ...] | tuple[tuple[float, ...], ...]:
+    """Check a covariance given as n diagonal entries or an n×n matrix (n = len(maxima)).
 
     Returns the canonical stored form: the diagonal tuple when the matrix is
     diagonal, otherwise the full matrix as a tuple of row tuples, so that two
-    spellings of the same matrix validate (and hash) identically.
+    spellings of the same matrix validate (and hash) identically. Each
+    diagonal entry must lie in [:data:`VARIANCE_MIN`, its entry of ``maxima``].
     """
+    n = len(maxima)
     shape_msg = f"must have {n} entries (diagonal) or be a {n}x{n} matrix"
     numpy = sys.modules.get("numpy")  # an array exists only once numpy is loaded (issue 17:
     if numpy is not None and isinstance(value, numpy.ndarray):  # the config imports no numpy)
@@ -196,13 +263,13 @@ def _normalise_covariance(value: Any, n: int) -> tuple[float, ...] | tuple[tuple
 
     if not any(rows_are_seq):
         diag = tuple(float(e) for e in value)
-        if any(d <= 0.0 for d in diag):
-            raise ValueError("must be positive definite (diagonal entries must be > 0)")
+        _check_variances(diag, maxima)
         return diag
 
     import numpy as np  # a full matrix only: a config of diagonals loads no numpy
 
     mat = np.array(value, dtype=np.float64)
+    _check_variances([float(d) for d in np.diag(mat)], maxima)
     scale = float(np.max(np.abs(mat)))
     if float(np.max(np.abs(mat - mat.T))) > 1e-12 * scale:
         raise ValueError("must be symmetric")
@@ -226,31 +293,44 @@ class EstimatorConfig(_FrozenModel):
 
     r_nominal_km2: Covariance = Field(
         _PAPER.estimator.r_nominal_km2,
-        description="nominal measurement covariance R (3, or 3x3) [km²]; 1e-6 is a 1 m σ",
+        description="nominal measurement covariance R (3, or 3x3) [km²]; 1e-6 is a 1 m σ; "
+        "diagonal entries in [1e-30, 1e8] km²",
+        json_schema_extra={"diagonal_minimum": VARIANCE_MIN, "diagonal_maximum": _R_VARIANCE_MAX},
     )
     q_process: Covariance = Field(
         _PAPER.estimator.q_process,
-        description="discrete process-noise covariance Q (6, or 6x6) [km², km²/s²]",
+        description="discrete process-noise covariance Q (6, or 6x6) [km², km²/s²]; diagonal "
+        "entries in [1e-30, 1e8] km² (positions) and [1e-30, 100] km²/s² (velocities)",
+        json_schema_extra={
+            "diagonal_minimum": VARIANCE_MIN,
+            "diagonal_maximum": _STATE_VARIANCE_MAX,
+        },
     )
     p0: Covariance = Field(
         _PAPER.estimator.p0,
-        description="initial estimate covariance P0 (6, or 6x6) [km², km²/s²]",
+        description="initial estimate covariance P0 (6, or 6x6) [km², km²/s²]; diagonal "
+        "entries in [1e-30, 1e8] km² (positions) and [1e-30, 100] km²/s² (velocities)",
+        json_schema_extra={
+            "diagonal_minimum": VARIANCE_MIN,
+            "diagonal_maximum": _STATE_VARIANCE_MAX,
+        },
     )
 
     @field_validator("r_nominal_km2", mode="before")
     @classmethod
     def _check_r(cls, value: Any) -> Any:
-        return _normalise_covariance(value, 3)
+        return _normalise_covariance(value, _R_VARIANCE_MAX)
 
     @field_validator("q_process", "p0", mode="before")
     @classmethod
     def _check_q_p0(cls, value: Any) -> Any:
-        return _normalise_covariance(value, 6)
+        return _normalise_covariance(value, _STATE_VARIANCE_MAX)
 
-    initial_error: Vec6 = Field(
+    initial_error: State6 = Field(
         _PAPER.estimator.initial_error,
         description="initial estimate minus true initial state [km, km/s]; the paper's "
-        "filter starts at the truth (zeros). A dispersion target for initial errors.",
+        "filter starts at the truth (zeros). A dispersion target for initial errors. "
+        "Positions within ±1e4 km, velocities within ±10 km/s.",
     )
 
     @field_validator("initial_error", mode="before")
@@ -282,12 +362,18 @@ class ScheduleConfig(_FrozenModel):
     """
 
     beta: Float = Field(
-        _PAPER.schedule.beta, gt=0, description="score-to-homotopy sensitivity β [1/score]"
+        _PAPER.schedule.beta,
+        gt=0,
+        le=1e3,
+        description="score-to-homotopy sensitivity β, in (0, 1e3] [1/score] (paper 0.25; at "
+        "1e3 a score of 0.01 already moves ε* to within e⁻¹⁰ of ε_max)",
     )
     nis_offset: Float = Field(
         _PAPER.schedule.nis_offset,
         ge=0,
-        description="NIS offset m subtracted before scoring [-] (paper: measurement dimension)",
+        le=GAIN_MAX,
+        description="NIS offset m subtracted before scoring, in [0, 1e6] [-] (paper: the "
+        "measurement dimension, 3)",
     )
     score_lowpass: Float = Field(
         _PAPER.schedule.score_lowpass,
@@ -298,18 +384,27 @@ class ScheduleConfig(_FrozenModel):
     kappa_mtf: Float = Field(
         _PAPER.schedule.kappa_mtf,
         ge=0,
-        description="weight κ_MTF of the MTF ratio in the score [-]",
+        le=GAIN_MAX,
+        description="weight κ_MTF of the MTF ratio in the score, in [0, 1e6] [-] (paper 12)",
     )
     score_max: Float = Field(
-        _PAPER.schedule.score_max, gt=0, description="cap on the instantaneous score [-]"
+        _PAPER.schedule.score_max,
+        gt=0,
+        le=GAIN_MAX,
+        description="cap on the instantaneous score, in (0, 1e6] [-] (paper 50)",
     )
     eps_min: Float = Field(
-        _PAPER.schedule.eps_min, ge=0, description="lower end ε_min of the homotopy map [-]"
+        _PAPER.schedule.eps_min,
+        ge=0,
+        le=EPS_MAX,
+        description="lower end ε_min of the homotopy map, in [0, 100] [-]",
     )
     eps_max: Float = Field(
         _PAPER.schedule.eps_max,
         gt=0,
-        description="upper end ε_max of the map; adaptive runs start here [-]",
+        le=EPS_MAX,
+        description="upper end ε_max of the map; adaptive runs start here; in (0, 100] [-] "
+        "(paper 1)",
     )
     alpha_eps: Float = Field(
         _PAPER.schedule.alpha_eps,
@@ -320,16 +415,20 @@ class ScheduleConfig(_FrozenModel):
     deadband: Float = Field(
         _PAPER.schedule.deadband,
         ge=0,
-        description="filtered score below which ε* = eps_min; 0 disables it [-]",
+        le=GAIN_MAX,
+        description="filtered score below which ε* = eps_min; 0 disables it; in [0, 1e6] [-]",
     )
     eps_saturation: Float | None = Field(
         _PAPER.schedule.eps_saturation,
+        ge=0,
+        le=EPS_MAX,
         description="upper clip of ε*, within [eps_min, eps_max]; unset disables it [-]",
     )
     eps_fixed: Float = Field(
         _PAPER.schedule.eps_fixed,
         ge=0,
-        description="ε held by the fixed architectures (paper: 0, bang-bang) [-]",
+        le=EPS_MAX,
+        description="ε held by the fixed architectures, in [0, 100] (paper: 0, bang-bang) [-]",
     )
 
     @model_validator(mode="after")
@@ -365,25 +464,29 @@ class GuidanceConfig(_FrozenModel):
     """
 
     t_resolve_s: Float = Field(
-        _PAPER.guidance.t_resolve_s, gt=0, description="re-solve interval [s]"
+        _PAPER.guidance.t_resolve_s,
+        gt=0,
+        le=TIME_MAX_S,
+        description="re-solve interval, in (0, 1e6] [s] (a whole multiple of scenario.dt_s)",
     )
     t_min_rem_s: Float = Field(
         _PAPER.guidance.t_min_rem_s,
         ge=0,
-        description="no re-solve once the remaining horizon is <= this [s]",
+        le=TIME_MAX_S,
+        description="no re-solve once the remaining horizon is <= this, in [0, 1e6] [s]",
     )
     resolve_timing: Literal["correct", "reference"] = Field(
         _PAPER.guidance.resolve_timing,
-        description="re-solve timing: 'correct' or the authors' 'reference'",
+        description="re-solve timing: 'correct' or the authors' 'reference' [-]",
     )
     hold: Literal["sample", "mean"] = Field(
         _PAPER.guidance.hold,
-        description="control hold over a step: 'sample' (start) or 'mean' (average)",
+        description="control hold over a step: 'sample' (start) or 'mean' (average) [-]",
     )
     method: Literal["shooting", "socp"] = Field(
         _PAPER.guidance.method,
         description="re-solve method of the architectures that do not name one: 'shooting' "
-        "(costate) or 'socp' (held controls of the smoothed min-fuel cone program)",
+        "(costate) or 'socp' (held controls of the smoothed min-fuel cone program) [-]",
     )
 
 
@@ -392,26 +495,38 @@ class SolverConfig(_FrozenModel):
 
     fallback: Literal["chain", "none"] = Field(
         _PAPER.solver.fallback,
-        description="on failure of the primary solver: try the fallback chain or not",
+        description="on failure of the primary solver: try the fallback chain or not [-]",
     )
     on_infeasible: Literal["keep", "min_miss"] = Field(
         _PAPER.solver.on_infeasible,
         description="when the convex check says x_f is unreachable: keep the propagated "
-        "costate, or steer to the minimum-miss solution",
+        "costate, or steer to the minimum-miss solution [-]",
     )
     success_residual: Float = Field(
         _PAPER.solver.success_residual,
         gt=0,
-        description="a solve succeeds when ||x(T) - x_f|| is below this [km, km/s]",
+        le=POSITION_MAX_KM,
+        description="a solve succeeds when ||x(T) - x_f|| is below this, in (0, 1e4] "
+        "[km, km/s]",
     )
     tol_pos_km: Float = Field(
-        _PAPER.solver.tol_pos_km, gt=0, description="solver tolerance on position [km]"
+        _PAPER.solver.tol_pos_km,
+        gt=0,
+        le=POSITION_MAX_KM,
+        description="solver tolerance on position, in (0, 1e4] [km]",
     )
     tol_vel_km_s: Float = Field(
-        _PAPER.solver.tol_vel_km_s, gt=0, description="solver tolerance on velocity [km/s]"
+        _PAPER.solver.tol_vel_km_s,
+        gt=0,
+        le=VELOCITY_MAX_KM_S,
+        description="solver tolerance on velocity, in (0, 10] [km/s]",
     )
     max_iter: Int = Field(
-        _PAPER.solver.max_iter, ge=1, description="maximum solver iterations per solve [-]"
+        _PAPER.solver.max_iter,
+        ge=1,
+        le=1000,
+        description="maximum solver iterations per solve, in [1, 1000] [-] (paper 50; each "
+        "costs about 0.1 ms, and every re-solve may make them)",
     )
     quadrature_nodes: Int = Field(
         _PAPER.solver.quadrature_nodes,
@@ -425,7 +540,7 @@ class SolverConfig(_FrozenModel):
         le=1000,
         description="at eps = 0, steps of the switching-time Newton tried before the dual "
         "ascent (its answer is kept only when the full evaluation confirms it); 0 = the "
-        "dual ascent alone, the solver before issue 17 [-]",
+        "dual ascent alone, the solver of cwrend 0.1 [-]",
     )
 
 
@@ -443,12 +558,25 @@ class DegradationWindow(_FrozenModel):
     random walk while the window is active.
     """
 
-    start_s: Float = Field(ge=0, description="window start time (inclusive) [s]")
-    end_s: Float = Field(description="window end time (inclusive), >= start_s [s]")
-    r_scale: Float = Field(
-        1.0, gt=0, description="true measurement covariance = r_scale * R_nominal [-]"
+    start_s: Float = Field(
+        ge=0, le=TIME_MAX_S, description="window start time (inclusive), in [0, 1e6] [s]"
     )
-    bias_km: Vec3 = Field((0.0, 0.0, 0.0), description="measurement bias added while active [km]")
+    end_s: Float = Field(
+        ge=0,
+        le=TIME_MAX_S,
+        description="window end time (inclusive), >= start_s, <= scenario.horizon_s [s]",
+    )
+    r_scale: Float = Field(
+        1.0,
+        ge=1e-6,
+        le=GAIN_MAX,
+        description="true measurement covariance = r_scale * R_nominal, in [1e-6, 1e6] [-] "
+        "(paper 300)",
+    )
+    bias_km: tuple[PositionKm, PositionKm, PositionKm] = Field(
+        (0.0, 0.0, 0.0),
+        description="measurement bias added while active, each within ±1e4 km [km]",
+    )
     dropout_probability: Float = Field(
         0.0, ge=0, le=1, description="probability of no measurement on a step; 1 = blackout [-]"
     )
@@ -456,12 +584,17 @@ class DegradationWindow(_FrozenModel):
         0.0, ge=0, le=1, description="probability that a step's noise is an outlier [-]"
     )
     outlier_scale: Float = Field(
-        1.0, ge=0, description="factor on the Gaussian noise of an outlier step [-]"
+        1.0,
+        ge=0,
+        le=1e3,
+        description="factor on the Gaussian noise of an outlier step, in [0, 1e3] [-]",
     )
     bias_drift_km_per_sqrt_s: Float = Field(
         0.0,
         ge=0,
-        description="random-walk intensity q of the bias: N(0, q² Δt) per step and axis [km/√s]",
+        le=10.0,
+        description="random-walk intensity q of the bias: N(0, q² Δt) per step and axis, in "
+        "[0, 10] [km/√s] (10 drifts 10 km in a second of window)",
     )
 
     @field_validator("bias_km", mode="before")
@@ -516,13 +649,16 @@ class TruthConfig(_FrozenModel):
 
     model: Literal["cw", "two_body", "j2"] = Field(
         _PAPER.truth.model,
-        description="truth dynamics: 'cw' (the design model), 'two_body' or 'j2'",
+        description="truth dynamics: 'cw' (the design model), 'two_body' or 'j2' [-]",
     )
     eccentricity: Float = Field(
         _PAPER.truth.eccentricity, ge=0, lt=1, description="chief eccentricity e, in [0, 1) [-]"
     )
     true_anomaly_deg: Float = Field(
-        _PAPER.truth.true_anomaly_deg, description="chief true anomaly f at t = 0 [deg]"
+        _PAPER.truth.true_anomaly_deg,
+        ge=-360,
+        le=360,
+        description="chief true anomaly f at t = 0, in [-360, 360] [deg]",
     )
     inclination_deg: Float = Field(
         _PAPER.truth.inclination_deg,
@@ -531,11 +667,16 @@ class TruthConfig(_FrozenModel):
         description="chief inclination i, in [0, 180] [deg]",
     )
     raan_deg: Float = Field(
-        _PAPER.truth.raan_deg, description="chief right ascension of the ascending node Ω [deg]"
+        _PAPER.truth.raan_deg,
+        ge=-360,
+        le=360,
+        description="chief right ascension of the ascending node Ω, in [-360, 360] [deg]",
     )
     arg_latitude_deg: Float = Field(
         _PAPER.truth.arg_latitude_deg,
-        description="chief argument of latitude u = ω + f at t = 0 [deg]",
+        ge=-360,
+        le=360,
+        description="chief argument of latitude u = ω + f at t = 0, in [-360, 360] [deg]",
     )
 
 
@@ -558,12 +699,15 @@ class ActuatorConfig(_FrozenModel):
     magnitude_bias: Float = Field(
         _PAPER.actuator.magnitude_bias,
         gt=-1,
-        description="fixed thrust-magnitude scale error, a fraction (0.01 = +1 %), > -1 [-]",
+        le=10,
+        description="fixed thrust-magnitude scale error, a fraction (0.01 = +1 %), in (-1, 10] "
+        "[-]",
     )
     magnitude_sigma: Float = Field(
         _PAPER.actuator.magnitude_sigma,
         ge=0,
-        description="per-step thrust-magnitude noise σ, a fraction of the command [-]",
+        le=10,
+        description="per-step thrust-magnitude noise σ, a fraction of the command, in [0, 10] [-]",
     )
     misalignment_deg: tuple[Angle, Angle, Angle] = Field(
         _PAPER.actuator.misalignment_deg,
@@ -579,10 +723,15 @@ class ActuatorConfig(_FrozenModel):
     min_thrust_km_s2: Float = Field(
         _PAPER.actuator.min_thrust_km_s2,
         ge=0,
-        description="commands below this magnitude produce no thrust [km/s²]",
+        le=0.1,
+        description="commands below this magnitude produce no thrust, in [0, 0.1] and <= "
+        "scenario.u_max_km_s2 [km/s²]",
     )
     delay_steps: Int = Field(
-        _PAPER.actuator.delay_steps, ge=0, description="actuation delay in whole steps [-]"
+        _PAPER.actuator.delay_steps,
+        ge=0,
+        le=MAX_STEPS,
+        description="actuation delay in whole steps, < the run's number of steps [-]",
     )
 
     @field_validator("misalignment_deg", mode="before")
@@ -605,7 +754,7 @@ class NoiseConfig(_FrozenModel):
     )
     file: str | None = Field(
         None,
-        description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3)",
+        description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3) [-]",
     )
 
     @field_validator("file")
@@ -632,36 +781,41 @@ class NoiseConfig(_FrozenModel):
 class OutputConfig(_FrozenModel):
     """Where results go: ``<dir>/<name>/...``."""
 
-    dir: str = Field("results", min_length=1, description="results root directory")
+    dir: str = Field("results", min_length=1, description="results root directory [-]")
     name: str | None = Field(
         None,
-        description="run/campaign name, a plain file name (default: the config file's stem)",
+        description="run/campaign name, a plain file name (default: the config file's stem) [-]",
     )
     steps_seeds: Int | None = Field(
         None,
         ge=0,
+        le=MAX_SEED,
         description="campaigns: write per-step data (steps/ dataset) only for seeds below "
-        "this number; unset = every seed, 0 = none (a run's steps take about 200 kB)",
+        "this number; unset = every seed, 0 = none (a run's steps take about 200 kB) [-]",
     )
     seeds_per_task: Int | None = Field(
         None,
         ge=1,
+        le=MAX_SEEDS_PER_TASK,
         description="campaigns: seeds run together as one task (all architectures), written "
         "to one file per architecture and journaled at once; larger means fewer files and "
         "faster campaigns, smaller a finer resume and progress; unset = at least 4 tasks per "
-        "worker, at most 16 seeds a task; never changes the numbers",
+        "worker, at most 16 seeds a task; never changes the numbers [-]",
     )
     rrd_seeds: Int | None = Field(
         3,
         ge=0,
+        le=MAX_SEED,
         description="campaigns: write a Rerun recording (all architectures of a seed and the "
         "references, about 1.6 MB for four architectures) for seeds below this number at "
-        "each grid point; 0 = none, unset = every seed",
+        "each grid point; 0 = none, unset = every seed [-]",
     )
     run_timeout_s: Float | None = Field(
         None,
         gt=0,
-        description="campaigns: wall-time limit of one run [s]; a run past it is recorded "
+        le=MAX_RUN_TIMEOUT_S,
+        description="campaigns: wall-time limit of one run, at most 86,400 (a day) [s]; a run "
+        "past it is recorded "
         "failed 'timed out' and the campaign goes on; unset = 60 s + 0.5 s per step "
         "(460 s for the paper's 800 steps; not enforced on Dask workers)",
     )
@@ -699,12 +853,12 @@ class Dispersion(_FrozenModel):
     same dispersed scenario.
     """
 
-    dist: Literal["normal", "uniform"] = Field(description="distribution")
-    mean: Float = Field(0.0, description="normal: mean of the draw")
-    std: Float | None = Field(None, ge=0, description="normal: standard deviation")
-    low: Float | None = Field(None, description="uniform: lower bound")
-    high: Float | None = Field(None, description="uniform: upper bound")
-    mode: Literal["add", "set"] = Field("add", description="add the draw to the base or set it")
+    dist: Literal["normal", "uniform"] = Field(description="distribution of the draw [-]")
+    mean: Float = Field(0.0, description="normal: mean of the draw [the key's unit]")
+    std: Float | None = Field(None, ge=0, description="normal: standard deviation [the key's unit]")
+    low: Float | None = Field(None, description="uniform: lower bound [the key's unit]")
+    high: Float | None = Field(None, description="uniform: upper bound [the key's unit]")
+    mode: Literal["add", "set"] = Field("add", description="add the draw to the base or set it [-]")
 
     @model_validator(mode="after")
     def _parameters_present(self) -> Self:
@@ -749,7 +903,7 @@ class CwrendConfig(_FrozenModel):
         default_factory=dict,
         description="grid: dotted.key = [v1, v2, …] or 'start:stop:num' (cartesian product); "
         "or, for cwrend sweep --design, ranges: dotted.key = { low = …, high = … } "
-        "(log = true, int = true) or { values = […] }",
+        "(log = true, int = true) or { values = […] } [the key's unit]",
     )
     dispersions: dict[str, Dispersion] = Field(
         default_factory=dict, description="per-run random draws: dotted.key = {dist = …}"

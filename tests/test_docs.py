@@ -1,0 +1,104 @@
+"""The manual: the configuration reference is the schema's, every value has a meaning and a unit.
+
+The reference page (``docs/reference/config.md``) is generated at build time by the MkDocs
+hook ``docs/hooks/config_reference.py`` from :class:`cwrend_cli.config.schema.CwrendConfig`;
+these tests read the same walk of the schema the hook renders.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _hook() -> ModuleType:
+    name = "cwrend_docs_config_reference"
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, REPO / "docs/hooks/config_reference.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+LEAVES = _hook().leaf_fields()
+
+
+def test_the_schema_has_the_paper_scenario_values() -> None:
+    keys = {leaf.key for leaf in LEAVES}
+    assert {"scenario.horizon_s", "schedule.beta", "degradation.windows.<i>.bias_km"} <= keys
+    assert len(LEAVES) > 50
+
+
+@pytest.mark.parametrize("leaf", LEAVES, ids=lambda leaf: leaf.key)
+def test_every_config_value_has_a_description(leaf: object) -> None:
+    assert leaf.text.strip(), f"{leaf.key}: no description= in cwrend_cli/config/schema.py"
+
+
+@pytest.mark.parametrize("leaf", LEAVES, ids=lambda leaf: leaf.key)
+def test_every_config_value_states_its_unit(leaf: object) -> None:
+    assert leaf.unit is not None, (
+        f"{leaf.key}: its description states no unit: end it with the unit in square "
+        f"brackets, e.g. [km], [km/s²], [s], or [-] for a dimensionless number, a choice or "
+        f"a name (the rule: docs/hooks/config_reference.py, UNIT_GROUP); got "
+        f"{leaf.description!r}"
+    )
+
+
+def test_a_unit_is_told_from_other_brackets() -> None:
+    leaf = _hook().Leaf(
+        key="k",
+        table="t",
+        description="state [x, y, z] in [0, 1] [km, km/s]; more",
+        type="float",
+        default="0",
+        bounds="",
+    )
+    assert leaf.unit == "km, km/s"
+    assert leaf.text == "state [x, y, z] in [0, 1]; more"
+    assert _hook().Leaf("k", "t", "a range [0, 1]", "float", "0", "").unit is None
+
+
+def test_the_reference_shows_every_value_with_its_default_and_bounds() -> None:
+    text = _hook().render_reference()
+    rows = {line.split(" | ")[0].strip("| `"): line for line in text.splitlines()}
+    for leaf in LEAVES:
+        assert leaf.key in rows, leaf.key
+    assert "`0.25`" in rows["schedule.beta"]  # the paper's value
+    assert "[0, 1)" in rows["schedule.score_lowpass"]
+    assert "(0, 1]" in rows["schedule.alpha_eps"]
+    assert "each [-180, 180]" in rows["actuator.misalignment_deg"]
+    assert "| km/s² |" in rows["scenario.u_max_km_s2"]
+
+
+def test_the_reference_shows_every_bound_the_schema_enforces() -> None:
+    """Each ge/gt/le/lt of a field (whoever adds it) reaches its row, in interval notation."""
+    import annotated_types as at
+
+    from cwrend_cli.config.schema import CwrendConfig
+
+    rows = {leaf.key: leaf.bounds for leaf in LEAVES}
+    checked = 0
+    for section, info in CwrendConfig.model_fields.items():
+        model = info.annotation
+        if not isinstance(model, type) or not hasattr(model, "model_fields"):
+            continue
+        for name, field in model.model_fields.items():
+            for rule in field.metadata:
+                for attr, opener in (("ge", "["), ("gt", "("), ("le", "]"), ("lt", ")")):
+                    value = getattr(rule, attr, None)
+                    if isinstance(rule, (at.Ge, at.Gt, at.Le, at.Lt)) and value is not None:
+                        shown = rows[f"{section}.{name}"]
+                        number = _hook()._fmt_number(value)
+                        assert number in shown, (section, name, attr, value, shown)
+                        assert opener in shown or ("≥>≤<"["[(])".index(opener)] in shown)
+                        checked += 1
+    assert checked > 20
