@@ -20,6 +20,7 @@ pydantic (see :class:`_Group`), and ``config validate`` no numpy nor Rich.
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -38,8 +39,10 @@ from cwrend_cli.output.layout import (
     COMPARE_STATS,
     MANIFEST,
     RUN_RECORDING,
+    RUNS_DIR,
     SWEEP_STATS,
     compare_dir,
+    run_dir,
 )
 
 if TYPE_CHECKING:  # annotations only; the commands import these when they run
@@ -289,7 +292,9 @@ def run(
         typer.Option(
             "--out",
             "-o",
-            help="Output directory (default: <output.dir>/<output.name>/run-<arch>-seed<N>).",
+            help="Output directory (default: <output.dir>/runs/<name>-<arch>-seed<N>, <name> "
+            "being output.name, the config file's stem unless set, and <arch> 'multi' for "
+            "several architectures; never inside a campaign's directory).",
             metavar="DIR",
         ),
     ] = None,
@@ -326,7 +331,13 @@ def run(
             recording.check_enabled()
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
-            out = Path(cfg.output.dir) / (cfg.output.name or "run") / f"run-{slug}-seed{seed_}"
+            runs_root = Path(cfg.output.dir) / RUNS_DIR
+            if (runs_root / MANIFEST).exists():
+                raise ConfigError(
+                    f"{runs_root} is a campaign directory (a campaign named {RUNS_DIR!r}); "
+                    "name the run's directory with --out"
+                )
+            out = Path(cfg.output.dir) / run_dir(cfg.output.name or "run", slug, seed_)
         check_output_dir(out, "choose another --out or output.dir")  # before computing
         console = _console(stderr=True)
         if quiet:
@@ -485,6 +496,18 @@ class CampaignOptions:
     max_seeds: int = 1000
 
 
+def command_line() -> list[str]:
+    """This process's command line as a shell would run it again (``sys.argv``).
+
+    ``python -m cwrend_cli …`` has the module's ``__main__.py`` as ``argv[0]``:
+    it is given back as the interpreter and ``-m cwrend_cli``.
+    """
+    argv = list(sys.argv)
+    if argv and Path(argv[0]).name == "__main__.py":
+        return [sys.executable, "-m", "cwrend_cli", *argv[1:]]
+    return argv
+
+
 def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     base = Path(cfg.output.dir)
     out = (base / (cfg.output.name or "campaign")).resolve()
@@ -640,6 +663,7 @@ def _campaign_step(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
+        argv=command_line(),
     )  # fmt: skip
     with progress.phase("computing statistics"):
         statistics = campaign.write_statistics(out, command, plan.root_seed)

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Literal, Protocol
 
 import pandas as pd
+import pyarrow as pa
 
 from cwrend_cli.campaign import design, statistics
 from cwrend_cli.campaign.executors import (
@@ -42,6 +43,7 @@ from cwrend_cli.campaign.executors import (
     run_signals,
 )
 from cwrend_cli.campaign.journal import (
+    JournalState,
     append_events,
     campaign_lock,
     check_confined,
@@ -53,7 +55,7 @@ from cwrend_cli.campaign.journal import (
     remove_orphan_files,
     wipe,
 )
-from cwrend_cli.campaign.plan import CampaignPlan, Task
+from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task
 from cwrend_cli.campaign.worker import (
     ReferencesKey,
     TaskOutcome,
@@ -70,6 +72,7 @@ from cwrend_cli.output.layout import (
     RUNS,
     SENSITIVITY,
     SWEEP_STATS,
+    recording_path,
     references_path,
 )
 from cwrend_cli.output.tables import (
@@ -235,6 +238,7 @@ def run_campaign(
     retry_failed: bool = False,
     allow_version_change: bool = False,
     progress: Progress | None = None,
+    argv: Sequence[str] | None = None,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -245,18 +249,24 @@ def run_campaign(
     appends its run events and a ``task_done`` record to ``events.jsonl`` in
     one write, so an interrupted campaign (Ctrl-C or ``kill -9``) keeps every
     completed task and leaves no partial data: files of unfinished executions
-    are removed on resume.
+    are removed on resume. ``argv``: the command line, recorded in the manifest's session.
     """
     progress = progress or _NoProgress()
     if executor_kind == "dask" and address:
         check_address(address)  # before anything is written
     make_output_dir(out_dir, "choose another output.dir or output.name")
     check_confined(out_dir)
-    with campaign_lock(out_dir):
-        return _run_locked(
-            plan_, out_dir, progress, command, executor_kind, workers, address, force,
-            retry_failed, allow_version_change,
-        )  # fmt: skip
+    try:
+        with campaign_lock(out_dir):
+            return _run_locked(
+                plan_, out_dir, progress, command, executor_kind, workers, address, force,
+                retry_failed, allow_version_change, argv,
+            )  # fmt: skip
+    except OSError as exc:  # outside the runs (the lock, the first manifest): nothing computed
+        raise InfrastructureError(
+            f"campaign stopped: {_fault_text(exc)}. Every run the journal holds is kept; fix "
+            "the cause and run the same command to resume"
+        ) from None
 
 
 def _run_locked(
@@ -270,22 +280,25 @@ def _run_locked(
     force: bool,
     retry_failed: bool,
     allow_version_change: bool,
+    argv: Sequence[str] | None = None,
 ) -> CampaignSummary:
     """:func:`run_campaign` once the directory exists, is confined and locked."""
     if force:
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
-    executions_before, done = _journal_before(out_dir, retry_failed)
+    executions_before, done, owed = _journal_before(out_dir, plan_, retry_failed)
     tasks = [
         replace(t, runs=tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
     ]
     tasks = [t for t in tasks if t.runs]
     total = sum(len(t.runs) for t in tasks)
     skipped = len(plan_.runs) - total
+    tasks += owed  # recordings lost before: written again, counted in no run
     executor = {"kind": executor_kind, "workers": workers, "address": address}
     manifest = new_manifest(
-        plan_, command=command, executor=executor, started=time.time(), previous=previous
-    )
+        plan_, command=command, executor=executor, started=time.time(), previous=previous,
+        argv=argv,
+    )  # fmt: skip
     write_json(manifest, out_dir / MANIFEST)
     interrupted = False
     stopped: str | None = None
@@ -340,8 +353,11 @@ def _run_locked(
     return CampaignSummary(out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs))
 
 
-def _journal_before(out_dir: Path, retry_failed: bool) -> tuple[set[object], set[str]]:
-    """Clean the orphans of a campaign directory; its executions with runs and its done runs.
+def _journal_before(
+    out_dir: Path, plan_: CampaignPlan, retry_failed: bool
+) -> tuple[set[object], set[str], list[Task]]:
+    """Clean the orphans of a campaign directory; its executions with runs, its done runs and
+    the tasks that write again the recordings it owes (:func:`_owed_recordings`).
 
     Done: ok runs, failed ones too unless ``retry_failed``. The journal's
     state is released on return, so the campaign never holds it while it
@@ -351,7 +367,37 @@ def _journal_before(out_dir: Path, retry_failed: bool) -> tuple[set[object], set
     remove_orphan_files(out_dir, journal.files)
     executions = {e.get("execution") for e in journal.runs.values()}
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
-    return executions, done
+    return executions, done, _owed_recordings(out_dir, plan_, journal, done)
+
+
+def _owed_recordings(
+    out_dir: Path, plan_: CampaignPlan, journal: JournalState, done: Collection[str]
+) -> list[Task]:
+    """``record_only`` tasks for the recordings the campaign owes and does not hold.
+
+    A recording is owed for every seed a task records (:func:`seeds_to_record`)
+    that has an ok run; it is held when a completed execution names it and
+    its file is there. One whose seed's runs all run again now is written by
+    their task; for the others (lost to a full disk by an earlier version,
+    deleted, failed to encode) a task recomputes the seed's ok runs, without
+    journaling them again, and writes the recording (issue 36, item 1).
+    """
+    owed: list[Task] = []
+    if plan_.rrd_seeds == 0:
+        return owed
+    for task in plan_.tasks:
+        runs: list[RunSpec] = []
+        for seed in seeds_to_record(task, plan_.archs, plan_.rrd_seeds):
+            rel = recording_path(task.point, seed)
+            if rel in journal.files and (out_dir / rel).is_file():
+                continue
+            of_seed = [r for r in task.runs if r.seed == seed]
+            if all(r.run_key not in done for r in of_seed):
+                continue  # its task computes them all again now, and records the seed
+            runs += [r for r in of_seed if journal.runs.get(r.run_key, {}).get("status") == "ok"]
+        if runs:
+            owed.append(replace(task, runs=tuple(runs), record_only=True))
+    return owed
 
 
 def _check_room(out_dir: Path, plan_: CampaignPlan, first: Task) -> None:
@@ -584,8 +630,19 @@ def write_statistics(
     if frame.empty:
         return CampaignStatistics(frame, groups, None)
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
-    write_parquet(statistics_table(frame, _stored_metadata(out_dir)), path)
+    _write_statistics_file(statistics_table(frame, _stored_metadata(out_dir)), path)
     return CampaignStatistics(frame, groups, path)
+
+
+def _write_statistics_file(table: pa.Table, path: Path) -> None:
+    """Write a statistics file; a full disk stops the command (exit 3), the runs stay."""
+    try:
+        write_parquet(table, path)
+    except OSError as exc:
+        raise InfrastructureError(
+            f"{path.name} not written: {_fault_text(exc)}. Every run is kept; fix the cause "
+            "and run the same command to write it"
+        ) from None
 
 
 def write_sensitivity(out_dir: Path, plan_: CampaignPlan) -> pd.DataFrame:
@@ -603,7 +660,7 @@ def write_sensitivity(out_dir: Path, plan_: CampaignPlan) -> pd.DataFrame:
     frame = design.sensitivity(runs, spec.rows, spec.ranges, plan_.root_seed)
     if not frame.empty:
         table = statistics_table(frame, _stored_metadata(out_dir))
-        write_parquet(table, out_dir / SENSITIVITY)
+        _write_statistics_file(table, out_dir / SENSITIVITY)
     return frame
 
 

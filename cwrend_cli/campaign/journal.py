@@ -27,10 +27,11 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shlex
 import shutil
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -362,29 +363,62 @@ def campaign_lock(out_dir: Path) -> Iterator[None]:
 
     A second process on the same directory is refused (naming the holder)
     instead of writing duplicate rows beside the first. The lock is an
-    ``flock`` on :data:`~cwrend_cli.output.layout.LOCK`: the kernel releases it
-    when its holder exits however it exits, so a lock is never stale; the
-    file itself stays and only names the last holder.
+    ``flock`` on :data:`~cwrend_cli.output.layout.LOCK`, which names its
+    holder: the kernel releases it when its holder exits however it exits,
+    so a lock is never stale (a file left by a killed holder is taken over).
+
+    The holder removes the file on release, still holding the lock, then
+    closes it. Another process may have opened the file just before the
+    removal and take the lock on the removed file once it is closed: a lock
+    nobody else can see. So a lock counts only when the file locked is still
+    the one at the path (same device and inode); otherwise it is dropped and
+    the path opened again (:func:`_locked_fd`). Removing the file only while
+    holding its lock keeps that check sound: a file at the path whose lock
+    is held is never removed by anyone else.
     """
     path = out_dir / LOCK
+    fd = _locked_fd(path, out_dir)
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot open the campaign lock ({exc.strerror})") from None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 256, 0).decode("utf-8", "replace").strip() or "unknown"
-            raise ConfigError(
-                f"{out_dir} is in use by another cwrend process ({holder}); wait for it to "
-                "finish or stop it, then run the command again"
-            ) from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()}, since {iso(time.time())}\n".encode(), 0)
         yield
     finally:
+        # while the lock is held (see above); an unwritable directory keeps it, still harmless
+        with suppress(OSError):
+            path.unlink(missing_ok=True)
         os.close(fd)  # releases the lock
+
+
+def _locked_fd(path: Path, out_dir: Path) -> int:
+    """An open descriptor of ``path`` holding its ``flock``, the file still being at ``path``.
+
+    Refuses (:class:`ConfigError`) when another process holds the lock.
+    """
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise ConfigError(f"{path}: cannot open the campaign lock ({exc.strerror})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 256, 0).decode("utf-8", "replace").strip() or "unknown"
+            os.close(fd)
+            raise ConfigError(
+                f"{out_dir} is in use by another cwrend process ({holder}); wait for it to "
+                "finish or stop it, then run the command again"
+            ) from None
+        except BaseException:
+            os.close(fd)
+            raise
+        held = os.fstat(fd)
+        try:
+            now = os.stat(path, follow_symlinks=False)
+        except FileNotFoundError:  # removed by its holder on release, after our open
+            now = None
+        if now is not None and (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino):
+            return fd
+        os.close(fd)  # a lock on a file no longer at the path excludes nobody: again
 
 
 def wipe(out_dir: Path) -> None:
@@ -500,23 +534,46 @@ def new_manifest(
     executor: Mapping[str, Any],
     started: float,
     previous: Mapping[str, Any] | None = None,
+    argv: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """The manifest of a campaign invocation that starts now (``status`` = running).
 
     ``sessions`` lists every invocation of the campaign (the ``previous``
-    manifest's, then this one): command, version, executor, start, end, runs
-    computed and skipped, how it ended. ``started_at`` is the first session's
-    start, so resuming a campaign never hides when it began.
+    manifest's, then this one): command, its full command line (``argv``,
+    quoted as a shell would, and the working directory it ran in), version,
+    executor, config hash and ``[output]`` table, start, end, runs computed
+    and skipped, how it ended. ``started_at`` is the first session's start,
+    so resuming a campaign never hides when it began.
+
+    ``config_hash`` is this session's; ``config_hashes`` every config hash the
+    campaign's files were written under, in order of first use. A resume may
+    change ``[output]`` (``--set output.steps_seeds=…``), which the config hash
+    covers and the campaign hash does not: the files of earlier sessions keep
+    their hash in their metadata, and each session's ``output`` gives back the
+    whole config of that hash (the rest is the campaign's).
     """
     sessions = _earlier_sessions(previous or {})
+    earlier_hash = (previous or {}).get("config_hash")
+    if sessions and isinstance(earlier_hash, str):  # the previous manifest's hash is its last's
+        sessions[-1].setdefault("config_hash", earlier_hash)
     session: dict[str, Any] = {
         "command": command,
+        "command_line": None if argv is None else shlex.join(argv),
+        "cwd": None if argv is None else os.getcwd(),
         "cwrend_version": __version__,
         "environment": environment(),
         "executor": dict(executor),
+        "config_hash": plan_.config_hash,
+        "output": plan_.base.get("output"),
         "started_at": iso(started),
         "status": "running",
     }
+    recorded = (previous or {}).get("config_hashes")
+    hashes = [
+        *(recorded if isinstance(recorded, list) else ()),
+        *(s.get("config_hash") for s in sessions),
+        plan_.config_hash,
+    ]
     return {
         "cwrend_version": __version__,
         "environment": environment(),
@@ -524,6 +581,7 @@ def new_manifest(
         "campaign_hash": plan_.campaign_hash,
         "config": plan_.base,
         "config_hash": plan_.config_hash,
+        "config_hashes": list(dict.fromkeys(h for h in hashes if isinstance(h, str))),
         "grid": {k: list(v) for k, v in plan_.grid},
         "design": _design_record(plan_),
         "seeds": list(plan_.seeds),

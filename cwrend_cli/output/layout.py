@@ -1,7 +1,7 @@
 """The names of everything cwrend writes: one place for the layout of a results directory.
 
-A ``cwrend run`` directory holds :data:`RUN_CONFIG`, :data:`RUN_SUMMARY`,
-:data:`RUN_STEPS`, :data:`RUN_SOLVES`, :data:`RUN_REFERENCES` and
+A ``cwrend run`` directory (by default :func:`run_dir`) holds :data:`RUN_CONFIG`,
+:data:`RUN_SUMMARY`, :data:`RUN_STEPS`, :data:`RUN_SOLVES`, :data:`RUN_REFERENCES` and
 :data:`RUN_RECORDING`. A campaign directory (``cwrend ablate`` / ``sweep``)
 holds :data:`MANIFEST`, :data:`RUNS`, :data:`EVENTS`, the statistics file,
 and the datasets :data:`STEPS`, :data:`SOLVES` (``<dir>/arch=<slug>/*.parquet``),
@@ -20,6 +20,8 @@ RUN_STEPS = "steps.parquet"
 RUN_SOLVES = "solves.parquet"
 RUN_REFERENCES = "references.parquet"
 RUN_RECORDING = "recording.rrd"
+#: Where ``cwrend run`` writes without ``--out``, inside ``output.dir`` (:func:`run_dir`).
+RUNS_DIR = "runs"
 
 # A campaign (``cwrend ablate`` / ``cwrend sweep``)
 MANIFEST = "manifest.json"
@@ -52,6 +54,15 @@ def references_path(point: str) -> str:
 def recording_path(point: str, seed: int) -> str:
     """Where a campaign's recording of ``seed`` at grid point ``point`` goes (relative)."""
     return f"{RECORDINGS}/{point}.s{seed:06d}.rrd"
+
+
+def run_dir(name: str, arch: str, seed: int) -> str:
+    """Default directory of ``cwrend run`` (relative to ``output.dir``): never a campaign's.
+
+    ``name``: ``output.name`` (default: the config file's stem); ``arch``: the
+    architecture's slug, or ``multi`` for several.
+    """
+    return f"{RUNS_DIR}/{name}-{arch}-seed{seed}"
 
 
 def compare_dir(a: str, b: str) -> str:

@@ -1,0 +1,178 @@
+"""What a results directory says about how it was made, and where cwrend writes (issue 37).
+
+Generated results are not tracked by git; ``cwrend run`` writes outside every
+campaign directory; a campaign's lock is gone once it ends, and is safe
+against the race of its removal; the manifest names every config hash the
+campaign's files carry and each session's command line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.campaign import journal
+from cwrend_cli.cli import app
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.layout import LOCK
+
+runner = CliRunner()
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _write_config(path: Path, name: str, extra: str = "") -> Path:
+    path.write_text(f'[output]\ndir = "{path.parent / "results"}"\nname = "{name}"\n{extra}')
+    return path
+
+
+def _ablate(cfg: Path, *args: str) -> Any:
+    result = runner.invoke(
+        app, ["ablate", str(cfg), "--arch", "mtf_adaptive", "--workers", "1", "-q", "--no-rrd",
+              *args],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def _manifest(out: Path) -> dict[str, Any]:
+    return dict(json.loads((out / "manifest.json").read_text(encoding="utf-8")))
+
+
+# --- item 5: where results go -------------------------------------------------
+
+
+def test_generated_results_are_not_tracked_by_git() -> None:
+    """`cwrend report results/paper` must not rewrite files under version control."""
+    if shutil.which("git") is None or not (REPO / ".git").exists():
+        pytest.skip("not a git checkout")
+    listed = subprocess.run(
+        ["git", "ls-files", "results"], cwd=REPO, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert listed == ["results/.gitkeep"]
+
+
+def test_run_without_out_writes_into_its_own_directory_not_a_campaigns(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "paper.toml", "paper")
+    result = runner.invoke(app, ["run", str(cfg), "--arch", "mtf_adaptive", "--no-rrd", "-q"])
+    assert result.exit_code == 0, result.output
+    results = tmp_path / "results"
+    assert (results / "runs" / "paper-mtf_adaptive-seed0" / "summary.parquet").is_file()
+    assert not (results / "paper").exists()  # the campaign's directory stays untouched
+
+
+def test_run_help_names_its_default_directory() -> None:
+    result = runner.invoke(app, ["run", "--help"], terminal_width=200)
+    assert "<output.dir>/runs/<name>-<arch>-seed<N>" in " ".join(result.output.split())
+
+
+def test_a_finished_campaign_leaves_no_lock_file(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "done")
+    _ablate(cfg, "--seeds", "1")
+    out = tmp_path / "results" / "done"
+    assert (out / "runs.parquet").is_file()
+    assert not (out / LOCK).exists()
+
+
+def test_a_lock_taken_on_the_file_its_holder_just_removed_is_taken_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The classic race of removing a lock file: B opens the file, A removes it and lets go,
+    B locks the removed file. B must then lock the file at the path, so that a third
+    process C is refused (with a lock on the removed file, C would hold a second lock)."""
+    holder_a = contextlib.ExitStack()
+    holder_a.enter_context(journal.campaign_lock(tmp_path))
+    real_flock = fcntl.flock
+    released: list[bool] = []
+
+    def flock_after_a_lets_go(fd: int, operation: int) -> None:
+        if not released:  # B has opened the file; A removes it and releases it now
+            released.append(True)
+            holder_a.close()
+            assert not (tmp_path / LOCK).exists()
+        real_flock(fd, operation)
+
+    monkeypatch.setattr(fcntl, "flock", flock_after_a_lets_go)
+    with journal.campaign_lock(tmp_path):  # B
+        monkeypatch.setattr(fcntl, "flock", real_flock)
+        assert released
+        assert f"pid {os.getpid()}" in (tmp_path / LOCK).read_text()
+        refused = pytest.raises(ConfigError, match="in use by another cwrend process")
+        with refused, journal.campaign_lock(tmp_path):  # C
+            pass
+    assert not (tmp_path / LOCK).exists()
+
+
+def test_a_lock_file_left_by_a_killed_holder_is_taken_over(tmp_path: Path) -> None:
+    (tmp_path / LOCK).write_text("pid 1, since 2026-01-01T00:00:00.000+00:00\n")
+    with journal.campaign_lock(tmp_path):
+        assert f"pid {os.getpid()}" in (tmp_path / LOCK).read_text()
+    assert not (tmp_path / LOCK).exists()
+
+
+# --- item 5: config hashes of a resumed campaign ----------------------------------
+
+
+def _file_hashes(out: Path) -> set[str]:
+    """The config hashes in the metadata of every Parquet file of a campaign directory."""
+    hashes = set()
+    for path in out.rglob("*.parquet"):
+        meta = pq.read_schema(path).metadata or {}
+        if b"config_hash" in meta:
+            hashes.add(meta[b"config_hash"].decode())
+    return hashes
+
+
+def test_the_manifest_names_every_config_hash_the_campaigns_files_carry(tmp_path: Path) -> None:
+    """A resume with another [output] (the config hash covers it, the campaign hash does not)
+    leaves files of two config hashes; the manifest names both, and each session its own."""
+    cfg = _write_config(tmp_path / "c.toml", "twice")
+    out = tmp_path / "results" / "twice"
+    _ablate(cfg, "--seeds", "1")
+    _ablate(cfg, "--seeds", "2", "--set", "output.steps_seeds=1")
+    manifest = _manifest(out)
+    carried = _file_hashes(out)
+    assert len(carried) == 2  # seed 0's steps under the first hash, seed 1's under the second
+    assert set(manifest["config_hashes"]) == carried
+    first, second = manifest["sessions"]
+    assert [first["config_hash"], second["config_hash"]] == manifest["config_hashes"]
+    assert second["config_hash"] == manifest["config_hash"]
+    assert (first["output"]["steps_seeds"], second["output"]["steps_seeds"]) == (None, 1)
+
+
+# --- item 10: the command line of each session ----------------------------------------
+
+
+def test_each_session_records_its_command_line_quoted_as_a_shell_would(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    where = tmp_path / "with space"
+    where.mkdir()
+    cfg = _write_config(where / "c.toml", "argv")
+    args = ["ablate", str(cfg), "--seeds", "1", "--arch", "mtf_adaptive", "--workers", "1",
+            "-q", "--no-rrd", "--set", "schedule.beta=0.5"]  # fmt: skip
+    argv = ["/usr/bin/cwrend", *args]
+    monkeypatch.setattr(sys, "argv", argv)
+    assert runner.invoke(app, args).exit_code == 0
+    session = _manifest(where / "results" / "argv")["sessions"][-1]
+    assert shlex.split(session["command_line"]) == argv
+    assert "'" in session["command_line"]  # the path with a space is quoted
+    assert session["cwd"] == os.getcwd()
+
+
+def test_python_dash_m_is_recorded_as_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    from cwrend_cli.cli import command_line
+
+    monkeypatch.setattr(sys, "argv", ["/x/cwrend_cli/__main__.py", "ablate", "c.toml"])
+    assert command_line() == [sys.executable, "-m", "cwrend_cli", "ablate", "c.toml"]
