@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import copy
 import functools
+import math
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
+from decimal import Context, Decimal, localcontext
 from types import MappingProxyType
 from typing import Any
 
@@ -185,22 +187,55 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
     return key, tuple(parse_override(f"{key}={p}")[1] for p in parts)
 
 
+#: Significant digits of a computed parameter value (a range's interior points, a design's
+#: sampled floats): the value a run uses is the value printed and stored.
+SIGNIFICANT_DIGITS = 10
+
+
+def decimal_float(value: float | Decimal, digits: int = SIGNIFICANT_DIGITS) -> float:
+    """``value`` rounded to ``digits`` significant digits, as a float (one conversion).
+
+    What a person would write: ``0.0008``, not ``0.0007999999999999999``.
+    Shared by grid ranges (:func:`_range_values`, from exact decimals) and
+    sampled designs (:mod:`cwrend_cli.campaign.design`, from floats).
+    """
+    return float(f"{value:.{digits}g}")
+
+
 def _range_values(key: str, spec: str) -> tuple[float, ...]:
+    """``start:stop:num``: ``num`` evenly spaced values from ``start`` to ``stop``, as written.
+
+    Computed in decimal arithmetic from the numbers as typed (``start + i·(stop −
+    start)/(num − 1)``, exact for any decimal step) and converted to a float
+    once (:func:`decimal_float`, to at least :data:`SIGNIFICANT_DIGITS`
+    significant digits and as many as ``start`` or ``stop`` has), so
+    ``6e-4:1e-3:5`` gives exactly 0.0006, 0.0007, 0.0008, 0.0009 and 0.001.
+    Until 2026-12-02 the values were ``numpy.linspace``'s, which carry float
+    noise (0.0007999999999999999, 0.30000000000000004).
+    """
+    syntax = f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
     try:
         start, stop, num = spec.split(":")
         count = int(num)
-        if not 1 <= count <= MAX_VALUES_PER_KEY:
-            raise ConfigError(
-                f"sweep {key} = {spec!r}: num must be between 1 and {MAX_VALUES_PER_KEY:,}"
-            )
-        import numpy as np  # not at the top: the configuration imports no numpy (issue 17)
-
-        values = np.linspace(float(start), float(stop), count)
-    except ValueError:
+        first, last = Decimal(start.strip()), Decimal(stop.strip())
+    except (ValueError, ArithmeticError):  # decimal.InvalidOperation is an ArithmeticError
+        raise ConfigError(syntax) from None
+    if not 1 <= count <= MAX_VALUES_PER_KEY:
         raise ConfigError(
-            f"sweep {key} = {spec!r}: a range is 'start:stop:num' with numbers, e.g. 0.1:0.5:5"
-        ) from None
-    return tuple(float(v) for v in values)
+            f"sweep {key} = {spec!r}: num must be between 1 and {MAX_VALUES_PER_KEY:,}"
+        )
+    if not (first.is_finite() and last.is_finite()):
+        raise ConfigError(syntax)
+    digits = max(SIGNIFICANT_DIGITS, *(len(d.as_tuple().digits) for d in (first, last)))
+    values = [first]  # one value: start (as numpy.linspace)
+    if count > 1:
+        with localcontext(Context(prec=max(40, 2 * digits))):
+            step = (last - first) / (count - 1)
+            values = [first + i * step for i in range(count - 1)] + [last]
+    floats = tuple(decimal_float(v, digits) for v in values)
+    if not all(math.isfinite(v) for v in floats):  # e.g. 1e999 (finite as a decimal)
+        raise ConfigError(syntax)
+    return floats
 
 
 def expand_grid(
