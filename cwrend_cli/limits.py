@@ -26,3 +26,8 @@ ANNOUNCE_RUNS = 20_000
 MAX_CONFIG_BYTES = 1_000_000
 #: Nesting of tables and arrays in a configuration file.
 MAX_NESTING = 16
+#: Seeds of one campaign task (``output.seeds_per_task``): a task's runs are held in a
+#: worker's memory until its files are written (about 0.2 MB of steps per run).
+MAX_SEEDS_PER_TASK = 10_000
+#: Wall-time limit of one run (``output.run_timeout_s``) [s]: a day.
+MAX_RUN_TIMEOUT_S = 86_400.0

@@ -825,12 +825,21 @@ def test_a_corrupt_manifest_exits_2_with_the_fix(tmp_path: Path, content: bytes)
 
 
 def test_a_run_with_non_finite_estimates_is_recorded_failed_naming_the_quantity(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     cfg = _write_config(tmp_path / "c.toml", "nonfinite")
-    # one run: a run whose estimate overflows runs on to the end (~2-4 s, not ~30 ms)
-    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1",
-                  "-q", "--set", "degradation.windows.1.bias_km=[1e308, 0.0, 0.0]")  # fmt: skip
+    real = worker_module.simulation.simulate
+
+    def overflowing(*args: Any, **kwargs: Any) -> simulation.RunResult:
+        # no accepted configuration overflows any more (issue 36 item 7): the estimate of
+        # a run is made to overflow at t = 326 s, as a 1e308 km bias used to
+        run = real(*args, **kwargs)
+        x_hat = run.x_hat.copy()
+        x_hat[326:, 0] = np.inf
+        return dataclasses.replace(run, x_hat=x_hat)
+
+    monkeypatch.setattr(worker_module.simulation, "simulate", overflowing)
+    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1", "-q")
     assert result.exit_code == 1, result.output  # some runs failed
     runs = pd.read_parquet(tmp_path / "results" / "nonfinite" / "runs.parquet")
     assert len(runs) == 1 and (runs["status"] == "failed").all()

@@ -260,7 +260,7 @@ def test_wrong_length_x0_is_rejected() -> None:
 def test_all_errors_reported_one_per_line() -> None:
     msg = config_error({"scenario": {"horizon_s": -1.0, "dt_s": 0.0}})
     assert "scenario.horizon_s = -1: must be > 0" in msg.splitlines()[1]
-    assert "scenario.dt_s = 0: must be > 0" in msg.splitlines()[2]
+    assert "scenario.dt_s = 0: must be >= 0.001" in msg.splitlines()[2]
 
 
 # --- overrides ------------------------------------------------------------------

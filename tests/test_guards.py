@@ -41,6 +41,43 @@ def test_a_non_finite_miss_is_named(run: simulation.RunResult) -> None:
         guards.check_finite(dataclasses.replace(run, miss_km=float("nan")))
 
 
+def test_an_infinite_nis_on_a_measured_row_is_named(run: simulation.RunResult) -> None:
+    nis = run.nis.copy()
+    nis[300] = np.inf  # issue 36 item 7: R x 1e308 recorded such runs ok
+    with pytest.raises(guards.NonFiniteRunError, match=r"non-finite NIS \(nis\) from t = 300 s"):
+        guards.check_finite(dataclasses.replace(run, nis=nis))
+
+
+def test_a_nan_nis_on_a_measured_row_is_named(run: simulation.RunResult) -> None:
+    nis = run.nis.copy()
+    nis[12] = np.nan
+    with pytest.raises(guards.NonFiniteRunError, match=r"non-finite NIS \(nis\) from t = 12 s"):
+        guards.check_finite(dataclasses.replace(run, nis=nis))
+
+
+def test_nan_measurement_rows_of_a_dropout_pass(run: simulation.RunResult) -> None:
+    dropout = run.dropout.copy()
+    dropout[100:110] = True
+    quiet = {name: getattr(run, name).copy() for name in ("y", "nis", "mtf_ratio", "score")}
+    for values in quiet.values():
+        values[100:110] = np.nan  # no measurement on those rows: NaN by design
+    guards.check_finite(dataclasses.replace(run, dropout=dropout, **quiet))
+
+
+def test_a_nan_nees_is_named(run: simulation.RunResult) -> None:
+    nees = run.nees.copy()
+    nees[40:] = np.nan  # issue 36 item 7: initial_error = 1e308 recorded mean_nees = NaN ok
+    with pytest.raises(guards.NonFiniteRunError, match=r"non-finite NEES \(nees\) from t = 40 s"):
+        guards.check_finite(dataclasses.replace(run, nees=nees))
+
+
+def test_a_mean_nis_that_overflows_is_named(run: simulation.RunResult) -> None:
+    nis = run.nis.copy()
+    nis[1:200] = 1e308  # finite rows whose mean is not: the logged metric would be inf
+    with pytest.raises(guards.NonFiniteRunError, match="non-finite mean_nis_nominal"):
+        guards.check_finite(dataclasses.replace(run, nis=nis))
+
+
 def test_a_block_longer_than_its_limit_raises_a_timeout() -> None:
     started = time.monotonic()
     expected = r"timed out: the run took longer than 0\.2 s"

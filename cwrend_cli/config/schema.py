@@ -295,7 +295,10 @@ class EstimatorConfig(_FrozenModel):
         _PAPER.estimator.r_nominal_km2,
         description="nominal measurement covariance R (3, or 3x3) [km²]; 1e-6 is a 1 m σ; "
         "diagonal entries in [1e-30, 1e8] km²",
-        json_schema_extra={"diagonal_minimum": VARIANCE_MIN, "diagonal_maximum": _R_VARIANCE_MAX},
+        json_schema_extra={
+            "diagonal_minimum": VARIANCE_MIN,
+            "diagonal_maximum": list(_R_VARIANCE_MAX),
+        },
     )
     q_process: Covariance = Field(
         _PAPER.estimator.q_process,
@@ -303,7 +306,7 @@ class EstimatorConfig(_FrozenModel):
         "entries in [1e-30, 1e8] km² (positions) and [1e-30, 100] km²/s² (velocities)",
         json_schema_extra={
             "diagonal_minimum": VARIANCE_MIN,
-            "diagonal_maximum": _STATE_VARIANCE_MAX,
+            "diagonal_maximum": list(_STATE_VARIANCE_MAX),
         },
     )
     p0: Covariance = Field(
@@ -312,7 +315,7 @@ class EstimatorConfig(_FrozenModel):
         "entries in [1e-30, 1e8] km² (positions) and [1e-30, 100] km²/s² (velocities)",
         json_schema_extra={
             "diagonal_minimum": VARIANCE_MIN,
-            "diagonal_maximum": _STATE_VARIANCE_MAX,
+            "diagonal_maximum": list(_STATE_VARIANCE_MAX),
         },
     )
 
@@ -506,8 +509,7 @@ class SolverConfig(_FrozenModel):
         _PAPER.solver.success_residual,
         gt=0,
         le=POSITION_MAX_KM,
-        description="a solve succeeds when ||x(T) - x_f|| is below this, in (0, 1e4] "
-        "[km, km/s]",
+        description="a solve succeeds when ||x(T) - x_f|| is below this, in (0, 1e4] [km, km/s]",
     )
     tol_pos_km: Float = Field(
         _PAPER.solver.tol_pos_km,
@@ -700,8 +702,7 @@ class ActuatorConfig(_FrozenModel):
         _PAPER.actuator.magnitude_bias,
         gt=-1,
         le=10,
-        description="fixed thrust-magnitude scale error, a fraction (0.01 = +1 %), in (-1, 10] "
-        "[-]",
+        description="fixed thrust-magnitude scale error, a fraction (0.01 = +1 %), in (-1, 10] [-]",
     )
     magnitude_sigma: Float = Field(
         _PAPER.actuator.magnitude_sigma,
