@@ -18,6 +18,7 @@ records a task only when it comes back.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import shutil
@@ -36,6 +37,7 @@ from cwrend_cli.campaign import design, statistics
 from cwrend_cli.campaign.executors import (
     DASK_LOST_AFTER_S,
     ExecutorKind,
+    ask_workers_to_stop,
     check_address,
     default_workers,
     executor_alive,
@@ -58,6 +60,7 @@ from cwrend_cli.campaign.journal import (
 from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task
 from cwrend_cli.campaign.worker import (
     ReferencesKey,
+    TaskInterrupted,
     TaskOutcome,
     execute_task,
     references_key,
@@ -67,8 +70,10 @@ from cwrend_cli.errors import CwrendError, InfrastructureError
 from cwrend_cli.output.files import estimated_bytes, make_output_dir, write_json, write_parquet
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
+    DESIGN,
     EVENTS,
     MANIFEST,
+    PROBLEM,
     RUNS,
     SENSITIVITY,
     SWEEP_STATS,
@@ -116,6 +121,37 @@ class _NoProgress:
 
     def close(self) -> None:
         pass
+
+
+class _SettledProgress:
+    """A :class:`Progress` that ends on the runs the journal holds, whatever it was told.
+
+    Per-run signals advance it as runs finish; a run whose execution is then
+    lost or abandoned (Ctrl-C) is not kept, so at the end the driver settles
+    the count on the journal's (:meth:`settle`): the bar never shows as done
+    a run a resume would compute again.
+    """
+
+    def __init__(self, inner: Progress) -> None:
+        self._inner = inner
+        self._ok = 0
+        self._failed = 0
+
+    def start(self, total: int, skipped: int) -> None:
+        self._inner.start(total, skipped)
+
+    def advance(self, ok: int, failed: int) -> None:
+        self._ok += ok
+        self._failed += failed
+        self._inner.advance(ok, failed)
+
+    def settle(self, ok: int, failed: int) -> None:
+        """This invocation's runs kept: ``ok`` and ``failed``."""
+        if (ok, failed) != (self._ok, self._failed):
+            self.advance(ok - self._ok, failed - self._failed)
+
+    def close(self) -> None:
+        self._inner.close()
 
 
 @dataclass(frozen=True)
@@ -176,6 +212,9 @@ RETRY_BACKOFF_S = 0.5
 _POLL_S = 1.0
 #: How often the driver delivers the per-run signals to the progress [s].
 _SIGNAL_POLL_S = 0.1
+#: How long Ctrl-C waits for the tasks in flight to return the runs they finished [s]
+#: (a pool worker stops its task at the next return of a run to Python: milliseconds).
+STOP_GRACE_S = 1.0
 
 
 class _RunTally:
@@ -283,6 +322,7 @@ def _run_locked(
     argv: Sequence[str] | None = None,
 ) -> CampaignSummary:
     """:func:`run_campaign` once the directory exists, is confined and locked."""
+    progress = _SettledProgress(progress)
     if force:
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
@@ -323,7 +363,11 @@ def _run_locked(
             records = list(journal.runs.values())
             # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
             # journal write and the progress update must not make the count lie)
-            computed = sum(e.get("execution") not in executions_before for e in records)
+            new = [
+                e["status"] == "ok" for e in records if e.get("execution") not in executions_before
+            ]
+            computed = len(new)
+            progress.settle(sum(new), computed - sum(new))  # the bar ends on what is kept
             ok = sum(r["status"] == "ok" for r in records)
             failed = len(records) - ok
             status = "interrupted" if interrupted else "complete"
@@ -554,6 +598,9 @@ def _drive(
                     raise _StopError(_fault_text(exc)) from None
                 n_ok = sum(o.status == "ok" for o in outcome.outcomes)
                 tally.completed(token, n_ok, len(outcome.outcomes) - n_ok)
+    except KeyboardInterrupt as stop:  # Ctrl-C (or SIGTERM/SIGHUP): keep every finished run
+        _keep_finished_runs(stop, executor, in_flight, events_path, plan_.campaign_hash)
+        raise
     except BaseException:
         for future in in_flight:
             future.cancel()
@@ -561,6 +608,47 @@ def _drive(
     if fatal is not None:
         raise _StopError(fatal)
     return [*lost, *queue] if lost else []
+
+
+def _keep_finished_runs(
+    stop: KeyboardInterrupt,
+    executor: Executor,
+    in_flight: Collection[Future[TaskOutcome]],
+    events_path: Path,
+    campaign: str,
+) -> None:
+    """On Ctrl-C, journal the runs the executions in flight finished (issue 37 item 2).
+
+    An in-process task raised the Ctrl-C itself, with its finished runs
+    (:class:`TaskInterrupted`). The pool's workers are told to stop
+    (:func:`ask_workers_to_stop`) and come back at once with theirs; those
+    not back within :data:`STOP_GRACE_S` (a run in a long solver call) are
+    abandoned, their runs computed again on resume. Nothing else is waited
+    for: a second Ctrl-C abandons them all at once.
+    """
+    if isinstance(stop, TaskInterrupted):
+        _journal_kept(stop.outcome, events_path, campaign)
+    ask_workers_to_stop(executor)
+    back, _ = wait(in_flight, timeout=STOP_GRACE_S) if in_flight else (set(), set())
+    for future in in_flight:
+        if future not in back:
+            future.cancel()
+            continue
+        try:
+            outcome = future.result()
+        except TaskInterrupted as interrupted:
+            outcome = interrupted.outcome
+        except Exception:  # lost: nothing to keep
+            continue
+        _journal_kept(outcome, events_path, campaign)
+
+
+def _journal_kept(outcome: TaskOutcome, events_path: Path, campaign: str) -> None:
+    """Journal the runs of an execution that stopped; a journal that cannot be written keeps
+    nothing more (the count of what is done comes from the journal)."""
+    if outcome.outcomes:
+        with contextlib.suppress(OSError):
+            append_events(events_path, events_of(outcome, campaign, time.time()))
 
 
 def _count_attempt(task: Task, exc: BaseException, attempts: dict[str, int]) -> str | None:
@@ -646,18 +734,33 @@ def _write_statistics_file(table: pa.Table, path: Path) -> None:
 
 
 def write_sensitivity(out_dir: Path, plan_: CampaignPlan) -> pd.DataFrame:
-    """Sobol indices of a ``sobol`` design campaign into ``sensitivity.parquet`` (else nothing).
+    """A design campaign's matrix and sensitivity indices (nothing for a grid).
 
-    Computed from ``runs.parquet`` (:func:`cwrend_cli.campaign.design.sensitivity`);
-    returns the frame (empty when the plan has no sobol design or no point
-    has ok runs of an architecture).
+    Writes ``design.parquet`` (:func:`~cwrend_cli.campaign.design.design_matrix`)
+    and ``problem.json`` (:func:`~cwrend_cli.campaign.design.problem_document`)
+    of the plan's design, then the indices computed from ``runs.parquet``
+    (:func:`cwrend_cli.campaign.design.sensitivity`: Sobol for ``sobol``,
+    RBD-FAST for ``lhs`` and ``random``) into ``sensitivity.parquet``;
+    returns them (empty when the plan has no design, no point has ok runs
+    of an architecture, or an RBD-FAST design has fewer than 9 rows).
     """
     spec = plan_.design
-    if spec is None or spec.kind != "sobol":
+    if spec is None:
         return pd.DataFrame()
+    unit = spec.unit(plan_.root_seed)
+    meta = _stored_metadata(out_dir)
+    matrix = design.design_matrix(spec.ranges, spec.rows, unit)
+    write_parquet(statistics_table(matrix, meta), out_dir / DESIGN)
+    problem = design.problem_document(
+        spec.kind, spec.samples, spec.ranges, plan_.root_seed, len(spec.rows), spec.second_order
+    )
+    write_json(problem, out_dir / PROBLEM)
     runs = pd.read_parquet(out_dir / RUNS)
     runs = runs[runs["run_key"].isin({r.run_key for r in plan_.runs})]
-    frame = design.sensitivity(runs, spec.rows, spec.ranges, plan_.root_seed)
+    frame = design.sensitivity(
+        runs, spec.rows, spec.ranges, plan_.root_seed, kind=spec.kind, unit=unit,
+        second_order=spec.second_order,
+    )  # fmt: skip
     if not frame.empty:
         table = statistics_table(frame, _stored_metadata(out_dir))
         _write_statistics_file(table, out_dir / SENSITIVITY)

@@ -32,7 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from cwrend_cli.campaign.design import Design, ParameterRange, parse_range
+from cwrend_cli.campaign.design import (
+    Design,
+    ParameterRange,
+    parse_cli_range,
+    parse_range,
+    unit_samples,
+)
 from cwrend_cli.campaign.design import design_points as sample_design
 from cwrend_cli.config import (
     ALL_ARCHITECTURES,
@@ -127,6 +133,9 @@ class Task:
     point: str
     problem: Problem
     noise: NoiseSource
+    #: Only to write the recordings of its seeds again (runs done already, journaled again
+    #: never): what a resume owes for recordings a campaign lost (issue 36, item 1).
+    record_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -137,10 +146,13 @@ class DesignSpec:
     samples: int  # points (lhs, random) or base points (sobol)
     ranges: tuple[ParameterRange, ...]
     rows: tuple[str, ...]  # the point id of each design row, in design order
+    #: sobol: second-order indices, the Saltelli scheme with the B_A^(i) rows as well
+    second_order: bool = False
 
     def identity(self) -> dict[str, Any]:
         """What identifies the design's points (the sample count only where a larger design
-        is not an extension of a smaller one: lhs)."""
+        is not an extension of a smaller one: lhs; not ``second_order``, whose design
+        contains the first-order one of the same samples)."""
         ident: dict[str, Any] = {
             "design": self.kind,
             "ranges": [[r.key, r.kind, r.low, r.high, r.log, list(r.values)] for r in self.ranges],
@@ -148,6 +160,11 @@ class DesignSpec:
         if self.kind == "lhs":
             ident["samples"] = self.samples
         return ident
+
+    def unit(self, root_seed: int) -> np.ndarray:
+        """The design's rows in the unit cube, in :attr:`rows` order (SALib's row order)."""
+        kind, n, dims = self.kind, self.samples, len(self.ranges)
+        return unit_samples(kind, n, dims, root_seed, self.second_order)
 
 
 @dataclass(frozen=True)
@@ -195,36 +212,58 @@ def design_points(
     kind: Design,
     samples: int | None,
     root_seed: int,
+    cli_ranges: Sequence[str] = (),
+    second_order: bool = False,
+    base: Mapping[str, Any] | None = None,
 ) -> tuple[DesignSpec, tuple[tuple[str, Assignment], ...]]:
     """The sampled points of a design over the ranges of ``[sweep]``, each point once.
 
-    Rows of a design that sample identical values (integer or categorical
-    ranges) are one point; :attr:`DesignSpec.rows` keeps each row's point.
+    ``cli_ranges`` (``--range KEY=LOW:HIGH…``, :func:`~cwrend_cli.campaign.design.parse_cli_range`)
+    add to or replace the ranges of ``[sweep]``; each of their keys must be a
+    value of ``base`` (the resolved configuration). Rows of a design that
+    sample identical values (integer or categorical ranges) are one point;
+    :attr:`DesignSpec.rows` keeps each row's point.
     """
     if cli_params:
         raise ConfigError("--param gives grid values; a --design samples the ranges of [sweep]")
+    if second_order and kind != "sobol":
+        raise ConfigError(f"--second-order: second-order indices need --design sobol, not {kind}")
     if samples is None:
         raise ConfigError(f"--design {kind} needs --samples N")
-    if not sweep:
-        raise ConfigError(
-            f'--design {kind}: [sweep] has no ranges; e.g. "schedule.beta" = '
-            "{ low = 0.05, high = 1.0 }"
-        )
-    ranges = []
+    by_key: dict[str, ParameterRange] = {}
     for key, spec in sweep.items():
         if not isinstance(spec, Mapping):
             raise ConfigError(
                 f"[sweep] {key}: a --design samples ranges ({{ low = …, high = … }} or "
                 "{ values = […] }), not a list of grid values"
             )
-        ranges.append(parse_range(key, spec))
+        by_key[key] = parse_range(key, spec)
+    for text in cli_ranges:
+        parsed = parse_cli_range(text)
+        if base is not None:
+            try:
+                get_dotted(base, parsed.key)
+            except (KeyError, IndexError, ValueError, TypeError):
+                raise ConfigError(
+                    f"--range {text}: {parsed.key} is not a configuration value (a dotted key "
+                    "such as schedule.beta or scenario.u_max_km_s2)"
+                ) from None
+        by_key[parsed.key] = parsed
+    if not by_key:
+        raise ConfigError(
+            f"--design {kind}: no ranges; give --range KEY=LOW:HIGH (e.g. --range "
+            'schedule.beta=0.05:1.0) or a [sweep] range such as "schedule.beta" = '
+            "{ low = 0.05, high = 1.0 }"
+        )
+    ranges = list(by_key.values())
     rows: list[str] = []
     points: dict[str, Assignment] = {}
-    for assignment in sample_design(kind, ranges, samples, root_seed):
+    for assignment in sample_design(kind, ranges, samples, root_seed, second_order):
         pid = point_id(assignment)
         rows.append(pid)
         points.setdefault(pid, assignment)
-    return DesignSpec(kind, samples, tuple(ranges), tuple(rows)), tuple(points.items())
+    spec = DesignSpec(kind, samples, tuple(ranges), tuple(rows), second_order)
+    return spec, tuple(points.items())
 
 
 def point_id(assignment: Assignment) -> str:
@@ -384,6 +423,8 @@ def plan(
     design_kind: Design | None = None,
     samples: int | None = None,
     workers: int | None = None,
+    ranges: Sequence[str] = (),
+    second_order: bool = False,
 ) -> CampaignPlan:
     """Expand a campaign into tasks, validating every run's resolved config first.
 
@@ -395,7 +436,9 @@ def plan(
     read and checked once here. Nothing has run or been written then.
 
     With ``design_kind`` the points are sampled from the ranges of
-    ``[sweep]`` (:func:`design_points`) instead of forming a grid.
+    ``[sweep]`` and ``ranges`` (``--range`` options; :func:`design_points`)
+    instead of forming a grid; ``second_order`` asks a ``sobol`` design for
+    second-order indices.
 
     Seeds per task: ``seeds_per_task``, else ``output.seeds_per_task``, else
     :func:`default_seeds_per_task` for ``workers`` (the executor's worker
@@ -415,12 +458,17 @@ def plan(
     root = cfg.noise.seed
     spec: DesignSpec | None = None
     if design_kind is None:
+        if ranges or second_order:
+            option = "--range" if ranges else "--second-order"
+            raise ConfigError(f"{option} defines a sampled design: add --design lhs|sobol|random")
         grid = expand_grid(cfg.sweep, cli_params)
         _check_size(math.prod(len(v) for _, v in grid), len(seeds), len(archs), allow_large)
         points = grid_points(grid)
     else:
         grid = ()
-        spec, points = design_points(cfg.sweep, cli_params, design_kind, samples, root)
+        spec, points = design_points(
+            cfg.sweep, cli_params, design_kind, samples, root, ranges, second_order, base
+        )
         _check_size(len(spec.rows), len(seeds), len(archs), allow_large)
     seeds_per_task = (
         seeds_per_task

@@ -67,6 +67,7 @@ __all__ = [
     "CaseResult",
     "ReferencesKey",
     "RunOutcome",
+    "TaskInterrupted",
     "TaskOutcome",
     "actuator_draws",
     "actuator_seed_sequence",
@@ -79,6 +80,7 @@ __all__ = [
     "seeds_to_record",
     "standard_normal",
     "standard_normal_for",
+    "stop_task",
 ]
 
 #: What the open-loop references of a problem depend on.
@@ -205,6 +207,39 @@ class TaskOutcome:
     warnings: tuple[str, ...] = ()  # e.g. a recording that could not be written
 
 
+class TaskInterrupted(KeyboardInterrupt):
+    """A task stopped by Ctrl-C (or its pool's stop): ``outcome`` holds the runs it finished.
+
+    Their steps/solves files are written; the driver journals them, so an
+    interrupted campaign keeps every finished run, not only whole tasks
+    (issue 37 item 2). A ``KeyboardInterrupt``: in-process it stops the
+    campaign as Ctrl-C does.
+    """
+
+    def __init__(self, outcome: TaskOutcome) -> None:
+        super().__init__(outcome)
+        self.outcome = outcome
+
+
+#: This process's stop (pool workers, :func:`stop_task`): asked, and whether a task's runs
+#: are running in the main thread now (where the stop is raised).
+_STOP = {"asked": False, "running": False}
+
+
+def stop_task() -> None:
+    """Ask the task of this pool worker to stop and keep its finished runs (a signal handler's).
+
+    Raises ``KeyboardInterrupt`` into the runs of the task running now, once
+    (a second signal, e.g. the terminal's Ctrl-C and then the driver's, does
+    not interrupt the task while it writes its files); a task that starts
+    later stops before its first run. A run interrupted is not kept.
+    """
+    first = not _STOP["asked"]
+    _STOP["asked"] = True
+    if first and _STOP["running"]:
+        raise KeyboardInterrupt
+
+
 def execute_task(
     task: Task,
     refs: simulation.References | None,
@@ -230,7 +265,11 @@ def execute_task(
     every architecture runs in this task) a Rerun recording overlaying the
     architectures and the references is written to
     ``recordings/<point>.s<seed>.rrd``. A recording that cannot be written is
-    reported in the outcome's ``warnings``; the runs stay valid.
+    reported in the outcome's ``warnings``; the runs stay valid, except when
+    it cannot be written to disk (an :class:`OSError`: disk full, permission),
+    which is an infrastructure fault like a steps file that cannot be written.
+    A ``record_only`` task (a recording a resumed campaign owes) writes only
+    its recordings: no steps/solves files, no outcomes, no per-run signals.
 
     The steps/solves files are complete when this returns but not
     necessarily on disk: the driver's journal flushes them before it records
@@ -249,6 +288,11 @@ def execute_task(
     ``on_run`` is called after each run with whether it was ok (the driver's
     per-run progress, :func:`cwrend_cli.campaign.executors.run_signals`); it
     only informs: the outcome returned is what counts.
+
+    Ctrl-C in-process, or :func:`stop_task` in a pool worker, stops the task:
+    the run in progress is dropped, the files of the runs finished are
+    written (named by those runs, no recordings: a resume writes the ones it
+    owes) and :class:`TaskInterrupted` carries their outcome.
     """
     outcomes: list[RunOutcome] = []
     results: dict[str, list[tuple[RunSpec, simulation.RunResult]]] = {}
@@ -260,44 +304,65 @@ def execute_task(
     if refs is not None:
         references[references_key(task.problem)] = refs
     noises: dict[tuple[Assignment, int], FloatArray] = {}  # shared by the archs of a seed
-    for spec in task.runs:
-        started = time.time()
-        t0 = time.perf_counter()
-        try:
-            problem = problems.get(spec.dispersed)
-            if problem is None:
-                problem = problems[spec.dispersed] = with_values(task.problem, spec.dispersed)
-            run_refs = _references(problem, references)
-            noise = noises.get((spec.dispersed, spec.seed))
-            if noise is None:
-                n_steps = problem.scenario.n_steps
-                noise = noises[spec.dispersed, spec.seed] = standard_normal(
-                    task.noise, spec.seed, n_steps
+    stopped = False
+    _STOP["running"] = True
+    try:
+        for spec in task.runs:
+            if _STOP["asked"]:  # a pool worker told to stop: no new run
+                raise KeyboardInterrupt
+            started = time.time()
+            t0 = time.perf_counter()
+            try:
+                problem = problems.get(spec.dispersed)
+                if problem is None:
+                    problem = problems[spec.dispersed] = with_values(task.problem, spec.dispersed)
+                run_refs = _references(problem, references)
+                noise = noises.get((spec.dispersed, spec.seed))
+                if noise is None:
+                    n_steps = problem.scenario.n_steps
+                    noise = noises[spec.dispersed, spec.seed] = standard_normal(
+                        task.noise, spec.seed, n_steps
+                    )
+                limit = guards.run_timeout_s(run_timeout_s, problem.scenario.n_steps)
+                with guards.time_limit(limit):
+                    result = simulation.simulate(
+                        problem,
+                        ALL_ARCHITECTURES[spec.arch],
+                        noise,
+                        run_refs,
+                        spec.seed,
+                        actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
+                        fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
+                    )
+                guards.check_finite(result)
+                metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
+                results.setdefault(spec.arch, []).append((spec, result))
+                by_seed.setdefault(spec.seed, []).append((problem, result))
+                outcomes.append(
+                    RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0)
                 )
-            limit = guards.run_timeout_s(run_timeout_s, problem.scenario.n_steps)
-            with guards.time_limit(limit):
-                result = simulation.simulate(
-                    problem,
-                    ALL_ARCHITECTURES[spec.arch],
-                    noise,
-                    run_refs,
-                    spec.seed,
-                    actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
-                    fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
+            except Exception as exc:  # failure isolation: the campaign goes on
+                kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
+                text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
+                outcomes.append(
+                    RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0)
                 )
-            guards.check_finite(result)
-            metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
-            results.setdefault(spec.arch, []).append((spec, result))
-            by_seed.setdefault(spec.seed, []).append((problem, result))
-            outcomes.append(RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0))
-        except Exception as exc:  # failure isolation: the campaign goes on
-            kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
-            text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
-            outcomes.append(RunOutcome(spec, "failed", {}, text, started, time.perf_counter() - t0))
-        if on_run is not None:
-            on_run(outcomes[-1].status == "ok")
+            if on_run is not None and not task.record_only:
+                on_run(outcomes[-1].status == "ok")
+        _STOP["running"] = False
+    except KeyboardInterrupt:  # the runs finished so far are kept (TaskInterrupted below)
+        stopped = True
+    finally:
+        _STOP["running"] = False
     files: list[str] = []
-    digest = hashlib.sha256(" ".join(r.run_key for r in task.runs).encode()).hexdigest()[:8]
+    # the runs executed: the task's, or those finished before a stop
+    digest = hashlib.sha256(" ".join(o.spec.run_key for o in outcomes).encode()).hexdigest()[:8]
+    if stopped:  # a result of the dropped run's, if any, is in no outcome and no file
+        executed = {o.spec.run_key for o in outcomes}
+        results = {a: [(s, r) for s, r in rs if s.run_key in executed] for a, rs in results.items()}
+        record_seeds = ()
+    if task.record_only:  # its runs are journaled already: a name of its own, no outcomes
+        digest, outcomes, results = f"{digest}-rrd", [], {}
     for arch, items in sorted(results.items()):
         kept = [(s, r) for s, r in items if steps_seeds is None or s.seed < steps_seeds]
         for kind, chosen, build in (
@@ -332,9 +397,16 @@ def execute_task(
                 recording_name=f"cwrend {task.point} seed {seed}",
             )
             files.append(rel)
+        except OSError:  # cannot write results (disk full): a fault, as for the tables above
+            raise
         except Exception as exc:  # a recording never costs the runs
             warnings.append(f"{rel}: recording not written ({type(exc).__name__}: {exc})")
-    return TaskOutcome(f"{task.task_key}-{digest}", tuple(outcomes), tuple(files), tuple(warnings))
+    outcome = TaskOutcome(
+        f"{task.task_key}-{digest}", tuple(outcomes), tuple(files), tuple(warnings)
+    )
+    if stopped:
+        raise TaskInterrupted(outcome)
+    return outcome
 
 
 def _references(
@@ -353,8 +425,11 @@ def seeds_to_record(task: Task, archs: Sequence[str], limit: int | None) -> tupl
 
     A resumed or retried task that reruns only some architectures of a seed
     leaves that seed's existing recording alone rather than overwrite it with
-    a partial one.
+    a partial one. A ``record_only`` task records every seed it holds below
+    ``limit`` (its runs are the seed's ok runs, as the lost recording had).
     """
+    if task.record_only:
+        return tuple(sorted({r.seed for r in task.runs if limit is None or r.seed < limit}))
     counts: dict[int, int] = {}
     for r in task.runs:
         counts[r.seed] = counts.get(r.seed, 0) + 1

