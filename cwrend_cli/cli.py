@@ -283,6 +283,7 @@ def run(
         typer.Option(
             "--seed",
             min=0,
+            max=limits.MAX_SEED,
             help="Noise realisation (default 0; root: noise.seed).",
             metavar="N",
         ),
@@ -491,9 +492,12 @@ class CampaignOptions:
     yes_large: bool
     design: str | None = None  # sweep: a sampled design instead of a grid
     samples: int | None = None
+    ranges: tuple[str, ...] = ()  # sweep --design: --range KEY=LOW:HIGH…
+    second_order: bool = False  # sweep --design sobol: second-order indices
     until: str | None = None  # ablate: sequential Monte Carlo target
     batch: int = 50
     max_seeds: int = 1000
+    strict: bool = False  # ablate --until: exit 1 when the target is not met
 
 
 def command_line() -> list[str]:
@@ -581,6 +585,8 @@ def _campaign(
         archs = [a.slug for a in _parse_archs(opts.arch)]
         out = _campaign_dir(cfg, opts.name)
         if opts.until is None:
+            if opts.strict:
+                raise ConfigError("--strict: applies to --until only; add --until TARGET")
             seeds = _seeds(opts.seeds, opts.seed_list)
             plan, summary, statistics = _campaign_step(
                 command, cfg, archs, seeds, params, opts, out, err
@@ -612,8 +618,8 @@ def _campaign(
         if achieved and not opts.quiet:
             _console().print(until_console_table(achieved, opts.until or ""))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
-        if unmet and not summary.interrupted and not opts.quiet:
-            err.print(f"--until not met within --max-seeds {opts.max_seeds}", markup=False)
+        if unmet and not summary.interrupted and (opts.strict or not opts.quiet):
+            err.print(sequential.unmet_message(achieved, opts.max_seeds), markup=False)
         if summary.interrupted:
             asked = {r.run_key for r in plan.runs}
             done = len(asked & campaign.held_run_keys(out))
@@ -628,6 +634,8 @@ def _campaign(
             err.print(
                 "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
             )
+            raise typer.Exit(code=1)
+        if unmet and opts.strict:
             raise typer.Exit(code=1)
 
 
@@ -654,7 +662,8 @@ def _campaign_step(
     workers = opts.workers or (default_workers() if executor_kind == "local" else None)
     plan = campaign.plan(
         cfg, archs, seeds, params, allow_large=opts.yes_large, design_kind=design_kind,
-        samples=opts.samples, workers=workers,
+        samples=opts.samples, workers=workers, ranges=opts.ranges,
+        second_order=opts.second_order,
     )  # fmt: skip
     if not opts.quiet:
         _announce(err, plan)
@@ -681,6 +690,7 @@ def _report_campaign(
 ) -> None:
     """The console tables and summary line of a finished (or interrupted) campaign."""
     from cwrend_cli import campaign
+    from cwrend_cli.campaign import design
     from cwrend_cli.console import (
         ablation_console_table,
         paired_console_table,
@@ -690,8 +700,8 @@ def _report_campaign(
     )
 
     label = f"{command} {out.name}"
-    sobol = plan.design is not None and plan.design.kind == "sobol"
-    with phase(err, f"{label}: computing Sobol indices", quiet=opts.quiet or not sobol):
+    designed = plan.design is not None
+    with phase(err, f"{label}: computing sensitivity indices", quiet=opts.quiet or not designed):
         sensitivity = campaign.write_sensitivity(out, plan)
     asked = {r.run_key for r in plan.runs}
     held = campaign.held_run_keys(out)
@@ -726,7 +736,17 @@ def _report_campaign(
             title = f"cwrend sweep · {out.name}"
             stdout.print(sweep_console_table(stats, list(statistics.groups), title))
     if not sensitivity.empty:
-        stdout.print(sensitivity_console_table(sensitivity, f"Sobol indices · {out.name}"))
+        stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
+    elif (
+        plan.design is not None
+        and plan.design.kind != "sobol"
+        and design.rbd_fast_harmonics(len(plan.design.rows)) < 1
+    ):
+        err.print(
+            f"no sensitivity indices: RBD-FAST needs at least 9 design rows "
+            f"(this design has {len(plan.design.rows)}); raise --samples",
+            markup=False,
+        )
     if not summary.interrupted:
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
@@ -766,12 +786,22 @@ def ablate(
         ),
     ] = None,
     batch: Annotated[
-        int, typer.Option("--batch", min=1, help="Seeds per batch with --until.", metavar="N")
+        int,
+        typer.Option(
+            "--batch", min=1, max=limits.MAX_RUNS, help="Seeds per batch with --until.", metavar="N"
+        ),
     ] = 50,
     max_seeds: Annotated[
         int,
         typer.Option("--max-seeds", min=1, help="Stop --until at this many seeds.", metavar="N"),
     ] = 1000,
+    strict: Annotated[
+        bool,
+        typer.Option(
+            "--strict",
+            help="With --until: exit 1 when --max-seeds is reached with the target not met.",
+        ),
+    ] = False,
     set_: SetOption = None,
 ) -> None:
     """Compare the architectures on the same noise per seed (plus open-loop references).
@@ -780,12 +810,14 @@ def ablate(
     solves/ datasets, events.jsonl, ablation.parquet (statistics with 95 %
     bootstrap intervals and paired comparisons) and recordings/ (one Rerun
     .rrd per recorded seed). Rerunning resumes.
-    Exit code 1 if any run failed, 2 for bad input, 3 if the machine failed (disk full,
+    Exit code 1 if any run failed (or, with --strict, the --until target was not met
+    within --max-seeds), 2 for bad input, 3 if the machine failed (disk full,
     lost workers: nothing recorded, rerun to resume), 130 if interrupted.
     """
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
-                           yes_large, until=until, batch=batch, max_seeds=max_seeds)  # fmt: skip
+                           yes_large, until=until, batch=batch, max_seeds=max_seeds,
+                           strict=strict)  # fmt: skip
     _campaign("ablate", file, set_, [], opts)
 
 
@@ -833,11 +865,29 @@ def sweep(
         typer.Option(
             "--samples",
             min=1,
+            max=limits.MAX_RUNS,
             help="Design size: points (lhs, random) or base points, a power of two (sobol: "
             "samples × (parameters + 2) points).",
             metavar="N",
         ),
     ] = None,
+    range_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--range",
+            help="A --design range: KEY=LOW:HIGH (uniform), KEY=LOW:HIGH:log, KEY=LOW:HIGH:int "
+            "or KEY=V1,V2,… (categories); repeatable, adds to / replaces [sweep]'s ranges.",
+            metavar="KEY=LOW:HIGH",
+        ),
+    ] = None,
+    second_order: Annotated[
+        bool,
+        typer.Option(
+            "--second-order",
+            help="--design sobol: second-order Sobol indices too (samples × (2 × parameters "
+            "+ 2) points; extends the first-order design of the same samples).",
+        ),
+    ] = False,
     set_: SetOption = None,
 ) -> None:
     """Grid (cartesian product) × architectures × seeds, with [dispersions] per run.
@@ -847,7 +897,8 @@ def sweep(
     """
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
-                           yes_large, design=design_, samples=samples)  # fmt: skip
+                           yes_large, design=design_, samples=samples,
+                           ranges=tuple(range_ or ()), second_order=second_order)  # fmt: skip
     _campaign("sweep", file, set_, list(param or []), opts)
 
 
@@ -872,6 +923,7 @@ def report(
         typer.Option(
             "--seed",
             min=0,
+            max=limits.MAX_SEED,
             help="Noise seed of the per-seed figures 1–5 (default: the first).",
             metavar="N",
         ),
@@ -951,12 +1003,15 @@ def compare(
     when the campaigns do not share noise (another noise.seed or noise file)
     or share no run. Per architecture: mean and median of the per-seed
     differences A − B with 95 % bootstrap intervals, and the share of seeds
-    where A is lower (better), with its Wilson interval. Writes
-    compare.parquet and compare.png; never into A or B unless --out says so.
+    where A is lower (better), with its Wilson interval. First, what differs
+    between the two configurations (dotted keys with A's and B's values,
+    [output] aside), also in the figure's title and compare.parquet's
+    metadata (config_diff). Writes compare.parquet and compare.png; never
+    into A or B unless --out says so.
     """
     with user_errors():
         from cwrend_cli.campaign import compare as cmp
-        from cwrend_cli.console import compare_console_tables
+        from cwrend_cli.console import compare_console_tables, config_diff_console_table
         from cwrend_cli.output.files import make_output_dir, write_parquet
         from cwrend_cli.report import write_compare_figure
 
@@ -968,7 +1023,11 @@ def compare(
                 raise ConfigError(f"{out} is a campaign directory: name another with --out")
         make_output_dir(out, "name another directory with --out")
         write_parquet(cmp.compare_table(result), out / COMPARE_STATS)
-        write_compare_figure(result.frame, a.name, b.name, out / COMPARE_FIGURE, dirs=(a, b))
+        differences = [(d.key, d.a, d.b) for d in cmp.config_diff(result.a, result.b)]
+        write_compare_figure(
+            result.frame, a.name, b.name, out / COMPARE_FIGURE, dirs=(a, b),
+            differences=differences,
+        )  # fmt: skip
         if not quiet:
             stdout = _console()
             stdout.print(
@@ -977,6 +1036,7 @@ def compare(
                 markup=False,
                 soft_wrap=True,  # paths must stay copyable
             )
+            stdout.print(config_diff_console_table(differences))
             tables = compare_console_tables(result.frame, list(result.groups), "A − B")
             for table in tables:
                 stdout.print(table)

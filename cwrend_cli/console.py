@@ -27,7 +27,7 @@ from rich.text import Text
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
 from cwrend_cli.physics.simulation import RunResult
-from cwrend_cli.report.labels import swept_values
+from cwrend_cli.report.labels import setting_text, swept_values
 
 
 def _num(value: float, spec: str) -> str:
@@ -303,10 +303,29 @@ def _ci(row: pd.Series, spec: str, scale: float = 1.0, *, bootstrap: bool = True
     return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}{mark}[/dim]"
 
 
-def _caption(text: str, rows: pd.DataFrame) -> str:
-    """``text``, plus the note on unreliable intervals when a bootstrap row has few seeds."""
-    flagged = rows.apply(_unreliable, axis=1) if not rows.empty else pd.Series(dtype=bool)
-    return f"{text}\n{UNRELIABLE_NOTE}" if bool(flagged.any()) else text
+#: Said instead of an interval's caption when every quantity of a table has one realisation.
+ONE_REALISATION = "one realisation: no interval"
+
+
+def _caption(text: str, rows: pd.DataFrame, alone: str) -> str:
+    """The caption of a table of intervals ``rows`` (their ``n`` is the runs or seed pairs).
+
+    ``alone`` when every row has one realisation (no interval is possible:
+    ``cwrend ablate`` with its default single seed); else ``text``, plus a line
+    saying so when some rows have one, and the note on unreliable intervals
+    when a bootstrap row has few seeds.
+    """
+    if rows.empty:
+        return text
+    single = rows["n"].astype(int) < 2
+    if bool(single.all()):
+        return alone
+    lines = [text]
+    if bool(single.any()):
+        lines.append(f"a value alone: {ONE_REALISATION}")
+    if bool(rows.apply(_unreliable, axis=1).any()):
+        lines.append(UNRELIABLE_NOTE)
+    return "\n".join(lines)
 
 
 def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
@@ -331,7 +350,9 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
             f"{get[('solve_mean_ms', 'mean')]['value']:.2f}/"
             f"{get[('solve_max_ms', 'max')]['value']:.1f}",
         )
-    table.caption = _caption("means, 95 % bootstrap interval below", marginal)
+    table.caption = _caption(
+        "means, 95 % bootstrap interval below", marginal, f"means; {ONE_REALISATION}"
+    )
     return table
 
 
@@ -358,6 +379,7 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
     table.caption = _caption(
         "Δ = A − B; 95 % interval below (Wilson for P, bootstrap otherwise)",
         pairs[pairs["statistic"] != "frac_less"],
+        f"Δ = A − B, {ONE_REALISATION}\n95 % Wilson interval below P",
     )
     return table
 
@@ -382,7 +404,9 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
             _ci(get[("miss_km", "mean")], ".2f", 1e3),
         )
     table.caption = _caption(
-        "means, 95 % bootstrap interval below; all statistics in sweep.parquet", marginal
+        "means, 95 % bootstrap interval below; all statistics in sweep.parquet",
+        marginal,
+        f"means; {ONE_REALISATION}; all statistics in sweep.parquet",
     )
     return table
 
@@ -429,41 +453,69 @@ def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -
             "Δ = A − B per seed; 95 % interval below (bootstrap; Wilson for\n"
             "A better, the share of seeds with A < B)"
         )
+        alone = f"Δ = A − B, {ONE_REALISATION}; 95 % Wilson interval\nbelow A better (A < B)"
         if ties:
             text += f"\n{ties} tie(s) (A = B exactly) count as not better"
+            alone += f"\n{ties} tie(s) (A = B exactly) count as not better"
         bootstrap_rows = part[part["statistic"].isin(["mean_diff", "median_diff"])]
-        table.caption = _caption(text, bootstrap_rows)
+        table.caption = _caption(text, bootstrap_rows, alone)
         tables.append(table)
     return tables
 
 
-def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table:
-    """Sobol indices of a design campaign: S1 and ST with 95 % intervals, per arch and metric.
+def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table | Group:
+    """Sensitivity indices of a design campaign with 95 % intervals, per arch and metric.
 
-    The fuel penalty is Δv scaled by a constant (same indices) and is left to
-    ``sensitivity.parquet``; parameters are shown by their key's last segment.
+    A ``sobol`` design: first-order (S1) and total (ST) Sobol indices, then
+    a table of the second-order indices (S2) when stored; an ``lhs`` or
+    ``random`` design: the first-order indices of RBD-FAST (``method``
+    ``rbd_fast``), S1 only. The fuel penalty is Δv scaled by a constant (same
+    indices) and is left to ``sensitivity.parquet``; parameters are shown by
+    their key's last segment.
     """
+    shown = frame[frame["metric"] != "fuel_penalty_pct"]
+    methods = set(shown["method"]) if "method" in shown else {"sobol"}
+    first = shown[shown["statistic"].isin(["S1", "ST"])]
+    stats = [k for k in ("S1", "ST") if (first["statistic"] == k).any()]
     table = _table(title, show_edge=False, padding=(0, 0, 0, 1))
     for name in ("architecture", "metric", "parameter"):
         table.add_column(name, no_wrap=True)
-    for name in ("S1 ± 95 %", "ST ± 95 %"):
-        table.add_column(name, justify="right", no_wrap=True)
-    shown = frame[frame["metric"] != "fuel_penalty_pct"]
+    for k in stats:
+        table.add_column(f"{k} ± 95 %", justify="right", no_wrap=True)
     keys = ["arch", "metric", "parameter"]
-    wide = shown.pivot_table(index=keys, columns="statistic", values=["value", "ci_low", "ci_high"])
+    wide = first.pivot_table(index=keys, columns="statistic", values=["value", "ci_low", "ci_high"])
     previous: tuple[str, ...] = ()
     for index, row in wide.iterrows():
         arch, metric, parameter = (str(v) for v in (index if isinstance(index, tuple) else ()))
         cells = [
             f"{row[('value', k)]:.2f} ± {(row[('ci_high', k)] - row[('ci_low', k)]) / 2:.2f}"
-            for k in ("S1", "ST")
+            for k in stats
         ]
-        first = (arch, metric) != previous
+        new = (arch, metric) != previous
         previous = (arch, metric)
-        table.add_row(arch if first else "", metric if first else "",
+        table.add_row(arch if new else "", metric if new else "",
                       parameter.rsplit(".", 1)[-1], *cells)  # fmt: skip
-    table.caption = "Sobol indices of the mean over seeds (SALib); all in sensitivity.parquet"
-    return table
+    table.caption = (
+        "first-order indices of the mean over seeds (RBD-FAST, SALib); all in sensitivity.parquet"
+        if methods == {"rbd_fast"}
+        else "Sobol indices of the mean over seeds (SALib); all in sensitivity.parquet"
+    )
+    pairs = shown[shown["statistic"] == "S2"]
+    if pairs.empty:
+        return table
+    second = _table("second-order Sobol indices", show_edge=False, padding=(0, 0, 0, 1))
+    for name in ("architecture", "metric", "parameters"):
+        second.add_column(name, no_wrap=True)
+    second.add_column("S2 ± 95 %", justify="right", no_wrap=True)
+    previous = ()
+    for _, r in pairs.iterrows():
+        arch, metric = str(r["arch"]), str(r["metric"])
+        new = (arch, metric) != previous
+        previous = (arch, metric)
+        names = " × ".join(str(r[c]).rsplit(".", 1)[-1] for c in ("parameter", "parameter_2"))
+        cell = f"{r['value']:.2f} ± {(r['ci_high'] - r['ci_low']) / 2:.2f}"
+        second.add_row(arch if new else "", metric if new else "", names, cell)
+    return Group(table, second)
 
 
 def until_console_table(achieved: Sequence[Any], target: str) -> Table:
@@ -474,6 +526,28 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
         table.add_column(name, justify="right")
     table.add_column("met")
     for a in achieved:
+        needed = a.seeds_needed
+        verdict = "yes" if a.met else "no" if needed is None else f"no: ~{needed:,} seeds"
         table.add_row(a.label, str(a.n), f"{a.value:.6g}", f"{a.half_width:.3g}",
-                      f"{a.limit:.3g}", "yes" if a.met else "no")  # fmt: skip
+                      f"{a.limit:.3g}", verdict)  # fmt: skip
+    if not all(a.met for a in achieved):
+        table.caption = "~N seeds: the estimate of what would meet the target (half-width ∝ 1/√n)"
+    return table
+
+
+def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table:
+    """``cwrend compare``: what differs between A's and B's configurations (fits 80 columns).
+
+    One row per dotted key (``campaign.compare.config_diff``) with A's and B's
+    values as :func:`~cwrend_cli.report.labels.setting_text` shows them; long
+    values fold onto further lines, never cut.
+    """
+    table = _table("A and B differ in", show_edge=False, padding=(0, 0, 0, 1))
+    table.add_column("setting", overflow="fold")
+    table.add_column("A", overflow="fold")
+    table.add_column("B", overflow="fold")
+    for key, a, b in differences:
+        table.add_row(key, setting_text(a), setting_text(b))
+    if not differences:
+        table.caption = "the same configuration (no setting differs outside [output])"
     return table

@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
@@ -176,3 +177,73 @@ def test_python_dash_m_is_recorded_as_run(monkeypatch: pytest.MonkeyPatch) -> No
 
     monkeypatch.setattr(sys, "argv", ["/x/cwrend_cli/__main__.py", "ablate", "c.toml"])
     assert command_line() == [sys.executable, "-m", "cwrend_cli", "ablate", "c.toml"]
+
+
+# --- item 10: what differs between the two campaigns of cwrend compare -------------
+
+
+def _campaign_dir(root: Path, name: str, *args: str) -> Path:
+    cfg = _write_config(root / f"{name}.toml", name)
+    _ablate(cfg, "--seeds", "2", *args)
+    return root / "results" / name
+
+
+@pytest.fixture(scope="module")
+def beta_pair(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """β = 0.25 (A) and β = 0.5 (B), each with its own output.name and steps_seeds."""
+    root = tmp_path_factory.mktemp("diff")
+    a = _campaign_dir(root, "b025", "--set", "schedule.beta=0.25")
+    b = _campaign_dir(root, "b05", "--set", "schedule.beta=0.5", "--set", "output.steps_seeds=0")
+    return a, b
+
+
+def test_config_diff_names_each_differing_key_with_both_values() -> None:
+    from cwrend_cli.campaign import compare
+
+    def campaign(config: dict[str, Any], grid: dict[str, Any]) -> compare.Campaign:
+        manifest = {"root_seed": 0, "config": config, "grid": grid, "design": None}
+        return compare.Campaign(Path("x"), manifest, pd.DataFrame())
+
+    a = campaign(
+        {"schedule": {"beta": 0.25, "eps_min": 0.01}, "output": {"name": "a"}, "sweep": {},
+         "dispersions": {}},
+        {},
+    )  # fmt: skip
+    b = campaign(
+        {"schedule": {"beta": 0.5, "eps_min": 0.01}, "output": {"name": "b"}, "sweep": {},
+         "dispersions": {"truth.eccentricity": {"std": 0.01}}},
+        {"scenario.u_max_km_s2": [0.0006, 0.0008]},
+    )  # fmt: skip
+    assert compare.config_diff(a, b) == (
+        compare.Difference("schedule.beta", 0.25, 0.5),
+        compare.Difference("dispersions.truth.eccentricity.std", None, 0.01),
+        compare.Difference("sweep.scenario.u_max_km_s2", None, [0.0006, 0.0008]),
+    )
+    assert compare.config_diff(a, a) == ()
+
+
+def test_compare_says_what_differs_in_its_table_figure_and_file(
+    beta_pair: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import cwrend_cli.report.write as write
+
+    titles: list[str] = []
+    real = write.fig_compare
+
+    def spy(*args: Any) -> Any:
+        fig = real(*args)
+        titles.append(fig.get_suptitle())
+        return fig
+
+    monkeypatch.setattr(write, "fig_compare", spy)
+    a, b = beta_pair
+    result = runner.invoke(app, ["compare", str(a), str(b), "--out", str(tmp_path)],
+                           env={"COLUMNS": "80"})  # fmt: skip
+    assert result.exit_code == 0, result.output
+    table = result.stdout.split("A − B")[0]  # printed before the comparison
+    assert "A and B differ in" in table
+    assert "schedule.beta" in table and "0.25" in table and "0.5" in table
+    assert "output" not in table  # where results go is not what they are
+    assert "A and B differ in schedule.beta: A 0.25, B 0.5" in titles[0]
+    meta = pq.read_schema(tmp_path / "compare.parquet").metadata
+    assert json.loads(meta[b"config_diff"]) == [{"key": "schedule.beta", "a": 0.25, "b": 0.5}]

@@ -57,9 +57,11 @@ __all__ = [
     "METRIC_ALIASES",
     "Campaign",
     "Comparison",
+    "Difference",
     "Matched",
     "compare",
     "compare_table",
+    "config_diff",
     "load_campaign",
     "match_runs",
     "parse_metrics",
@@ -345,7 +347,9 @@ def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) 
 
 
 def compare_table(comparison: Comparison) -> pa.Table:
-    """``compare.parquet``: the rows, with both campaigns and the units in the metadata."""
+    """``compare.parquet``: the rows, with both campaigns, the units and what differs
+    between their configurations (``config_diff``, :func:`config_diff` as JSON) in the
+    metadata."""
     a, b = comparison.a, comparison.b
     hash_a = str(a.manifest.get("config_hash", ""))
     hash_b = str(b.manifest.get("config_hash", ""))
@@ -361,5 +365,66 @@ def compare_table(comparison: Comparison) -> pa.Table:
         "config_hash_a": hash_a,
         "config_hash_b": hash_b,
         "root_seed": str(a.root_seed),
+        # what differs between A and B: [{"key": dotted key, "a": A's value, "b": B's}, ...]
+        "config_diff": json.dumps(
+            [{"key": d.key, "a": d.a, "b": d.b} for d in config_diff(a, b)], ensure_ascii=False
+        ),
     }
     return statistics_table(comparison.frame, meta)
+
+
+# ---------------------------------------------------------------------------
+# What differs between A and B
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Difference:
+    """A configuration key whose value differs between A and B (``None``: absent there)."""
+
+    key: str  # dotted: schedule.beta; a grid's values as sweep.<key>, a design's as design.<field>
+    a: Any  # A's value as its manifest stores it (JSON: numbers, strings, lists)
+    b: Any
+
+
+def config_diff(a: Campaign, b: Campaign) -> tuple[Difference, ...]:
+    """What differs between the configurations of A and B, key by key, in A's key order.
+
+    Read from each manifest: the resolved base configuration without
+    ``[output]`` (where results go and which seeds keep per-step data: not
+    what the runs compute; the campaign hash leaves it out likewise), the
+    grid's values of each swept key as ``sweep.<key>`` and a sampled design's
+    fields as ``design.<field>``. Tables are walked to their leaves; an array
+    is one value. Empty when the two configurations are the same.
+    """
+    left, right = _settings(a.manifest), _settings(b.manifest)
+    keys = dict.fromkeys([*left, *right])
+    return tuple(
+        Difference(k, left.get(k), right.get(k)) for k in keys if left.get(k) != right.get(k)
+    )
+
+
+def _settings(manifest: Mapping[str, Any]) -> dict[str, Any]:
+    """The dotted keys and values :func:`config_diff` compares, of one manifest."""
+    config = manifest.get("config")
+    # the base config's [sweep] is empty: the grid stands for it
+    skip = ("output", "sweep")
+    tree = {k: v for k, v in config.items() if k not in skip} if isinstance(config, dict) else {}
+    grid = manifest.get("grid")
+    if isinstance(grid, dict) and grid:
+        tree["sweep"] = dict(grid)
+    design = manifest.get("design")
+    if isinstance(design, dict):
+        tree["design"] = dict(design)
+    leaves: dict[str, Any] = {}
+    _leaves(tree, "", leaves)
+    return leaves
+
+
+def _leaves(tree: Mapping[str, Any], prefix: str, into: dict[str, Any]) -> None:
+    for key, value in tree.items():
+        # a grid's keys are dotted themselves (sweep.schedule.beta): kept whole, never split
+        if isinstance(value, Mapping) and prefix != "sweep.":
+            _leaves(value, f"{prefix}{key}.", into)  # an empty table has no leaf
+        else:
+            into[f"{prefix}{key}"] = value

@@ -58,6 +58,7 @@ from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import (
+    difference_text,
     format_value,
     param_label,
     param_setting,
@@ -997,6 +998,8 @@ def fig_sensitivity(data: ReportData) -> Figure:
         raise ValueError("no sensitivity indices stored")
     metrics = [(m, name) for m, name in SENSITIVITY_METRICS if (table["metric"] == m).any()]
     params = list(dict.fromkeys(table["parameter"]))
+    # S1 and ST of a sobol design; S1 alone of RBD-FAST (lhs, random); S2 is in the tables
+    indices = [t for t in SOBOL_INDICES if (table["statistic"] == t[0]).any()]
     height = 1.8 + len(archs) * (0.62 * len(params) + 1.3)
     fig = _figure(6.2 * len(metrics) + 2.2, height)
     axes = np.atleast_2d(fig.subplots(len(archs), len(metrics), sharey=True, squeeze=False))
@@ -1006,12 +1009,13 @@ def fig_sensitivity(data: ReportData) -> Figure:
         for col, (metric, name) in enumerate(metrics):
             ax = axes[row, col]
             sel = table[(table["arch"] == a) & (table["metric"] == metric)]
-            for i, (stat, label, colour) in enumerate(SOBOL_INDICES):
+            for i, (stat, label, colour) in enumerate(indices):
                 rows = sel[sel["statistic"] == stat].set_index("parameter").reindex(params)
                 value = rows["value"].to_numpy(dtype=float)
                 err = _error_bars(value, rows["ci_low"].to_numpy(dtype=float),
                                   rows["ci_high"].to_numpy(dtype=float))  # fmt: skip
-                ax.barh(ys + (i - 0.5) * bar, np.nan_to_num(value), height=bar, color=colour,
+                offset = (i - (len(indices) - 1) / 2) * bar
+                ax.barh(ys + offset, np.nan_to_num(value), height=bar, color=colour,
                         xerr=err, capsize=3, label=label,
                         error_kw={"lw": 1.1, "ecolor": "black"})  # fmt: skip
             ax.axvline(0.0, color="black", lw=0.9)
@@ -1023,11 +1027,11 @@ def fig_sensitivity(data: ReportData) -> Figure:
             ax.set_title(f"{arch_label(a)} · {name}{seeds}", fontsize=10.5)
             if row == len(archs) - 1:
                 ax.set_xlabel("Sobol index of the mean over seeds [-]")
-    handles: list[Any] = [Patch(color=colour, label=label) for _, label, colour in SOBOL_INDICES]
+    handles: list[Any] = [Patch(color=colour, label=label) for _, label, colour in indices]
     handles.append(Line2D([], [], color="black", marker="|", ms=10, ls="-", lw=1.1,
                           label="95 % interval"))  # fmt: skip
     _legend_below(fig, handles, ncol=3)
-    fig.suptitle("Sensitivity: Sobol indices of the sampled design")
+    fig.suptitle("Sensitivity indices of the sampled design")
     return _finished(fig)
 
 
@@ -1138,8 +1142,9 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     FigureEntry(
         "sensitivity.png",
         "Sensitivity of the sampled design: first-order (S1) and total (ST) Sobol indices of "
-        "the mean miss and mean Δv over the seeds of each design point, per parameter and "
-        "architecture; error bars: 95 % intervals (sensitivity.parquet).",
+        "the mean miss and mean Δv over the seeds of each design point (S1 alone, by RBD-FAST, "
+        "for an lhs or random design), per parameter and architecture; error bars: 95 % "
+        "intervals (sensitivity.parquet).",
         fig_sensitivity,
         _has_sensitivity,
     ),
@@ -1245,7 +1250,11 @@ def _compare_row_label(first: pd.Series, groups: Sequence[str]) -> str:
 
 
 def fig_compare(
-    frame: pd.DataFrame, label_a: str, label_b: str, worlds: tuple[str, str] | None = None
+    frame: pd.DataFrame,
+    label_a: str,
+    label_b: str,
+    worlds: tuple[str, str] | None = None,
+    differences: Sequence[tuple[str, Any, Any]] | None = None,
 ) -> Figure:
     """Paired differences A − B per architecture (and grid point) with 95 % intervals.
 
@@ -1254,7 +1263,10 @@ def fig_compare(
     bootstrap intervals, zero marked; a last panel: the share of seeds where
     A is lower, with its Wilson interval, one half marked. ``worlds``: the
     simulated worlds of A and B (:func:`~cwrend_cli.report.load.results_world`),
-    named under the title (once when they are the same).
+    named under the title (once when they are the same). ``differences``: what
+    differs between their configurations, ``(dotted key, A's value, B's value)``
+    (``campaign.compare.config_diff``), the first :data:`_DIFFERENCES_SHOWN`
+    named under the title and the count of the others.
     """
     groups = [c for c in frame.columns if c in ("point_a", "point_b") or c.startswith(PARAM_PREFIX)]
     metrics = [m for m in _COMPARE_AXES if m in set(frame["metric"])]
@@ -1307,5 +1319,23 @@ def fig_compare(
         world_a, world_b = worlds
         same = f"A and B: {world_a}" if world_a == world_b else f"A: {world_a}  |  B: {world_b}"
         title = f"{title}\n{same}"
+    if differences is not None:
+        title = f"{title}\n{_differences_line(differences)}"
     fig.suptitle(title)
     return _finished(fig)
+
+
+#: Configuration differences named under the title of the comparison figure.
+_DIFFERENCES_SHOWN = 3
+
+
+def _differences_line(differences: Sequence[tuple[str, Any, Any]]) -> str:
+    """``A and B differ in schedule.beta: A 0.25, B 0.5``: the first few, a line each, then
+    a count of the others."""
+    if not differences:
+        return "A and B have the same configuration"
+    lines = [difference_text(*d) for d in differences[:_DIFFERENCES_SHOWN]]
+    more = len(differences) - _DIFFERENCES_SHOWN
+    if more > 0:
+        lines.append(f"and {more} more setting(s): config_diff in compare.parquet")
+    return "A and B differ in " + "\n".join(lines)

@@ -89,6 +89,25 @@ def format_value(value: Any) -> str:
     return str(value)
 
 
+def difference_text(key: str, a: Any, b: Any) -> str:
+    """One configuration difference of ``cwrend compare``: ``schedule.beta: A 0.25, B 0.5``.
+
+    Values as :func:`format_value` shows them, arrays element by element
+    (``[0.1, 0.2]``); ``none`` where the key is absent or unset.
+    """
+    return f"{key}: A {setting_text(a)}, B {setting_text(b)}"
+
+
+def setting_text(value: Any) -> str:
+    """A configuration value as shown: :func:`format_value`, arrays element by element,
+    ``none`` for an absent or unset value."""
+    if value is None:
+        return "none"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(setting_text(v) for v in value) + "]"
+    return format_value(value)
+
+
 def swept_values(row: pd.Series, columns: Iterable[str]) -> list[str]:
     """``key = value`` for each swept (``param.``) column of ``row``, values as given."""
     return [

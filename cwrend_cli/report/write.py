@@ -12,8 +12,10 @@ place where the report writes files.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib as mpl
 import pandas as pd
@@ -96,13 +98,16 @@ def write_compare_figure(
     path: Path,
     *,
     dirs: tuple[Path, Path] | None = None,
+    differences: Sequence[tuple[str, Any, Any]] | None = None,
 ) -> Path:
     """Draw :func:`~cwrend_cli.report.figures.fig_compare` in the report's style; save as PNG.
 
     ``dirs``: the two compared results directories; their simulated worlds
     (truth model, actuator errors, sensor faults; read from their stored
-    configurations) are then named under the title.
+    configurations) are then named under the title. ``differences``: what
+    differs between their configurations, ``(dotted key, A's value, B's value)``,
+    named under the title too.
     """
     worlds = (results_world(dirs[0]), results_world(dirs[1])) if dirs is not None else None
     with mpl.rc_context(STYLE):
-        return _save(fig_compare(frame, label_a, label_b, worlds), path)
+        return _save(fig_compare(frame, label_a, label_b, worlds, differences), path)
