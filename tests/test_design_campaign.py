@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -128,8 +129,128 @@ def test_until_runs_batches_and_equals_a_fixed_campaign_of_its_final_size(
     archs = ["mtf_adaptive", "plain_adaptive"]
     met = all(a.met for a in sequential.achieved(stats, sequential.parse_until(target), archs))
     assert met or n == 30  # it stops before --max-seeds only when the target is met
-    assert ("not met within --max-seeds" in result.stderr) == (not met)
+    assert ("--until not met: --max-seeds 30 reached" in result.stderr) == (not met)
     fixed = _config(tmp_path, "fixed", "")
     args = ["ablate", fixed, "--arch", ",".join(archs), "--workers", "1", "-q", "--seeds", str(n)]
     assert runner.invoke(app, args).exit_code == 0
     pd.testing.assert_frame_equal(runs, _runs(tmp_path / "results" / "fixed"))
+
+
+def _salib_inputs(out: Path, arch: str, metric: str) -> tuple[dict[str, Any], pd.DataFrame, Any]:
+    """What the manual tells a user to read: problem.json, design.parquet and Y from the runs."""
+    problem = json.loads((out / "problem.json").read_text())
+    matrix = pd.read_parquet(out / "design.parquet")
+    runs = pd.read_parquet(out / "runs.parquet")
+    ok = runs[(runs["status"] == "ok") & (runs["arch"] == arch)]
+    y = matrix["point"].map(ok.groupby("point")[metric].mean()).to_numpy()
+    return problem, matrix, y
+
+
+def _stored(out: Path, metric: str, statistic: str) -> pd.DataFrame:
+    stored = pd.read_parquet(out / "sensitivity.parquet")
+    return stored[(stored["metric"] == metric) & (stored["statistic"] == statistic)]
+
+
+def test_salib_takes_back_a_sobol_design_and_gives_the_stored_indices(tmp_path: Path) -> None:
+    """design.parquet in SALib's row order + problem.json + runs.parquet: SALib's own
+    sobol.analyze, given the arguments problem.json records, reproduces every stored
+    S1, ST and S2 and its interval exactly (second-order on request)."""
+    from SALib.analyze import sobol
+
+    cfg = _config(tmp_path, "salib")
+    args = _sweep(cfg, "--design", "sobol", "--samples", "4", "--seeds", "2", "--second-order")
+    args.remove("-q")
+    assert (result := runner.invoke(app, args)).exit_code == 0, result.output
+    assert "second-order Sobol indices" in result.output
+    out = tmp_path / "results" / "salib"
+    for metric in ("miss_km", "delta_v_km_s"):
+        problem, matrix, y = _salib_inputs(out, "mtf_adaptive", metric)
+        assert len(matrix) == 4 * (2 * 2 + 2) and list(matrix["row"]) == list(range(len(matrix)))
+        about = problem["cwrend"]
+        si = sobol.analyze(problem, y, calc_second_order=about["calc_second_order"],
+                           num_resamples=about["num_resamples"], conf_level=about["conf_level"],
+                           seed=about["seed"])  # fmt: skip
+        for stat in ("S1", "ST"):
+            stored = _stored(out, metric, stat).set_index("parameter").loc[problem["names"]]
+            assert np.array_equal(stored["value"], si[stat])
+            assert np.array_equal(stored["ci_high"] - stored["value"], si[f"{stat}_conf"])
+        s2 = _stored(out, metric, "S2")
+        assert list(zip(s2["parameter"], s2["parameter_2"], strict=True)) == [
+            ("schedule.beta", "schedule.kappa_mtf")
+        ]
+        assert s2["value"].iloc[0] == si["S2"][0, 1]
+
+
+def test_the_design_matrix_holds_the_unit_sample_salib_draws(tmp_path: Path) -> None:
+    """design.parquet's unit.* columns are SALib's sample of problem.json (scaled by its
+    bounds and dists: the values the runs used, to their 10 stored digits)."""
+    from SALib.sample import sobol as saltelli
+
+    cfg = _config(tmp_path, "matrix")
+    args = _sweep(cfg, "--design", "sobol", "--samples", "4", "--seeds", "1")
+    assert (result := runner.invoke(app, args)).exit_code == 0, result.output
+    out = tmp_path / "results" / "matrix"
+    problem = json.loads((out / "problem.json").read_text())
+    matrix = pd.read_parquet(out / "design.parquet")
+    unit_problem = {**problem, "bounds": [[0, 1]] * 2, "dists": ["unif"] * 2}
+    drawn = saltelli.sample(unit_problem, 4, calc_second_order=False, seed=problem["cwrend"]["seed"])
+    names = problem["names"]
+    assert np.array_equal(matrix[[f"unit.{n}" for n in names]].to_numpy(), drawn)
+    scaled = saltelli.sample(problem, 4, calc_second_order=False, seed=problem["cwrend"]["seed"])
+    values = matrix[[f"param.{n}" for n in names]].to_numpy()
+    assert np.allclose(values, scaled, rtol=1e-9, atol=0)
+    runs = pd.read_parquet(out / "runs.parquet").drop_duplicates("point").set_index("point")
+    for n in names:
+        assert (matrix[f"param.{n}"].to_numpy() == runs.loc[matrix["point"], f"param.{n}"]).all()
+
+
+def test_an_lhs_design_from_the_command_line_prints_and_stores_rbd_fast_indices(
+    tmp_path: Path,
+) -> None:
+    """--range defines the design without a [sweep] table; its first-order indices (RBD-FAST)
+    are on the console, in sensitivity.parquet (SALib's rbd_fast on the written files gives
+    them back exactly) and in the report."""
+    from SALib.analyze import rbd_fast
+
+    cfg = _config(tmp_path, "lhs", "")
+    args = _sweep(cfg, "--design", "lhs", "--samples", "12", "--seeds", "1",
+                  "--range", "schedule.beta=0.05:1.0", "--range", "schedule.kappa_mtf=2:30:log")
+    args.remove("-q")  # fmt: skip
+    assert (result := runner.invoke(app, args)).exit_code == 0, result.output
+    assert "RBD-FAST" in result.output and "kappa_mtf" in result.output
+    out = tmp_path / "results" / "lhs"
+    stored = pd.read_parquet(out / "sensitivity.parquet")
+    assert set(stored["method"]) == {"rbd_fast"} and set(stored["statistic"]) == {"S1"}
+    problem, matrix, y = _salib_inputs(out, "mtf_adaptive", "miss_km")
+    about = problem["cwrend"]
+    x = matrix[[f"unit.{n}" for n in problem["names"]]].to_numpy()
+    si = rbd_fast.analyze(problem, x, y, M=about["M"], num_resamples=about["num_resamples"],
+                          conf_level=about["conf_level"], seed=about["seed"])  # fmt: skip
+    miss = _stored(out, "miss_km", "S1").set_index("parameter").loc[problem["names"]]
+    assert np.array_equal(miss["value"], si["S1"])
+    assert np.array_equal(miss["ci_high"] - miss["value"], si["S1_conf"])
+    assert runner.invoke(app, ["report", str(out)]).exit_code == 0
+    text = (out / "report" / "report.md").read_text()
+    assert "RBD-FAST" in text and "| S1 terminal miss | S1 Δv |" in text
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--design", "lhs", "--samples", "4", "--range", "schedule.bta=0.1:1"],
+         "--range schedule.bta=0.1:1: schedule.bta is not a configuration value"),
+        (["--design", "lhs", "--samples", "4", "--range", "schedule.beta=1:0.1"],
+         "--range schedule.beta=1:0.1: low = 1.0, high = 0.1"),
+        (["--range", "schedule.beta=0.1:1"], "--range defines a sampled design: add --design"),
+        (["--design", "lhs", "--samples", "4"], "--design lhs: no ranges; give --range"),
+        (["--design", "lhs", "--samples", "16", "--range", "schedule.beta=0.1:1",
+          "--second-order"], "--second-order: second-order indices need --design sobol"),
+    ],
+)  # fmt: skip
+def test_a_bad_command_line_design_exits_2_naming_the_option(
+    tmp_path: Path, args: list[str], message: str
+) -> None:
+    result = runner.invoke(app, _sweep(_config(tmp_path, "bad", ""), *args))
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr and "Traceback" not in result.output
+    assert not (tmp_path / "results").exists()

@@ -52,6 +52,7 @@ __all__ = [
     "parse_until",
     "ready",
     "seed_counts",
+    "unmet_message",
 ]
 
 #: Widths are not checked before this many batches.
@@ -146,6 +147,44 @@ class Achieved:
     def met(self) -> bool:
         """Half-width at most the limit (a NaN interval, from < 2 seeds, is not met)."""
         return self.half_width <= self.limit
+
+    @property
+    def seeds_needed(self) -> int | None:
+        """The seeds that would meet the limit if the half-width shrinks as 1/√n, else None.
+
+        ``⌈n (half-width / limit)²⌉`` (at least ``n``): an estimate from the
+        interval at ``n`` seeds, as the half-width of a mean's interval scales
+        with ``σ/√n``; ``None`` without an interval or a positive limit.
+        """
+        usable = math.isfinite(self.half_width) and math.isfinite(self.limit) and self.limit > 0
+        if not usable or self.n < 1:
+            return None
+        return max(self.n, math.ceil(self.n * (self.half_width / self.limit) ** 2))
+
+
+def unmet_message(achieved: Sequence[Achieved], max_seeds: int) -> str:
+    """What ``--until`` says when ``--max-seeds`` was reached with a target not met.
+
+    Each interval not met with its half-width and target, and the seeds the
+    widest would need (:attr:`Achieved.seeds_needed`).
+    """
+    unmet = [a for a in achieved if not a.met]
+    parts = [
+        f"{a.label}: no interval" if a.seeds_needed is None
+        else f"{a.label}: half-width {a.half_width:.3g} > {a.limit:.3g}"
+        for a in unmet
+    ]  # fmt: skip
+    text = (
+        f"--until not met: --max-seeds {max_seeds} reached with "
+        f"{len(unmet)} of {len(achieved)} interval(s) too wide ({'; '.join(parts)})"
+    )
+    needed = [a.seeds_needed for a in unmet if a.seeds_needed is not None]
+    if needed:
+        text += (
+            f"; about {max(needed):,} seeds would meet {'it' if len(unmet) == 1 else 'them'} "
+            "(a half-width shrinks as 1/√seeds): raise --max-seeds or widen the target"
+        )
+    return text
 
 
 def achieved(stats: pd.DataFrame, target: Target, archs: Sequence[str]) -> list[Achieved]:

@@ -1,0 +1,123 @@
+"""The first table and an unmet --until (issue 37, item 13).
+
+A quantity with one realisation has no interval, and its table says so
+instead of a bootstrap caption; ``--until`` that reaches ``--max-seeds``
+says which interval is too wide and about how many seeds it would need, and
+``--strict`` makes that exit 1.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from rich.console import Console
+from typer.testing import CliRunner
+
+from cwrend_cli.campaign import sequential, statistics
+from cwrend_cli.cli import app
+from cwrend_cli.console import (
+    ONE_REALISATION,
+    ablation_console_table,
+    paired_console_table,
+    sweep_console_table,
+)
+
+runner = CliRunner()
+
+
+def _runs(n: int, points: int = 1) -> pd.DataFrame:
+    rng = np.random.default_rng(1)
+    rows = []
+    for point in range(points):
+        for seed in range(n):
+            for arch, scale in (("mtf_adaptive", 1.0), ("plain_adaptive", 2.0)):
+                rows.append(
+                    {"point": f"p{point}", "param.schedule.beta": 0.25 * (point + 1),
+                     "seed": seed, "arch": arch, "status": "ok",
+                     "miss_km": scale * 1e-3 * (1 + 0.3 * rng.standard_normal()),
+                     "delta_v_km_s": 0.14 + 1e-4 * rng.standard_normal(),
+                     "fuel_penalty_pct": 25.0, "solve_success_pct": 100.0,
+                     "solve_mean_ms": 1.0, "solve_max_ms": 2.0, "n_infeasible": 0}
+                )  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _stats(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    groups = [c for c in by if c != "arch"]
+    return pd.concat([statistics.describe(runs, by), statistics.paired(runs, groups)])
+
+
+def _caption(table: object) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=200, highlight=False).print(table)
+    return " ".join(buf.getvalue().split())
+
+
+def test_one_seed_ablation_says_one_realisation_not_bootstrap() -> None:
+    stats = _stats(_runs(1), ["arch"])
+    text = _caption(ablation_console_table(stats, "t"))
+    assert f"means; {ONE_REALISATION}" in text and "bootstrap" not in text
+    paired = _caption(paired_console_table(stats))
+    assert ONE_REALISATION in paired and "bootstrap" not in paired
+    assert "Wilson interval below P" in paired  # P(A < B) has an interval even from one seed
+
+
+def test_one_seed_per_point_sweep_says_one_realisation() -> None:
+    stats = _stats(_runs(1, points=2), ["point", "param.schedule.beta", "arch"])
+    text = _caption(sweep_console_table(stats, ["point", "param.schedule.beta"], "t"))
+    assert ONE_REALISATION in text and "bootstrap" not in text
+
+
+def test_a_table_with_one_realisation_in_some_rows_says_so_for_them() -> None:
+    runs = _runs(12)
+    runs = runs[(runs["arch"] == "mtf_adaptive") | (runs["seed"] == 0)]  # plain: one seed
+    text = _caption(ablation_console_table(_stats(runs, ["arch"]), "t"))
+    assert "means, 95 % bootstrap interval below" in text
+    assert f"a value alone: {ONE_REALISATION}" in text
+
+
+def test_the_seeds_needed_scale_as_the_inverse_square_of_the_half_width() -> None:
+    a = sequential.Achieved("mtf_adaptive", 1e-3, half_width=4e-4, limit=2e-4, n=20)
+    assert a.seeds_needed == 80  # half-width × 1/2 needs 4× the seeds
+    assert sequential.Achieved("x", 1.0, 1e-4, 2e-4, 20).seeds_needed == 20  # met already
+    assert sequential.Achieved("x", math.nan, math.nan, math.nan, 0).seeds_needed is None
+    text = sequential.unmet_message([a], max_seeds=20)
+    assert "--until not met: --max-seeds 20 reached" in text
+    assert "half-width 0.0004 > 0.0002" in text and "about 80 seeds" in text
+
+
+def _until(tmp_path: Path, *extra: str) -> object:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\n')
+    args = ["ablate", str(cfg), "--name", "u", "--arch", "mtf_adaptive", "-w", "1", "--no-rrd",
+            "--until", "miss_km:1e-9", "--batch", "1", "--max-seeds", "2", *extra]  # fmt: skip
+    return runner.invoke(app, args, env={"COLUMNS": "200"})
+
+
+def test_an_unmet_until_says_so_and_estimates_the_seeds(tmp_path: Path) -> None:
+    result = _until(tmp_path)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stderr.split())
+    assert "--until not met: --max-seeds 2 reached with 1 of 1 interval(s) too wide" in text
+    assert "seeds would meet it (a half-width shrinks as 1/√seeds)" in text
+
+
+def test_strict_makes_an_unmet_until_exit_1(tmp_path: Path) -> None:
+    result = _until(tmp_path, "--strict", "-q")
+    assert result.exit_code == 1, result.output
+    assert "--until not met" in result.stderr  # said even when quiet: it is the error
+
+
+@pytest.mark.parametrize("args", [["--seeds", "1"], []])
+def test_strict_without_until_is_refused(tmp_path: Path, args: list[str]) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\n')
+    result = runner.invoke(app, ["ablate", str(cfg), "--strict", *args])
+    assert result.exit_code == 2
+    assert "--strict: applies to --until only" in result.stderr
+    assert not (tmp_path / "campaign").exists()
