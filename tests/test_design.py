@@ -115,3 +115,112 @@ def test_sobol_indices_of_the_ishigami_function_match_the_analytic_values() -> N
     assert np.all(np.abs(idx.s1 - s1) <= widen * idx.s1_conf)
     assert np.all(np.abs(idx.st - st) <= widen * idx.st_conf)
     assert np.all(idx.s1_conf < 0.05) and np.all(idx.st_conf < 0.05)  # tight enough to mean it
+
+
+def test_a_second_order_sobol_design_contains_the_first_order_design() -> None:
+    """Saltelli's scheme with the B_A^(i) rows too: every first-order row is in it, in order."""
+    first = design.unit_samples("sobol", 16, 3, root_seed=5)
+    second = design.unit_samples("sobol", 16, 3, root_seed=5, second_order=True)
+    assert second.shape == (16 * design.n_runs_per_base("sobol", 3, second_order=True), 3)
+    assert second.shape == (16 * (2 * 3 + 2), 3)
+    for k in range(3 + 1):  # A, A_B^(1..3); then B: SALib's first rows of each block
+        assert np.array_equal(first[k :: 3 + 2], second[k :: 2 * 3 + 2])
+    assert np.array_equal(first[3 + 1 :: 3 + 2], second[2 * 3 + 1 :: 2 * 3 + 2])  # B
+
+
+def test_second_order_sobol_indices_of_the_ishigami_function_match_the_analytic_values() -> None:
+    """Ishigami (a = 7, b = 0.1): the only interaction is x1 × x3, V13 / V; S2 of the other
+    pairs is 0. Each within its SALib interval widened to 99.9 % (as the first-order test)."""
+    a, b, pi = 7.0, 0.1, math.pi
+    v = 0.5 * (1 + b * pi**4 / 5) ** 2 + a**2 / 8 + b**2 * pi**8 * (1 / 18 - 1 / 50)
+    s13 = b**2 * pi**8 * (1 / 18 - 1 / 50) / v
+    ranges = [design.ParameterRange(f"x{i}", "float", -pi, pi) for i in range(3)]
+    points = design.design_points("sobol", ranges, 4096, root_seed=0, second_order=True)
+    x = np.array([[value for _, value in p] for p in points])
+    idx = design.sobol_indices(ranges, _ishigami(x), root_seed=0, second_order=True)
+    assert idx.s2 is not None and idx.s2_conf is not None
+    widen = 3.29 / 1.96
+    for (i, j), exact in {(0, 1): 0.0, (0, 2): s13, (1, 2): 0.0}.items():
+        assert abs(idx.s2[i, j] - exact) <= widen * idx.s2_conf[i, j], (i, j)
+    assert s13 > 3 * idx.s2_conf[0, 2]  # the interaction is resolved, not noise
+
+
+def test_rbd_fast_finds_the_variance_shares_of_a_linear_model_on_a_latin_hypercube() -> None:
+    """y = 4 x1 + 2 x2 + 0 x3, x ~ U[0, 1]³: S1 = (16, 4, 0) / 20, no interactions.
+
+    RBD-FAST on a plain LHS (no special sampling) must find each within its interval
+    widened to 99.9 %, and the dominant parameter first.
+    """
+    ranges = [design.ParameterRange(f"x{i}", "float", 0.0, 1.0) for i in range(3)]
+    unit = design.unit_samples("lhs", 512, 3, root_seed=1)
+    y = 4 * unit[:, 0] + 2 * unit[:, 1]
+    idx = design.rbd_fast_indices(ranges, unit, y, root_seed=1)
+    exact = np.array([0.8, 0.2, 0.0])
+    assert np.all(np.abs(idx.s1 - exact) <= 3.29 / 1.96 * idx.s1_conf)
+    assert list(np.argsort(-idx.s1)) == [0, 1, 2]
+    assert np.all(idx.s1_conf < 0.1) and np.isnan(idx.st).all()  # no total index by RBD-FAST
+
+
+def test_rbd_fast_harmonics_follow_the_design_size() -> None:
+    """M ≤ (n − 1) / 8 (the bias correction stays bounded in the half-size bootstrap), ≤ 10."""
+    assert [design.rbd_fast_harmonics(n) for n in (8, 9, 16, 17, 80, 81, 10_000)] == [
+        0, 1, 1, 2, 9, 10, 10,
+    ]  # fmt: skip
+    unit = design.unit_samples("lhs", 8, 1, root_seed=0)
+    with pytest.raises(ValueError, match="at least 9 rows"):
+        design.rbd_fast_indices([UNIT], unit, unit[:, 0], root_seed=0)
+
+
+def test_the_salib_problem_names_every_range_with_its_bounds_and_distribution() -> None:
+    ranges = [
+        design.parse_range("schedule.beta", {"low": 0.05, "high": 1.0}),
+        design.parse_range("schedule.kappa_mtf", {"low": 3.0, "high": 48.0, "log": True}),
+        design.parse_range("solver.max_iter", {"low": 20, "high": 60, "int": True}),
+        design.parse_range("truth.model", {"values": ["cw", "j2"]}),
+    ]
+    assert design.salib_problem(ranges) == {
+        "num_vars": 4,
+        "names": ["schedule.beta", "schedule.kappa_mtf", "solver.max_iter", "truth.model"],
+        "bounds": [[0.05, 1.0], [3.0, 48.0], [0.0, 1.0], [0.0, 1.0]],
+        "dists": ["unif", "logunif", "unif", "unif"],
+    }
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("schedule.beta=0.1:1.0", design.ParameterRange("schedule.beta", "float", 0.1, 1.0)),
+        (
+            "schedule.kappa_mtf=3:48:log",
+            design.ParameterRange("schedule.kappa_mtf", "float", 3.0, 48.0, log=True),
+        ),
+        ("solver.max_iter=20:60:int", design.ParameterRange("solver.max_iter", "int", 20, 60)),
+        ("truth.model=cw,j2", design.ParameterRange("truth.model", "choice", values=("cw", "j2"))),
+    ],
+)
+def test_a_command_line_range_is_the_range_of_a_sweep_table(
+    text: str, expected: design.ParameterRange
+) -> None:
+    assert design.parse_cli_range(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("schedule.beta", "expected KEY=LOW:HIGH"),
+        ("schedule.beta=0.1", None),  # a single value is one category: accepted
+        ("schedule.beta=a:b", "LOW and HIGH must be numbers"),
+        ("schedule.beta=1:0.5", "need finite low < high"),
+        ("schedule.beta=0.1:1:cube", "LOW:HIGH:log or LOW:HIGH:int"),
+        ("schedule.beta=0:1:log", "log = true needs low > 0"),
+        ("schedule.beta=0.5:3:int", "int = true needs integer low and high"),
+        ("schedule.beta=0.1,,0.2", "empty value in the list"),
+    ],
+)
+def test_a_bad_command_line_range_names_the_option(text: str, message: str | None) -> None:
+    if message is None:
+        assert design.parse_cli_range(text).kind == "choice"
+        return
+    with pytest.raises(ConfigError, match=f"^--range {text}: ") as err:
+        design.parse_cli_range(text)
+    assert message in str(err.value)

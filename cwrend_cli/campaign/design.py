@@ -64,6 +64,7 @@ if TYPE_CHECKING:  # pandas is imported by sensitivity() only: a worker plans no
 
 from cwrend_cli.config.overrides import SIGNIFICANT_DIGITS, decimal_float
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.tables import PARAM_PREFIX, UNIT_PREFIX
 
 __all__ = [
     "DESIGNS",
@@ -403,10 +404,6 @@ def rbd_fast_indices(
     )
 
 
-#: Column prefix of a design row's unit coordinates in ``design.parquet``.
-UNIT_PREFIX = "unit."
-
-
 def design_matrix(
     ranges: Sequence[ParameterRange], rows: Sequence[str], unit: np.ndarray
 ) -> pd.DataFrame:
@@ -422,7 +419,7 @@ def design_matrix(
     for i, r in enumerate(ranges):
         columns[f"{UNIT_PREFIX}{r.key}"] = unit[:, i]
     for i, r in enumerate(ranges):
-        columns[f"param.{r.key}"] = [r.value(float(u)) for u in unit[:, i]]
+        columns[f"{PARAM_PREFIX}{r.key}"] = [r.value(float(u)) for u in unit[:, i]]
     return pd.DataFrame(columns)
 
 
@@ -530,11 +527,11 @@ def sensitivity(
             else:
                 assert unit is not None
                 idx = rbd_fast_indices(ranges, unit, y, root_seed)
-            found = [(name, "", "S1", idx.s1[i], idx.s1_conf[i])
-                     for i, name in enumerate(idx.names)]  # fmt: skip
-            if method == "sobol":
-                found += [(name, "", "ST", idx.st[i], idx.st_conf[i])
-                          for i, name in enumerate(idx.names)]  # fmt: skip
+            found = []
+            for i, name in enumerate(idx.names):  # per parameter S1, then ST (sobol)
+                found.append((name, "", "S1", idx.s1[i], idx.s1_conf[i]))
+                if method == "sobol":
+                    found.append((name, "", "ST", idx.st[i], idx.st_conf[i]))
             if idx.s2 is not None and idx.s2_conf is not None:
                 found += [
                     (idx.names[i], idx.names[j], "S2", idx.s2[i, j], idx.s2_conf[i, j])

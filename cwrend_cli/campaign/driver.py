@@ -24,11 +24,11 @@ import json
 import shutil
 import time
 from collections import deque
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import pandas as pd
 import pyarrow as pa
@@ -73,6 +73,7 @@ from cwrend_cli.output.layout import (
     DESIGN,
     EVENTS,
     MANIFEST,
+    POINTS,
     PROBLEM,
     RUNS,
     SENSITIVITY,
@@ -82,6 +83,7 @@ from cwrend_cli.output.layout import (
 )
 from cwrend_cli.output.tables import (
     param_columns,
+    points_table,
     references_table,
     runs_table,
     statistics_table,
@@ -375,6 +377,8 @@ def _run_locked(
                 status = f"stopped: {stopped}"
             try:  # under a full disk these may fail too: the journal stays the record
                 write_parquet(runs_table(records, _file_metadata(plan_)), out_dir / RUNS)
+                write_parquet(points_table(_points_of(records), _file_metadata(plan_)),
+                              out_dir / POINTS)  # fmt: skip
                 finish_manifest(
                     manifest,
                     finished=time.time(),
@@ -395,6 +399,14 @@ def _run_locked(
             "the same command to compute exactly the missing runs"
         )
     return CampaignSummary(out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs))
+
+
+def _points_of(records: Sequence[Mapping[str, Any]]) -> list[tuple[str, Mapping[str, Any]]]:
+    """Each point of the runs ``records`` once, with its swept values, in first-seen order."""
+    points: dict[str, Mapping[str, Any]] = {}
+    for r in records:
+        points.setdefault(str(r["point"]), r.get("params", {}))
+    return list(points.items())
 
 
 def _journal_before(

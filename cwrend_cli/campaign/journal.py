@@ -5,6 +5,8 @@ Layout of ``<output.dir>/<name>/``::
     manifest.json                   what ran: config, grid, seeds, archs, hashes, status
     events.jsonl                    the journal: one JSON event per line, appended per task
     runs.parquet                    one row per run (output.tables.runs_table), from the journal
+    points.parquet                  one row per point of those runs: id, swept values
+                                    (output.tables.points_table; joins steps/ on point)
     ablation.parquet | sweep.parquet  statistics (written by the driver)
     steps/arch=<slug>/*.parquet     per-step data of each task execution (hive-partitioned)
     solves/arch=<slug>/*.parquet    per-solve data, likewise
@@ -46,9 +48,12 @@ from cwrend_cli.campaign.worker import TaskOutcome
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
+    DESIGN,
     EVENTS,
     LOCK,
     MANIFEST,
+    POINTS,
+    PROBLEM,
     RECORDINGS,
     REFERENCES,
     RUNS,
@@ -80,8 +85,8 @@ __all__ = [
 
 #: Directories of per-task files (journaled, removed on --force, orphans cleaned on resume).
 DATASETS = (STEPS, SOLVES, RECORDINGS)
-#: The statistics files of ``cwrend ablate`` and ``cwrend sweep``.
-STATS_FILES = (ABLATION_STATS, SWEEP_STATS, SENSITIVITY)
+#: The statistics files of ``cwrend ablate`` and ``cwrend sweep`` (a design's matrix too).
+STATS_FILES = (ABLATION_STATS, SWEEP_STATS, SENSITIVITY, DESIGN, PROBLEM)
 
 
 def iso(unix: float) -> str:
@@ -338,7 +343,7 @@ def check_confined(out_dir: Path) -> None:
     journal, manifest, …) would send results, or ``--force``'s removal,
     outside the campaign directory (issue 20).
     """
-    names = (MANIFEST, RUNS, EVENTS, LOCK, *STATS_FILES, *DATASETS, REFERENCES)
+    names = (MANIFEST, RUNS, POINTS, EVENTS, LOCK, *STATS_FILES, *DATASETS, REFERENCES)
     for name in names:
         if (out_dir / name).is_symlink():
             _refuse_link(out_dir / name, out_dir)
@@ -423,7 +428,7 @@ def _locked_fd(path: Path, out_dir: Path) -> int:
 
 def wipe(out_dir: Path) -> None:
     """Remove what a campaign writes (``--force``), nothing else."""
-    for name in (MANIFEST, RUNS, EVENTS, *STATS_FILES):
+    for name in (MANIFEST, RUNS, POINTS, EVENTS, *STATS_FILES):
         (out_dir / name).unlink(missing_ok=True)
     for dataset in (*DATASETS, REFERENCES):
         if (out_dir / dataset).exists():

@@ -26,6 +26,8 @@ RUNS_DIR = "runs"
 # A campaign (``cwrend ablate`` / ``cwrend sweep``)
 MANIFEST = "manifest.json"
 RUNS = "runs.parquet"
+#: One row per grid or design point of the runs: its id and swept values (joins steps/solves).
+POINTS = "points.parquet"
 EVENTS = "events.jsonl"
 STEPS = "steps"
 SOLVES = "solves"
@@ -33,8 +35,12 @@ RECORDINGS = "recordings"
 REFERENCES = "references"
 ABLATION_STATS = "ablation.parquet"
 SWEEP_STATS = "sweep.parquet"
-#: Sobol indices of a ``cwrend sweep --design sobol`` campaign.
+#: Sensitivity indices of a ``cwrend sweep --design …`` campaign.
 SENSITIVITY = "sensitivity.parquet"
+#: The design matrix of a ``sweep --design`` campaign (unit sample in SALib's row order).
+DESIGN = "design.parquet"
+#: SALib's problem definition of a design and how cwrend analysed it.
+PROBLEM = "problem.json"
 #: Held (flock) by the process running the campaign; names that process.
 LOCK = ".cwrend.lock"
 

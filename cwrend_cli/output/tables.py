@@ -185,9 +185,13 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "other": _col("the architecture A is compared with (A - B)", "-"),
     "point_a": _col("grid point of campaign A", "-"),
     "point_b": _col("grid point of campaign B", "-"),
-    # sensitivity.parquet (statistic: S1 first-order, ST total Sobol index)
+    # sensitivity.parquet (statistic: S1 first-order, ST total, S2 second-order Sobol index)
     "parameter": _col("the swept configuration key of a Sobol index", "-"),
+    "parameter_2": _col("the other key of a second-order index (S2), else empty", "-"),
+    "method": _col("estimator: sobol (Saltelli design) or rbd_fast (any design), by SALib", "-"),
     "n_seeds": _col("fewest ok seeds of a design point (the index is of the mean over seeds)", "-"),
+    # design.parquet (a sampled design's rows in SALib's order)
+    "row": _col("row of the design matrix, in SALib's sample order", "-"),
 }
 #: Configuration keys without a unit suffix whose value is dimensionless.
 #: (Keys with a unit suffix, e.g. ``guidance.t_resolve_s``, take it first.) Choices given
@@ -207,6 +211,8 @@ _DIMENSIONLESS_KEYS = (
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
 #: Prefixes of the ``runs.parquet`` columns of swept values and dispersion draws.
 _VALUE_PREFIXES = ("param.", "disp.")
+#: Prefix of a design row's unit-cube coordinate of a key in ``design.parquet``.
+UNIT_PREFIX = "unit."
 
 
 def _key_unit(key: str) -> str:
@@ -230,6 +236,8 @@ def unit_of(name: str) -> str:
     for prefix in _VALUE_PREFIXES:
         if name.startswith(prefix):
             return _key_unit(name.removeprefix(prefix))
+    if name.startswith(UNIT_PREFIX):
+        return "-"
     unit, _ = COLUMNS[name]
     if unit:
         return unit
@@ -245,6 +253,8 @@ def description_of(name: str) -> str:
         return f"swept value of {name.removeprefix(PARAM_PREFIX)}"
     if name.startswith("disp."):
         return f"dispersed value of {name.removeprefix('disp.')} applied to the run"
+    if name.startswith(UNIT_PREFIX):
+        return f"unit-cube coordinate of {name.removeprefix(UNIT_PREFIX)} (SALib's sample)"
     return COLUMNS[name][1]
 
 
@@ -615,19 +625,48 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
         cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
         fields.append(f)
     for prefix, key in ((PARAM_PREFIX, "params"), ("disp.", "dispersed")):
-        names = sorted({k for r in records for k in r.get(key, {})})
-        for name in names:
-            values = [r.get(key, {}).get(name) for r in records]
-            kinds = {type(v) for v in values if v is not None}
-            if kinds <= {int, float} and not kinds <= {int}:
-                arr = pa.array([None if v is None else float(v) for v in values], pa.float64())
-            elif len(kinds) == 1:
-                arr = pa.array(values)
-            else:
-                arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())
-            cols[prefix + name] = arr
-            fields.append(pa.field(prefix + name, arr.type))
+        for name, arr in _keyed_columns(records, key, prefix):
+            cols[name] = arr
+            fields.append(pa.field(name, arr.type))
     return _conventional(pa.table(cols, schema=pa.schema(fields)), metadata)
+
+
+def _keyed_columns(
+    records: Sequence[Mapping[str, Any]], key: str, prefix: str
+) -> list[tuple[str, pa.Array]]:
+    """A column ``<prefix><config key>`` per key of the records' mappings ``record[key]``.
+
+    Sorted by key; numbers as float64 (int64 when all are integers), other
+    values of one type as that type, mixed ones as JSON text; missing: null.
+    """
+    columns = []
+    for name in sorted({k for r in records for k in r.get(key, {})}):
+        values = [r.get(key, {}).get(name) for r in records]
+        kinds = {type(v) for v in values if v is not None}
+        if kinds <= {int, float} and not kinds <= {int}:
+            arr = pa.array([None if v is None else float(v) for v in values], pa.float64())
+        elif len(kinds) == 1:
+            arr = pa.array(values)
+        else:
+            arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())
+        columns.append((prefix + name, arr))
+    return columns
+
+
+def points_table(
+    points: Sequence[tuple[str, Mapping[str, Any]]], metadata: Mapping[str, Any]
+) -> pa.Table:
+    """``points.parquet``: one row per grid or design point, its id and its swept values.
+
+    ``points``: ``(point id, {config key: value})`` in plan order. The columns
+    are those of ``runs.parquet``: ``point`` and ``param.<key>`` (typed as
+    there, with the key's unit), so the per-step and per-solve datasets,
+    which name each row's point, join the swept values on ``point`` alone.
+    """
+    records = [{"params": dict(values)} for _, values in points]
+    cols: dict[str, pa.Array] = {"point": pa.array([p for p, _ in points], pa.string())}
+    cols.update(_keyed_columns(records, "params", PARAM_PREFIX))
+    return _conventional(pa.table(cols), metadata)
 
 
 def statistics_table(frame: pd.DataFrame, metadata: Mapping[str, Any]) -> pa.Table:

@@ -234,10 +234,11 @@ def sweep_table(data: ReportData) -> str:
 
 
 def sensitivity_table(data: ReportData) -> str | None:
-    """Sobol indices of a ``sobol`` design: a row per architecture and parameter.
+    """Sensitivity indices of a sampled design: a row per architecture and parameter.
 
-    S1 and ST of the mean miss and of the mean Δv over the seeds of each
-    design point, ``value [low, high]`` (95 %, as stored in
+    S1 and ST (a ``sobol`` design; S1 alone for RBD-FAST's indices of an
+    ``lhs`` or ``random`` design) of the mean miss and of the mean Δv over the
+    seeds of each design point, ``value [low, high]`` (95 %, as stored in
     ``sensitivity.parquet``). ``None`` without stored indices.
     """
     table = data.sensitivity
@@ -245,22 +246,51 @@ def sensitivity_table(data: ReportData) -> str | None:
     if table is None or not archs:
         return None
     metrics = [(m, name) for m, name in SENSITIVITY_METRICS if (table["metric"] == m).any()]
+    stats = [k for k in ("S1", "ST") if (table["statistic"] == k).any()]
     header = ["architecture", "parameter"] + [
-        f"{stat} {name}" for _, name in metrics for stat in ("S1", "ST")
+        f"{stat} {name}" for _, name in metrics for stat in stats
     ]
+    first = table[table["statistic"].isin(stats)]
     get = {
         (str(r["arch"]), str(r["metric"]), str(r["parameter"]), str(r["statistic"])): r
-        for _, r in table.iterrows()
+        for _, r in first.iterrows()
     }
     rows = []
     for a in archs:
-        for param in dict.fromkeys(table.loc[table["arch"] == a, "parameter"]):
+        for param in dict.fromkeys(first.loc[first["arch"] == a, "parameter"]):
             cells = [
                 _ci(get.get((a, m, param, stat)), INDEX, bootstrap=False)
                 for m, _ in metrics
-                for stat in ("S1", "ST")
+                for stat in stats
             ]
             rows.append([arch_label(a), param_label(param), *cells])
+    return markdown_table(header, rows)
+
+
+def second_order_table(data: ReportData) -> str | None:
+    """Second-order Sobol indices (S2) of a ``sobol`` design, a row per pair of parameters.
+
+    ``None`` unless ``sensitivity.parquet`` holds them (``--second-order``).
+    """
+    table = data.sensitivity
+    archs = sensitivity_archs(data)
+    if table is None or not archs or "parameter_2" not in table:
+        return None
+    pairs = table[table["statistic"] == "S2"]
+    if pairs.empty:
+        return None
+    metrics = [(m, name) for m, name in SENSITIVITY_METRICS if (pairs["metric"] == m).any()]
+    header = ["architecture", "parameters"] + [f"S2 {name}" for _, name in metrics]
+    get = {
+        (str(r["arch"]), str(r["metric"]), str(r["parameter"]), str(r["parameter_2"])): r
+        for _, r in pairs.iterrows()
+    }
+    rows = []
+    for a in archs:
+        sel = pairs[pairs["arch"] == a]
+        for p1, p2 in dict.fromkeys(zip(sel["parameter"], sel["parameter_2"], strict=True)):
+            cells = [_ci(get.get((a, m, p1, p2)), INDEX, bootstrap=False) for m, _ in metrics]
+            rows.append([arch_label(a), f"{param_label(p1)} × {param_label(p2)}", *cells])
     return markdown_table(header, rows)
 
 
@@ -278,16 +308,36 @@ def _design_lines(data: ReportData) -> list[str]:
     ]
     table = sensitivity_table(data)
     if table is None:
-        return [*lines, "No sensitivity indices stored (only a `sobol` design has them).", ""]
+        return [
+            *lines,
+            "No sensitivity indices stored (an `lhs` or `random` design needs at least 9 "
+            "design rows for RBD-FAST).",
+            "",
+        ]
     stored = data.sensitivity
     seeds: Any = stored["n_seeds"].min() if stored is not None and "n_seeds" in stored else None
-    about = (
-        "First-order (S1) and total (ST) Sobol indices of the mean over the seeds of each "
-        "design point, 95 % interval in brackets (`sensitivity.parquet`"
-        + (f"; at least {int(float(seeds))} seed(s) per point" if _finite(seeds) else "")
-        + "). ST ≥ S1 up to sampling error; ST − S1 is the share through interactions."
-    )
-    return [*lines, "### Sensitivity indices", "", about, "", table, ""]
+    per_point = f"; at least {int(float(seeds))} seed(s) per point" if _finite(seeds) else ""
+    rbd = stored is not None and "method" in stored and set(stored["method"]) == {"rbd_fast"}
+    if rbd:
+        about = (
+            "First-order indices (S1) of the mean over the seeds of each design point, "
+            "estimated from the design as it is by RBD-FAST (SALib; Plischke 2010, bias "
+            "corrected as Tissot & Prieur 2012), 95 % bootstrap interval in brackets "
+            f"(`sensitivity.parquet`{per_point}). S1 is the share of the variance explained "
+            "by one parameter alone; 1 − ΣS1 is left to interactions (and noise)."
+        )
+    else:
+        about = (
+            "First-order (S1) and total (ST) Sobol indices of the mean over the seeds of each "
+            f"design point, 95 % interval in brackets (`sensitivity.parquet`{per_point}). "
+            "ST ≥ S1 up to sampling error; ST − S1 is the share through interactions."
+        )
+    lines += ["### Sensitivity indices", "", about, "", table, ""]
+    pairs = second_order_table(data)
+    if pairs is not None:
+        lines += ["Second-order Sobol indices (S2: the share of a pair's interaction), "
+                  "95 % interval in brackets:", "", pairs, ""]  # fmt: skip
+    return lines
 
 
 def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, str]]) -> str:
