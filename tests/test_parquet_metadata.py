@@ -164,7 +164,7 @@ def test_campaign_files_carry_the_conventions(written: Path, name: str) -> None:
     files = sorted(directory.rglob("*.parquet"))
     kinds = {p.relative_to(directory).parts[0] for p in files}
     stats = "ablation.parquet" if name == "a" else "sweep.parquet"
-    assert kinds == {"runs.parquet", stats, "steps", "solves", "references"}
+    assert kinds == {"runs.parquet", "points.parquet", stats, "steps", "solves", "references"}
     for path in files:
         _check_file(path, expected)
 

@@ -247,3 +247,27 @@ def test_compare_says_what_differs_in_its_table_figure_and_file(
     assert "A and B differ in schedule.beta: A 0.25, B 0.5" in titles[0]
     meta = pq.read_schema(tmp_path / "compare.parquet").metadata
     assert json.loads(meta[b"config_diff"]) == [{"key": "schedule.beta", "a": 0.25, "b": 0.5}]
+
+
+# --- item 10: steps joined to their swept values ----------------------------------------
+
+
+def test_points_parquet_joins_every_step_to_its_swept_values(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "swept")
+    result = runner.invoke(
+        app, ["sweep", str(cfg), "--param", "schedule.beta=0.25,0.5", "--seeds", "1", "--arch",
+              "mtf_adaptive", "--workers", "1", "-q", "--no-rrd"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "results" / "swept"
+    points = pd.read_parquet(out / "points.parquet")
+    assert sorted(points["param.schedule.beta"]) == [0.25, 0.5]
+    assert points["point"].is_unique
+    steps = pd.read_parquet(out / "steps", columns=["run_key", "point", "step"])
+    joined = steps.merge(points, on="point", how="left", validate="many_to_one")
+    runs = pd.read_parquet(out / "runs.parquet", columns=["run_key", "param.schedule.beta"])
+    by_run = dict(zip(runs["run_key"], runs["param.schedule.beta"], strict=True))
+    assert joined["param.schedule.beta"].notna().all()
+    assert (joined["param.schedule.beta"] == joined["run_key"].map(by_run)).all()
+    unit = pq.read_schema(out / "points.parquet").field("param.schedule.beta").metadata[b"unit"]
+    assert unit == b"-"
