@@ -23,7 +23,7 @@ import tomli_w
 from pydantic import ValidationError
 
 from cwrend_cli.config.messages import format_validation_error
-from cwrend_cli.config.overrides import parse_override, set_dotted
+from cwrend_cli.config.overrides import nesting_depth, parse_override, set_dotted
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING
@@ -67,17 +67,6 @@ def config_from_dict(
         raise ConfigError(header, format_validation_error(exc, CwrendConfig)) from None
 
 
-def _depth(value: Any, level: int = 0) -> int:
-    """Nesting depth of tables and arrays, counted no further than :data:`MAX_NESTING` + 1."""
-    if level > MAX_NESTING:
-        return level
-    if isinstance(value, dict):
-        return max((_depth(v, level + 1) for v in value.values()), default=level + 1)
-    if isinstance(value, list):
-        return max((_depth(v, level + 1) for v in value), default=level + 1)
-    return level
-
-
 def _safe_stem(path: Path) -> str:
     """The file stem made into a valid ``output.name``."""
     stem = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-")
@@ -118,7 +107,7 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig
         data = {}
         too_deep = True
     else:
-        too_deep = _depth(data) > MAX_NESTING
+        too_deep = nesting_depth(data) > MAX_NESTING
     if too_deep:
         raise ConfigError(f"{path}: tables and arrays nested more than {MAX_NESTING} levels deep")
 

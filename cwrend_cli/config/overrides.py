@@ -23,7 +23,7 @@ from typing import Any
 
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.limits import MAX_VALUES_PER_KEY
+from cwrend_cli.limits import MAX_NESTING, MAX_VALUES_PER_KEY
 from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     ARCHITECTURES,
@@ -36,6 +36,7 @@ __all__ = [
     "apply",
     "expand_grid",
     "get_dotted",
+    "nesting_depth",
     "parse_arch",
     "parse_archs",
     "parse_override",
@@ -48,12 +49,34 @@ __all__ = [
 # ---------------------------------------------------------------------------
 
 
-def _parse_value(raw: str) -> Any:
-    """A TOML value (``1e-3``, ``"mean"``, ``[1, 2]``, ``true``), else the bare string."""
+def nesting_depth(value: Any, level: int = 0) -> int:
+    """Nesting depth of tables and arrays, counted no further than :data:`MAX_NESTING` + 1."""
+    if level > MAX_NESTING:
+        return level
+    if isinstance(value, dict):
+        return max((nesting_depth(v, level + 1) for v in value.values()), default=level + 1)
+    if isinstance(value, list):
+        return max((nesting_depth(v, level + 1) for v in value), default=level + 1)
+    return level
+
+
+def _parse_value(raw: str, key: str) -> Any:
+    """A TOML value (``1e-3``, ``"mean"``, ``[1, 2]``, ``true``), else the bare string.
+
+    Refused like a file's (:data:`MAX_NESTING`): a value whose tables and arrays,
+    under its key, nest deeper than a configuration file may (issue 36 item 8).
+    """
     try:
         parsed = tomllib.loads(f"v = {raw}")
     except tomllib.TOMLDecodeError:
         return raw
+    except RecursionError:  # thousands of levels: the parser gives up before we could count
+        parsed = None
+    if parsed is None or nesting_depth(parsed, key.count(".")) > MAX_NESTING:
+        raise ConfigError(
+            f"{key[:80]} = …: the value's tables and arrays nest more than {MAX_NESTING} "
+            "levels deep with its key's (a configuration file may not either)"
+        )
     return parsed["v"] if parsed.keys() == {"v"} else raw
 
 
@@ -61,7 +84,7 @@ def _split_key(key: str) -> list[str]:
     """Split a dotted key, rejecting empty components."""
     parts = [p.strip() for p in key.split(".")]
     if not key.strip() or any(not p for p in parts):
-        raise ConfigError(f"malformed key {key!r}: empty key component")
+        raise ConfigError(f"malformed key {key[:80]!r}: empty key component")
     return parts
 
 
@@ -79,7 +102,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     if not key:
         raise ConfigError(f"malformed override {text!r}: empty key")
     _split_key(key)
-    return key, _parse_value(raw.strip())
+    return key, _parse_value(raw.strip(), key)
 
 
 def _thaw(value: Any) -> Any:
@@ -101,11 +124,28 @@ def _default_tree() -> dict[str, Any]:
     return CwrendConfig().model_dump(mode="json")
 
 
+#: Digits of an array index in a dotted key: the longest array of a configuration
+#: (a degradation window list) is far shorter.
+_INDEX_DIGITS = 6
+
+
+def _array_index(part: str) -> int:
+    """A key component as an array index: ASCII digits only (``str.isdigit`` also takes
+    ``²``, which ``int`` refuses), at most :data:`_INDEX_DIGITS`; else :class:`ValueError`."""
+    if not (part.isascii() and part.isdigit()) or len(part) > _INDEX_DIGITS:
+        raise ValueError(f"not an array index: {part[:20]!r}")
+    return int(part)
+
+
 def _index(part: str, seq: list[Any], prefix: str) -> int:
     """A non-negative list index from a key component, range-checked."""
-    if not part.isdigit():
-        raise ConfigError(f"{prefix}: is an array, use an integer index instead of {part!r}")
-    idx = int(part)
+    try:
+        idx = _array_index(part)
+    except ValueError:
+        raise ConfigError(
+            f"{prefix}: is an array, use an index of at most {_INDEX_DIGITS} ASCII digits "
+            f"(0 to {len(seq) - 1}) instead of {part[:20]!r}"
+        ) from None
     if idx >= len(seq):
         raise ConfigError(f"{prefix}: index {idx} out of range ({len(seq)} entries)")
     return idx
@@ -154,7 +194,7 @@ def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
     """Value at a dotted key of a JSON tree (integer components index arrays)."""
     node: Any = tree
     for part in key.split("."):
-        node = node[part] if isinstance(node, Mapping) else node[int(part)]
+        node = node[part] if isinstance(node, Mapping) else node[_array_index(part)]
     return node
 
 

@@ -1,0 +1,138 @@
+"""Inputs that must be refused at once: exit 2, the field named, nothing written (issue 36, 7-11).
+
+Each case used to run for a minute or more, take gigabytes, record runs ``ok`` with
+infinite statistics or end in a traceback. Here each is fed to the command line
+in-process, in an empty working directory with the results root inside it, and
+the test checks exit code 2, the message (which names the field or option), no
+traceback and that nothing was written. Time and memory are not asserted (no
+test depends on the machine's speed): ``tests/measure_refusals.py`` runs the same
+cases in child processes and reports each one's wall time and peak memory.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
+BIG = "1e308"
+runner = CliRunner()
+
+#: A case: its command line from the working directory, and a text the error must hold.
+Setup = Callable[[Path], list[str]]
+
+
+def _ablate(*sets: str) -> Setup:
+    """``cwrend ablate`` of the paper campaign with ``--set`` overrides."""
+    return lambda d: ["ablate", str(PAPER), *[a for s in sets for a in ("--set", s)]]
+
+
+CASES: dict[str, tuple[Setup, str]] = {
+    # item 7: absurd finite values
+    "p0 of 1e308": (
+        _ablate(f"estimator.p0=[{BIG}, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10]"),
+        "estimator.p0 = [1e+308, ",
+    ),
+    "a full-matrix p0 of 1e308": (
+        _ablate(
+            "estimator.p0=["
+            + ", ".join(
+                "[" + ", ".join(BIG if i == j else "0" for j in range(6)) + "]" for i in range(6)
+            )
+            + "]"
+        ),
+        "diagonal entry 0 = 1e+308 must be in [1e-30, 100000000] km²",
+    ),
+    "r_nominal_km2 of 1e308": (
+        _ablate(f"estimator.r_nominal_km2=[{BIG}, {BIG}, {BIG}]"),
+        "estimator.r_nominal_km2 = ",
+    ),
+    "q_process of 1e308": (
+        _ablate(f"estimator.q_process=[1e-12, 1e-12, 1e-12, {BIG}, 1e-14, 1e-14]"),
+        "diagonal entry 3 = 1e+308 must be in [1e-30, 100] km/s²",
+    ),
+    "a window's bias_km of 1e308": (
+        _ablate(f"degradation.windows.1.bias_km=[{BIG}, 0.0, 0.0]"),
+        "degradation.windows.1.bias_km.0 = 1e+308: must be <= 10000",
+    ),
+    "initial_error of 1e308": (
+        _ablate(f"estimator.initial_error=[{BIG}, 0, 0, 0, 0, 0]"),
+        "estimator.initial_error.0 = 1e+308: must be <= 10000",
+    ),
+    "an initial velocity of 1e308": (
+        _ablate(f"scenario.x0.4={BIG}"),
+        "scenario.x0.4 = 1e+308: must be <= 10",
+    ),
+    "r_scale of 1e308": (
+        _ablate(f"degradation.windows.0.r_scale={BIG}"),
+        "degradation.windows.0.r_scale = 1e+308: must be <= 1000000",
+    ),
+    "beta of 1e308": (_ablate(f"schedule.beta={BIG}"), "schedule.beta = 1e+308: must be <= 1000"),
+    "kappa_mtf of 1e308": (_ablate(f"schedule.kappa_mtf={BIG}"), "schedule.kappa_mtf = 1e+308"),
+    "score_max of 1e308": (_ablate(f"schedule.score_max={BIG}"), "schedule.score_max = 1e+308"),
+    "t_resolve_s of 1e308": (
+        _ablate(f"guidance.t_resolve_s={BIG}"),
+        "guidance.t_resolve_s = 1e+308: must be <= 1000000",
+    ),
+    "max_iter of 10**12": (
+        _ablate("solver.max_iter=1000000000000"),
+        "solver.max_iter = 1000000000000: must be <= 1000",
+    ),
+    "run_timeout_s of 1e308": (
+        _ablate(f"output.run_timeout_s={BIG}"),
+        "output.run_timeout_s = 1e+308: must be <= 86400",
+    ),
+    "u_max of 1e308": (_ablate(f"scenario.u_max_km_s2={BIG}"), "scenario.u_max_km_s2 = 1e+308"),
+    # item 8: seeds past int64, deep values, indices that are not ASCII digits
+    "cwrend run --seed 2**63": (
+        lambda d: ["run", str(PAPER), "--no-rrd", "--seed", str(2**63)],
+        "--seed",
+    ),
+    "cwrend report --seed 2**63": (
+        lambda d: ["report", str(d), "--seed", str(2**63)],
+        "--seed",
+    ),
+    "--samples 2**70": (
+        lambda d: ["sweep", str(PAPER), "--design", "lhs", "--samples", str(2**70)],
+        "--samples",
+    ),
+    "a --set value nested 3,000 deep": (
+        _ablate("schedule.beta=" + "[" * 3000 + "]" * 3000),
+        "schedule.beta = …: the value's tables and arrays nest more than 16 levels deep",
+    ),
+    "a --param value nested 3,000 deep": (
+        lambda d: ["sweep", str(PAPER), "--param", "schedule.beta=" + "{a=" * 3000 + "}" * 3000],
+        "nest more than 16 levels deep",
+    ),
+    "a superscript index": (
+        _ablate("degradation.windows.\u00b2.r_scale=2"),
+        "degradation.windows: is an array, use an index of at most 6 ASCII digits",
+    ),
+    "a 5,000-digit index": (
+        _ablate("degradation.windows." + "1" * 5000 + ".r_scale=2"),
+        "degradation.windows: is an array, use an index of at most 6 ASCII digits",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_an_absurd_input_is_refused_at_once(
+    case: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    setup, message = CASES[case]
+    monkeypatch.chdir(tmp_path)
+    args = setup(tmp_path)
+    if args[0] in ("ablate", "sweep"):
+        args += ["--set", f"output.dir={str(tmp_path / 'results')!r}"]
+    before = set(os.listdir(tmp_path))
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr, result.stderr
+    assert "Traceback" not in result.output
+    assert set(os.listdir(tmp_path)) == before  # nothing written, not even a results dir
