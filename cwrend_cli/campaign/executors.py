@@ -1,7 +1,8 @@
 """Where campaign tasks run: one interface, a ``concurrent.futures.Executor``.
 
 * ``local`` (default): a process pool over the machine's cores (spawn start
-  method, workers ignore Ctrl-C so the parent can stop them cleanly);
+  method; Ctrl-C makes a worker stop its task and return the runs it
+  finished, the parent stops the campaign);
   ``workers = 1`` runs in-process.
 * ``dask``: a Dask distributed cluster through ``Client.get_executor()``; a
   ``LocalCluster`` when no address is given. Dask workers must see the
@@ -29,6 +30,7 @@ as before.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
@@ -43,9 +45,11 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from multiprocessing.context import BaseContext
 from multiprocessing.queues import Queue
+from types import FrameType
 from typing import Literal, ParamSpec, Protocol, TypeVar
 from urllib.parse import urlsplit
 
+from cwrend_cli.campaign.worker import stop_task
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.teardown import end_without_teardown
 
@@ -78,8 +82,43 @@ class InlineExecutor(Executor):
 _RUN_QUEUE: Queue[tuple[int, bool]] | None = None
 
 
+#: Signals a pool worker turns into a stop of its task (:func:`worker.stop_task`), not its end:
+#: the terminal sends Ctrl-C (and a hang-up) to the whole process group, and the driver
+#: forwards a stop to its workers (:func:`ask_workers_to_stop`); the parent decides the rest.
+#: SIGTERM still ends a worker (the driver's :func:`_terminate_workers`).
+WORKER_STOP_SIGNALS = (signal.SIGINT, signal.SIGHUP)
+
+
+def _stop_task(signum: int, frame: FrameType | None) -> None:
+    stop_task()
+
+
+@contextmanager
+def _stop_signals_blocked() -> Iterator[None]:
+    """Block :data:`WORKER_STOP_SIGNALS` in this thread while it starts worker processes.
+
+    A process inherits the blocked mask, so a Ctrl-C while a worker is still
+    importing (before its initializer installs :func:`_stop_task`) stays
+    pending in the worker instead of raising ``KeyboardInterrupt`` there and
+    printing its traceback (issue 36 item 12); the initializer unblocks it.
+    Here, a Ctrl-C that arrived meanwhile is delivered on leaving the block.
+    (Python's own resource tracker starts the same way.)
+    """
+    signal.pthread_sigmask(signal.SIG_BLOCK, WORKER_STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, WORKER_STOP_SIGNALS)
+
+
 def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
-    """Pool workers ignore Ctrl-C (the parent stops them) and exit if the parent dies.
+    """Pool workers stop their task on Ctrl-C (the parent stops the campaign), exit if the
+    parent dies.
+
+    Ctrl-C and SIGHUP (:data:`WORKER_STOP_SIGNALS`, blocked from the worker's
+    start by :func:`_stop_signals_blocked`) stop the task running, which
+    returns its finished runs (:func:`worker.stop_task`); they never print a
+    traceback.
 
     They end without the interpreter's teardown (:mod:`cwrend_cli.teardown`:
     0.5–0.6 s of every campaign's end, which waits for its workers to exit).
@@ -89,7 +128,9 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     cannot hold up the others.
     """
     global _RUN_QUEUE
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in WORKER_STOP_SIGNALS:
+        signal.signal(signum, _stop_task)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, WORKER_STOP_SIGNALS)
     if runs is not None:
         runs.cancel_join_thread()
         _RUN_QUEUE = runs
@@ -134,6 +175,22 @@ def _terminate_workers(pool: ProcessPoolExecutor) -> None:
     """
     for process in list((pool._processes or {}).values()):
         process.terminate()
+
+
+def ask_workers_to_stop(executor: Executor) -> None:
+    """Ask the workers of a local pool to stop their tasks, keeping their finished runs.
+
+    Each gets SIGINT (:func:`worker.stop_task`): its task returns at once
+    (:class:`~cwrend_cli.campaign.worker.TaskInterrupted`) with the runs it
+    finished. In-process and on Dask nothing is sent: an in-process task has
+    the Ctrl-C already, a Dask task runs to its end or is lost.
+    """
+    if not isinstance(executor, ProcessPoolExecutor):
+        return
+    for process in list((executor._processes or {}).values()):
+        with contextlib.suppress(OSError):  # it has just exited
+            if process.pid is not None:
+                os.kill(process.pid, signal.SIGINT)
 
 
 def _started() -> None:
@@ -292,8 +349,9 @@ def open_executor(
         context = multiprocessing.get_context("spawn")
         runs: Queue[tuple[int, bool]] = context.Queue()
         pool = _SignallingPool(runs, n, context)
-        for _ in range(n):  # start the workers now, while the driver prepares the first tasks
-            pool.submit(_started)
+        with _stop_signals_blocked():
+            for _ in range(n):  # start the workers now, while the driver prepares the first tasks
+                pool.submit(_started)
         try:
             yield pool, n
         except BaseException:  # Ctrl-C or a stop: the running tasks are abandoned, not awaited

@@ -1,0 +1,72 @@
+"""``cwrend`` with a signal sent at a state of the campaign, not at a time (for the tests).
+
+    python tests/hooked_cwrend.py WHEN N SIGNAL cwrend-arguments…
+
+sends ``SIGNAL`` once the driver has seen the ``N``-th state ``WHEN``:
+
+* ``journal``: the driver appended to ``events.jsonl`` (a task journaled);
+* ``run``: the driver heard a run finish (a per-run signal of a task in flight).
+
+SIGKILL (``kill -9``) and SIGSTOP (the test then acts while the campaign is
+frozen at that state, and lets it go on with SIGCONT) go to the campaign
+process alone; any other signal to its process group, as a terminal's Ctrl-C
+or hang-up reaches the workers too (tests start the child in a session of its
+own). So the signal lands at the same point of the campaign however fast the
+machine is. The driver's wait for the tasks in flight after Ctrl-C
+(``STOP_GRACE_S``) is set to an hour: what a stop keeps must not depend on the
+machine's speed either.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from typing import Any
+
+from cwrend_cli.campaign import driver
+
+
+def _send(signum: signal.Signals) -> None:
+    if signum in (signal.SIGKILL, signal.SIGSTOP):
+        os.kill(os.getpid(), signum)
+    else:
+        os.killpg(os.getpgrp(), signum)
+
+
+def _hook(when: str, after: int, signum: signal.Signals) -> None:
+    seen = [0]
+
+    def count() -> None:
+        seen[0] += 1
+        if seen[0] == after:
+            _send(signum)
+
+    if when == "journal":
+        append = driver.append_events  # type: ignore[attr-defined]
+
+        def appended(*args: Any, **kwargs: Any) -> None:
+            append(*args, **kwargs)
+            count()
+
+        driver.append_events = appended  # type: ignore[attr-defined]
+    elif when == "run":
+        heard = driver._RunTally.heard
+
+        def heard_run(self: driver._RunTally, token: int, ok: bool) -> None:
+            heard(self, token, ok)
+            count()
+
+        driver._RunTally.heard = heard_run  # type: ignore[method-assign]
+    else:
+        raise SystemExit(f"unknown state {when!r}")
+
+
+if __name__ == "__main__":
+    when, after, name = sys.argv[1:4]
+    driver.STOP_GRACE_S = 3600.0
+    _hook(when, int(after), signal.Signals[name])
+    sys.argv = ["cwrend", *sys.argv[4:]]
+    from cwrend_cli.__main__ import main
+
+    main()

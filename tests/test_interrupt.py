@@ -1,0 +1,130 @@
+"""Ctrl-C keeps every finished run, not only whole tasks (issue 37 item 2).
+
+A task of many seeds stopped by Ctrl-C returns the runs it finished (their
+files written, the run in progress dropped) and the driver journals them; the
+progress bar and the summary end on what the journal holds, which is exactly
+what a resume skips. Each interruption lands at a state of the campaign (a
+run finished), never after a time.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+from typer.testing import CliRunner
+
+from cwrend_cli import campaign
+from cwrend_cli.cli import app
+from cwrend_cli.config import load_config
+
+runner = CliRunner()
+ADAPTIVE = ["mtf_adaptive", "plain_adaptive"]  # the fast architectures
+HOOKED = Path(__file__).with_name("hooked_cwrend.py")
+#: Only guards against a hang: what is asserted never depends on the time taken.
+HANG_S = 600
+
+
+def _config(tmp_path: Path, name: str) -> Path:
+    path = tmp_path / f"{name}.toml"
+    results = tmp_path / "results"
+    path.write_text(f'[output]\ndir = "{results}"\nname = "{name}"\nseeds_per_task = 8\n')
+    return path
+
+
+class _CtrlCAfter:
+    """A progress that raises Ctrl-C when it hears the ``n``-th run finish (once)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.advanced = 0
+
+    def start(self, total: int, skipped: int) -> None:
+        pass
+
+    def advance(self, ok: int, failed: int) -> None:
+        self.advanced += ok + failed
+        if self.n and self.advanced >= self.n:
+            self.n = 0
+            raise KeyboardInterrupt
+
+    def close(self) -> None:
+        pass
+
+
+def test_ctrl_c_in_a_task_keeps_the_runs_it_finished(tmp_path: Path) -> None:
+    """In-process: one task of 16 runs, Ctrl-C after its third run: three runs are kept,
+    the bar ends at three, and the resume computes the other 13 to the same numbers."""
+    plan_ = campaign.plan(load_config(_config(tmp_path, "c")), ADAPTIVE, list(range(8)))
+    assert len(plan_.tasks) == 1 and len(plan_.runs) == 16
+    out = tmp_path / "results" / "c"
+    progress = _CtrlCAfter(3)
+    summary = campaign.run_campaign(plan_, out, command="ablate", workers=1, progress=progress)
+    assert summary.interrupted
+    assert summary.executed == 3 and progress.advanced == 3
+    assert len(pd.read_parquet(out / "runs.parquet")) == 3
+    resumed = campaign.run_campaign(plan_, out, command="ablate", workers=1)
+    assert (resumed.skipped, resumed.executed) == (3, 13)
+    whole = tmp_path / "results" / "whole"
+    campaign.run_campaign(plan_, whole, command="ablate", workers=1)
+    pd.testing.assert_frame_equal(_runs(out), _runs(whole))
+    steps = pd.read_parquet(out / "steps").sort_values(["run_key", "step"], ignore_index=True)
+    expected = pd.read_parquet(whole / "steps").sort_values(["run_key", "step"], ignore_index=True)
+    pd.testing.assert_frame_equal(steps, expected, check_exact=True)  # no duplicate, no gap
+
+
+def _runs(out: Path) -> pd.DataFrame:
+    """``runs.parquet`` without its wall-time columns (they differ between equal runs)."""
+    runs = pd.read_parquet(out / "runs.parquet")
+    timing = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms")
+    return runs.drop(columns=[c for c in timing if c in runs.columns])
+
+
+def _sigint_default() -> None:
+    """In the child: SIGINT at its default, as in a terminal (see test_campaign)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def test_ctrl_c_to_a_pool_keeps_the_finished_runs_the_summary_counts(tmp_path: Path) -> None:
+    """Two workers, two tasks of 16 runs; Ctrl-C to the process group when the first run
+    finishes: the summary's done count is > 0 and is exactly what the resume skips."""
+    cfg = _config(tmp_path, "pool")
+    args = ["ablate", str(cfg), "--seeds", "16", "--arch", ",".join(ADAPTIVE), "--no-rrd"]
+    proc = subprocess.run(
+        [sys.executable, str(HOOKED), "run", "1", "SIGINT", *args, "--workers", "2"],
+        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
+        preexec_fn=_sigint_default,
+    )  # fmt: skip
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr + proc.stdout
+    found = re.search(r"interrupted: (\d+) of 32 runs done \((\d+) computed now\)", proc.stderr)
+    assert found, proc.stderr
+    done = int(found[1])
+    assert done > 0 and int(found[2]) == done
+    resumed = runner.invoke(app, [*args, "--workers", "1"])
+    assert resumed.exit_code == 0, resumed.output
+    assert f"{32 - done} run(s) computed, {done} already done" in resumed.stderr
+
+
+def test_a_stopped_pool_leaves_no_file_of_a_run_it_did_not_keep(tmp_path: Path) -> None:
+    """The files a stopped execution wrote name only the runs it journaled."""
+    cfg = _config(tmp_path, "files")
+    args = ["ablate", str(cfg), "--seeds", "16", "--arch", ",".join(ADAPTIVE), "--no-rrd", "-q"]
+    proc = subprocess.run(
+        [sys.executable, str(HOOKED), "run", "3", "SIGINT", *args, "--workers", "2"],
+        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
+        preexec_fn=_sigint_default,
+    )  # fmt: skip
+    assert proc.returncode == 130, proc.stderr
+    out = tmp_path / "results" / "files"
+    kept = set(pd.read_parquet(out / "runs.parquet")["run_key"])
+    assert kept
+    assert set(pd.read_parquet(out / "solves")["run_key"]) == kept
+    steps = pd.read_parquet(out / "steps")
+    assert set(steps["run_key"]) == kept and len(steps) == len(kept) * 801
+    assert os.listdir(out / "steps")  # the data were written, not only journaled
