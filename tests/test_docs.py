@@ -8,6 +8,7 @@ these tests read the same walk of the schema the hook renders.
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -97,8 +98,60 @@ def test_the_reference_shows_every_bound_the_schema_enforces() -> None:
                     value = getattr(rule, attr, None)
                     if isinstance(rule, (at.Ge, at.Gt, at.Le, at.Lt)) and value is not None:
                         shown = rows[f"{section}.{name}"]
-                        number = _hook()._fmt_number(value)
+                        number = _hook().fmt_bound(value)
                         assert number in shown, (section, name, attr, value, shown)
                         assert opener in shown or ("≥>≤<"["[(])".index(opener)] in shown)
                         checked += 1
     assert checked > 20
+
+
+# ---------------------------------------------------------------------------
+# The README: a front page, the two commands CI runs, no lab notebook
+# ---------------------------------------------------------------------------
+
+README = (REPO / "README.md").read_text(encoding="utf-8")
+CI_LINES = [line.strip() for line in (REPO / ".ci/run").read_text(encoding="utf-8").splitlines()]
+#: A commit hash: 7 to 40 hex digits with at least one letter and one digit, as a word.
+COMMIT = re.compile(
+    r"(?<![0-9A-Za-z])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}(?![0-9A-Za-z])"
+)
+#: An issue reference: "issue 17", "issues 15", "#17", "item 3".
+ISSUE = re.compile(r"\bissues?\s*#?\d+|(?<![\w&])#\d+\b|\bitems?\s+\d+", re.IGNORECASE)
+
+
+def _commands() -> list[str]:
+    return [block.strip() for block in re.findall(r"```bash\n(.*?)```", README, re.DOTALL)]
+
+
+def test_the_readme_is_a_front_page_under_300_lines() -> None:
+    assert len(README.splitlines()) < 300
+
+
+def test_the_readme_names_no_commit() -> None:
+    assert COMMIT.findall(README) == []
+
+
+def test_the_readme_names_no_issue() -> None:
+    assert ISSUE.findall(README) == []
+
+
+def test_the_readme_opens_with_the_install_and_run_command() -> None:
+    assert _commands()[0] == (
+        "python3 -m venv .venv && . .venv/bin/activate && pip install . && "
+        "cwrend ablate campaigns/paper.toml"
+    )
+
+
+def test_the_readme_test_command_is_what_ci_runs() -> None:
+    install, test = _commands()[1].rsplit(" && ", 1)
+    assert install == 'python3 -m venv .venv && . .venv/bin/activate && pip install ".[test]"'
+    assert install in CI_LINES, ".ci/run installs otherwise than the README says"
+    assert test == "pytest -q" and test in CI_LINES, ".ci/run tests otherwise than the README"
+
+
+def test_the_readme_links_to_files_that_exist() -> None:
+    targets = re.findall(r"\]\(([^)#\s]+)[^)]*\)", README)
+    local = [t for t in targets if "://" not in t]
+    assert len(local) > 10
+    for target in local:
+        assert (REPO / target).exists(), target

@@ -22,6 +22,7 @@ import re
 import types
 import typing
 from dataclasses import dataclass
+from decimal import Decimal
 from pathlib import Path
 from typing import Any
 
@@ -109,6 +110,21 @@ def _fmt_value(value: Any) -> str:
     return str(value)
 
 
+def fmt_bound(value: float | int) -> str:
+    """A bound as a reader writes it: 1e6, 1e-6, 0.0013, 180 (the value, shortest form)."""
+    if isinstance(value, int) or (value.is_integer() and abs(value) < 1e5):
+        return str(int(value))
+    text = repr(value)  # the shortest form that reads back as the same float
+    if "e" not in text and abs(value) >= 1e5:
+        text = format(Decimal(text), "e")  # exact: 1234567.5 -> 1.2345675e+6
+    if "e" not in text:
+        return text
+    mantissa, exponent = text.split("e")
+    if "." in mantissa:
+        mantissa = mantissa.rstrip("0").rstrip(".")
+    return f"{mantissa}e{int(exponent)}"
+
+
 def _interval(prop: dict[str, Any]) -> str:
     """The numeric bounds of one JSON-schema node, in interval notation."""
     lo = ("[", prop["minimum"]) if "minimum" in prop else None
@@ -118,11 +134,11 @@ def _interval(prop: dict[str, Any]) -> str:
     if "exclusiveMaximum" in prop:
         hi = (")", prop["exclusiveMaximum"])
     if lo and hi:
-        return f"{lo[0]}{_fmt_number(lo[1])}, {_fmt_number(hi[1])}{hi[0]}"
+        return f"{lo[0]}{fmt_bound(lo[1])}, {fmt_bound(hi[1])}{hi[0]}"
     if lo:
-        return f"{'≥' if lo[0] == '[' else '>'} {_fmt_number(lo[1])}"
+        return f"{'≥' if lo[0] == '[' else '>'} {fmt_bound(lo[1])}"
     if hi:
-        return f"{'≤' if hi[0] == ']' else '<'} {_fmt_number(hi[1])}"
+        return f"{'≤' if hi[0] == ']' else '<'} {fmt_bound(hi[1])}"
     return ""
 
 
@@ -140,7 +156,19 @@ def _bounds(prop: dict[str, Any]) -> str:
     if inner and all(b == inner[0] for b in inner) and inner[0]:
         parts.append(f"each {inner[0]}")
     elif any(inner):
-        parts.append("entries " + "; ".join(b or "any" for b in inner))
+        groups: list[tuple[int, int, str]] = []  # runs of entries with the same bounds
+        for i, bound in enumerate(inner, start=1):
+            if groups and groups[-1][2] == bound:
+                groups[-1] = (groups[-1][0], i, bound)
+            else:
+                groups.append((i, i, bound))
+        parts.append(
+            "entries "
+            + "; ".join(
+                f"{first}{f'–{last}' if last > first else ''} {bound or 'any'}"
+                for first, last, bound in groups
+            )
+        )
     for alt in prop.get("anyOf", []):
         if alt.get("type") != "null":
             parts.append(_bounds(alt))
@@ -240,7 +268,8 @@ def _tables(
             )
         )
     own = [Table(prefix, header, description, tuple(leaves))] if leaves else []
-    return own + nested
+    # the top level's own values (the campaign tables) after the sections
+    return nested + own if not prefix else own + nested
 
 
 def config_tables() -> list[Table]:
@@ -270,10 +299,11 @@ def render_reference() -> str:
     """The Markdown of the configuration reference (one table per TOML table)."""
     out: list[str] = []
     for table in config_tables():
-        title = table.name or "Campaign tables (top level)"
+        title = table.name or "Top level: campaign grids"
         out.append(f"## `{title}`\n")
         if table.name:
-            out.append(f"TOML: `{table.toml_header}`. {table.description.capitalize()}.\n")
+            about = table.description[:1].upper() + table.description[1:]
+            out.append(f"TOML: `{table.toml_header}`. {about}.\n")
         out.append("| key | type | unit | default | bounds | description |")
         out.append("|---|---|---|---|---|---|")
         for leaf in table.leaves:
