@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import StrEnum
@@ -384,6 +384,16 @@ ArchsOption = Annotated[
         metavar="ARCHS",
     ),
 ]
+PairOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--pair",
+        help="Also compare A with B seed by seed (A:B, two architectures of the campaign; "
+        "repeatable). By default: MTF vs plain and adaptive vs fixed within each re-solve "
+        "method, and cone program vs shooting.",
+        metavar="A:B",
+    ),
+]
 WorkersOption = Annotated[
     int | None,
     typer.Option(
@@ -498,6 +508,7 @@ class CampaignOptions:
     batch: int = 50
     max_seeds: int = 1000
     strict: bool = False  # ablate --until: exit 1 when the target is not met
+    pairs: tuple[str, ...] = ()  # --pair A:B, compared besides statistics.DEFAULT_PAIRS
 
 
 def command_line() -> list[str]:
@@ -560,6 +571,7 @@ def _campaign(
     with user_errors(), _second_ctrl_c_exits_130(err):
         from cwrend_cli import campaign
         from cwrend_cli.campaign import design, sequential
+        from cwrend_cli.campaign.statistics import campaign_pairs
         from cwrend_cli.config import load_config
         from cwrend_cli.console import until_console_table
         from cwrend_cli.output import recording
@@ -583,24 +595,25 @@ def _campaign(
         if opts.samples is not None and opts.design is None:
             raise ConfigError("--samples sets the size of a --design")
         archs = [a.slug for a in _parse_archs(opts.arch)]
+        pairs = campaign_pairs(opts.pairs, archs)
         out = _campaign_dir(cfg, opts.name)
         if opts.until is None:
             if opts.strict:
                 raise ConfigError("--strict: applies to --until only; add --until TARGET")
             seeds = _seeds(opts.seeds, opts.seed_list)
             plan, summary, statistics = _campaign_step(
-                command, cfg, archs, seeds, params, opts, out, err
+                command, cfg, archs, seeds, params, opts, out, err, pairs
             )
             achieved: list[sequential.Achieved] = []
         else:
             if opts.seeds is not None or opts.seed_list is not None:
                 raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
-            target = sequential.parse_until(opts.until)
+            target = sequential.parse_until(opts.until, pairs)
             if opts.max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             for n in sequential.seed_counts(opts.batch, opts.max_seeds):
                 plan, summary, statistics = _campaign_step(
-                    command, cfg, archs, list(range(n)), params, opts, out, err
+                    command, cfg, archs, list(range(n)), params, opts, out, err, pairs
                 )
                 achieved = sequential.achieved(statistics.frame, target, archs)
                 if summary.interrupted or (
@@ -614,7 +627,7 @@ def _campaign(
                         f"> {widest.limit:.3g}); next batch",
                         markup=False,
                     )
-        _report_campaign(command, plan, summary, statistics, out, opts, err)
+        _report_campaign(command, plan, summary, statistics, out, opts, err, pairs)
         if achieved and not opts.quiet:
             _console().print(until_console_table(achieved, opts.until or ""))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
@@ -648,8 +661,9 @@ def _campaign_step(
     opts: CampaignOptions,
     out: Path,
     err: Console,
+    pairs: Sequence[tuple[str, str]],
 ) -> tuple[campaign.CampaignPlan, campaign.CampaignSummary, campaign.CampaignStatistics]:
-    """Plan, run (resuming) and compute the statistics of one campaign invocation."""
+    """Plan, run (resuming) and compute the statistics (with ``pairs``) of one invocation."""
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
     from cwrend_cli.campaign.executors import default_workers
@@ -675,7 +689,7 @@ def _campaign_step(
         argv=command_line(),
     )  # fmt: skip
     with progress.phase("computing statistics"):
-        statistics = campaign.write_statistics(out, command, plan.root_seed)
+        statistics = campaign.write_statistics(out, command, plan.root_seed, pairs)
     return plan, summary, statistics
 
 
@@ -687,6 +701,7 @@ def _report_campaign(
     out: Path,
     opts: CampaignOptions,
     err: Console,
+    pairs: Sequence[tuple[str, str]],
 ) -> None:
     """The console tables and summary line of a finished (or interrupted) campaign."""
     from cwrend_cli import campaign
@@ -709,7 +724,7 @@ def _report_campaign(
         # a re-run naming fewer seeds, architectures or points than the directory holds:
         # report on exactly the runs asked for; the statistics file covers them all
         with phase(err, f"{label}: computing statistics of the runs named"):
-            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked)
+            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked, pairs)
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
         err.print(
             f"note: the tables cover the {len(asked & held)} run(s) this command names; "
@@ -723,9 +738,9 @@ def _report_campaign(
     if not stats.empty:
         if command == "ablate":
             stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
-            pairs = paired_console_table(stats)
-            if pairs is not None:
-                stdout.print(pairs)
+            paired = paired_console_table(stats)
+            if paired is not None:
+                stdout.print(paired)
         elif plan.design is not None:  # hundreds of sampled points: no per-point table
             err.print(
                 f"{len({r.point for r in plan.runs})} design points: the statistics of each "
@@ -802,6 +817,7 @@ def ablate(
             help="With --until: exit 1 when --max-seeds is reached with the target not met.",
         ),
     ] = False,
+    pair: PairOption = None,
     set_: SetOption = None,
 ) -> None:
     """Compare the architectures on the same noise per seed (plus open-loop references).
@@ -817,7 +833,7 @@ def ablate(
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, until=until, batch=batch, max_seeds=max_seeds,
-                           strict=strict)  # fmt: skip
+                           strict=strict, pairs=tuple(pair or ()))  # fmt: skip
     _campaign("ablate", file, set_, [], opts)
 
 
@@ -888,6 +904,7 @@ def sweep(
             "+ 2) points; extends the first-order design of the same samples).",
         ),
     ] = False,
+    pair: PairOption = None,
     set_: SetOption = None,
 ) -> None:
     """Grid (cartesian product) × architectures × seeds, with [dispersions] per run.
@@ -898,7 +915,8 @@ def sweep(
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, design=design_, samples=samples,
-                           ranges=tuple(range_ or ()), second_order=second_order)  # fmt: skip
+                           ranges=tuple(range_ or ()), second_order=second_order,
+                           pairs=tuple(pair or ()))  # fmt: skip
     _campaign("sweep", file, set_, list(param or []), opts)
 
 

@@ -7,7 +7,9 @@ bounded number in flight (:func:`~cwrend_cli.campaign.worker.execute_task`)
 and journals each as it completes, then writes ``runs.parquet`` and the
 manifest. It computes each grid point's open-loop references when the
 point's first task is submitted (once per distinct scenario and solver),
-hands them to the tasks and writes them to ``references/<point>.parquet``.
+hands them to the tasks and writes them once per scenario and solver to
+``references/r<digest>.parquet``, each point's file named in
+``references/index.jsonl``.
 :func:`write_statistics` writes ``ablation.parquet`` / ``sweep.parquet``
 from ``runs.parquet``. Progress is reported through the :class:`Progress`
 protocol, run by run where the executor signals runs (the local pool and
@@ -54,15 +56,18 @@ from cwrend_cli.campaign.journal import (
     finish_manifest,
     load_journal,
     new_manifest,
+    read_events,
     remove_orphan_files,
     wipe,
 )
 from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task
 from cwrend_cli.campaign.worker import (
+    InputChangedError,
     ReferencesKey,
     TaskInterrupted,
     TaskOutcome,
     execute_task,
+    references_id,
     references_key,
     seeds_to_record,
 )
@@ -75,6 +80,7 @@ from cwrend_cli.output.layout import (
     MANIFEST,
     POINTS,
     PROBLEM,
+    REFERENCES_INDEX,
     RUNS,
     SENSITIVITY,
     SWEEP_STATS,
@@ -173,10 +179,15 @@ class _PointReferences:
     """The open-loop references of the grid points of one campaign invocation.
 
     Computed when a point's first task is submitted, once per distinct
-    (scenario, solver), and written to ``references/<point>.parquet``. A
-    computation that fails is remembered as ``None``: the tasks then compute
-    the references run by run, so each run fails with its own error, as it
-    would have alone.
+    (scenario, solver) (:func:`~cwrend_cli.campaign.worker.references_key`),
+    and written once per distinct (scenario, solver) to
+    ``references/<references_id>.parquet``: a sweep of the schedule's
+    hyperparameters writes one file, not one per point. Each point's file is
+    named by a line of ``references/index.jsonl``, appended (and on disk)
+    before any of the point's tasks is submitted, hence before any of its
+    runs is journaled. A computation that fails is remembered as ``None``:
+    the tasks then compute the references run by run, so each run fails with
+    its own error, as it would have alone.
     """
 
     def __init__(self, out_dir: Path, campaign_hash: str, config_hash: str) -> None:
@@ -184,7 +195,11 @@ class _PointReferences:
         self._campaign_hash = campaign_hash
         self._config_hash = config_hash
         self._by_key: dict[ReferencesKey, simulation.References | None] = {}
-        self._written: set[str] = set()
+        self._written: set[str] = set()  # reference files written by this invocation
+        index = out_dir / REFERENCES_INDEX
+        self._indexed = {  # points the index names already (a resumed campaign)
+            str(e["point"]) for e in (read_events(index) if index.exists() else ()) if "point" in e
+        }
 
     def of(self, task: Task) -> simulation.References | None:
         """The references of ``task``'s point (``None`` if they cannot be computed)."""
@@ -195,14 +210,20 @@ class _PointReferences:
             except Exception:  # the runs report it, one by one
                 self._by_key[key] = None
         refs = self._by_key[key]
-        if refs is not None and task.point not in self._written:
-            meta = {
-                "config_hash": self._config_hash,
-                "campaign_hash": self._campaign_hash,
-                "point": task.point,
-            }
-            write_parquet(references_table(refs, meta), self._out_dir / references_path(task.point))
-            self._written.add(task.point)
+        if refs is not None and task.point not in self._indexed:
+            name = references_id(key)
+            rel = references_path(name)
+            if rel not in self._written and not (self._out_dir / rel).exists():
+                meta = {
+                    "config_hash": self._config_hash,
+                    "campaign_hash": self._campaign_hash,
+                    "references": name,
+                }
+                table = references_table(refs, meta)
+                write_parquet(table, self._out_dir / rel, root=self._out_dir)
+            self._written.add(rel)
+            append_events(self._out_dir / REFERENCES_INDEX, [{"point": task.point, "file": rel}])
+            self._indexed.add(task.point)
         return refs
 
 
@@ -328,7 +349,7 @@ def _run_locked(
     if force:
         wipe(out_dir)
     previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
-    executions_before, done, owed = _journal_before(out_dir, plan_, retry_failed)
+    journaled_to, done, owed = _journal_before(out_dir, plan_, retry_failed)
     tasks = [
         replace(t, runs=tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
     ]
@@ -364,10 +385,10 @@ def _run_locked(
             journal = load_journal(out_dir / EVENTS)
             records = list(journal.runs.values())
             # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
-            # journal write and the progress update must not make the count lie)
-            new = [
-                e["status"] == "ok" for e in records if e.get("execution") not in executions_before
-            ]
+            # journal write and the progress update must not make the count lie), also those
+            # rerun under an execution name they had before (--retry-failed of a whole task)
+            since = load_journal(out_dir / EVENTS, start=journaled_to).runs.values()
+            new = [e["status"] == "ok" for e in since]
             computed = len(new)
             progress.settle(sum(new), computed - sum(new))  # the bar ends on what is kept
             ok = sum(r["status"] == "ok" for r in records)
@@ -411,9 +432,9 @@ def _points_of(records: Sequence[Mapping[str, Any]]) -> list[tuple[str, Mapping[
 
 def _journal_before(
     out_dir: Path, plan_: CampaignPlan, retry_failed: bool
-) -> tuple[set[object], set[str], list[Task]]:
-    """Clean the orphans of a campaign directory; its executions with runs, its done runs and
-    the tasks that write again the recordings it owes (:func:`_owed_recordings`).
+) -> tuple[int, set[str], list[Task]]:
+    """Clean the orphans of a campaign directory; its journal's size [bytes], its done runs
+    and the tasks that write again the recordings it owes (:func:`_owed_recordings`).
 
     Done: ok runs, failed ones too unless ``retry_failed``. The journal's
     state is released on return, so the campaign never holds it while it
@@ -421,9 +442,9 @@ def _journal_before(
     """
     journal = load_journal(out_dir / EVENTS)
     remove_orphan_files(out_dir, journal.files)
-    executions = {e.get("execution") for e in journal.runs.values()}
+    size = (out_dir / EVENTS).stat().st_size if (out_dir / EVENTS).exists() else 0
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
-    return executions, done, _owed_recordings(out_dir, plan_, journal, done)
+    return size, done, _owed_recordings(out_dir, plan_, journal, done)
 
 
 def _owed_recordings(
@@ -508,6 +529,8 @@ def _execute(
                 pending = _drive(
                     pool, parallel, pending, plan_, out_dir, progress, references, attempts
                 )
+        except InputChangedError:
+            raise
         except (CwrendError, OSError) as exc:  # only opening or closing the executor raises these
             if not reopened:
                 raise
@@ -538,6 +561,7 @@ def _drive(
     in_flight: dict[Future[TaskOutcome], tuple[int, Task]] = {}
     lost: list[Task] = []
     fatal: str | None = None
+    changed: InputChangedError | None = None  # the campaign's input changed: exit 2
     limit = 2 * parallel
     submitted = 0
     dead_s = 0.0  # how long the executor has been unable to deliver results
@@ -599,6 +623,10 @@ def _drive(
                 token, task = in_flight.pop(future)
                 try:
                     outcome = future.result()
+                except InputChangedError as exc:  # no new task; those in flight are kept
+                    tally.lost(token)
+                    changed, fatal = exc, fatal or str(exc)
+                    continue
                 except Exception as exc:  # the execution did not come back: not a result
                     tally.lost(token)
                     fatal = fatal or _count_attempt(task, exc, attempts)
@@ -617,6 +645,8 @@ def _drive(
         for future in in_flight:
             future.cancel()
         raise
+    if changed is not None:
+        raise changed
     if fatal is not None:
         raise _StopError(fatal)
     return [*lost, *queue] if lost else []
@@ -688,14 +718,17 @@ class CampaignStatistics:
 
 
 def _statistics(
-    runs: pd.DataFrame, command: Literal["ablate", "sweep"], root_seed: int
+    runs: pd.DataFrame,
+    command: Literal["ablate", "sweep"],
+    root_seed: int,
+    pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
 ) -> tuple[pd.DataFrame, tuple[str, ...]]:
     groups = () if command == "ablate" else ("point", *param_columns(runs.columns))
     by = [*groups, "arch"]
     frame = pd.concat(
         [
             statistics.describe(runs, by, seed=root_seed),
-            statistics.paired(runs, list(groups), seed=root_seed),
+            statistics.paired(runs, list(groups), seed=root_seed, pairs=pairs),
         ],
         ignore_index=True,
     )
@@ -715,18 +748,22 @@ def _stored_metadata(out_dir: Path) -> dict[str, str]:
 
 
 def write_statistics(
-    out_dir: Path, command: Literal["ablate", "sweep"], root_seed: int
+    out_dir: Path,
+    command: Literal["ablate", "sweep"],
+    root_seed: int,
+    pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
 ) -> CampaignStatistics:
     """Compute the statistics of ``runs.parquet`` and write them beside it.
 
     ``ablate``: per architecture, into ``ablation.parquet``; ``sweep``: per
     grid point (with its swept values) and architecture, into
-    ``sweep.parquet``. Each with its paired comparisons; the bootstrap is
-    seeded from ``root_seed``. Nothing is written when there are no
-    statistics. The file always covers every run the directory holds.
+    ``sweep.parquet``. Each with its paired comparisons of ``pairs`` (those
+    present; :func:`statistics.paired`); the bootstrap is seeded from
+    ``root_seed``. Nothing is written when there are no statistics. The file
+    always covers every run the directory holds.
     """
     runs = pd.read_parquet(out_dir / RUNS)
-    frame, groups = _statistics(runs, command, root_seed)
+    frame, groups = _statistics(runs, command, root_seed, pairs)
     if frame.empty:
         return CampaignStatistics(frame, groups, None)
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
@@ -789,13 +826,15 @@ def subset_statistics(
     command: Literal["ablate", "sweep"],
     root_seed: int,
     run_keys: Collection[str],
+    pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
 ) -> CampaignStatistics:
     """The statistics of the runs ``run_keys`` of the directory only; nothing is written.
 
     What a re-run naming fewer seeds, architectures or grid points reports;
-    computed as for the whole directory (same groups, bootstrap seeded from
-    ``root_seed``).
+    computed as for the whole directory (same groups and ``pairs``, bootstrap
+    seeded from ``root_seed``).
     """
     runs = pd.read_parquet(out_dir / RUNS)
-    frame, groups = _statistics(runs[runs["run_key"].isin(set(run_keys))], command, root_seed)
+    subset = runs[runs["run_key"].isin(set(run_keys))]
+    frame, groups = _statistics(subset, command, root_seed, pairs)
     return CampaignStatistics(frame, groups, None)

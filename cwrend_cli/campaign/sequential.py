@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from cwrend_cli.campaign.statistics import METRICS, PAIRS, STATISTICS
+from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, STATISTICS
 from cwrend_cli.errors import ConfigError
 
 __all__ = [
@@ -78,8 +78,11 @@ class Target:
     pair: tuple[str, str] | None = None  # a paired difference A − B, else every architecture
 
 
-def parse_until(text: str) -> Target:
-    """Parse ``--until``; :class:`ConfigError` with the syntax on a bad target."""
+def parse_until(text: str, pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS) -> Target:
+    """Parse ``--until``; :class:`ConfigError` with the syntax on a bad target.
+
+    A paired target names one of ``pairs``, those the campaign compares.
+    """
     syntax = (
         "[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%], e.g. miss_km:0.0005, median.miss_km:5% or "
         "miss_km@mtf_adaptive-plain_adaptive:0.0005"
@@ -103,8 +106,8 @@ def parse_until(text: str) -> Target:
             raise ConfigError(f"--until {text!r}: statistic must be one of {', '.join(STATISTICS)}")
         return Target(metric, statistic, width / 100 if relative else width, relative)
     pair = (m["a"], m["b"])
-    if pair not in PAIRS:
-        known = ", ".join(f"{a}-{b}" for a, b in PAIRS)
+    if pair not in pairs:
+        known = ", ".join(f"{a}-{b}" for a, b in pairs)
         raise ConfigError(f"--until {text!r}: pairs compared are {known}")
     if metric not in _PAIRED_STATISTIC:
         raise ConfigError(f"--until {text!r}: a paired target is on miss_km or delta_v_km_s")

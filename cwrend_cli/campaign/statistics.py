@@ -31,6 +31,7 @@ after a campaign's runs.
 
 from __future__ import annotations
 
+import zlib
 from collections import deque
 from collections.abc import Callable, Hashable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -42,6 +43,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from cwrend_cli.campaign.executors import default_workers
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.params import ALL_ARCHITECTURES
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
 CONFIDENCE = 0.95
@@ -59,7 +62,9 @@ Statistic = Callable[..., Any]
 
 #: Pairs compared seed by seed (first vs second), when both are in a campaign: the
 #: estimators, the schedules, and each cone-program architecture against its
-#: shooting counterpart (issue 16, item 5).
+#: shooting counterpart (issue 16, item 5). Their rows are bootstrapped from one
+#: stream in this order, as since issue 16: kept as they are so that the rows of
+#: every campaign stay the same; any other pair is an *added* pair (see :func:`paired`).
 PAIRS = (
     ("mtf_adaptive", "plain_adaptive"),
     ("mtf_adaptive", "mtf_fixed"),
@@ -70,6 +75,66 @@ PAIRS = (
     ("plain_adaptive_socp", "plain_adaptive"),
     ("mtf_adaptive_socp", "mtf_adaptive"),
 )
+#: Stream of an added pair's bootstrap: ``default_rng([seed, PAIR_STREAM, crc32("A:B")])``.
+PAIR_STREAM = 2**32 - 2
+
+
+def _pairs_by_rule() -> tuple[tuple[str, str], ...]:
+    """Every pair that differs in one design choice, better-expected first.
+
+    Within each re-solve method: MTF vs plain at the same schedule, adaptive
+    vs fixed at the same estimator; across methods: cone program vs shooting
+    at the same estimator and schedule. Ordered as :data:`PAIRS` (the
+    architectures of :data:`~cwrend_cli.physics.params.ALL_ARCHITECTURES` from
+    the last: MTF adaptive first).
+    """
+    archs = list(ALL_ARCHITECTURES.values())[::-1]
+    out: list[tuple[str, str]] = []
+    for a in archs:
+        for b in archs:
+            same_method = a.method == b.method
+            estimator = same_method and a.adaptive == b.adaptive and a.mtf and not b.mtf
+            schedule = same_method and a.mtf == b.mtf and a.adaptive and not b.adaptive
+            twins = (a.mtf, a.adaptive) == (b.mtf, b.adaptive)
+            method = twins and a.method == "socp" and b.method is None
+            if estimator or schedule or method:
+                out.append((a.slug, b.slug))
+    return tuple(out)
+
+
+#: The pairs every campaign compares when both architectures are in it: :data:`PAIRS`
+#: (its rows as they always were), then the other pairs of :func:`_pairs_by_rule` (the
+#: estimators and schedules of the cone-program architectures, issue 37), added pairs.
+DEFAULT_PAIRS = PAIRS + tuple(p for p in _pairs_by_rule() if p not in PAIRS)
+
+
+def campaign_pairs(asked: Sequence[str], archs: Sequence[str]) -> tuple[tuple[str, str], ...]:
+    """The pairs a campaign of ``archs`` compares: :data:`DEFAULT_PAIRS`, then ``--pair A:B``.
+
+    Each of ``asked`` names two different architectures of the campaign;
+    :class:`ConfigError` naming ``--pair`` and the campaign's architectures
+    otherwise. A pair already compared by default is not repeated.
+    """
+    choices = ", ".join(archs)
+    out = list(DEFAULT_PAIRS)
+    for text in asked:
+        parts = [p.strip() for p in text.split(":")]
+        if len(parts) != 2 or not all(parts):
+            raise ConfigError(
+                f"--pair {text!r}: expected A:B, two architectures of the campaign ({choices})"
+            )
+        a, b = parts
+        for slug in (a, b):
+            if slug not in archs:
+                known = "not in this campaign" if slug in ALL_ARCHITECTURES else "unknown"
+                raise ConfigError(
+                    f"--pair {text!r}: architecture {slug!r} is {known} (choices: {choices})"
+                )
+        if a == b:
+            raise ConfigError(f"--pair {text!r}: name two different architectures ({choices})")
+        if (a, b) not in out:
+            out.append((a, b))
+    return tuple(out)
 
 
 def _p95(x: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -381,7 +446,7 @@ def paired(
     runs: pd.DataFrame,
     by: Sequence[str] = (),
     seed: int = 0,
-    pairs: Sequence[tuple[str, str]] = PAIRS,
+    pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS,
 ) -> pd.DataFrame:
     """Seed-by-seed comparisons of architecture pairs (on the same noise).
 
@@ -389,7 +454,14 @@ def paired(
     seeds where A misses less than B (Wilson CI), the median of
     ``miss_A − miss_B`` and the mean of ``Δv_A − Δv_B`` (bootstrap CIs), over
     the seeds of the group where both ran ok. Rows per group and pair:
-    ``frac_less``, ``median_diff``, ``mean_diff``; groups sorted by ``by``.
+    ``frac_less``, ``median_diff``, ``mean_diff``.
+
+    The pairs of :data:`PAIRS` come first (groups sorted by ``by``, then the
+    pairs in the order given), bootstrapped from one stream seeded
+    ``seed + 1`` as they always were; then each *added* pair (any other, e.g.
+    ``--pair``), its groups in order, from a stream of its own keyed by its
+    names (:data:`PAIR_STREAM`), so that a pair's rows are the same whatever
+    other pairs are asked for and adding one changes no row of another.
     """
     ok = runs[runs["status"] == "ok"]
     if ok.empty:
@@ -404,12 +476,38 @@ def paired(
     else:
         keys, bounds = [()], np.array([0, len(wide)])
     columns: set[Any] = set(wide.columns)
-    present = [(a, b) for a, b in pairs if ("miss_km", a) in columns and ("miss_km", b) in columns]
+    present = [
+        (a, b)
+        for a, b in dict.fromkeys(pairs)
+        if ("miss_km", a) in columns and ("miss_km", b) in columns
+    ]
+    shared = [p for p in present if p in PAIRS]
+    streams = [(shared, np.random.default_rng(seed + 1))] if shared else []
+    streams += [([p], _pair_generator(seed, p)) for p in present if p not in PAIRS]
+    frames = [_paired_rows(wide, keys, bounds, chosen, by, rng) for chosen, rng in streams]
+    frames = [f for f in frames if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+def _pair_generator(seed: int, pair: tuple[str, str]) -> np.random.Generator:
+    """The bootstrap stream of an added pair: the seed, :data:`PAIR_STREAM` and its names."""
+    return np.random.default_rng([seed, PAIR_STREAM, zlib.crc32(f"{pair[0]}:{pair[1]}".encode())])
+
+
+def _paired_rows(
+    wide: pd.DataFrame,
+    keys: Sequence[tuple[Hashable, ...]],
+    bounds: npt.NDArray[np.intp],
+    pairs: Sequence[tuple[str, str]],
+    by: Sequence[str],
+    rng: np.random.Generator,
+) -> pd.DataFrame:
+    """The rows of :func:`paired` for ``pairs`` (each group, then each pair), drawn from ``rng``."""
     blocks = {
         (a, b): wide[
             [("miss_km", a), ("miss_km", b), ("delta_v_km_s", a), ("delta_v_km_s", b)]
         ].to_numpy(dtype=float)
-        for a, b in present
+        for a, b in pairs
     }
     idents: list[tuple[Hashable, ...]] = []
     head: list[tuple[str, str, int]] = []  # (arch, other, n) per group and pair
@@ -417,7 +515,7 @@ def paired(
     samples: list[FloatArray] = []
     fns: list[Statistic] = []
     for key, (a_row, b_row) in zip(keys, pairwise(bounds), strict=True):
-        for a, b in present:
+        for a, b in pairs:
             block = blocks[a, b][a_row:b_row]
             both = block[~np.isnan(block).any(axis=1)]
             n = len(both)
@@ -432,7 +530,7 @@ def paired(
             fns += [np.median, np.mean]
     if not head:
         return pd.DataFrame([])
-    ci = bootstrap_cis(samples, fns, np.random.default_rng(seed + 1)).reshape(len(head), 2, 2)
+    ci = bootstrap_cis(samples, fns, rng).reshape(len(head), 2, 2)
     value = np.column_stack(
         [
             [v for v, _, _ in less_rows],

@@ -1,0 +1,142 @@
+"""Paired comparisons for every architecture choice, and ``--pair A:B`` (issue 37, item 4).
+
+By default a campaign compares MTF vs plain (same schedule) and adaptive vs
+fixed (same estimator) within each re-solve method, and cone program vs
+shooting (same estimator and schedule); ``--pair A:B`` adds any pair of its
+architectures. The rows of the pairs compared before stay the same bit for
+bit: an added pair draws its bootstrap from a stream of its own.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.campaign import sequential, statistics
+from cwrend_cli.cli import app
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.params import ALL_ARCHITECTURES, SOCP_ARCHITECTURES
+
+runner = CliRunner()
+SOCP_WITHIN = [
+    ("mtf_adaptive_socp", "plain_adaptive_socp"),
+    ("mtf_fixed_socp", "plain_fixed_socp"),
+    ("mtf_adaptive_socp", "mtf_fixed_socp"),
+    ("plain_adaptive_socp", "plain_fixed_socp"),
+]
+
+
+def _runs(archs: list[str], points: int = 1) -> pd.DataFrame:
+    """Runs of ``archs`` on 12, 1, 5, … seeds per grid point, a few failed."""
+    gen = np.random.default_rng(3)
+    rows = []
+    for point in range(points):
+        for seed in range((12, 1, 5)[point % 3]):
+            for arch in archs:
+                rows.append(
+                    {"point": f"p{point}", "param.schedule.beta": 0.25 * (point + 1),
+                     "seed": seed, "arch": arch,
+                     "status": "ok" if gen.random() > 0.05 else "failed",
+                     "miss_km": abs(gen.normal(1e-3, 5e-4)),
+                     "delta_v_km_s": gen.normal(0.14, 1e-3)}
+                )  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _pairs_of(frame: pd.DataFrame) -> set[tuple[str, str]]:
+    return set(zip(frame["arch"], frame["other"], strict=True))
+
+
+def test_default_pairs_differ_in_one_choice_each() -> None:
+    """12 pairs: 4 within each method (2 estimator, 2 schedule) and 4 across methods."""
+    pairs = statistics.DEFAULT_PAIRS
+    assert pairs[: len(statistics.PAIRS)] == statistics.PAIRS and len(set(pairs)) == 12
+    for a, b in pairs:
+        x, y = ALL_ARCHITECTURES[a], ALL_ARCHITECTURES[b]
+        differ = [x.mtf != y.mtf, x.adaptive != y.adaptive, x.method != y.method]
+        assert sum(differ) == 1
+    assert set(SOCP_WITHIN) <= set(pairs)
+
+
+def test_an_all_socp_campaign_compares_its_estimators_and_schedules() -> None:
+    frame = statistics.paired(_runs(list(SOCP_ARCHITECTURES)))
+    assert _pairs_of(frame) == set(SOCP_WITHIN)
+    assert len(frame) == 3 * len(SOCP_WITHIN)
+
+
+@pytest.mark.parametrize("by", [[], ["point", "param.schedule.beta"]])
+def test_the_added_pairs_append_rows_and_change_none(by: list[str]) -> None:
+    """Every architecture, three grid points: the rows of PAIRS first, bit for bit as before."""
+    runs = _runs(list(ALL_ARCHITECTURES), points=3 if by else 1)
+    before = statistics.paired(runs, by, seed=7, pairs=statistics.PAIRS)
+    now = statistics.paired(runs, by, seed=7)
+    assert len(now) > len(before)
+    pd.testing.assert_frame_equal(now.iloc[: len(before)].reset_index(drop=True), before)
+    assert _pairs_of(now.iloc[len(before) :]) == set(SOCP_WITHIN)
+    added = ("plain_fixed_socp", "mtf_adaptive")
+    more = statistics.paired(runs, by, seed=7, pairs=(*statistics.DEFAULT_PAIRS, added))
+    pd.testing.assert_frame_equal(more.iloc[: len(now)].reset_index(drop=True), now)
+    assert _pairs_of(more.iloc[len(now) :]) == {added}
+
+
+def test_pairs_named_on_the_command_line_are_checked() -> None:
+    archs = ["mtf_adaptive", "plain_fixed"]
+    got = statistics.campaign_pairs(
+        ["plain_fixed:mtf_adaptive", " plain_fixed : mtf_adaptive"], archs
+    )
+    assert got == (*statistics.DEFAULT_PAIRS, ("plain_fixed", "mtf_adaptive"))  # once
+    default = statistics.campaign_pairs(["mtf_fixed:plain_fixed"], ["mtf_fixed", "plain_fixed"])
+    assert default == statistics.DEFAULT_PAIRS  # compared anyway: not repeated
+    for text, says in [
+        ("mtf_adaptive", "expected A:B"),
+        ("mtf_adaptive:plain", "'plain' is unknown"),
+        ("mtf_adaptive:mtf_fixed", "'mtf_fixed' is not in this campaign"),
+        ("mtf_adaptive:mtf_adaptive", "two different architectures"),
+    ]:
+        with pytest.raises(ConfigError, match=says) as info:
+            statistics.campaign_pairs([text], archs)
+        assert f"--pair {text!r}" in str(info.value) and "mtf_adaptive, plain_fixed" in str(
+            info.value
+        )
+
+
+def test_an_until_target_may_name_a_pair_of_the_command_line() -> None:
+    pairs = statistics.campaign_pairs(["mtf_fixed:plain_adaptive"], ["mtf_fixed", "plain_adaptive"])
+    target = sequential.parse_until("miss_km@mtf_fixed-plain_adaptive:0.001", pairs)
+    assert target.pair == ("mtf_fixed", "plain_adaptive")
+
+
+def _config(tmp_path: Path) -> Path:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\n')
+    return cfg
+
+
+@pytest.mark.parametrize("command", ["ablate", "sweep"])
+def test_a_pair_outside_the_campaign_exits_2_naming_the_choices(
+    tmp_path: Path, command: str
+) -> None:
+    args = [command, str(_config(tmp_path)), "--arch", "mtf_adaptive,plain_adaptive",
+            "--pair", "mtf_adaptive_socp:plain_adaptive"]  # fmt: skip
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.stderr.split())
+    assert "--pair 'mtf_adaptive_socp:plain_adaptive'" in text
+    assert "choices: mtf_adaptive, plain_adaptive" in text and "Traceback" not in result.output
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_pair_is_stored_and_shown(tmp_path: Path) -> None:
+    archs = "mtf_fixed,plain_adaptive"
+    args = ["ablate", str(_config(tmp_path)), "--name", "p", "--arch", archs, "--seeds", "2",
+            "-w", "1", "--no-rrd", "--pair", "plain_adaptive:mtf_fixed"]  # fmt: skip
+    result = runner.invoke(app, args, env={"COLUMNS": "80"})
+    assert result.exit_code == 0, result.output
+    stats = pd.read_parquet(tmp_path / "results" / "p" / "ablation.parquet")
+    paired = stats[stats["kind"] == "paired"]
+    assert _pairs_of(paired) == {("plain_adaptive", "mtf_fixed")} and len(paired) == 3
+    assert "plain_adaptive" in result.stdout and "vs mtf_fixed" in result.stdout
