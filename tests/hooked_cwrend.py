@@ -22,9 +22,11 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from pathlib import Path
 from typing import Any
 
 from cwrend_cli.campaign import driver
+from cwrend_cli.output.layout import EVENTS
 
 
 def _send(signum: signal.Signals) -> None:
@@ -45,9 +47,10 @@ def _hook(when: str, after: int, signum: signal.Signals) -> None:
     if when == "journal":
         append = driver.append_events  # type: ignore[attr-defined]
 
-        def appended(*args: Any, **kwargs: Any) -> None:
-            append(*args, **kwargs)
-            count()
+        def appended(path: Any, *args: Any, **kwargs: Any) -> None:
+            append(path, *args, **kwargs)
+            if Path(path).name == EVENTS:  # not another file the driver appends to
+                count()
 
         driver.append_events = appended  # type: ignore[attr-defined]
     elif when == "run":

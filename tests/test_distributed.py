@@ -32,6 +32,10 @@ pytestmark = pytest.mark.skipif(shutil.which("dask") is None, reason="needs Dask
 
 ARCHS = "mtf_adaptive,plain_adaptive"
 TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
+#: Guards against a hang only: no assertion depends on how fast the machine is.
+HANG_S = 600.0
+#: ``cwrend`` that sends a signal at a state of the campaign (tests/hooked_cwrend.py).
+HOOKED = Path(__file__).with_name("hooked_cwrend.py")
 
 
 def _free_port() -> int:
@@ -40,7 +44,7 @@ def _free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def _wait_for_port(port: int, timeout_s: float = 60.0) -> None:
+def _wait_for_port(port: int, timeout_s: float = HANG_S) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         try:
@@ -94,7 +98,7 @@ class Cluster:
         from distributed import Client
 
         with Client(self.address, timeout="30s") as client:  # type: ignore[no-untyped-call]
-            client.wait_for_workers(n, timeout=60)  # type: ignore[no-untyped-call]
+            client.wait_for_workers(n, timeout=HANG_S)  # type: ignore[no-untyped-call]
 
     def alive(self) -> bool:
         return all(proc.poll() is None for proc in [*self.workers, self.scheduler])
@@ -217,18 +221,24 @@ def test_a_sobol_design_on_dask_gives_the_numbers_of_one_worker_and_resumes(
 
 
 def _start_campaign(tmp_path: Path, cluster: Cluster, seeds: int) -> subprocess.Popen[str]:
-    args = [sys.executable, "-m", "cwrend_cli", "ablate", str(_config(tmp_path, "dask")),
-            "--seeds", str(seeds), "--arch", ARCHS, "--executor", "dask", "--address",
-            cluster.address, "-q"]  # fmt: skip
+    """The campaign, which stops itself (SIGSTOP) once its second task is journaled."""
+    args = [sys.executable, str(HOOKED), "journal", "2", "SIGSTOP", "ablate",
+            str(_config(tmp_path, "dask")), "--seeds", str(seeds), "--arch", ARCHS,
+            "--executor", "dask", "--address", cluster.address, "-q"]  # fmt: skip
     return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _wait_for_tasks(out: Path, proc: subprocess.Popen[str], n: int) -> None:
-    deadline = time.monotonic() + 180
-    while (not (out / "events.jsonl").exists() or _events_done(out) < n) and (
-        time.monotonic() < deadline and proc.poll() is None
-    ):
+def _wait_stopped(proc: subprocess.Popen[str]) -> None:
+    """Wait until ``proc`` has stopped itself at its state; fail if it ended first."""
+    hang = time.monotonic() + HANG_S
+    while time.monotonic() < hang:
+        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
+        if pid:
+            assert os.WIFSTOPPED(status), "the campaign ended before its state"
+            return
         time.sleep(0.05)
+    proc.kill()
+    raise AssertionError(f"no state reached in {HANG_S:g} s: the campaign hangs")
 
 
 def _kill_mid_campaign(
@@ -236,11 +246,12 @@ def _kill_mid_campaign(
 ) -> tuple[int, str]:
     """Start a Dask campaign, kill ``victim`` once two tasks are done; its exit code and stderr."""
     proc = _start_campaign(tmp_path, cluster, seeds)
-    _wait_for_tasks(tmp_path / "results" / "dask", proc, 2)
-    assert proc.poll() is None, "the kill must land mid-campaign"
+    _wait_stopped(proc)  # frozen with two tasks journaled: the kill lands mid-campaign
+    assert _events_done(tmp_path / "results" / "dask") == 2
     os.killpg(victim.pid, signal.SIGKILL)
+    proc.send_signal(signal.SIGCONT)
     try:
-        _, stderr = proc.communicate(timeout=180)
+        _, stderr = proc.communicate(timeout=HANG_S)
     except subprocess.TimeoutExpired:  # say where it hangs (faulthandler on SIGUSR1), then fail
         proc.send_signal(signal.SIGUSR1)
         time.sleep(2)
