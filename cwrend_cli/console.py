@@ -453,7 +453,9 @@ def compare_console_tables(frame: pd.DataFrame, groups: list[str], title: str) -
             "Δ = A − B per seed; 95 % interval below (bootstrap; Wilson for\n"
             "A better, the share of seeds with A < B)"
         )
-        alone = f"Δ = A − B, {ONE_REALISATION}; 95 % Wilson interval\nbelow A better (A < B)"
+        alone = (
+            f"Δ = A − B per seed, {ONE_REALISATION}\n95 % Wilson interval below A better (A < B)"
+        )
         if ties:
             text += f"\n{ties} tie(s) (A = B exactly) count as not better"
             alone += f"\n{ties} tie(s) (A = B exactly) count as not better"

@@ -121,3 +121,20 @@ def test_strict_without_until_is_refused(tmp_path: Path, args: list[str]) -> Non
     assert result.exit_code == 2
     assert "--strict: applies to --until only" in result.stderr
     assert not (tmp_path / "campaign").exists()
+
+
+def test_a_comparison_of_one_seed_says_one_realisation() -> None:
+    from cwrend_cli.console import compare_console_tables
+
+    rows = [
+        {"kind": "paired", "arch": "mtf_adaptive", "metric": m, "statistic": s, "n": 1,
+         "value": v, "ci_low": lo, "ci_high": hi}
+        for m in ("miss_km", "delta_v_km_s")
+        for s, v, lo, hi in (("mean_diff", -1e-3, math.nan, math.nan),
+                             ("median_diff", -1e-3, math.nan, math.nan),
+                             ("frac_better", 1.0, 0.21, 1.0),
+                             ("frac_tied", 0.0, math.nan, math.nan))
+    ]  # fmt: skip
+    (table,) = compare_console_tables(pd.DataFrame(rows), [], "t")
+    text = _caption(table)
+    assert ONE_REALISATION in text and "bootstrap" not in text
