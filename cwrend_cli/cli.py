@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -541,11 +541,13 @@ def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
     seeds, points = len(plan.seeds), max(len({r.point for r in plan.runs}), 1)
     kept = seeds if plan.steps_seeds is None else min(seeds, plan.steps_seeds)
     recorded = seeds if plan.rrd_seeds is None else min(seeds, plan.rrd_seeds)
-    size = estimated_bytes(runs, runs * kept // seeds, points * recorded)
+    stepped = points if plan.steps_points is None else len(plan.steps_points)
+    size = estimated_bytes(runs, runs * kept * stepped // (seeds * points), stepped * recorded)
+    where = "" if plan.steps_points is None else f", {stepped:,} point(s): design_steps_points"
     err.print(
         f"plan: {runs:,} runs ({points:,} point(s) × {seeds:,} seeds × {len(plan.archs)} "
         f"architectures), about {size / 1e9:.1f} GB of results (per-step data for "
-        f"{kept:,} seeds: output.steps_seeds)",
+        f"{kept:,} seeds: output.steps_seeds{where})",
         markup=False,
     )
 
@@ -568,7 +570,8 @@ def _campaign(
     opts: CampaignOptions,
 ) -> None:
     err = _console(stderr=True)
-    with user_errors(), _second_ctrl_c_exits_130(err):
+    # the campaign's lock, taken by its first run and held until everything is written
+    with user_errors(), _second_ctrl_c_exits_130(err), ExitStack() as hold:
         from cwrend_cli import campaign
         from cwrend_cli.campaign import design, sequential
         from cwrend_cli.campaign.statistics import campaign_pairs
@@ -602,7 +605,7 @@ def _campaign(
                 raise ConfigError("--strict: applies to --until only; add --until TARGET")
             seeds = _seeds(opts.seeds, opts.seed_list)
             plan, summary, statistics = _campaign_step(
-                command, cfg, archs, seeds, params, opts, out, err, pairs
+                command, cfg, archs, seeds, params, opts, out, err, pairs, hold
             )
             achieved: list[sequential.Achieved] = []
         else:
@@ -613,7 +616,7 @@ def _campaign(
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             for n in sequential.seed_counts(opts.batch, opts.max_seeds):
                 plan, summary, statistics = _campaign_step(
-                    command, cfg, archs, list(range(n)), params, opts, out, err, pairs
+                    command, cfg, archs, list(range(n)), params, opts, out, err, pairs, hold
                 )
                 achieved = sequential.achieved(statistics.frame, target, archs)
                 if summary.interrupted or (
@@ -662,8 +665,14 @@ def _campaign_step(
     out: Path,
     err: Console,
     pairs: Sequence[tuple[str, str]],
+    hold: ExitStack,
 ) -> tuple[campaign.CampaignPlan, campaign.CampaignSummary, campaign.CampaignStatistics]:
-    """Plan, run (resuming) and compute the statistics (with ``pairs``) of one invocation."""
+    """Plan, run (resuming) and compute the statistics (with ``pairs``) of one invocation.
+
+    The campaign's lock is entered into ``hold`` (the command's): kept until the
+    command has written everything, never released between the runs and the
+    statistics (issue 36 item 2).
+    """
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
     from cwrend_cli.campaign.executors import default_workers
@@ -686,7 +695,7 @@ def _campaign_step(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
-        argv=command_line(),
+        argv=command_line(), hold=hold,
     )  # fmt: skip
     with progress.phase("computing statistics"):
         statistics = campaign.write_statistics(out, command, plan.root_seed, pairs)
@@ -966,9 +975,13 @@ def report(
     errors, Δv vs miss); for several seeds the miss and Δv distributions and
     the paired comparison; for a sweep one figure per swept parameter.
     """
-    with user_errors():
+    with user_errors(), ExitStack() as hold:
         from cwrend_cli.report import write_report
 
+        if results_dir.is_dir():  # no campaign writes in it meanwhile (issue 36 item 2)
+            from cwrend_cli.campaign.journal import campaign_lock
+
+            hold.enter_context(campaign_lock(results_dir))
         summary = write_report(results_dir, seed=seed, point=point)
         for path in summary.files:
             typer.echo(str(path))
@@ -1062,3 +1075,99 @@ def compare(
             for note in result.notes:
                 err.print(f"note: {note}", markup=False)
             err.print(f"results written to {out}", soft_wrap=True, markup=False)
+
+
+# ---------------------------------------------------------------------------
+# Tables for a paper
+# ---------------------------------------------------------------------------
+
+
+@app.command(
+    "table",
+    cls=_Command,
+    short_help="A table of stored statistics across campaigns (md, LaTeX, CSV).",
+)
+def table(
+    results: Annotated[
+        list[str],
+        typer.Argument(
+            help="Campaign directories (ablate or sweep), each DIR or LABEL=DIR (the label names "
+            "the campaign in the table).",
+            metavar="RESULTS...",
+        ),
+    ],
+    rows: Annotated[
+        str | None,
+        typer.Option(
+            "--rows",
+            help="Fields whose values make the rows, comma-separated, each FIELD or "
+            "FIELD=HEADER: campaign, arch, other (B of a pair), point, metric, or a "
+            "configuration key (its swept value, else the campaign's base value). Default: "
+            "campaign (several), the swept keys, arch (and other for a paired value).",
+            metavar="FIELDS",
+        ),
+    ] = None,
+    cols: Annotated[
+        str | None,
+        typer.Option(
+            "--cols",
+            help="Fields whose values make the columns (as --rows), each with every value; "
+            "default: one column per value of --metric.",
+            metavar="FIELDS",
+        ),
+    ] = None,
+    metric: Annotated[
+        str,
+        typer.Option(
+            "--metric",
+            "-m",
+            help="Values, comma-separated, each [STATISTIC.]METRIC[@A-B][:bare][:DIGITS]: "
+            "mean|median|p95 of miss, dv, fuel (95 % bootstrap interval); solve_mean_ms, "
+            "solve_max_ms, solve_success_pct; paired frac_less.miss (Wilson), median_diff.miss, "
+            "mean_diff.dv, @A-B for one pair; n (ok runs); infeasible_pct, failed_pct (share "
+            "of re-solves, from runs.parquet). :bare drops the interval, :3 shows 3 decimals.",
+            metavar="LIST",
+        ),
+    ] = "n,mean.miss,median.miss,mean.dv",
+    where: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--where",
+            help="Keep entries whose field has one of the values, in that order: "
+            "[CAMPAIGN:]FIELD=V1,V2 (CAMPAIGN: only that campaign's entries). Repeatable.",
+            metavar="FILTER",
+        ),
+    ] = None,
+    fmt: Annotated[
+        str,
+        typer.Option(
+            "--format",
+            "-f",
+            help="md (GitHub markdown), latex (booktabs) or csv.",
+            metavar="md|latex|csv",
+        ),
+    ] = "md",
+    title: Annotated[
+        str | None, typer.Option("--title", help="A line above the table.", metavar="TEXT")
+    ] = None,
+) -> None:
+    """Print a table of the statistics campaigns stored, for a paper or a script.
+
+    Reads each campaign's ablation.parquet or sweep.parquet (values with their 95 %
+    intervals, never recomputed) and, for infeasible_pct / failed_pct, its runs.parquet.
+    Each cell must be one stored value: a cell that two campaigns, grid points or pairs
+    fill is refused naming the field that tells them apart (exit 2), as is an unknown
+    field or value. Misses in m, Δv in km/s, fuel penalty in %; a bootstrap interval
+    from fewer than 10 seeds is marked *. Example (a sweep over guidance.hold):
+
+    cwrend table results/paper-1000 --rows guidance.hold,arch --metric n,mean.miss,p95.miss:bare
+    """
+    with user_errors():
+        from cwrend_cli.report import table as tables
+
+        if fmt not in tables.FORMATS:
+            raise ConfigError(f"--format {fmt!r}: one of {', '.join(tables.FORMATS)}")
+        values = [tables.parse_value(t) for t in metric.split(",") if t.strip()]
+        sources = [tables.load_source(r) for r in results]
+        built = tables.build_table(sources, values, rows, cols, where or (), title)
+        typer.echo(tables.render(built, fmt))

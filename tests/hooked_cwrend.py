@@ -5,7 +5,8 @@
 sends ``SIGNAL`` once the driver has seen the ``N``-th state ``WHEN``:
 
 * ``journal``: the driver appended to ``events.jsonl`` (a task journaled);
-* ``run``: the driver heard a run finish (a per-run signal of a task in flight).
+* ``run``: the driver heard a run finish (a per-run signal of a task in flight);
+* ``statistics``: the command is about to write a campaign's statistics (its runs done).
 
 SIGKILL (``kill -9``) and SIGSTOP (the test then acts while the campaign is
 frozen at that state, and lets it go on with SIGCONT) go to the campaign
@@ -25,6 +26,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cwrend_cli import campaign
 from cwrend_cli.campaign import driver
 from cwrend_cli.output.layout import EVENTS
 
@@ -61,6 +63,14 @@ def _hook(when: str, after: int, signum: signal.Signals) -> None:
             count()
 
         driver._RunTally.heard = heard_run  # type: ignore[method-assign]
+    elif when == "statistics":
+        write = campaign.write_statistics
+
+        def writing(*args: Any, **kwargs: Any) -> Any:
+            count()
+            return write(*args, **kwargs)
+
+        campaign.write_statistics = writing
     else:
         raise SystemExit(f"unknown state {when!r}")
 

@@ -26,7 +26,7 @@ import json
 import shutil
 import time
 from collections import deque
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -301,6 +301,7 @@ def run_campaign(
     allow_version_change: bool = False,
     progress: Progress | None = None,
     argv: Sequence[str] | None = None,
+    hold: contextlib.ExitStack | None = None,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -312,14 +313,17 @@ def run_campaign(
     one write, so an interrupted campaign (Ctrl-C or ``kill -9``) keeps every
     completed task and leaves no partial data: files of unfinished executions
     are removed on resume. ``argv``: the command line, recorded in the manifest's session.
+
+    The directory is locked (:func:`hold_campaign`) while this runs, or, with
+    ``hold``, until the caller closes that stack: a command that writes the
+    statistics and a report after the runs keeps them under the same lock.
     """
     progress = progress or _NoProgress()
-    if executor_kind == "dask" and address:
-        check_address(address)  # before anything is written
-    make_output_dir(out_dir, "choose another output.dir or output.name")
-    check_confined(out_dir)
     try:
-        with campaign_lock(out_dir):
+        with contextlib.ExitStack() as own:
+            (hold or own).enter_context(
+                hold_campaign(out_dir, address if executor_kind == "dask" else None)
+            )
             return _run_locked(
                 plan_, out_dir, progress, command, executor_kind, workers, address, force,
                 retry_failed, allow_version_change, argv,
@@ -329,6 +333,36 @@ def run_campaign(
             f"campaign stopped: {_fault_text(exc)}. Every run the journal holds is kept; fix "
             "the cause and run the same command to resume"
         ) from None
+
+
+#: Campaign directories this process holds locked (:func:`hold_campaign`).
+_HELD: set[Path] = set()
+
+
+@contextlib.contextmanager
+def hold_campaign(out_dir: Path, address: str | None = None) -> Iterator[None]:
+    """Create, confine and lock a campaign directory for the ``with`` block (issue 36 item 2).
+
+    Everything a command writes in the directory (runs, manifest, statistics,
+    sensitivity, report) is written under one lock, so another process (even
+    with ``--force``) never writes between them. Reentrant in a process: a
+    campaign run inside a command's hold does not lock again. ``address``: a
+    Dask scheduler checked before anything is written.
+    """
+    key = out_dir.resolve()
+    if key in _HELD:
+        yield
+        return
+    if address:
+        check_address(address)  # before anything is written
+    make_output_dir(out_dir, "choose another output.dir or output.name")
+    check_confined(out_dir)
+    with campaign_lock(out_dir):
+        _HELD.add(key)
+        try:
+            yield
+        finally:
+            _HELD.discard(key)
 
 
 def _run_locked(
@@ -464,7 +498,7 @@ def _owed_recordings(
         return owed
     for task in plan_.tasks:
         runs: list[RunSpec] = []
-        for seed in seeds_to_record(task, plan_.archs, plan_.rrd_seeds):
+        for seed in seeds_to_record(task, plan_.archs, plan_.rrd_seeds_of(task.point)):
             rel = recording_path(task.point, seed)
             if rel in journal.files and (out_dir / rel).is_file():
                 continue
@@ -479,8 +513,9 @@ def _owed_recordings(
 
 def _check_room(out_dir: Path, plan_: CampaignPlan, first: Task) -> None:
     """Stop before computing when the disk cannot hold even the first task's files (exit 3)."""
-    steps = [r for r in first.runs if plan_.steps_seeds is None or r.seed < plan_.steps_seeds]
-    recorded = seeds_to_record(first, plan_.archs, plan_.rrd_seeds)
+    below = plan_.steps_seeds_of(first.point)
+    steps = [r for r in first.runs if below is None or r.seed < below]
+    recorded = seeds_to_record(first, plan_.archs, plan_.rrd_seeds_of(first.point))
     need = estimated_bytes(len(first.runs), len(steps), len(recorded))
     free = shutil.disk_usage(out_dir).free
     if free < need:
@@ -573,7 +608,7 @@ def _drive(
         while True:
             while fatal is None and not lost and len(in_flight) < limit and queue:
                 task = queue.popleft()
-                record = seeds_to_record(task, plan_.archs, plan_.rrd_seeds)
+                record = seeds_to_record(task, plan_.archs, plan_.rrd_seeds_of(task.point))
                 try:
                     refs = references.of(task)
                 except OSError as exc:  # writing the point's references failed
@@ -587,7 +622,7 @@ def _drive(
                         refs,
                         str(out_dir),
                         record,
-                        plan_.steps_seeds,
+                        plan_.steps_seeds_of(task.point),
                         _file_metadata(plan_),
                         plan_.run_timeout_s,
                         signals.signal(submitted),

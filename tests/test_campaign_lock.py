@@ -1,0 +1,94 @@
+"""The campaign lock covers everything a command writes (issue 36 item 2).
+
+Campaign A holds its directory from its first run until its statistics (and
+anything else it writes) are written: a campaign B on the same directory, even
+with ``--force``, is refused in between instead of having its own files
+overwritten by A's statistics stamped with B's hash. The two campaigns are
+synchronised by a state (A frozen just before it writes its statistics), not
+by a time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+
+runner = CliRunner()
+HOOKED = Path(__file__).with_name("hooked_cwrend.py")
+#: Guards against a hang only: no assertion depends on the time taken.
+HANG_S = 600.0
+ARCHS = "mtf_adaptive,plain_adaptive"
+
+
+def _wait_stopped(proc: subprocess.Popen[str]) -> None:
+    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first."""
+    hang = time.monotonic() + HANG_S
+    while time.monotonic() < hang:
+        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
+        if pid:
+            assert os.WIFSTOPPED(status), "the campaign ended before its state"
+            return
+        time.sleep(0.02)
+    proc.kill()
+    raise AssertionError(f"no state reached in {HANG_S:g} s")
+
+
+def test_a_forced_campaign_cannot_write_between_anothers_runs_and_its_statistics(
+    tmp_path: Path,
+) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "shared"\n')
+    out = tmp_path / "results" / "shared"
+    a_args = ["ablate", str(cfg), "--seeds", "2", "--arch", ARCHS, "--workers", "1", "--no-rrd"]
+    a = subprocess.Popen(
+        [sys.executable, str(HOOKED), "statistics", "1", "SIGSTOP", *a_args, "-q"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        _wait_stopped(a)  # A's runs are done and journaled; its statistics not yet written
+        a_hash = json.loads((out / "manifest.json").read_text())["campaign_hash"]
+        b = runner.invoke(
+            app, ["ablate", str(cfg), "--seeds", "1", "--arch", ARCHS, "--workers", "1",
+                  "--no-rrd", "--force", "--set", "schedule.beta=0.5", "-q"],
+        )  # fmt: skip
+        assert b.exit_code == 2, b.output
+        assert "is in use by another cwrend process" in b.stderr
+    finally:
+        a.send_signal(signal.SIGCONT)
+    _, stderr = a.communicate(timeout=HANG_S)
+    assert a.returncode == 0, stderr
+    assert json.loads((out / "manifest.json").read_text())["campaign_hash"] == a_hash
+    stats = pq.read_schema(out / "ablation.parquet").metadata
+    assert stats[b"campaign_hash"].decode() == a_hash
+    assert len(pq.read_table(out / "runs.parquet")) == 4  # A's runs, none of B's
+
+
+def test_a_report_is_refused_while_a_campaign_holds_the_directory(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "busy"\n')
+    out = tmp_path / "results" / "busy"
+    args = ["ablate", str(cfg), "--seeds", "1", "--arch", ARCHS, "--workers", "1", "--no-rrd"]
+    a = subprocess.Popen(
+        [sys.executable, str(HOOKED), "statistics", "1", "SIGSTOP", *args, "-q"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        _wait_stopped(a)
+        report = runner.invoke(app, ["report", str(out)])
+        assert report.exit_code == 2, report.output
+        assert "is in use by another cwrend process" in report.stderr
+        assert not (out / "report").exists()
+    finally:
+        a.send_signal(signal.SIGCONT)
+        a.communicate(timeout=HANG_S)
+    assert a.returncode == 0
