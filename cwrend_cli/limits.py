@@ -31,3 +31,9 @@ MAX_NESTING = 16
 MAX_SEEDS_PER_TASK = 10_000
 #: Wall-time limit of one run (``output.run_timeout_s``) [s]: a day.
 MAX_RUN_TIMEOUT_S = 86_400.0
+#: Problems an error lists (the rest are counted): a configuration of thousands of
+#: unknown keys names the first ones, not every one.
+MAX_LISTED_PROBLEMS = 20
+#: Keys of a ``[sweep]`` table (grid or design parameters): a grid of even 2 values
+#: per key passes MAX_POINTS at 14 keys, and a design's points grow with its keys.
+MAX_SWEPT_KEYS = 1_000

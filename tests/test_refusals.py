@@ -19,6 +19,8 @@ import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
+from cwrend_cli.config import overrides
+from cwrend_cli.config.schema import ScheduleConfig
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 BIG = "1e308"
@@ -118,7 +120,20 @@ CASES: dict[str, tuple[Setup, str]] = {
         _ablate("degradation.windows." + "1" * 5000 + ".r_scale=2"),
         "degradation.windows: is an array, use an index of at most 6 ASCII digits",
     ),
+    # item 11: a [sweep] of thousands of keys
+    "a [sweep] of 2,000 keys": (
+        lambda d: [
+            "sweep",
+            _write(d / "wide.toml", "[sweep]\n" + "".join(f"a{i} = [1]\n" for i in range(2000))),
+        ],
+        'sweep = {"a0": [1], ',
+    ),
 }
+
+
+def _write(path: Path, text: str) -> str:
+    path.write_text(text)
+    return str(path)
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -136,3 +151,46 @@ def test_an_absurd_input_is_refused_at_once(
     assert message in result.stderr, result.stderr
     assert "Traceback" not in result.output
     assert set(os.listdir(tmp_path)) == before  # nothing written, not even a results dir
+
+
+def test_a_sweep_of_too_many_keys_names_the_limit(tmp_path: Path) -> None:
+    path = _write(
+        tmp_path / "wide.toml", "[sweep]\n" + "".join(f"a{i} = [1]\n" for i in range(2000))
+    )
+    result = runner.invoke(app, ["sweep", path])
+    assert result.exit_code == 2, result.output
+    assert ": at most 1,000 keys (got 2,000)" in result.stderr
+
+
+def test_thousands_of_problems_list_the_first_twenty_and_a_count(tmp_path: Path) -> None:
+    keys = "".join(f"a{i} = 1\n" for i in range(2000))
+    result = runner.invoke(
+        app, ["config", "validate", _write(tmp_path / "u.toml", "[schedule]\n" + keys)]
+    )
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.splitlines()
+    assert lines[1:21] == [
+        f"  schedule.a{i}: unknown key (allowed: {', '.join(ScheduleConfig.model_fields)})"
+        for i in range(20)
+    ]
+    assert lines[21:] == ["  … and 1,980 more (2,000 in all)"]
+
+
+def test_setting_keys_copies_the_tree_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 36 item 11: each key of a [sweep] copied the whole tree (quadratic: 350 s)."""
+    copies: list[object] = []
+    real = overrides._thaw
+
+    def counted(value: object) -> object:
+        copies.append(value)
+        return real(value)
+
+    monkeypatch.setattr(overrides, "_thaw", counted)
+    base = {"schedule": {"beta": 0.25}, "sweep": {}}
+
+    def whole_tree_copies(n: int) -> int:
+        copies.clear()
+        overrides.apply(base, [(f"schedule.k{i}", 1.0) for i in range(n)])
+        return sum(isinstance(c, dict) and "schedule" in c for c in copies)
+
+    assert whole_tree_copies(10) == whole_tree_copies(100) == 1

@@ -183,11 +183,21 @@ class CampaignPlan:
     rrd_seeds: int | None  # output.rrd_seeds: recordings only below this seed
     run_timeout_s: float | None = None  # output.run_timeout_s (None: guards.run_timeout_s default)
     design: DesignSpec | None = None  # a sampled design instead of a grid (``grid`` is then empty)
+    #: output.design_steps_points: the points with per-step data and recordings (None: all)
+    steps_points: frozenset[str] | None = None
 
     @property
     def runs(self) -> tuple[RunSpec, ...]:
         """All runs, in plan order."""
         return tuple(r for t in self.tasks for r in t.runs)
+
+    def steps_seeds_of(self, point: str) -> int | None:
+        """Per-step data of ``point``'s runs below this seed (None: every seed; 0: none)."""
+        return self.steps_seeds if self.steps_points is None or point in self.steps_points else 0
+
+    def rrd_seeds_of(self, point: str) -> int | None:
+        """Recordings of ``point``'s seeds below this seed (None: every seed; 0: none)."""
+        return self.rrd_seeds if self.steps_points is None or point in self.steps_points else 0
 
 
 def grid_points(grid: Sequence[tuple[str, Sequence[Any]]]) -> tuple[tuple[str, Assignment], ...]:
@@ -323,12 +333,18 @@ def draw_dispersions(
     return tuple(out)
 
 
+#: Values of a grid point or dispersed run named in its error (the rest are counted).
+_LISTED_VALUES = 5
+
+
 def _validated(base: Mapping[str, Any], assignment: Assignment, what: str) -> CwrendConfig:
     """The config ``base`` + ``assignment``, validated; errors name ``what`` and the values."""
     try:
         return config_from_dict(apply(base, assignment), source=what)
     except ConfigError as exc:
-        values = ", ".join(f"{k} = {v!r}" for k, v in assignment)
+        values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
+        if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
+            values += f", … {len(assignment):,} values in all"
         raise ConfigError(f"{what} ({values}) is invalid:", exc.problems or (str(exc),)) from None
 
 
@@ -518,4 +534,12 @@ def plan(
         rrd_seeds=cfg.output.rrd_seeds,
         run_timeout_s=cfg.output.run_timeout_s,
         design=spec,
+        steps_points=_steps_points(spec, cfg.output.design_steps_points),
     )
+
+
+def _steps_points(spec: DesignSpec | None, first: int) -> frozenset[str] | None:
+    """The first ``first`` distinct points of a design in design order (None: not a design)."""
+    if spec is None:
+        return None
+    return frozenset(list(dict.fromkeys(spec.rows))[:first])

@@ -23,7 +23,7 @@ import tomli_w
 from pydantic import ValidationError
 
 from cwrend_cli.config.messages import format_validation_error
-from cwrend_cli.config.overrides import nesting_depth, parse_override, set_dotted
+from cwrend_cli.config.overrides import apply, nesting_depth, parse_override
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING
@@ -111,12 +111,15 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> CwrendConfig
     if too_deep:
         raise ConfigError(f"{path}: tables and arrays nested more than {MAX_NESTING} levels deep")
 
+    assignment: list[tuple[str, Any]] = []
     for text_override in overrides:
         key, value = parse_override(text_override)
         if key == "noise.file" and isinstance(value, str) and value.strip():
             given = Path(value).expanduser()
             value = str(given if given.is_absolute() else Path.cwd() / given)
-        data = set_dotted(data, key, value)
+        assignment.append((key, value))
+    if assignment:  # the tree copied once for all of them
+        data = apply(data, assignment)
 
     output = data.get("output")
     if output is None:

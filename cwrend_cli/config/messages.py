@@ -19,6 +19,8 @@ from typing import Any, get_args, get_origin
 from pydantic import BaseModel, ValidationError
 from pydantic_core import PydanticCustomError
 
+from cwrend_cli.limits import MAX_LISTED_PROBLEMS
+
 __all__ = ["fmt_num", "format_validation_error", "rules_error"]
 
 # ---------------------------------------------------------------------------
@@ -121,6 +123,8 @@ def _describe(err: Mapping[str, Any]) -> str:
         return f"must be one of {ctx.get('expected', '')}"
     if kind in ("too_short", "too_long"):
         n = ctx.get("min_length", ctx.get("max_length"))
+        if isinstance(err.get("input"), Mapping):  # a table of at most n keys
+            return f"at most {n:,} keys (got {len(err['input']):,})"
         return f"must have {n} entries (got {ctx.get('actual_length')})"
     if kind == "string_too_short":
         return "must not be empty"
@@ -135,7 +139,9 @@ def format_validation_error(
 
     ``root_model`` is the model that was validated; it names the allowed keys
     of a table holding an unknown key. It defaults to
-    :class:`~cwrend_cli.config.schema.CwrendConfig`.
+    :class:`~cwrend_cli.config.schema.CwrendConfig`. Only the first
+    :data:`~cwrend_cli.limits.MAX_LISTED_PROBLEMS` errors are written out, the
+    rest counted in a last line (85,000 unknown keys printed 8.3 MB).
     """
     if root_model is None:
         # Imported here, not at the top: the schema imports this module for
@@ -144,7 +150,8 @@ def format_validation_error(
 
         root_model = CwrendConfig
     lines: list[str] = []
-    for err in exc.errors(include_url=False):
+    errors = exc.errors(include_url=False)
+    for err in errors[:MAX_LISTED_PROBLEMS]:
         loc = tuple(err["loc"])
         path = ".".join(str(p) for p in loc)
         kind = err["type"]
@@ -161,4 +168,6 @@ def format_validation_error(
         else:
             where = path or "<config>"
             lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}")
+    if len(errors) > MAX_LISTED_PROBLEMS:
+        lines.append(f"… and {len(errors) - MAX_LISTED_PROBLEMS:,} more ({len(errors):,} in all)")
     return lines

@@ -31,14 +31,23 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    SerializerFunctionWrapHandler,
     Strict,
     ValidationInfo,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
 from cwrend_cli.config.messages import fmt_num, rules_error
-from cwrend_cli.limits import MAX_RUN_TIMEOUT_S, MAX_SEED, MAX_SEEDS_PER_TASK, MAX_STEPS
+from cwrend_cli.limits import (
+    MAX_RUN_TIMEOUT_S,
+    MAX_RUNS,
+    MAX_SEED,
+    MAX_SEEDS_PER_TASK,
+    MAX_STEPS,
+    MAX_SWEPT_KEYS,
+)
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
 
@@ -47,12 +56,15 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ActuatorConfig",
+    "ConstraintsConfig",
+    "CorridorConfig",
     "CwrendConfig",
     "DegradationConfig",
     "DegradationWindow",
     "Dispersion",
     "EstimatorConfig",
     "GuidanceConfig",
+    "KeepOutConfig",
     "NoiseConfig",
     "OutputConfig",
     "ScenarioConfig",
@@ -811,6 +823,15 @@ class OutputConfig(_FrozenModel):
         "references, about 1.6 MB for four architectures) for seeds below this number at "
         "each grid point; 0 = none, unset = every seed [-]",
     )
+    design_steps_points: Int = Field(
+        1,
+        ge=0,
+        le=MAX_RUNS,
+        description="sweep --design: write per-step data (steps/ dataset) and recordings only "
+        "for the first this many design points, in design order (design.parquet's rows; "
+        "steps_seeds and rrd_seeds apply within them); 0 = none, the design's point count or "
+        "more = every point; a grid sweep writes every point [-]",
+    )
     run_timeout_s: Float | None = Field(
         None,
         gt=0,
@@ -839,6 +860,124 @@ class OutputConfig(_FrozenModel):
                 "letter or digit, no path separators, at most 128 characters"
             )
         return value
+
+
+#: A semi-axis of the keep-out ellipsoid [km]: positive, within the position bound.
+SemiAxisKm = Annotated[float, Strict(), Field(gt=0, le=POSITION_MAX_KM)]
+#: An entry of the corridor axis [-] (normalised at use; bounded so its norm is finite).
+AxisEntry = Annotated[float, Strict(), Field(ge=-GAIN_MAX, le=GAIN_MAX)]
+#: Largest covariance margin k [σ]: a margin of 100 σ is already absurd.
+SIGMA_MARGIN_MAX = 100.0
+
+
+class KeepOutConfig(_FrozenModel):
+    """A keep-out ellipsoid centred on the target (issue 32; ``[constraints.keep_out]``)."""
+
+    semi_axes_km: tuple[SemiAxisKm, SemiAxisKm, SemiAxisKm] = Field(
+        description="semi-axes (a, b, c) of the ellipsoid (x/a)² + (y/b)² + (z/c)² < 1 along x "
+        "radial, y along-track, z cross-track; each in (0, 1e4] [km]",
+    )
+
+    @field_validator("semi_axes_km", mode="before")
+    @classmethod
+    def _three_axes(cls, value: Any) -> Any:
+        return _check_length(value, 3)
+
+
+class CorridorConfig(_FrozenModel):
+    """An approach corridor: a cone with apex at the docking port (``[constraints.corridor]``).
+
+    Inside the cone the keep-out zone is waived. With a corridor, ``scenario.xf``
+    is the port at rest: unset, it is set to ``[port_km, 0, 0, 0]``; set to
+    anything else, the config is refused.
+    """
+
+    port_km: tuple[PositionKm, PositionKm, PositionKm] = Field(
+        description="docking port p (the cone's apex and the terminal position), on or outside "
+        "the keep-out surface; each within ±1e4 km [km]",
+    )
+    axis: tuple[AxisEntry, AxisEntry, AxisEntry] = Field(
+        description="outward corridor axis (from the port away from the target), any non-zero "
+        "length (normalised by the tool); each entry in [-1e6, 1e6] [-]",
+    )
+    half_angle_deg: Float = Field(
+        gt=0, lt=90, description="cone half-angle θ, in (0, 90) [deg]"
+    )
+
+    @field_validator("port_km", "axis", mode="before")
+    @classmethod
+    def _three_entries(cls, value: Any) -> Any:
+        return _check_length(value, 3)
+
+    @field_validator("axis")
+    @classmethod
+    def _non_zero(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not any(value):
+            raise ValueError("must be a non-zero vector")
+        return value
+
+
+class ConstraintsConfig(_FrozenModel):
+    """Path constraints (issue 32; ``[constraints]``); none by default.
+
+    A position is safe when it is outside the keep-out zone or inside the
+    corridor. Measured on the true trajectory of every run; enforced by the
+    cone-program (``socp``) guidance only: the shooting method stays
+    unconstrained. Off (no keep-out zone, no corridor, no margin), the section is
+    left out of the resolved config, so the config hash and every number are as
+    without it.
+    """
+
+    keep_out: KeepOutConfig | None = Field(
+        None, description="keep-out ellipsoid centred on the target (unset: none)"
+    )
+    corridor: CorridorConfig | None = Field(
+        None, description="approach corridor with apex at the port (unset: none)"
+    )
+    sigma_margin: Float = Field(
+        0.0,
+        ge=0,
+        le=SIGMA_MARGIN_MAX,
+        description="covariance margin k: constraints tightened by k·√(nᵀ P_pos n) along their "
+        "normal n, in [0, 100] [-]",
+    )
+
+    @model_serializer(mode="wrap")
+    def _without_unset(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # an unset zone or corridor is left out (TOML has no null; a dotted key can then
+        # create it: --set constraints.corridor.half_angle_deg=…)
+        out: dict[str, Any] = handler(self)
+        return {k: v for k, v in out.items() if v is not None}
+
+    @model_validator(mode="after")
+    def _port_outside_keep_out(self) -> Self:
+        if self.keep_out is not None and self.corridor is not None:
+            level = sum(
+                (p / a) ** 2
+                for p, a in zip(self.corridor.port_km, self.keep_out.semi_axes_km, strict=True)
+            )
+            if level < 1.0 - PORT_SURFACE_TOL:
+                raise rules_error(
+                    [
+                        (
+                            "corridor.port_km",
+                            list(self.corridor.port_km),
+                            "must lie on or outside the keep-out zone: (x/a)² + (y/b)² + "
+                            f"(z/c)² = {level:.6g} < 1 with (a, b, c) = keep_out.semi_axes_km",
+                        )
+                    ]
+                )
+        return self
+
+    @property
+    def active(self) -> bool:
+        """True when a keep-out zone or a corridor is configured."""
+        return self.keep_out is not None or self.corridor is not None
+
+
+#: Relative tolerance of "on the keep-out surface" for the port [-]: a port computed as a
+#: point of the surface (a·û) may land a few ulps inside.
+PORT_SURFACE_TOL = 1e-12
 
 
 SweepValue = Float | Int | bool | str | tuple[Float, ...]
@@ -898,17 +1037,60 @@ class CwrendConfig(_FrozenModel):
     actuator: ActuatorConfig = Field(
         default_factory=ActuatorConfig, description="actuator errors (the truth gets them)"
     )
+    constraints: ConstraintsConfig = Field(
+        default_factory=ConstraintsConfig,
+        description="path constraints: keep-out zone, corridor (socp guidance; measured always)",
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str | dict[str, Any]] = Field(
         default_factory=dict,
+        max_length=MAX_SWEPT_KEYS,
         description="grid: dotted.key = [v1, v2, …] or 'start:stop:num' (cartesian product); "
         "or, for cwrend sweep --design, ranges: dotted.key = { low = …, high = … } "
-        "(log = true, int = true) or { values = […] } [the key's unit]",
+        "(log = true, int = true) or { values = […] }; at most 1,000 keys [the key's unit]",
     )
     dispersions: dict[str, Dispersion] = Field(
-        default_factory=dict, description="per-run random draws: dotted.key = {dist = …}"
+        default_factory=dict,
+        max_length=MAX_SWEPT_KEYS,
+        description="per-run random draws: dotted.key = {dist = …}; at most 1,000 keys",
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _xf_at_the_port(cls, data: Any) -> Any:
+        # With a corridor and no scenario.xf, the terminal state is the port at rest
+        # (issue 32); an explicit xf is checked against it by _cross_section_rules.
+        if not isinstance(data, dict):
+            return data
+        constraints = data.get("constraints")
+        corridor = (
+            constraints.get("corridor")
+            if isinstance(constraints, dict)
+            else getattr(constraints, "corridor", None)
+        )
+        port = corridor.get("port_km") if isinstance(corridor, dict) else getattr(
+            corridor, "port_km", None
+        )
+        if not isinstance(port, (list, tuple)) or len(port) != 3:
+            return data  # no corridor, or a malformed port its own validator names
+        scenario = data.get("scenario", {})
+        if isinstance(scenario, ScenarioConfig):
+            if "xf" in scenario.model_fields_set:
+                return data
+            return {**data, "scenario": scenario.model_copy(update={"xf": (*port, 0, 0, 0)})}
+        if isinstance(scenario, dict) and "xf" not in scenario:
+            return {**data, "scenario": {**scenario, "xf": [*port, 0.0, 0.0, 0.0]}}
+        return data
+
+    @model_serializer(mode="wrap")
+    def _without_constraints_when_off(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # no [constraints]: left out of the resolved tree, which the config and campaign
+        # hashes are computed from, so every existing hash (and number) is unchanged
+        out = handler(self)
+        if isinstance(out, dict) and self.constraints == ConstraintsConfig():
+            out.pop("constraints", None)
+        return out
 
     @model_validator(mode="after")
     def _cross_section_rules(self) -> Self:
@@ -963,6 +1145,17 @@ class CwrendConfig(_FrozenModel):
                     "actuator.min_thrust_km_s2",
                     act.min_thrust_km_s2,
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
+                )
+            )
+        corridor = self.constraints.corridor
+        if corridor is not None and tuple(sc.xf) != (*corridor.port_km, 0.0, 0.0, 0.0):
+            problems.append(
+                (
+                    "scenario.xf",
+                    list(sc.xf),
+                    "with a corridor the terminal state is the port at rest, "
+                    f"[{', '.join(fmt_num(p) for p in corridor.port_km)}, 0, 0, 0] "
+                    "(constraints.corridor.port_km): leave scenario.xf unset or set it so",
                 )
             )
         if self.guidance.t_min_rem_s >= sc.horizon_s:
