@@ -284,7 +284,10 @@ def test_manifest_records_provenance(small_ablation: Path) -> None:
 def test_rerun_skips_completed_runs(small_ablation: Path) -> None:
     before = (small_ablation / "events.jsonl").read_text()
     cfg = small_ablation.parent.parent / "c.toml"
-    result = _cli("ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q")
+    result = _cli(
+        "ablate", str(cfg), "--seeds", "3", "--arch", ADAPTIVE, "--workers", "1", "-q",
+        "--rrd-seeds", "2",  # the same command: a larger --rrd-seeds would record seed 2 now
+    )  # fmt: skip
     assert result.exit_code == 0
     assert (small_ablation / "events.jsonl").read_text() == before  # nothing recomputed
 
@@ -315,24 +318,35 @@ def test_changed_config_is_refused_unless_forced(small_ablation: Path) -> None:
     assert "--force" in refused.output
 
 
-def test_campaign_writes_the_references_of_each_point(tmp_path: Path) -> None:
-    """references/<point>.parquet: the open-loop references of the point, kept on resume."""
+def test_campaign_writes_the_references_of_each_scenario_once(tmp_path: Path) -> None:
+    """references/<id>.parquet per distinct scenario and solver, named for each point by
+    references/index.jsonl (read back by report.load.references_file); kept on resume."""
+    from cwrend_cli.report.load import references_file
+
     cfg_file = _write_config(tmp_path / "c.toml", "refs")
-    args = ["sweep", str(cfg_file), "--param", "scenario.u_max_km_s2=8e-4,9e-4", "--arch",
-            "mtf_adaptive", "--seeds", "1", "--workers", "1", "--no-rrd", "-q"]  # fmt: skip
+    args = ["sweep", str(cfg_file), "--param", "scenario.u_max_km_s2=8e-4,9e-4", "--param",
+            "schedule.beta=0.25,0.5", "--arch", "mtf_adaptive", "--seeds", "1", "--workers", "1",
+            "--no-rrd", "-q"]  # fmt: skip
     assert _cli(*args).exit_code == 0
     out = tmp_path / "results" / "refs"
-    names = []
+    names = set()
     for u_max in (8e-4, 9e-4):
-        point = campaign.point_id((("scenario.u_max_km_s2", u_max),))
-        names.append(f"{point}.parquet")
         problem = problem_of(load_config(cfg_file, [f"scenario.u_max_km_s2={u_max}"]))
         expected = references_table(simulation.open_loop_references(problem))
-        stored = pq.read_table(out / "references" / f"{point}.parquet")
+        files = {
+            references_file(out, campaign.point_id((("scenario.u_max_km_s2", u_max),
+                                                    ("schedule.beta", beta))))
+            for beta in (0.25, 0.5)
+        }  # fmt: skip
+        (rel,) = files  # β does not change the references: both points name one file
+        stored = pq.read_table(out / rel)
         assert stored.schema == expected.schema
         assert stored.equals(expected)
+        names.add(Path(rel).name)
+    assert len(names) == 2
     assert _cli(*args).exit_code == 0  # a resume with nothing to do keeps them
-    assert sorted(p.name for p in (out / "references").iterdir()) == sorted(names)
+    assert {p.name for p in (out / "references").iterdir()} == names | {"index.jsonl"}
+    assert len((out / "references" / "index.jsonl").read_text().splitlines()) == 4
     journal.wipe(out)  # what --force removes
     assert not (out / "references").exists()
 

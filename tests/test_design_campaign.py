@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from cwrend_cli.campaign import sequential
 from cwrend_cli.cli import app
+from cwrend_cli.report import load_results
 
 runner = CliRunner()
 TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "error")
@@ -256,3 +257,36 @@ def test_a_bad_command_line_design_exits_2_naming_the_option(
     assert result.exit_code == 2, result.output
     assert message in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "results").exists()
+
+
+def test_a_design_writes_per_step_data_of_its_first_point_and_its_references_once(
+    tmp_path: Path,
+) -> None:
+    """By default (output.design_steps_points = 1) only the first design point in design
+    order has steps; the points of one scenario share one references file; the report
+    reads that point with its references."""
+    cfg = _config(tmp_path, "lean")
+    args = _sweep(cfg, "--design", "sobol", "--samples", "2", "--seeds", "2")
+    assert (result := runner.invoke(app, args)).exit_code == 0, result.output
+    out = tmp_path / "results" / "lean"
+    first = pd.read_parquet(out / "design.parquet")["point"].iloc[0]
+    steps = pd.read_parquet(out / "steps", columns=["point", "seed"])
+    assert set(steps["point"]) == {first} and set(steps["seed"]) == {0, 1}
+    solves = pd.read_parquet(out / "solves", columns=["point"])  # small: every run keeps them
+    assert solves["point"].nunique() == pd.read_parquet(out / "runs.parquet")["point"].nunique()
+    stored = sorted(p.name for p in (out / "references").iterdir())
+    assert len(stored) == 2 and stored[0] == "index.jsonl"  # β and κ do not change them
+    data = load_results(out)
+    assert data.point == first and data.references is not None
+    assert not any("references" in note for note in data.notes)
+
+
+def test_design_steps_points_chooses_how_many_design_points_keep_steps(tmp_path: Path) -> None:
+    cfg = _config(tmp_path, "steps")
+    args = _sweep(cfg, "--design", "sobol", "--samples", "2", "--seeds", "1",
+                  "--set", "output.design_steps_points=3")  # fmt: skip
+    assert (result := runner.invoke(app, args)).exit_code == 0, result.output
+    out = tmp_path / "results" / "steps"
+    rows = pd.read_parquet(out / "design.parquet")["point"]
+    steps = pd.read_parquet(out / "steps", columns=["point"])
+    assert set(steps["point"]) == set(list(dict.fromkeys(rows))[:3])

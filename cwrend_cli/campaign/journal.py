@@ -11,8 +11,11 @@ Layout of ``<output.dir>/<name>/``::
     steps/arch=<slug>/*.parquet     per-step data of each task execution (hive-partitioned)
     solves/arch=<slug>/*.parquet    per-solve data, likewise
     recordings/<point>.s<seed>.rrd  Rerun recordings
-    references/<point>.parquet      open-loop references of each grid point
-                                    (output.tables.references_table)
+    references/r<digest>.parquet    open-loop references, one file per distinct scenario
+                                    and solver (output.tables.references_table)
+    references/index.jsonl          which of them each grid point uses ({"point", "file"})
+    design.parquet, problem.json    a sampled design's matrix and SALib problem
+    sensitivity.parquet             a sampled design's sensitivity indices
 
 The journal is the truth: a task execution counts once its ``task_done``
 event (written in the same append as its run events) is in
@@ -26,6 +29,7 @@ the manifest check and the manifest, and ``--force``'s wipe.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
@@ -46,6 +50,7 @@ from cwrend_cli import __version__
 from cwrend_cli.campaign.plan import CampaignPlan
 from cwrend_cli.campaign.worker import TaskOutcome
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.files import refuse_links
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     DESIGN,
@@ -114,7 +119,7 @@ def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None
     root = Path(path).parent
     _flush(root / f for e in events if e.get("event") == "task_done" for f in e.get("files", ()))
     text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
-    with open(path, "ab") as fh:
+    with open(_open_to_append(Path(path)), "ab") as fh:
         if fh.tell() > 0:
             with open(path, "rb") as tail:
                 tail.seek(-1, os.SEEK_END)
@@ -125,10 +130,26 @@ def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None
         os.fsync(fh.fileno())
 
 
+def _open_to_append(path: Path) -> int:
+    """A descriptor appending to ``path``, never through a link planted after start-up (issue 36,
+    item 6): a link is an :class:`OSError` ``ELOOP`` naming it."""
+    try:
+        return os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        if exc.errno != errno.ELOOP:
+            raise
+        raise OSError(
+            errno.ELOOP,
+            "a symbolic link, and cwrend never writes through links: remove it and run the "
+            "command again",
+            str(path),
+        ) from None
+
+
 def _flush(paths: Iterable[Path]) -> None:
     """Wait until the contents of the files ``paths`` are on disk."""
     for path in paths:
-        fd = os.open(path, os.O_RDONLY)
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
         try:
             os.fsync(fd)
         finally:
@@ -143,17 +164,20 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def iter_events(path: str | Path) -> Iterator[dict[str, Any]]:
+def iter_events(path: str | Path, start: int = 0) -> Iterator[dict[str, Any]]:
     """The complete events of a journal, one at a time, read line by line.
 
     A torn or unparsable line is dropped (a torn last line included); a
     missing journal has no events. Only one line is held at a time, so
     reading costs memory for what the caller keeps, not for the file.
+    ``start``: read from this byte on (the journal's size when an invocation
+    began: what it appended).
     """
     path = Path(path)
     if not path.exists():
         return
     with open(path, "rb") as fh:
+        fh.seek(start)
         for chunk in fh:  # split on b"\n"; the \r-separated pieces as bytes.splitlines does
             for line in chunk.splitlines():
                 try:
@@ -259,8 +283,11 @@ class JournalState:
     files: frozenset[str]  # data files written by completed task executions
 
 
-def load_journal(path: str | Path) -> JournalState:
+def load_journal(path: str | Path, start: int = 0) -> JournalState:
     """Runs and files of every task execution that completed (its ``task_done`` was written).
+
+    ``start``: only the events from this byte on (:func:`iter_events`), e.g.
+    the runs an invocation journaled, however their executions are named.
 
     Streams the journal (:func:`iter_events`) and keeps what the state needs:
     per run key its latest outcome event (by position in the journal) that a
@@ -287,7 +314,7 @@ def load_journal(path: str | Path) -> JournalState:
         else:
             latest[0] = min(latest[0], position)
 
-    for position, event in enumerate(iter_events(path)):
+    for position, event in enumerate(iter_events(path, start)):
         kind = event.get("event")
         if kind in ("run_finished", "run_failed"):
             execution = event.get("execution")
@@ -341,24 +368,13 @@ def check_confined(out_dir: Path) -> None:
 
     cwrend never reads or writes through a link: a linked ``steps/`` (or
     journal, manifest, …) would send results, or ``--force``'s removal,
-    outside the campaign directory (issue 20).
+    outside the campaign directory (issue 20). Links planted later are
+    refused by each write (:func:`~cwrend_cli.output.files.atomic_path`'s
+    ``root``, :func:`append_events`; issue 36).
     """
     names = (MANIFEST, RUNS, POINTS, EVENTS, LOCK, *STATS_FILES, *DATASETS, REFERENCES)
-    for name in names:
-        if (out_dir / name).is_symlink():
-            _refuse_link(out_dir / name, out_dir)
-    for dataset in (*DATASETS, REFERENCES):
-        for root, dirs, files in os.walk(out_dir / dataset):  # does not follow links
-            for entry in (*dirs, *files):
-                if (Path(root) / entry).is_symlink():
-                    _refuse_link(Path(root) / entry, out_dir)
-
-
-def _refuse_link(path: Path, out_dir: Path) -> None:
-    raise ConfigError(
-        f"{path}: a symbolic link inside the campaign directory; cwrend reads and writes only "
-        f"inside {out_dir} and never follows links: remove the link, or choose another "
-        "output.dir / output.name"
+    refuse_links(
+        out_dir, names, "the campaign directory", ", or choose another output.dir / output.name"
     )
 
 

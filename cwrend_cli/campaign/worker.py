@@ -65,6 +65,7 @@ from cwrend_cli.physics.params import Solver as SolverParams
 
 __all__ = [
     "CaseResult",
+    "InputChangedError",
     "ReferencesKey",
     "RunOutcome",
     "TaskInterrupted",
@@ -75,6 +76,7 @@ __all__ = [
     "fault_draws",
     "fault_seed_sequence",
     "noise_seed_sequence",
+    "references_id",
     "references_key",
     "run_case",
     "seeds_to_record",
@@ -90,6 +92,16 @@ ReferencesKey = tuple[Scenario, SolverParams]
 def references_key(problem: Problem) -> ReferencesKey:
     """The part of ``problem`` its open-loop references depend on: scenario and solver."""
     return (problem.scenario, problem.solver)
+
+
+def references_id(key: ReferencesKey) -> str:
+    """A stable name of the references of ``key``: ``r`` and 12 hex digits.
+
+    The SHA-256 of the key's ``repr`` (the scenario's and the solver's
+    fields: numbers, tuples of numbers and words), so every grid point with
+    the same scenario and solver names one file, in any process.
+    """
+    return "r" + hashlib.sha256(repr(key).encode()).hexdigest()[:12]
 
 
 # ---------------------------------------------------------------------------
@@ -135,13 +147,28 @@ def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
     otherwise the stream :func:`noise_seed_sequence` of the root seed.
     """
     if noise.file is not None:
-        if noise.digest is not None and file_digest(noise.file) != noise.digest:
-            raise InputDataError(
-                f"noise.file = {noise.file!r} changed since the campaign was planned; "
-                "a campaign replays one realisation: restore the file or start over"
-            )
-        return load_noise_file(noise.file, n_steps)
+        if noise.digest is None:
+            return load_noise_file(noise.file, n_steps)
+        try:  # planned: the file must still hold what was planned
+            if file_digest(noise.file) == noise.digest:
+                return load_noise_file(noise.file, n_steps)
+            reason = "changed since the campaign was planned"
+        except InputDataError as exc:  # deleted or unreadable since
+            reason = f"unusable since the campaign was planned ({exc})"
+        raise InputChangedError(
+            f"noise.file = {noise.file!r} {reason}; a campaign replays one realisation, so it "
+            "stopped and recorded no run for it: restore the file and run the same command "
+            "to resume, or start over with --force"
+        )
     return sensors.standard_normal_stream(noise_seed_sequence(noise.root_seed, seed), n_steps)
+
+
+class InputChangedError(InputDataError):
+    """An input of a planned campaign (its noise file) changed while it ran (exit 2).
+
+    Not a run's failure: it escapes :func:`execute_task`, and the driver
+    stops the campaign at once without journaling the task (issue 36, item 5).
+    """
 
 
 def standard_normal_for(cfg: CwrendConfig, seed: int) -> FloatArray:
@@ -341,6 +368,8 @@ def execute_task(
                 outcomes.append(
                     RunOutcome(spec, "ok", metrics, "", started, time.perf_counter() - t0)
                 )
+            except InputChangedError:  # the campaign's input, not this run: it stops
+                raise
             except Exception as exc:  # failure isolation: the campaign goes on
                 kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
                 text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
@@ -378,7 +407,7 @@ def execute_task(
             rel = f"{kind}/arch={arch}/{task.task_key}-{digest}.parquet"
             table = build([r for _, r in chosen], extra, metadata)
             # not waiting for the disk: the journal flushes the files before it records the task
-            write_parquet(table, Path(out_dir) / rel, durable=False)
+            write_parquet(table, Path(out_dir) / rel, durable=False, root=Path(out_dir))
             files.append(rel)
     warnings: list[str] = []
     for seed in record_seeds:
@@ -395,6 +424,7 @@ def execute_task(
                 problem.degradation.windows,
                 u_max_km_s2=problem.scenario.u_max_km_s2,
                 recording_name=f"cwrend {task.point} seed {seed}",
+                root=Path(out_dir),
             )
             files.append(rel)
         except OSError:  # cannot write results (disk full): a fault, as for the tables above

@@ -47,6 +47,9 @@ from cwrend_cli.limits import (
     MAX_SEEDS_PER_TASK,
     MAX_STEPS,
     MAX_SWEPT_KEYS,
+    NOISE_FILE_BYTES_PER_STEP,
+    NOISE_FILE_SLACK_BYTES,
+    noise_file_max_bytes,
 )
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
@@ -767,7 +770,11 @@ class NoiseConfig(_FrozenModel):
     )
     file: str | None = Field(
         None,
-        description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3) [-]",
+        description="external standard-normal realisation (CSV/Parquet, columns n1,n2,n3; "
+        "one row per step; at most 1 MiB + 1 kB per step) [-]",
+        json_schema_extra={
+            "max_bytes": f"{NOISE_FILE_SLACK_BYTES} + {NOISE_FILE_BYTES_PER_STEP} per step"
+        },
     )
 
     @field_validator("file")
@@ -1166,6 +1173,31 @@ class CwrendConfig(_FrozenModel):
                     f"must be < scenario.horizon_s ({fmt_num(sc.horizon_s)})",
                 )
             )
+        noise_problem = _noise_file_too_large(self.noise.file, sc.n_steps)
+        if noise_problem is not None:
+            problems.append(("noise.file", self.noise.file, noise_problem))
         if problems:
             raise rules_error(problems)
         return self
+
+
+def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
+    """Why ``file`` is too large to be a noise file of ``n_steps`` rows, or ``None``.
+
+    The bound is :func:`cwrend_cli.limits.noise_file_max_bytes` (about 1 kB a step
+    plus 1 MiB): checked on the file's size alone, before anything hashes or reads
+    it (issue 36 item 9).
+    """
+    if file is None:
+        return None
+    try:
+        size = Path(file).stat().st_size
+    except OSError:
+        return None  # reading it reports the problem
+    limit = noise_file_max_bytes(n_steps)
+    if size <= limit:
+        return None
+    return (
+        f"{size:,} bytes; a noise file of {n_steps:,} rows (one per step, horizon_s / dt_s) "
+        f"is at most {limit:,} bytes"
+    )

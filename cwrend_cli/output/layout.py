@@ -52,9 +52,19 @@ COMPARE_FIGURE = "compare.png"
 REPORT_DIR = "report"
 
 
-def references_path(point: str) -> str:
-    """Where the open-loop references of grid point ``point`` go (relative)."""
-    return f"{REFERENCES}/{point}.parquet"
+#: Which references file holds each grid point's references: JSON lines
+#: ``{"point": <id>, "file": "references/<name>.parquet"}`` (the last line of a point wins).
+REFERENCES_INDEX = f"{REFERENCES}/index.jsonl"
+
+
+def references_path(name: str) -> str:
+    """Where the open-loop references named ``name`` go (relative).
+
+    ``name``: ``r<digest>`` of a scenario and solver, shared by every grid
+    point with them (:data:`REFERENCES_INDEX` says which points); earlier
+    versions of cwrend wrote one file per point, named by its id.
+    """
+    return f"{REFERENCES}/{name}.parquet"
 
 
 def recording_path(point: str, seed: int) -> str:

@@ -8,10 +8,12 @@ Reads either layout that cwrend writes:
   ``point``, ``arch``, ``seed``, ``status``, the summary metrics, swept values
   as ``param.<key>``), the hive dataset ``steps/arch=<slug>/…`` (steps columns
   plus ``run_key`` and ``point``; the per-step NEES of every seed of the
-  reported point is read too, when stored), ``references/<point>.parquet`` (the open-loop
-  references of each grid point, with the schema of a run's
-  ``references.parquet``) and ``manifest.json`` (``config`` = the resolved base
-  config).
+  reported point is read too, when stored), the open-loop references of each
+  grid point (with the schema of a run's ``references.parquet``: the file
+  ``references/index.jsonl`` names for the point, shared by the points of one
+  scenario and solver, or ``references/<point>.parquet`` as earlier versions
+  wrote them; :func:`references_file`) and ``manifest.json`` (``config`` =
+  the resolved base config).
 
 A campaign of a sampled design (``cwrend sweep --design …``) is recognised
 (:attr:`ReportData.design`) by its ``sensitivity.parquet`` (Sobol indices of a
@@ -52,9 +54,15 @@ from cwrend_cli.config import (
 )
 from cwrend_cli.config.adapt import problem_of, windows_of
 from cwrend_cli.errors import ConfigError, CwrendError
+from cwrend_cli.output.files import refuse_links
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
+    DESIGN,
+    EVENTS,
     MANIFEST,
+    REFERENCES,
+    REFERENCES_INDEX,
+    REPORT_DIR,
     RUN_CONFIG,
     RUN_REFERENCES,
     RUN_STEPS,
@@ -76,6 +84,14 @@ from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import format_value
 
 Layout = Literal["run", "campaign"]
+
+
+#: What a report reads (or writes: ``report/``) in a results directory; none may be a link:
+#: a report never reads another directory's results nor writes outside (issue 36, item 6).
+REPORTED = (
+    MANIFEST, RUNS, EVENTS, STEPS, REFERENCES, ABLATION_STATS, SWEEP_STATS, SENSITIVITY,
+    DESIGN, RUN_CONFIG, RUN_SUMMARY, RUN_STEPS, RUN_REFERENCES, REPORT_DIR,
+)  # fmt: skip
 
 
 class ReportError(CwrendError):
@@ -501,9 +517,33 @@ def _load_run_dir(root: Path, seed: int | None, point: str | None = None) -> Rep
     )
 
 
+def references_file(root: Path, point: str) -> str:
+    """The references file of grid point ``point`` of a campaign (relative to ``root``).
+
+    The file ``references/index.jsonl`` names for the point (shared by the
+    points of one scenario and solver), else ``references/<point>.parquet``
+    (one file per point, as earlier versions of cwrend wrote them). A torn
+    or unparsable line of the index is skipped, and so is a line naming a
+    file outside ``references/``; the last line of a point wins.
+    """
+    index = root / REFERENCES_INDEX
+    named = references_path(point)
+    if index.is_file():
+        for line in index.read_text(encoding="utf-8").splitlines():
+            try:
+                entry = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(entry, dict) and entry.get("point") == point and "file" in entry:
+                file = Path(str(entry["file"]))
+                if file.parent == Path(REFERENCES) and file.suffix == ".parquet":  # nothing else
+                    named = file.as_posix()
+    return named
+
+
 def _campaign_references(root: Path, point: str | None, notes: list[str]) -> pd.DataFrame | None:
     """The stored open-loop references of grid point ``point`` (absent: ``None`` and a note)."""
-    rel = references_path(str(point))
+    rel = references_file(root, str(point))
     if point is not None and (root / rel).exists():
         return _read_references(root / rel)
     notes.append(
@@ -533,7 +573,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         if runs["point"].nunique() <= 1:
             point = None  # a single point: as without --point
     elif "point" in runs.columns and runs["point"].nunique() > 1:
-        point = _reported_point(runs, config)
+        point = _first_design_point(root, runs) or _reported_point(runs, config)
     selected = runs if point is None else runs[runs["point"].astype(str) == point]
     chosen = _pick_seed(selected, seed)
     sensitivity = _campaign_sensitivity(root)
@@ -556,7 +596,13 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
     if point is not None and "point" in steps.columns:
         steps = steps[steps["point"].astype(str) == point]
     if steps.empty:
-        raise ReportError(f"{steps_dir}: no steps for seed {chosen}")
+        hint = (
+            " (a design writes per-step data of its first output.design_steps_points "
+            "point(s) only, in design.parquet's order)"
+            if (root / DESIGN).exists()
+            else ""
+        )
+        raise ReportError(f"{steps_dir}: no steps for seed {chosen}" + hint)
     steps["arch"] = steps["arch"].astype(str)
     ref_point = point
     if ref_point is None and "point" in selected.columns and not selected.empty:
@@ -580,6 +626,21 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         design=design,
         sensitivity=sensitivity,
     )
+
+
+def _first_design_point(root: Path, runs: pd.DataFrame) -> str | None:
+    """A design's first point in design order with an ok run (``design.parquet``), if any.
+
+    The point whose per-step data a design writes first (``output.design_steps_points``).
+    """
+    path = root / DESIGN
+    if not path.is_file():
+        return None
+    ok = set(runs.loc[runs["status"] == "ok", "point"].astype(str))
+    for point in _read_parquet(path)["point"].astype(str):
+        if point in ok:
+            return str(point)
+    return None
 
 
 def _design_manifest(meta: Mapping[str, Any], runs: pd.DataFrame) -> bool:
@@ -640,6 +701,7 @@ def load_results(
         raise ReportError(f"{root}: no such directory")
     if not root.is_dir():
         raise ReportError(f"{root}: not a directory")
+    refuse_links(root, REPORTED, "the results directory")
     if (root / RUNS).exists():
         return _load_campaign_dir(root, seed, point)
     if (root / RUN_SUMMARY).exists():
