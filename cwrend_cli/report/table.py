@@ -1,0 +1,813 @@
+"""``cwrend table``: cross-campaign tables of stored statistics, for a paper (md, LaTeX, CSV).
+
+A table is read, never recomputed, from the statistics each campaign stored
+(``ablation.parquet`` / ``sweep.parquet``: values with their 95 % intervals,
+bootstrap or Wilson) and, for the two shares of re-solves, from its
+``runs.parquet``. What a table shows is said by:
+
+* **fields**, the dimensions of its rows (``--rows``) and columns
+  (``--cols``): ``campaign`` (each results directory, named by its directory
+  or a ``LABEL=DIR`` argument), ``arch``, ``other`` (the B of a paired
+  comparison A − B), ``point`` (a grid point's id), ``metric`` (the values
+  asked for, one column each by default) and any configuration key
+  (``guidance.hold``, ``param.guidance.hold`` alike): its swept value where a
+  campaign sweeps it, else the campaign's base value, so an ablation and a
+  sweep line up on the same keys;
+* **values** (``--metric``), each ``[STATISTIC.]METRIC[@A-B][:bare][:DIGITS]``
+  (:func:`parse_value`): a statistic of the runs of an architecture
+  (``mean.miss``, ``median.miss``, ``p95.miss``, ``mean.dv``, ``mean.fuel``
+  with their bootstrap intervals; ``solve_mean_ms``, ``solve_max_ms``,
+  ``solve_success_pct`` without), a paired comparison (``frac_less.miss``
+  with its Wilson interval, ``median_diff.miss``, ``mean_diff.dv``; ``@A-B``
+  fixes the pair, else ``arch`` and ``other`` are fields), the runs counted
+  (``n``), or the share of re-solves certified infeasible or failed
+  (``infeasible_pct``, ``failed_pct``: sums over the cell's ok runs);
+* **filters** (``--where [CAMPAIGN:]FIELD=V1,V2``): keep the entries whose
+  field has one of the values, shown in that order (only those of one
+  campaign when prefixed).
+
+Each cell must be one stored value: two matching entries (two campaigns,
+grid points or pairs in one cell) are refused naming a field that tells
+them apart. Units and precision per quantity as in the report: misses in m
+(2 decimals), Δv in km/s (4; differences 5), fuel penalty in % (2), shares
+3 decimals. A bootstrap interval from fewer than 10 seeds is marked ``*``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from cwrend_cli.config import get_dotted
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
+from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.physics.params import ALL_ARCHITECTURES
+from cwrend_cli.report.labels import format_value
+
+__all__ = [
+    "FIELDS",
+    "FORMATS",
+    "Source",
+    "Value",
+    "build_table",
+    "load_source",
+    "parse_value",
+    "render",
+]
+
+Format = Literal["md", "latex", "csv"]
+FORMATS: tuple[Format, ...] = ("md", "latex", "csv")
+#: Fields that are not configuration keys.
+FIELDS = ("campaign", "arch", "other", "point", "metric")
+#: Below this many seeds a bootstrap interval is flagged (as on the console and in report.md).
+MIN_BOOTSTRAP_N = 10
+UNRELIABLE_NOTE = "* fewer than 10 seeds: bootstrap interval unreliable"
+_MISSING = "–"
+
+
+@dataclass(frozen=True)
+class _Quantity:
+    """How a stored metric is shown: name, unit, factor to that unit, decimals."""
+
+    name: str
+    unit: str
+    scale: float
+    digits: int
+
+
+#: The metrics of the statistics files, as shown (the report's units and precision).
+QUANTITIES: Mapping[str, _Quantity] = {
+    "miss_km": _Quantity("miss", "m", 1e3, 2),
+    "delta_v_km_s": _Quantity("Δv", "km/s", 1.0, 4),
+    "fuel_penalty_pct": _Quantity("fuel penalty", "%", 1.0, 2),
+    "solve_mean_ms": _Quantity("re-solve time", "ms", 1.0, 2),
+    "solve_max_ms": _Quantity("re-solve time", "ms", 1.0, 1),
+    "solve_success_pct": _Quantity("re-solve success", "%", 1.0, 2),
+    "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
+}
+#: Short names of ``--metric`` (those of ``cwrend compare --metric``).
+ALIASES: Mapping[str, str] = {"miss": "miss_km", "dv": "delta_v_km_s", "fuel": "fuel_penalty_pct"}
+#: The statistics of each stored metric (the first is the default).
+MARGINAL: Mapping[str, tuple[str, ...]] = {
+    "miss_km": ("mean", "median", "p95"),
+    "delta_v_km_s": ("mean", "median", "p95"),
+    "fuel_penalty_pct": ("mean", "median", "p95"),
+    "solve_mean_ms": ("mean",),
+    "solve_max_ms": ("max",),
+    "solve_success_pct": ("mean",),
+    "n_infeasible": ("mean",),
+}
+#: The paired statistics of each metric (the first is the default).
+PAIRED: Mapping[str, tuple[str, ...]] = {
+    "miss_km": ("median_diff", "frac_less"),
+    "delta_v_km_s": ("mean_diff",),
+}
+#: Values computed from ``runs.parquet``: share of the re-solves of the cell's ok runs [%].
+RUN_SHARES: Mapping[str, tuple[str, str]] = {
+    "infeasible_pct": ("n_infeasible", "re-solves infeasible"),
+    "failed_pct": ("n_failed", "re-solves failed"),
+}
+_VALUE_SYNTAX = re.compile(
+    r"^(?:(?P<stat>[a-z_0-9]+)\.)?(?P<metric>[a-z_]+)(?:@(?P<a>[a-z_]+)-(?P<b>[a-z_]+))?"
+    r"(?P<mods>(?::[a-z0-9]+)*)$"
+)
+_SYNTAX_HELP = (
+    "[STATISTIC.]METRIC[@A-B][:bare][:DIGITS], e.g. mean.miss, p95.miss:bare, "
+    "frac_less.miss@mtf_adaptive-plain_adaptive, mean_diff.dv, n, infeasible_pct"
+)
+
+
+@dataclass(frozen=True)
+class Value:
+    """One value asked for by ``--metric`` (:func:`parse_value`)."""
+
+    text: str  # as given
+    kind: Literal["marginal", "paired", "count", "share"]
+    metric: str  # column name in the statistics (or runs.parquet for a share)
+    statistic: str
+    pair: tuple[str, str] | None = None
+    interval: bool = True  # show the stored interval
+    digits: int | None = None  # decimals (None: the quantity's)
+
+    @property
+    def header(self) -> str:
+        """The column header: quantity, unit, and the interval's kind."""
+        if self.kind == "count":
+            return "n"
+        if self.kind == "share":
+            return f"{RUN_SHARES[self.text.split(':')[0]][1]} [%]"
+        q = QUANTITIES[self.metric]
+        ci = " (95 % CI)" if self.interval else ""
+        if self.statistic == "frac_less":
+            a, b = self.pair or ("A", "B")
+            ci = " (95 % Wilson)" if self.interval else ""
+            return f"P({a} misses less than {b}){ci}"
+        if self.kind == "paired":
+            what = self.statistic.removesuffix("_diff")
+            return f"{what} {q.name} difference [{q.unit}]{ci}"
+        return f"{self.statistic} {q.name} [{q.unit}]{ci}"
+
+    def decimals(self) -> int:
+        if self.digits is not None:
+            return self.digits
+        if self.kind == "count":
+            return 0
+        if self.kind == "share":
+            return 2
+        if self.statistic == "frac_less":
+            return 3
+        if self.statistic == "mean_diff" and self.metric == "delta_v_km_s":
+            return 5
+        return QUANTITIES[self.metric].digits
+
+    def scale(self) -> float:
+        if self.kind in ("count", "share") or self.statistic == "frac_less":
+            return 1.0
+        return QUANTITIES[self.metric].scale
+
+
+def parse_value(text: str) -> Value:
+    """One ``--metric`` entry; :class:`ConfigError` naming it and the syntax when wrong."""
+    m = _VALUE_SYNTAX.match(text.strip())
+    if m is None:
+        raise ConfigError(f"--metric {text!r}: expected {_SYNTAX_HELP}")
+    interval, digits = True, None
+    for mod in filter(None, m["mods"].split(":")):
+        if mod == "bare":
+            interval = False
+        elif mod.isdigit() and int(mod) <= 12:
+            digits = int(mod)
+        else:
+            raise ConfigError(
+                f"--metric {text!r}: unknown modifier {mod!r} (':bare' drops the interval, "
+                "':3' shows 3 decimals)"
+            )
+    stat, name = m["stat"], m["metric"]
+    metric = ALIASES.get(name, name)
+    pair = (m["a"], m["b"]) if m["a"] else None
+    if pair is not None:
+        for slug in pair:
+            if slug not in ALL_ARCHITECTURES:
+                raise ConfigError(
+                    f"--metric {text!r}: unknown architecture {slug!r} "
+                    f"(choices: {', '.join(ALL_ARCHITECTURES)})"
+                )
+    if stat is None and name in ("n", *RUN_SHARES):
+        if pair is not None:
+            raise ConfigError(f"--metric {text!r}: {name} is per architecture, not per pair")
+        kind: Literal["count", "share"] = "count" if name == "n" else "share"
+        return Value(text, kind, name, name, None, False, digits)
+    paired_stats = PAIRED.get(metric, ())
+    if metric not in MARGINAL:
+        known = ", ".join([*ALIASES, *(m for m in MARGINAL if m not in ALIASES.values())])
+        raise ConfigError(
+            f"--metric {text!r}: unknown metric {name!r} (metrics: {known}; also n, "
+            f"{', '.join(RUN_SHARES)})"
+        )
+    if stat in paired_stats or (stat is None and pair is not None):
+        if not paired_stats:
+            raise ConfigError(f"--metric {text!r}: {metric} has no paired comparison")
+        return Value(text, "paired", metric, stat or paired_stats[0], pair, interval, digits)
+    if pair is not None:
+        raise ConfigError(
+            f"--metric {text!r}: the paired statistics of {metric} are "
+            f"{', '.join(paired_stats) or 'none'}"
+        )
+    stat = stat or MARGINAL[metric][0]
+    if stat not in MARGINAL[metric]:
+        allowed = ", ".join([*MARGINAL[metric], *paired_stats])
+        raise ConfigError(f"--metric {text!r}: statistic {stat!r} of {metric} is one of {allowed}")
+    return Value(text, "marginal", metric, stat, None, interval, digits)
+
+
+# ---------------------------------------------------------------------------
+# Campaigns
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Source:
+    """A campaign directory as a table reads it."""
+
+    label: str
+    path: Path
+    manifest: Mapping[str, Any]
+    stats: pd.DataFrame  # its ablation.parquet or sweep.parquet
+    runs: pd.DataFrame | None = field(default=None, compare=False)  # read when a share is asked
+
+    @property
+    def swept(self) -> tuple[str, ...]:
+        """The configuration keys the campaign sweeps, in its grid's order."""
+        grid = self.manifest.get("grid")
+        keys = list(grid) if isinstance(grid, dict) else []
+        cols = [
+            c.removeprefix(PARAM_PREFIX) for c in self.stats.columns if c.startswith(PARAM_PREFIX)
+        ]
+        return tuple(dict.fromkeys([*keys, *cols]))
+
+    def base_value(self, key: str) -> tuple[bool, Any]:
+        """(found, value) of ``key`` in the campaign's base configuration."""
+        config = self.manifest.get("config")
+        if not isinstance(config, Mapping):
+            return False, None
+        try:
+            return True, get_dotted(config, key)
+        except (KeyError, IndexError, TypeError, ValueError, ConfigError):
+            return False, None
+
+
+def load_source(text: str) -> Source:
+    """``DIR`` or ``LABEL=DIR``: a campaign's manifest and statistics; exit 2 if it has none."""
+    label, path = None, Path(text)
+    if "=" in text and not path.exists():
+        label, _, rest = text.partition("=")
+        path = Path(rest)
+    manifest_path = path / MANIFEST
+    stats_path = next(
+        (path / n for n in (SWEEP_STATS, ABLATION_STATS) if (path / n).is_file()), None
+    )
+    if not manifest_path.is_file() or stats_path is None:
+        raise ConfigError(
+            f"{path}: not a campaign directory with statistics (no {MANIFEST} and "
+            f"{ABLATION_STATS} or {SWEEP_STATS}); give the directory of a cwrend ablate or "
+            "cwrend sweep that ran to its end"
+        )
+    try:
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+        stats = pd.read_parquet(stats_path)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: unreadable campaign ({exc})") from None
+    for name in ("arch", "other", "point", "kind", "metric", "statistic"):
+        if name in stats.columns:
+            stats[name] = stats[name].astype(object).where(stats[name].notna(), None)
+    return Source(label or path.resolve().name, path, manifest, stats)
+
+
+def _with_runs(source: Source) -> Source:
+    if source.runs is not None:
+        return source
+    try:
+        runs = pd.read_parquet(source.path / RUNS)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{source.path}: cannot read {RUNS} ({exc})") from None
+    return Source(source.label, source.path, source.manifest, source.stats, runs)
+
+
+# ---------------------------------------------------------------------------
+# Fields
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Field:
+    name: str  # campaign, arch, other, point, metric, or a configuration key
+    header: str
+
+    @property
+    def is_key(self) -> bool:
+        return self.name not in FIELDS
+
+
+_HEADERS = {"campaign": "campaign", "arch": "architecture", "other": "vs", "point": "point",
+            "metric": "value"}  # fmt: skip
+
+
+def _field(text: str, sources: Sequence[Source], option: str) -> _Field:
+    """``FIELD`` or ``FIELD=HEADER`` of ``--rows`` / ``--cols`` / ``--where``."""
+    name, _, header = text.partition("=")
+    name = name.strip().removeprefix(PARAM_PREFIX)
+    if name in FIELDS:
+        return _Field(name, header or _HEADERS[name])
+    if any(name in s.swept or s.base_value(name)[0] for s in sources):
+        return _Field(name, header or name.rsplit(".", 1)[-1])
+    swept = sorted({k for s in sources for k in s.swept})
+    last = name.rsplit(".", 1)[-1]
+    near = [k for k in [*swept, *_config_keys(sources)] if k.rsplit(".", 1)[-1] == last]
+    hint = f"; did you mean {near[0]}?" if near else ""
+    raise ConfigError(
+        f"{option} {name!r}: unknown field (fields: {', '.join(FIELDS)}, or a configuration "
+        f"key{': swept here ' + ', '.join(swept) if swept else ''}){hint}"
+    )
+
+
+def _config_keys(sources: Sequence[Source]) -> list[str]:
+    """The dotted keys of the campaigns' base configurations (for a did-you-mean)."""
+    keys: list[str] = []
+
+    def walk(tree: Mapping[str, Any], prefix: str) -> None:
+        for k, v in tree.items():
+            if isinstance(v, Mapping):
+                walk(v, f"{prefix}{k}.")
+            else:
+                keys.append(f"{prefix}{k}")
+
+    for s in sources:
+        config = s.manifest.get("config")
+        if isinstance(config, Mapping):
+            walk(config, "")
+    return list(dict.fromkeys(keys))
+
+
+def _fields(text: str | None, sources: Sequence[Source], option: str) -> list[_Field]:
+    fields = [_field(t, sources, option) for t in (text or "").split(",") if t.strip()]
+    names = [f.name for f in fields]
+    dup = next((n for n in names if names.count(n) > 1), None)
+    if dup is not None:
+        raise ConfigError(f"{option}: field {dup!r} named twice")
+    return fields
+
+
+@dataclass(frozen=True)
+class _Filter:
+    campaign: str | None
+    field: _Field
+    values: tuple[str, ...]
+
+
+def _filter(text: str, sources: Sequence[Source]) -> _Filter:
+    """``--where [CAMPAIGN:]FIELD=V1,V2``."""
+    lhs, eq, rhs = text.partition("=")
+    campaign, colon, key = lhs.rpartition(":")
+    if not eq or not key.strip() or not rhs.strip():
+        raise ConfigError(f"--where {text!r}: expected [CAMPAIGN:]FIELD=VALUE[,VALUE…]")
+    if colon and campaign not in {s.label for s in sources}:
+        labels = ", ".join(s.label for s in sources)
+        raise ConfigError(f"--where {text!r}: no campaign {campaign!r} (campaigns: {labels})")
+    f = _field(key, sources, "--where")
+    values = tuple(v.strip() for v in rhs.split(",") if v.strip())
+    return _Filter(campaign if colon else None, f, values)
+
+
+def _matches(value: Any, wanted: str) -> bool:
+    """A field's value against a ``--where`` value as written (numbers to a relative 1e-9)."""
+    if value is None:
+        return wanted in ("none", "None", _MISSING)
+    if isinstance(value, bool | np.bool_):
+        return wanted.lower() == str(bool(value)).lower()
+    if isinstance(value, int | float | np.integer | np.floating):
+        try:
+            return math.isclose(float(value), float(wanted), rel_tol=1e-9, abs_tol=0.0)
+        except ValueError:
+            return False
+    return format_value(value) == wanted or json.dumps(value) == wanted
+
+
+# ---------------------------------------------------------------------------
+# Entries: one stored value each, with every field's value
+# ---------------------------------------------------------------------------
+
+
+def _cell_value(value: Any) -> Any:
+    """A ``param.<key>`` cell as its value (JSON text for mixed kinds; NaN: none)."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, str):
+        try:
+            parsed = json.loads(value)
+        except ValueError:
+            return value
+        return parsed if isinstance(parsed, list | dict) else value
+    return value
+
+
+def _entries(source: Source, value: Value, index: int, keys: Sequence[str]) -> pd.DataFrame:
+    """The stored values of ``value`` in ``source``: value, ci_low, ci_high, n, the fields."""
+    stats = source.stats
+    if value.kind in ("marginal", "count"):
+        metric, statistic = (
+            ("miss_km", "mean") if value.kind == "count" else (value.metric, value.statistic)
+        )
+        sel = stats[
+            (stats["kind"] == "marginal")
+            & (stats["metric"] == metric)
+            & (stats["statistic"] == statistic)
+        ].copy()
+        if value.kind == "count":
+            sel["value"] = sel["n"].astype(float)
+            sel["ci_low"] = sel["ci_high"] = math.nan
+        sel["other"] = None
+    elif value.kind == "paired":
+        sel = stats[
+            (stats["kind"] == "paired")
+            & (stats["metric"] == value.metric)
+            & (stats["statistic"] == value.statistic)
+        ].copy()
+        if value.pair is not None:
+            sel = sel[(sel["arch"] == value.pair[0]) & (sel["other"] == value.pair[1])]
+    else:
+        sel = _shares(_with_runs(source), value)
+    if "point" not in sel.columns:
+        sel["point"] = "base"
+    out = pd.DataFrame(
+        {
+            "value": sel["value"].astype(float).to_numpy(),
+            "ci_low": sel["ci_low"].astype(float).to_numpy() if value.interval else math.nan,
+            "ci_high": sel["ci_high"].astype(float).to_numpy() if value.interval else math.nan,
+            "n": sel["n"].astype(float).to_numpy(),
+            "campaign": source.label,
+            "arch": sel["arch"].to_numpy(),
+            "other": sel["other"].to_numpy() if "other" in sel.columns else None,
+            "point": sel["point"].astype(str).to_numpy(),
+            "metric": index,
+        }
+    )
+    for key in keys:
+        column = PARAM_PREFIX + key
+        if column in sel.columns:
+            out[key] = [_cell_value(v) for v in sel[column]]
+        else:
+            found, base = source.base_value(key)
+            out[key] = [base if found else None] * len(out)
+    return out
+
+
+def _shares(source: Source, value: Value) -> pd.DataFrame:
+    """Per grid point and architecture: 100 × Σ(count) / Σ(n_solves) over the ok runs."""
+    runs = source.runs
+    assert runs is not None
+    column = RUN_SHARES[value.metric][0]
+    if column not in runs.columns or "n_solves" not in runs.columns:
+        raise ConfigError(f"{source.path}: {RUNS} holds no {column} (written by an older cwrend)")
+    ok = runs[runs["status"] == "ok"]
+    params = [c for c in ok.columns if c.startswith(PARAM_PREFIX)]
+    rows = []
+    for (point, arch), g in ok.groupby(["point", "arch"], sort=False, observed=True):
+        solves = float(g["n_solves"].sum())
+        share = 100.0 * float(g[column].sum()) / solves if solves else math.nan
+        first = g.iloc[0]
+        rows.append({"point": str(point), "arch": str(arch), "value": share, "ci_low": math.nan,
+                     "ci_high": math.nan, "n": float(len(g)),
+                     **{p: first[p] for p in params}})  # fmt: skip
+    return pd.DataFrame(rows, columns=["point", "arch", "value", "ci_low", "ci_high", "n", *params])
+
+
+# ---------------------------------------------------------------------------
+# The table
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Table:
+    """A built table: header cells, rows of display cells, and the numbers behind them."""
+
+    row_headers: tuple[str, ...]
+    columns: tuple[tuple[str, Value], ...]  # (header, the value shown)
+    rows: tuple[tuple[tuple[str, ...], tuple[pd.Series | None, ...]], ...]
+    title: str | None = None
+
+    @property
+    def flagged(self) -> bool:
+        """Whether a shown bootstrap interval is from fewer than :data:`MIN_BOOTSTRAP_N` seeds."""
+        return any(
+            _unreliable(cell, value)
+            for _, cells in self.rows
+            for cell, (_, value) in zip(cells, self.columns, strict=True)
+        )
+
+
+def _unreliable(cell: pd.Series | None, value: Value) -> bool:
+    if cell is None or value.statistic == "frac_less" or not value.interval:
+        return False
+    return math.isfinite(float(cell["ci_low"])) and float(cell["n"]) < MIN_BOOTSTRAP_N
+
+
+def _order(
+    field_: _Field,
+    values: Iterable[Any],
+    sources: Sequence[Source],
+    filters: Sequence[_Filter],
+    specs: Sequence[Value],
+) -> list[Any]:
+    """The distinct ``values`` of a field in display order.
+
+    A ``--where`` list's order first (one naming no campaign); then campaigns
+    as given, architectures in the package's order, values asked for as
+    asked, a configuration key's values in the order of the first grid that
+    sweeps it, the rest sorted.
+    """
+    present = list(dict.fromkeys(_hashable(v) for v in values))
+    ranked: list[Any] = []
+    for f in filters:
+        if f.field.name == field_.name and f.campaign is None:
+            ranked += [v for w in f.values for v in present if _matches(_unhash(v), w)]
+    if field_.name == "campaign":
+        ranked += [s.label for s in sources]
+    elif field_.name in ("arch", "other"):
+        ranked += list(ALL_ARCHITECTURES)
+    elif field_.name == "metric":
+        ranked += list(range(len(specs)))
+    elif field_.is_key:
+        for s in sources:
+            grid = s.manifest.get("grid")
+            if isinstance(grid, dict) and field_.name in grid:
+                ranked += [_hashable(v) for v in grid[field_.name]]
+    ranked = [r for r in dict.fromkeys(ranked) if r in present]
+    rest = [v for v in present if v not in ranked]
+    return ranked + sorted(rest, key=_sort_key)
+
+
+def _hashable(value: Any) -> Any:
+    return json.dumps(value) if isinstance(value, list | dict) else value
+
+
+def _unhash(value: Any) -> Any:
+    if isinstance(value, str) and value[:1] in "[{":
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def _sort_key(value: Any) -> tuple[int, Any]:
+    if value is None:
+        return (2, "")
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return (0, float(value))
+    return (1, str(value))
+
+
+def _shown(field_: _Field, value: Any, specs: Sequence[Value]) -> str:
+    if field_.name == "metric":
+        return specs[int(value)].header
+    if value is None:
+        return _MISSING
+    return format_value(_unhash(value))
+
+
+def build_table(
+    sources: Sequence[Source],
+    values: Sequence[Value],
+    rows: str | None = None,
+    cols: str | None = None,
+    where: Sequence[str] = (),
+    title: str | None = None,
+) -> Table:
+    """The table of ``values`` over ``sources`` with ``rows`` and ``cols`` (comma-separated
+    fields, ``FIELD=HEADER`` to rename a header) after the ``where`` filters.
+
+    :class:`ConfigError` (exit 2) for an unknown field, a filter that keeps
+    nothing, or two stored values in one cell.
+    """
+    if not values:
+        raise ConfigError("--metric: name at least one value")
+    row_fields = _fields(rows, sources, "--rows")
+    col_fields = _fields(cols, sources, "--cols")
+    filters = [_filter(w, sources) for w in where]
+    shared = {f.name for f in row_fields} & {f.name for f in col_fields}
+    if shared:
+        raise ConfigError(f"--rows and --cols both name {sorted(shared)[0]!r}")
+    if not row_fields:
+        row_fields = _default_rows(sources, values, col_fields)
+    if all(f.name != "metric" for f in (*row_fields, *col_fields)):
+        col_fields.append(_Field("metric", "value"))
+    keys = list(
+        dict.fromkeys(
+            [f.name for f in (*row_fields, *col_fields) if f.is_key]
+            + [f.field.name for f in filters if f.field.is_key]
+            + [k for s in sources for k in s.swept]
+        )
+    )
+    frame = pd.concat(
+        [_entries(s, v, i, keys) for s in sources for i, v in enumerate(values)],
+        ignore_index=True,
+    )
+    if frame.empty:
+        raise ConfigError(
+            f"no stored value of --metric {','.join(v.text for v in values)} in "
+            f"{', '.join(s.label for s in sources)}: check the architectures and pairs they hold"
+        )
+    for f in filters:
+        keep = frame[f.field.name].map(lambda v, f=f: any(_matches(v, w) for w in f.values))
+        if f.campaign is not None:
+            keep |= frame["campaign"] != f.campaign
+        if not keep.any():
+            held = frame[f.field.name].map(lambda v: _MISSING if v is None else format_value(v))
+            raise ConfigError(
+                f"--where {f.field.name}={','.join(f.values)} keeps nothing: the entries have "
+                f"{f.field.name} = {', '.join(dict.fromkeys(held))}"
+            )
+        frame = frame[keep.astype(bool)]
+    names = [f.name for f in (*row_fields, *col_fields)]
+    for name in names:
+        frame[name] = frame[name].map(_hashable)
+    _check_one_per_cell(frame, names, keys)
+    row_keys = _keys(frame, row_fields, sources, filters, values)
+    col_keys = _keys(frame, col_fields, sources, filters, values)
+    # each cell's position in ``frame`` (one at most: _check_one_per_cell)
+    cells = {tuple(k): i for i, k in enumerate(frame[names].itertuples(index=False, name=None))}
+    columns = []
+    for ck in col_keys:
+        spec = values[int(ck[[f.name for f in col_fields].index("metric")])]
+        others = [
+            _shown(f, v, values) for f, v in zip(col_fields, ck, strict=True) if f.name != "metric"
+        ]
+        header = " · ".join([*others, *([spec.header] if len(values) > 1 or not others else [])])
+        columns.append((header, spec))
+    table_rows = []
+    for rk in row_keys:
+        row_cells: list[pd.Series | None] = []
+        for ck in col_keys:
+            hit = cells.get((*rk, *ck))
+            row_cells.append(None if hit is None else frame.iloc[hit])
+        if any(c is not None for c in row_cells):
+            shown = tuple(_shown(f, v, values) for f, v in zip(row_fields, rk, strict=True))
+            table_rows.append((shown, tuple(row_cells)))
+    return Table(tuple(f.header for f in row_fields), tuple(columns), tuple(table_rows), title)
+
+
+def _default_rows(
+    sources: Sequence[Source], values: Sequence[Value], cols: Sequence[_Field]
+) -> list[_Field]:
+    """campaign (several), the swept keys, arch, and other (for a paired value)."""
+    taken = {f.name for f in cols}
+    names = ["campaign"] if len(sources) > 1 else []
+    names += list(dict.fromkeys(k for s in sources for k in s.swept))
+    names += ["arch"]
+    if any(v.kind == "paired" and v.pair is None for v in values):
+        names += ["other"]
+    return [_field(n, sources, "--rows") for n in names if n not in taken]
+
+
+def _keys(
+    frame: pd.DataFrame,
+    fields: Sequence[_Field],
+    sources: Sequence[Source],
+    filters: Sequence[_Filter],
+    values: Sequence[Value],
+) -> list[tuple[Any, ...]]:
+    """The combinations of the fields' values present in ``frame``, in display order."""
+    if not fields:
+        return [()]
+    names = [f.name for f in fields]
+    present = set(frame[names].itertuples(index=False, name=None))
+    orders = [_order(f, frame[f.name], sources, filters, values) for f in fields]
+    rank = [{v: i for i, v in enumerate(o)} for o in orders]
+    return sorted(present, key=lambda k: tuple(r[v] for r, v in zip(rank, k, strict=True)))
+
+
+def _check_one_per_cell(frame: pd.DataFrame, names: Sequence[str], keys: Sequence[str]) -> None:
+    dup = frame[frame.duplicated(names, keep=False)]
+    if dup.empty:
+        return
+    first = next(iter(dup.groupby(list(names), sort=False, dropna=False)))[1]
+    candidates = ["campaign", *keys, "point", "arch", "other"]
+    differs = next(
+        (c for c in candidates if c not in names and first[c].map(_hashable).nunique() > 1),
+        "point",
+    )
+    seen = ", ".join(dict.fromkeys(format_value(_unhash(v)) for v in first[differs]))
+    raise ConfigError(
+        f"a cell holds {len(first)} stored values that differ in {differs} ({seen}): add "
+        f"{differs} to --rows or --cols, or keep one with --where {differs}=…"
+    )
+
+
+# ---------------------------------------------------------------------------
+# Rendering
+# ---------------------------------------------------------------------------
+
+
+def _cell(cell: pd.Series | None, value: Value, mark: str) -> str:
+    """``value [low, high]`` in the value's unit and precision (``–`` when not stored)."""
+    if cell is None or not math.isfinite(float(cell["value"])):
+        return _MISSING
+    scale, spec = value.scale(), f".{value.decimals()}f"
+    text = format(float(cell["value"]) * scale, spec)
+    lo, hi = float(cell["ci_low"]), float(cell["ci_high"])
+    if value.interval and math.isfinite(lo) and math.isfinite(hi):
+        text += f" [{lo * scale:{spec}}, {hi * scale:{spec}}]"
+        if _unreliable(cell, value):
+            text += mark
+    return text
+
+
+def render(table: Table, fmt: Format) -> str:
+    """The table as GitHub markdown, a LaTeX ``tabular`` (booktabs) or CSV."""
+    if fmt == "csv":
+        return _csv(table)
+    mark = "\\*" if fmt == "md" else "$^{*}$"
+    header = [*table.row_headers, *(h for h, _ in table.columns)]
+    body = [
+        [*keys, *(_cell(c, v, mark) for c, (_, v) in zip(cells, table.columns, strict=True))]
+        for keys, cells in table.rows
+    ]
+    note = UNRELIABLE_NOTE if table.flagged else None
+    if fmt == "md":
+        lines = [f"{table.title}", ""] if table.title else []
+        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        lines += ["| " + " | ".join(row) + " |" for row in body]
+        if note:
+            lines += ["", "\\" + note]
+        return "\n".join(lines)
+    return _latex(table, header, body, note)
+
+
+#: Characters LaTeX reads as commands, and the Unicode of cwrend's labels, in LaTeX.
+_LATEX = {
+    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+    "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
+    "Δ": r"$\Delta$", "ε": r"$\varepsilon$", "β": r"$\beta$", "σ": r"$\sigma$", "κ": r"$\kappa$",
+    "ρ": r"$\rho$", "α": r"$\alpha$", "°": r"$^\circ$", "×": r"$\times$", "–": "--",
+    "−": "$-$", "·": r"$\cdot$", "²": r"$^2$", "≤": r"$\le$", "≥": r"$\ge$",
+}  # fmt: skip
+
+
+def _tex(text: str) -> str:
+    return "".join(_LATEX.get(ch, ch) for ch in text)
+
+
+def _latex(table: Table, header: list[str], body: list[list[str]], note: str | None) -> str:
+    align = "l" * len(table.row_headers) + "r" * len(table.columns)
+    lines = [f"% {_tex(table.title)}"] if table.title else []
+    lines += [
+        f"\\begin{{tabular}}{{{align}}}",
+        "\\toprule",
+        " & ".join(_tex(h) for h in header) + " \\\\",
+        "\\midrule",
+    ]
+    lines += [
+        " & ".join(c if c.endswith("$^{*}$") else _tex(c) for c in row) + " \\\\" for row in body
+    ]
+    lines += ["\\bottomrule", "\\end{tabular}"]
+    if note:
+        lines.append(f"% {_tex(note)}")
+    return "\n".join(lines)
+
+
+def _csv(table: Table) -> str:
+    """One column per row field; per value its number, and its interval's ends when it has one
+    (in the value's unit, unrounded)."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    header = list(table.row_headers)
+    for h, v in table.columns:
+        header += [h, f"{h} low", f"{h} high"] if v.interval and v.kind != "count" else [h]
+    writer.writerow(header)
+    for keys, cells in table.rows:
+        row = list(keys)
+        for cell, (_, v) in zip(cells, table.columns, strict=True):
+            numbers = (
+                ["value", "ci_low", "ci_high"] if v.interval and v.kind != "count" else ["value"]
+            )
+            for name in numbers:
+                x = math.nan if cell is None else float(cell[name]) * v.scale()
+                if not math.isfinite(x):
+                    row.append("")
+                else:
+                    row.append(str(int(x)) if v.kind == "count" else repr(x))
+        writer.writerow(row)
+    return out.getvalue().rstrip("\n")

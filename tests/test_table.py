@@ -1,0 +1,319 @@
+"""``cwrend table``: the study tables of the docs, from stored statistics (issue 37, item 8).
+
+Small campaigns made here stand for the 1,000-seed studies: a sweep over the
+hold (the ``paper-1000`` sweep), the same sweep with actuator errors (a
+variant of the mismatch study) and an ablation of shooting and cone-program
+architectures (the methods study). Each table has the layout of the docs'
+tables and its cells are the stored values, formatted, never recomputed.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import Result
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+
+runner = CliRunner()
+ADAPTIVE = "mtf_adaptive,plain_adaptive"
+SOCP = "mtf_adaptive,plain_adaptive,mtf_adaptive_socp,plain_adaptive_socp"
+
+
+def _campaign(root: Path, command: str, name: str, *args: str) -> Path:
+    cfg = root / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{root / "results"}"\n')
+    base = [command, str(cfg), "--name", name, "--seeds", "3", "-w", "1", "--no-rrd", "-q"]
+    result = runner.invoke(app, [*base, *args])
+    assert result.exit_code == 0, result.output
+    return root / "results" / name
+
+
+@pytest.fixture(scope="module")
+def studies(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("studies")
+    hold = ("--param", "guidance.hold=sample,mean", "--arch", ADAPTIVE)
+    return {
+        "sweep": _campaign(root, "sweep", "hold", *hold),
+        "actuator": _campaign(
+            root, "sweep", "hold_actuator", *hold, "--set", "actuator.magnitude_sigma=0.01"
+        ),
+        "methods": _campaign(root, "ablate", "methods", "--arch", SOCP),
+    }
+
+
+def _table(*args: str | Path) -> Result:
+    return runner.invoke(app, ["table", *map(str, args)])
+
+
+def _lines(result: Result) -> list[str]:
+    assert result.exit_code == 0, result.output
+    return result.stdout.splitlines()
+
+
+def _ci(row: pd.Series, scale: float, digits: int, mark: str = "\\*") -> str:
+    """A cell as the docs print it: value [low, high], from a stored statistics row."""
+    v, lo, hi = (float(row[c]) * scale for c in ("value", "ci_low", "ci_high"))
+    return f"{v:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]{mark}"
+
+
+def _stat(path: Path, **where: str) -> pd.Series:
+    stats = pd.read_parquet(path)
+    for column, value in where.items():
+        stats = stats[stats[column.replace("__", ".")] == value]
+    assert len(stats) == 1
+    return stats.iloc[0]
+
+
+# --- the layouts of the docs' tables ------------------------------------------
+
+
+def test_the_sweep_table_per_grid_point_and_architecture(studies: dict[str, Path]) -> None:
+    """As "Results on the paper scenario": swept values, architecture, n, intervals."""
+    result = _table(
+        studies["sweep"],
+        "--rows",
+        "guidance.hold,arch",
+        "--metric",
+        "n,mean.miss,median.miss,p95.miss:bare,mean.dv,infeasible_pct,failed_pct",
+    )
+    lines = _lines(result)
+    assert lines[0] == (
+        "| hold | architecture | n | mean miss [m] (95 % CI) | median miss [m] (95 % CI) | "
+        "p95 miss [m] | mean Δv [km/s] (95 % CI) | re-solves infeasible [%] | "
+        "re-solves failed [%] |"
+    )
+    assert lines[1] == "|" + "---|" * 9
+    rows = [line.split(" | ") for line in lines[2:6]]
+    assert [(r[0].removeprefix("| "), r[1]) for r in rows] == [
+        ("sample", "plain_adaptive"),
+        ("sample", "mtf_adaptive"),
+        ("mean", "plain_adaptive"),
+        ("mean", "mtf_adaptive"),
+    ]  # the grid's order of the values, the package's order of architectures
+    stats = studies["sweep"] / "sweep.parquet"
+    for r in rows:
+        key = {"param__guidance__hold": r[0].removeprefix("| "), "arch": r[1], "kind": "marginal"}
+        mean = _stat(stats, **key, metric="miss_km", statistic="mean")
+        p95 = _stat(stats, **key, metric="miss_km", statistic="p95")
+        dv = _stat(stats, **key, metric="delta_v_km_s", statistic="mean")
+        assert r[2] == str(int(mean["n"]))
+        assert r[3] == _ci(mean, 1e3, 2)
+        assert r[5] == f"{float(p95['value']) * 1e3:.2f}"
+        assert r[6] == _ci(dv, 1.0, 4)
+        assert r[7] == "0.00" and r[8].removesuffix(" |") == "0.00"  # adaptive: none
+    assert lines[-1] == "\\* fewer than 10 seeds: bootstrap interval unreliable"
+
+
+def test_the_paired_table_per_grid_point(studies: dict[str, Path]) -> None:
+    """As the docs' P(MTF-adaptive misses less than plain-adaptive) table (Wilson interval)."""
+    pair = "@mtf_adaptive-plain_adaptive"
+    result = _table(
+        studies["sweep"],
+        "--rows",
+        "guidance.hold",
+        "--metric",
+        f"frac_less.miss{pair},median_diff.miss{pair}",
+    )
+    lines = _lines(result)
+    assert lines[0] == (
+        "| hold | P(mtf_adaptive misses less than plain_adaptive) (95 % Wilson) | "
+        "median miss difference [m] (95 % CI) |"
+    )
+    sample = lines[2].split(" | ")
+    key = {
+        "param__guidance__hold": "sample",
+        "kind": "paired",
+        "arch": "mtf_adaptive",
+        "metric": "miss_km",
+    }
+    stats = studies["sweep"] / "sweep.parquet"
+    assert sample[1] == _ci(_stat(stats, **key, statistic="frac_less"), 1.0, 3, mark="")
+    assert sample[2] == _ci(_stat(stats, **key, statistic="median_diff"), 1e3, 2) + " |"
+
+
+def test_a_cross_campaign_table_has_a_column_per_campaign(studies: dict[str, Path]) -> None:
+    """As "Robustness under model mismatch": rows architecture, one column per variant."""
+    result = _table(
+        f"ideal sensors & actuator={studies['sweep']}",
+        f"+ actuator errors={studies['actuator']}",
+        "--where",
+        "guidance.hold=mean",
+        "--rows",
+        "arch",
+        "--cols",
+        "campaign",
+        "--metric",
+        "mean.miss",
+        "--title",
+        'Mean miss [m] (95 % CI), `hold = "mean"`:',
+    )
+    lines = _lines(result)
+    assert lines[:4] == [
+        'Mean miss [m] (95 % CI), `hold = "mean"`:',
+        "",
+        "| architecture | ideal sensors & actuator | + actuator errors |",
+        "|---|---|---|",
+    ]
+    row = lines[5].split(" | ")
+    assert row[0] == "| mtf_adaptive"
+    for cell, name in zip(row[1:], ("sweep", "actuator"), strict=True):
+        stored = _stat(
+            studies[name] / "sweep.parquet",
+            param__guidance__hold="mean",
+            kind="marginal",
+            arch="mtf_adaptive",
+            metric="miss_km",
+            statistic="mean",
+        )
+        assert cell.removesuffix(" |") == _ci(stored, 1e3, 2)
+
+
+def test_the_methods_table_pairs_each_cone_program_with_its_shooting_twin(
+    studies: dict[str, Path],
+) -> None:
+    """As "Shooting vs cone-program guidance": cone program, vs shooting, the comparisons."""
+    result = _table(
+        studies["methods"],
+        "--rows",
+        "arch=cone program,other=vs shooting",
+        "--where",
+        "arch=plain_adaptive_socp,mtf_adaptive_socp",
+        "--where",
+        "other=plain_adaptive,mtf_adaptive",
+        "--metric",
+        "frac_less.miss,median_diff.miss,mean_diff.dv",
+    )
+    lines = _lines(result)
+    assert lines[0] == (
+        "| cone program | vs shooting | P(A misses less than B) (95 % Wilson) | "
+        "median miss difference [m] (95 % CI) | mean Δv difference [km/s] (95 % CI) |"
+    )
+    assert [line.split(" | ")[:2] for line in lines[2:4]] == [
+        ["| plain_adaptive_socp", "plain_adaptive"],
+        ["| mtf_adaptive_socp", "mtf_adaptive"],
+    ]
+    stored = _stat(
+        studies["methods"] / "ablation.parquet",
+        kind="paired",
+        arch="mtf_adaptive_socp",
+        other="mtf_adaptive",
+        metric="delta_v_km_s",
+        statistic="mean_diff",
+    )
+    assert lines[3].split(" | ")[4] == _ci(stored, 1.0, 5) + " |"
+
+
+def test_an_ablation_lines_up_with_a_sweep_on_its_base_value(studies: dict[str, Path]) -> None:
+    """The ablation sweeps no hold: its rows carry its base value (sample), beside the
+    sweep's mean-hold rows, as the methods table shows the two holds."""
+    result = _table(
+        studies["methods"],
+        studies["sweep"],
+        "--where",
+        "hold:guidance.hold=mean",
+        "--where",
+        "arch=mtf_adaptive,mtf_adaptive_socp",
+        "--rows",
+        "guidance.hold,arch,campaign",
+        "--metric",
+        "mean.miss",
+    )
+    lines = _lines(result)
+    assert [line.split(" | ")[:3] for line in lines[2:5]] == [
+        ["| sample", "mtf_adaptive", "methods"],
+        ["| sample", "mtf_adaptive_socp", "methods"],
+        ["| mean", "mtf_adaptive", "hold"],
+    ]
+
+
+# --- formats ---------------------------------------------------------------------
+
+
+def test_latex_is_a_booktabs_tabular_with_escaped_text(studies: dict[str, Path]) -> None:
+    result = _table(
+        studies["sweep"], "--rows", "guidance.hold,arch", "--metric", "mean.dv", "--format", "latex"
+    )
+    lines = _lines(result)
+    assert lines[:4] == [
+        "\\begin{tabular}{llr}",
+        "\\toprule",
+        "hold & architecture & mean $\\Delta$v [km/s] (95 \\% CI) \\\\",
+        "\\midrule",
+    ]
+    assert lines[4].startswith("sample & plain\\_adaptive & 0.1")
+    assert lines[4].endswith("]$^{*}$ \\\\")
+    assert lines[-3:-1] == ["\\bottomrule", "\\end{tabular}"]
+
+
+def test_csv_gives_each_value_and_its_interval_unrounded(studies: dict[str, Path]) -> None:
+    result = _table(
+        studies["sweep"],
+        "--rows",
+        "guidance.hold,arch",
+        "--metric",
+        "n,mean.miss",
+        "--format",
+        "csv",
+    )
+    assert result.exit_code == 0, result.output
+    rows = list(csv.reader(io.StringIO(result.stdout)))
+    assert rows[0] == [
+        "hold",
+        "architecture",
+        "n",
+        "mean miss [m] (95 % CI)",
+        "mean miss [m] (95 % CI) low",
+        "mean miss [m] (95 % CI) high",
+    ]
+    stored = _stat(
+        studies["sweep"] / "sweep.parquet",
+        param__guidance__hold="sample",
+        kind="marginal",
+        arch="plain_adaptive",
+        metric="miss_km",
+        statistic="mean",
+    )
+    assert rows[1][:3] == ["sample", "plain_adaptive", "3"]
+    assert [float(x) for x in rows[1][3:]] == [
+        float(stored[c]) * 1e3 for c in ("value", "ci_low", "ci_high")
+    ]
+
+
+# --- refusals ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--rows", "hold"), "--rows 'hold': unknown field"),
+        (("--rows", "arch", "--metric", "mean.mis"), "unknown metric 'mis'"),
+        (("--metric", "frac_less.dv"), "statistic 'frac_less' of delta_v_km_s"),
+        (("--where", "guidance.hold=never"), "--where guidance.hold=never keeps nothing"),
+        (("--rows", "arch"), "differ in guidance.hold (sample, mean): add guidance.hold"),
+        (("--format", "html"), "--format 'html'"),
+    ],
+)
+def test_a_bad_table_exits_2_saying_why(
+    studies: dict[str, Path], args: tuple[str, ...], message: str
+) -> None:
+    result = _table(studies["sweep"], *args)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_unknown_field_suggests_the_swept_key(studies: dict[str, Path]) -> None:
+    result = _table(studies["sweep"], "--rows", "hold")
+    assert "did you mean guidance.hold?" in result.stderr
+
+
+def test_a_directory_without_statistics_is_refused(tmp_path: Path) -> None:
+    result = _table(tmp_path)
+    assert result.exit_code == 2
+    assert "not a campaign directory with statistics" in result.stderr
