@@ -49,6 +49,19 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
         degradation=params.Degradation(windows=windows_of(cfg)),
         truth=_mirror(params.Truth, cfg.truth),
         actuator=_mirror(params.Actuator, cfg.actuator),
+        constraints=constraints_of(cfg),
+    )
+
+
+def constraints_of(cfg: CwrendConfig) -> params.Constraints | None:
+    """The configured path constraints (issue 32), or None when the section is off."""
+    c = cfg.constraints
+    if c == type(c)():
+        return None
+    return params.Constraints(
+        keep_out=None if c.keep_out is None else _mirror(params.KeepOut, c.keep_out),
+        corridor=None if c.corridor is None else _mirror(params.Corridor, c.corridor),
+        sigma_margin=c.sigma_margin,
     )
 
 

@@ -907,9 +907,7 @@ class CorridorConfig(_FrozenModel):
         description="outward corridor axis (from the port away from the target), any non-zero "
         "length (normalised by the tool); each entry in [-1e6, 1e6] [-]",
     )
-    half_angle_deg: Float = Field(
-        gt=0, lt=90, description="cone half-angle θ, in (0, 90) [deg]"
-    )
+    half_angle_deg: Float = Field(gt=0, lt=90, description="cone half-angle θ, in (0, 90) [deg]")
 
     @field_validator("port_km", "axis", mode="before")
     @classmethod
@@ -1076,8 +1074,10 @@ class CwrendConfig(_FrozenModel):
             if isinstance(constraints, dict)
             else getattr(constraints, "corridor", None)
         )
-        port = corridor.get("port_km") if isinstance(corridor, dict) else getattr(
-            corridor, "port_km", None
+        port = (
+            corridor.get("port_km")
+            if isinstance(corridor, dict)
+            else getattr(corridor, "port_km", None)
         )
         if not isinstance(port, (list, tuple)) or len(port) != 3:
             return data  # no corridor, or a malformed port its own validator names

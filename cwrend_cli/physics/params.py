@@ -281,6 +281,50 @@ class Actuator:
 
 
 @dataclass(frozen=True)
+class KeepOut:
+    """A keep-out ellipsoid centred on the target (the relative frame's origin).
+
+    The zone is ``(x/a)² + (y/b)² + (z/c)² < 1`` with ``semi_axes_km = (a, b, c)``
+    along x (radial), y (along-track), z (cross-track) [km].
+    """
+
+    semi_axes_km: Vec3  # ellipsoid semi-axes (a, b, c) [km]
+
+
+@dataclass(frozen=True)
+class Corridor:
+    """An approach corridor: the cone with apex at the docking port (:mod:`.constraints`).
+
+    Inside the cone ``{r : (r − p)·â ≥ ‖r − p‖ cos θ}`` (p = ``port_km``, â =
+    ``axis`` normalised, θ = ``half_angle_deg``) the keep-out zone is waived.
+    """
+
+    port_km: Vec3  # docking port p, on or outside the keep-out surface [km]
+    axis: Vec3  # outward corridor axis (any length; normalised at use) [-]
+    half_angle_deg: float  # cone half-angle θ, in (0, 90) [deg]
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """Path constraints of a run (issue 32): a keep-out zone, a corridor, a margin.
+
+    A position is safe when it is outside the keep-out zone or inside the
+    corridor. ``sigma_margin`` k tightens every constraint of the constrained
+    cone program by k σ along its normal (σ from the filter's position
+    covariance) [-].
+    """
+
+    keep_out: KeepOut | None = None
+    corridor: Corridor | None = None
+    sigma_margin: float = 0.0  # covariance margin k, in σ [-]
+
+    @property
+    def active(self) -> bool:
+        """True when a keep-out zone or a corridor is configured."""
+        return self.keep_out is not None or self.corridor is not None
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -292,6 +336,8 @@ class Problem:
     degradation: Degradation = field(default_factory=Degradation)
     truth: Truth = field(default_factory=Truth)
     actuator: Actuator = field(default_factory=Actuator)
+    #: path constraints (issue 32); None: none, every number as without the section
+    constraints: Constraints | None = None
 
 
 @dataclass(frozen=True)
