@@ -37,3 +37,15 @@ MAX_LISTED_PROBLEMS = 20
 #: Keys of a ``[sweep]`` table (grid or design parameters): a grid of even 2 values
 #: per key passes MAX_POINTS at 14 keys, and a design's points grow with its keys.
 MAX_SWEPT_KEYS = 1_000
+#: A noise file (``noise.file``, one row of n1, n2, n3 per step) is at most this many
+#: bytes per step, plus NOISE_FILE_SLACK_BYTES: a CSV row of three full-precision
+#: floats takes about 75 bytes, a Parquet file 24 per row plus its footer; the rest is
+#: room for other columns. Anything larger is not a noise file of this scenario and is
+#: refused before it is hashed or read (a sparse 3 GiB file took 64 s and 15.9 GB).
+NOISE_FILE_BYTES_PER_STEP = 1024
+NOISE_FILE_SLACK_BYTES = 1 << 20
+
+
+def noise_file_max_bytes(n_steps: int) -> int:
+    """Largest noise file accepted for a run of ``n_steps`` steps [bytes]."""
+    return NOISE_FILE_SLACK_BYTES + NOISE_FILE_BYTES_PER_STEP * n_steps

@@ -15,12 +15,18 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
 from cwrend_cli.config import overrides
+from cwrend_cli.config.io import load_noise_file
 from cwrend_cli.config.schema import ScheduleConfig
+from cwrend_cli.errors import InputDataError
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 BIG = "1e308"
@@ -128,7 +134,25 @@ CASES: dict[str, tuple[Setup, str]] = {
         ],
         'sweep = {"a0": [1], ',
     ),
+    # item 9: a noise file far larger than its rows can take
+    "a sparse 100 MiB noise file": (
+        lambda d: [
+            "ablate",
+            str(PAPER),
+            "--set",
+            f"noise.file={_sparse(d / 'n.csv', 100 << 20)!r}",
+        ],
+        'n.csv": 104,857,600 bytes; a noise file of 800 rows (one per step, horizon_s / dt_s) '
+        "is at most 1,867,776 bytes",
+    ),
 }
+
+
+def _sparse(path: Path, size: int) -> str:
+    """A noise file of one row and ``size`` bytes, all but its first line a hole."""
+    path.write_text("n1,n2,n3\n0,0,0\n")
+    os.truncate(path, size)
+    return str(path)
 
 
 def _write(path: Path, text: str) -> str:
@@ -194,3 +218,19 @@ def test_setting_keys_copies_the_tree_once(monkeypatch: pytest.MonkeyPatch) -> N
         return sum(isinstance(c, dict) and "schedule" in c for c in copies)
 
     assert whole_tree_copies(10) == whole_tree_copies(100) == 1
+
+
+def test_a_parquet_noise_file_of_the_wrong_length_is_refused_from_its_footer(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A few kB of Parquet can hold 10**8 rows of zeros: its rows are counted, not decoded."""
+    path = tmp_path / "n.parquet"
+    zeros = pa.array(np.zeros(100_000))
+    pq.write_table(pa.table({"n1": zeros, "n2": zeros, "n3": zeros}), path)
+
+    def decoded(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the rows were decoded")
+
+    monkeypatch.setattr(pd, "read_parquet", decoded)
+    with pytest.raises(InputDataError, match="has 100000 rows, expected 800"):
+        load_noise_file(path, 800)

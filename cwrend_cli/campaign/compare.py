@@ -35,7 +35,6 @@ The rows have the long format of ``ablation.parquet`` (``kind`` = ``paired``,
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -48,7 +47,8 @@ import pandas as pd
 import pyarrow as pa
 
 from cwrend_cli.campaign.statistics import METRICS, bootstrap_ci, wilson_ci
-from cwrend_cli.errors import ConfigError
+from cwrend_cli.config.io import file_digest
+from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.output.layout import MANIFEST, RUNS
 from cwrend_cli.output.tables import PARAM_PREFIX, param_columns, statistics_table
 
@@ -148,17 +148,24 @@ def load_campaign(path: Path) -> Campaign:
 
 
 def _file_digest(path: str) -> str | None:
+    """SHA-256 of a file read in chunks (:func:`cwrend_cli.config.io.file_digest`), or None."""
     try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except OSError:
+        return file_digest(path)
+    except InputDataError:
         return None
 
 
 def _same_file(a: str | None, b: str | None) -> bool:
+    """Whether two noise files hold the same bytes: sizes first, then (equal sizes) digests."""
     if a is None or b is None:
         return a is b
     if a == b:
         return True
+    try:
+        if Path(a).stat().st_size != Path(b).stat().st_size:
+            return False
+    except OSError:
+        return False
     da = _file_digest(a)
     return da is not None and da == _file_digest(b)
 

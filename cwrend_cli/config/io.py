@@ -12,12 +12,14 @@ per step, scaled by chol(R_true) at use (SPEC §6).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import os
 import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import tomli_w
 from pydantic import ValidationError
@@ -26,7 +28,7 @@ from cwrend_cli.config.messages import format_validation_error
 from cwrend_cli.config.overrides import apply, nesting_depth, parse_override
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
-from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING
+from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING, noise_file_max_bytes
 
 if TYPE_CHECKING:
     from cwrend_cli.physics.params import FloatArray
@@ -215,11 +217,42 @@ def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
 
 
 def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (an input identified by its content); :class:`InputDataError`."""
+    """SHA-256 of a file's bytes (an input identified by its content); :class:`InputDataError`.
+
+    Read in chunks (:func:`hashlib.file_digest`): the memory taken does not grow
+    with the file (issue 36 item 9: the whole file was read at once).
+    """
     try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        with open(path, "rb") as file:
+            return hashlib.file_digest(file, "sha256").hexdigest()
     except OSError as exc:
         raise InputDataError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+
+
+def _noise_bytes(path: Path, n_steps: int) -> bytes:
+    """The bytes of a noise file of ``n_steps`` rows, read no further than its bound.
+
+    :class:`InputDataError` for a file larger than
+    :func:`~cwrend_cli.limits.noise_file_max_bytes` (checked on its size, then on
+    what is read, in case it grew in between).
+    """
+    limit = noise_file_max_bytes(n_steps)
+    with open(path, "rb") as file:
+        size = os.fstat(file.fileno()).st_size
+        data = file.read(limit + 1) if size <= limit else b""
+    if size > limit or len(data) > limit:
+        raise InputDataError(
+            f"noise.file = {str(path)!r}: {max(size, len(data)):,} bytes; a noise file of "
+            f"{n_steps:,} rows (one per step, horizon_s / dt_s) is at most {limit:,} bytes"
+        )
+    return data
+
+
+def _wrong_rows(path: Path, rows: int, n_steps: int) -> NoReturn:
+    raise InputDataError(
+        f"noise.file = {str(path)!r}: has {rows} rows, expected {n_steps} "
+        "(one row per step, horizon_s / dt_s)"
+    )
 
 
 def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:
@@ -234,12 +267,20 @@ def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:
 
     path = Path(path)
     try:
+        data = io.BytesIO(_noise_bytes(path, n_steps))
         if path.suffix.lower() in (".parquet", ".pq"):
-            frame = pd.read_parquet(path)
+            import pyarrow.parquet as pq
+
+            rows = pq.ParquetFile(data).metadata.num_rows  # a footer: no row decoded yet
+            if rows != n_steps:  # a few kB of Parquet can hold a billion rows of zeros
+                _wrong_rows(path, rows, n_steps)
+            frame = pd.read_parquet(data)
         else:
-            frame = pd.read_csv(path)
+            frame = pd.read_csv(data)
     except FileNotFoundError:
         raise InputDataError(f"noise.file = {str(path)!r}: file not found") from None
+    except InputDataError:
+        raise
     except Exception as exc:  # pandas/pyarrow raise many types for unreadable files
         raise InputDataError(f"noise.file = {str(path)!r}: cannot be read ({exc})") from None
     missing = [c for c in NOISE_COLUMNS if c not in frame.columns]
@@ -249,10 +290,7 @@ def load_noise_file(path: str | Path, n_steps: int) -> FloatArray:
             f"expected columns n1, n2, n3 (found: {', '.join(map(str, frame.columns))})"
         )
     if len(frame) != n_steps:
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: has {len(frame)} rows, expected {n_steps} "
-            "(one row per step, horizon_s / dt_s)"
-        )
+        _wrong_rows(path, len(frame), n_steps)
     try:
         values = frame[list(NOISE_COLUMNS)].to_numpy(dtype=float)
     except (TypeError, ValueError):
