@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from cwrend_cli import campaign
 from cwrend_cli.campaign import driver as driver_module
 from cwrend_cli.campaign import journal
+from cwrend_cli.campaign import worker as worker_module
 from cwrend_cli.cli import app
 from cwrend_cli.config import ARCHITECTURES, CwrendConfig
 from cwrend_cli.errors import InfrastructureError
@@ -168,3 +169,142 @@ def test_a_full_disk_writing_the_statistics_is_exit_3(
     monkeypatch.setattr(driver_module, "write_parquet", _no_space)
     with pytest.raises(InfrastructureError, match=r"ablation\.parquet not written: disk full"):
         campaign.write_statistics(tmp_path / "results" / "stats", "ablate", 0)
+
+
+# --- item 6: links planted after start-up --------------------------------------
+
+
+def test_a_write_confined_to_a_directory_never_follows_a_link_below_it(tmp_path: Path) -> None:
+    from cwrend_cli.output.files import atomic_path
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (tmp_path / "out" / "steps").mkdir(parents=True)
+    (tmp_path / "out" / "steps" / "arch=a").symlink_to(elsewhere, target_is_directory=True)
+    with (
+        pytest.raises(OSError, match="never writes through links") as raised,
+        atomic_path(tmp_path / "out" / "steps" / "arch=a" / "t.parquet", root=tmp_path / "out"),
+    ):
+        pass
+    assert raised.value.errno == errno.ELOOP
+    assert list(elsewhere.iterdir()) == []
+
+
+@pytest.mark.parametrize("planted", ["steps/arch=mtf_adaptive", "recordings", "events.jsonl"])
+def test_a_link_planted_after_start_up_is_never_written_through(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, planted: str
+) -> None:
+    cfg = _write_config(tmp_path / "c.toml", "planted")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    real = journal.check_confined  # what the driver calls
+
+    def then_plant(out_dir: Path) -> None:
+        real(out_dir)  # the start-up check passes; the link comes after it
+        link = out_dir / planted
+        link.parent.mkdir(parents=True, exist_ok=True)
+        target = elsewhere / link.name
+        if planted.endswith(".jsonl"):
+            target.write_text("")
+        else:
+            target.mkdir()
+        link.symlink_to(target)
+
+    monkeypatch.setattr(driver_module, "check_confined", then_plant)
+    args = ["ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    result = _cli(*args, "--rrd-seeds", "1")
+    assert result.exit_code == 3, result.output
+    assert "never writes through links" in result.stderr and "Traceback" not in result.output
+    assert [p for p in elsewhere.rglob("*") if p.is_file() and p.stat().st_size] == []
+    monkeypatch.undo()
+    again = _cli(*args)  # the link is still there: refused at start-up, exit 2
+    assert again.exit_code == 2 and "a symbolic link inside the campaign directory" in again.stderr
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cfg = _write_config(tmp_path_factory.mktemp("fin") / "c.toml", "fin")
+    args = ["ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    assert _cli(*args).exit_code == 0
+    return cfg.parent / "results" / "fin"
+
+
+@pytest.mark.parametrize("linked", ["report", "steps", "manifest.json", "events.jsonl"])
+def test_a_report_through_a_link_is_refused_with_exit_2(
+    tmp_path: Path, finished: Path, linked: str
+) -> None:
+    import shutil
+
+    results = tmp_path / "fin"
+    shutil.copytree(finished, results)
+    elsewhere = tmp_path / "elsewhere"
+    if linked == "report":
+        elsewhere.mkdir()
+    else:
+        (results / linked).rename(elsewhere)
+    (results / linked).symlink_to(elsewhere)
+    before = sorted(elsewhere.rglob("*")) if elsewhere.is_dir() else []
+    result = _cli("report", str(results))
+    assert result.exit_code == 2, result.output
+    assert "a symbolic link inside the results directory" in result.stderr
+    assert not (results / "report").is_dir() or (results / "report").is_symlink()
+    assert (sorted(elsewhere.rglob("*")) if elsewhere.is_dir() else []) == before
+
+
+# --- item 5: a noise file changed during a campaign ---------------------------
+
+
+def _noise_file(path: Path, seed: int) -> Path:
+    import numpy as np
+
+    values = np.random.default_rng(seed).standard_normal((800, 3))
+    pd.DataFrame(values, columns=["n1", "n2", "n3"]).to_csv(path, index=False)
+    return path
+
+
+def test_a_noise_file_changed_during_a_campaign_stops_it_as_a_changed_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    noise = _noise_file(tmp_path / "noise.csv", 1)
+    original = noise.read_bytes()
+    extra = f'seeds_per_task = 1\n[noise]\nfile = "{noise}"\n'
+    cfg = _write_config(tmp_path / "c.toml", "noisy", extra)
+    out = tmp_path / "results" / "noisy"
+    real = worker_module.execute_task  # what the driver submits
+    calls = {"n": 0}
+
+    def then_change(*args: Any, **kwargs: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 2:  # after the first task: the file is edited under the campaign
+            _noise_file(noise, 2)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(driver_module, "execute_task", then_change)
+    args = ["ablate", str(cfg), "-n", "3", "--arch", ADAPTIVE, "--workers", "1", "-q"]
+    result = _cli(*args)
+    assert result.exit_code == 2, result.output
+    assert "changed since the campaign was planned" in result.stderr
+    assert "Traceback" not in result.output
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) == 2 and (runs["status"] == "ok").all()  # nothing recorded as failed
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"].startswith("stopped: noise.file")
+    monkeypatch.undo()
+    noise.write_bytes(original)  # restored: the same command resumes
+    assert _cli(*args).exit_code == 0
+    whole = _cli("ablate", str(_write_config(tmp_path / "w.toml", "whole", extra)), *args[2:])
+    assert whole.exit_code == 0
+    pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
+
+
+def test_retry_failed_counts_every_run_it_computed_again(tmp_path: Path) -> None:
+    """A task whose runs all failed reruns under its old execution name: still counted."""
+    cfg = _write_config(tmp_path / "c.toml", "retry")
+    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,1e-5", "--arch",
+            "mtf_adaptive", "--seeds", "2", "--workers", "1"]  # fmt: skip
+    assert _cli(*args, "-q").exit_code == 1  # the u_max = 1e-5 point's 2 runs fail
+    retry = _cli(*args, "--retry-failed")
+    assert retry.exit_code == 1
+    assert "2 run(s) computed, 2 already done" in retry.stderr
+    manifest = json.loads((tmp_path / "results" / "retry" / "manifest.json").read_text())
+    assert manifest["sessions"][-1]["runs_computed"] == 2

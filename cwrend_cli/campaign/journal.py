@@ -545,7 +545,8 @@ def _design_record(plan_: CampaignPlan) -> dict[str, Any] | None:
     """A sampled design as the manifest records it (None for a grid)."""
     if plan_.design is None:
         return None
-    return {**plan_.design.identity(), "samples": plan_.design.samples}
+    spec = plan_.design
+    return {**spec.identity(), "samples": spec.samples, "second_order": spec.second_order}
 
 
 def new_manifest(

@@ -12,11 +12,12 @@ Parquet and JSON writers built on it, and :func:`write_run`, the directory of
 
 from __future__ import annotations
 
+import errno
 import json
 import os
-import tempfile
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+import secrets
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -42,11 +43,18 @@ from cwrend_cli.output.tables import (
 )
 from cwrend_cli.physics.simulation import References, RunResult
 
-__all__ = ["atomic_path", "write_json", "write_parquet", "write_run"]
+__all__ = [
+    "atomic_path",
+    "open_confined_dir",
+    "refuse_links",
+    "write_json",
+    "write_parquet",
+    "write_run",
+]
 
 
 @contextmanager
-def atomic_path(path: Path, *, durable: bool = True) -> Iterator[Path]:
+def atomic_path(path: Path, *, durable: bool = True, root: Path | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; move it onto ``path`` on success.
 
     The one way cwrend writes a file: readers (and a resumed campaign) see
@@ -58,21 +66,126 @@ def atomic_path(path: Path, *, durable: bool = True) -> Iterator[Path]:
     worker's steps/solves files, which the journal flushes before it records
     their task (:func:`cwrend_cli.campaign.journal.append_events`), so the
     worker computes on instead of waiting for the disk.
+
+    ``root``: a directory holding ``path`` that the write must not leave.
+    Every directory between ``root`` and ``path`` is opened (or created)
+    without following links, and the file is created, written and moved
+    within the last one through its descriptor: a link planted there at any
+    time, also after a campaign started, is refused with an :class:`OSError`
+    (``ELOOP``) instead of written through (issue 36, item 6). Without
+    ``root`` the directory of ``path`` is made as given (links followed).
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    path = Path(path)
+    if root is None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    directory = open_confined_dir(root if root is not None else path.parent, path.parent)
     try:
-        yield tmp_path
-        if durable:
-            with open(tmp_path, "rb") as fh:
-                os.fsync(fh.fileno())
-        os.chmod(tmp_path, 0o644)  # mkstemp creates 0600; results are ordinary files
-        os.replace(tmp_path, path)
+        name = _create_temporary(directory, path.name)
+        try:
+            yield _through(directory, name, path.parent)
+            if durable:
+                fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW, dir_fd=directory)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+            os.chmod(name, 0o644, dir_fd=directory, follow_symlinks=False)
+            os.replace(name, path.name, src_dir_fd=directory, dst_dir_fd=directory)
+        finally:
+            with suppress(FileNotFoundError):  # moved into place, or never written
+                os.unlink(name, dir_fd=directory)
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        os.close(directory)
+
+
+#: Where this process sees its open descriptors as paths (Linux); elsewhere names are used.
+_FD_PATHS = Path("/proc/self/fd")
+
+
+def _through(directory: int, name: str, parent: Path) -> Path:
+    """A path to ``name`` in the open ``directory`` that no link planted later can redirect."""
+    if _FD_PATHS.is_dir():
+        return _FD_PATHS / str(directory) / name
+    return parent / name
+
+
+def _create_temporary(directory: int, name: str) -> str:
+    """Create an empty file ``.<name>.<random>.tmp`` in the open ``directory``; its name."""
+    for _ in range(100):
+        temporary = f".{name}.{secrets.token_hex(4)}.tmp"
+        try:
+            fd = os.open(
+                temporary,
+                os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                0o600,
+                dir_fd=directory,
+            )
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return temporary
+    raise FileExistsError(errno.EEXIST, "no free temporary name", name)
+
+
+def open_confined_dir(root: Path, directory: Path) -> int:
+    """A descriptor of ``directory``, reached from ``root`` without following any link.
+
+    Each directory below ``root`` is created when missing and opened with
+    ``O_NOFOLLOW``; a link (or a file) in the way raises :class:`OSError`
+    ``ELOOP`` naming it. ``directory`` must be ``root`` or inside it. The
+    caller closes the descriptor.
+    """
+    parts = Path(os.path.normpath(directory)).relative_to(os.path.normpath(root)).parts
+    fd = os.open(root, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        for i, part in enumerate(parts):
+            if part == "..":
+                raise ValueError(f"{directory} is not inside {root}")
+            with suppress(FileExistsError):
+                os.mkdir(part, 0o777, dir_fd=fd)
+            try:
+                inner = os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fd)
+            except OSError as exc:
+                if exc.errno not in (errno.ENOTDIR, errno.ELOOP):
+                    raise
+                where = Path(root, *parts[: i + 1])
+                raise OSError(
+                    errno.ELOOP,
+                    f"not a directory but a link or a file, and cwrend never writes through "
+                    f"links nor outside {root}: remove it and run the command again",
+                    str(where),
+                ) from None
+            os.close(fd)
+            fd = inner
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def refuse_links(root: Path, names: Iterable[str], what: str, fix: str = "") -> None:
+    """Refuse (:class:`ConfigError`, exit 2) a link at ``root/<name>`` or inside such a directory.
+
+    What cwrend reads or writes in a results directory is checked before a
+    command reads or writes it (its writes are confined as well:
+    :func:`atomic_path`'s ``root``). ``what`` names the directory for the
+    message (``the campaign directory``), ``fix`` is appended to its advice.
+    """
+    for name in names:
+        path = root / name
+        if path.is_symlink():
+            raise _linked(path, root, what, fix)
+        for base, dirs, files in os.walk(path):  # follows no link; nothing for a file
+            for entry in (*dirs, *files):
+                if (Path(base) / entry).is_symlink():
+                    raise _linked(Path(base) / entry, root, what, fix)
+
+
+def _linked(path: Path, root: Path, what: str, fix: str) -> ConfigError:
+    return ConfigError(
+        f"{path}: a symbolic link inside {what}; cwrend reads and writes only inside {root} "
+        f"and never follows links: remove the link{fix}"
+    )
 
 
 #: Approximate bytes a run adds to a campaign directory: its per-step data (when kept,
@@ -137,8 +250,11 @@ def make_output_dir(path: str | Path, setting: str) -> Path:
     return out
 
 
-def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) -> Path:
-    """Write ``table`` to ``path`` atomically (temp file + rename; ``durable``: atomic_path).
+def write_parquet(
+    table: pa.Table, path: str | Path, *, durable: bool = True, root: Path | None = None
+) -> Path:
+    """Write ``table`` to ``path`` atomically (temp file + rename; ``durable``, ``root``: see
+    :func:`atomic_path`).
 
     Snappy-compressed, strings dictionary-encoded and floats byte-stream-split:
     what a worker spends most of its non-simulation time on is encoding and
@@ -159,7 +275,7 @@ def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) ->
     strings = [f.name for f in table.schema if pa.types.is_string(f.type)]
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     others = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
-    with atomic_path(path, durable=durable) as tmp:
+    with atomic_path(path, durable=durable, root=root) as tmp:
         pq.write_table(
             table,
             tmp,
@@ -171,10 +287,10 @@ def write_parquet(table: pa.Table, path: str | Path, *, durable: bool = True) ->
     return path
 
 
-def write_json(data: Any, path: str | Path) -> Path:
-    """Write ``data`` as indented JSON to ``path`` atomically."""
+def write_json(data: Any, path: str | Path, *, root: Path | None = None) -> Path:
+    """Write ``data`` as indented JSON to ``path`` atomically (``root``: :func:`atomic_path`)."""
     path = Path(path)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, root=root) as tmp:
         tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     return path
 

@@ -534,6 +534,7 @@ def record_case(
     recording_id: str | None = None,
     recording_name: str | None = None,
     u_max_km_s2: float = 8e-4,
+    root: Path | None = None,
 ) -> Path:
     """Write one ``.rrd`` overlaying ``runs`` (one noise realisation) and the references.
 
@@ -542,7 +543,8 @@ def record_case(
     degradation windows of the config. ``recording_id`` defaults to a fresh
     UUID (never the process-wide default, which child processes inherit);
     files sharing a recording id merge in the viewer. ``u_max_km_s2`` only
-    scales the thrust arrows. Returns ``path``.
+    scales the thrust arrows. ``root``: a directory the write must not leave
+    (:func:`~cwrend_cli.output.files.atomic_path`). Returns ``path``.
 
     The recording is encoded in memory (:func:`encode_case`) and its bytes
     written by cwrend (:func:`~cwrend_cli.output.files.atomic_path`), never
@@ -554,12 +556,12 @@ def record_case(
         runs, refs, windows, application_id=application_id, recording_id=recording_id,
         recording_name=recording_name, u_max_km_s2=u_max_km_s2,
     )  # fmt: skip
-    return write_recording(Path(path), data)
+    return write_recording(Path(path), data, root=root)
 
 
-def write_recording(path: Path, data: bytes) -> Path:
+def write_recording(path: Path, data: bytes, *, root: Path | None = None) -> Path:
     """Write the encoded recording ``data`` to ``path`` atomically (an OSError if it cannot)."""
-    with atomic_path(path) as tmp:
+    with atomic_path(path, root=root) as tmp:
         tmp.write_bytes(data)
     return path
 

@@ -43,8 +43,8 @@ class ReportSummary:
     notes: tuple[str, ...] = ()
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    with atomic_path(path) as tmp:
+def _save(fig: Figure, path: Path, root: Path | None = None) -> Path:
+    with atomic_path(path, root=root) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png")
     return path
 
@@ -64,21 +64,20 @@ def write_report(
     """
     results_dir = Path(results_dir)
     data = load_results(results_dir, seed, point)
-    out = results_dir / REPORT_DIR
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir / REPORT_DIR  # written without following links (atomic_path's root)
     planned = planned_figures(data)
     figures: list[Path] = []
     with mpl.rc_context(STYLE):
         for figure in planned:
-            figures.append(_save(figure.draw(), out / figure.file))
+            figures.append(_save(figure.draw(), out / figure.file, results_dir))
     md = out / "report.md"
     text = report_md(data, results_dir, [(f.file, f.caption) for f in planned])
-    with atomic_path(md) as tmp:
+    with atomic_path(md, root=results_dir) as tmp:
         tmp.write_text(text, encoding="utf-8")
     page = out / "report.html"
     config = json.dumps(resolved_dict(data.config), indent=2) if data.config else None
     images = {path.name: path.read_bytes() for path in figures}
-    with atomic_path(page) as tmp:
+    with atomic_path(page, root=results_dir) as tmp:
         tmp.write_text(report_html(text, images, config, data.config_hash), encoding="utf-8")
     return ReportSummary(
         results_dir=results_dir,
