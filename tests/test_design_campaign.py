@@ -296,3 +296,24 @@ def test_design_steps_points_chooses_how_many_design_points_keep_steps(tmp_path:
     rows = pd.read_parquet(out / "design.parquet")["point"]
     steps = pd.read_parquet(out / "steps", columns=["point"])
     assert set(steps["point"]) == set(list(dict.fromkeys(rows))[:3])
+
+
+def test_second_order_extends_a_first_order_campaign_of_the_same_samples(tmp_path: Path) -> None:
+    """Same directory, first-order then --second-order: only the B_A^(i) rows run, and the
+    campaign equals a fresh second-order campaign. (Three ranges: with two, B_A^(1) is
+    A_B^(2) and B_A^(2) is A_B^(1), the same points.)"""
+    third = ("--range", "schedule.nis_offset=1.5:6")
+    cfg = _config(tmp_path, "grow2")
+    args = _sweep(cfg, "--design", "sobol", "--samples", "2", *third)
+    assert runner.invoke(app, args).exit_code == 0
+    first = _runs(tmp_path / "results" / "grow2")
+    assert (result := runner.invoke(app, [*args, "--second-order"])).exit_code == 0, result.output
+    grown = _runs(tmp_path / "results" / "grow2")
+    assert len(first) == 2 * (3 + 2) and len(grown) == 2 * (2 * 3 + 2)
+    assert set(first["run_key"]) <= set(grown["run_key"])
+    manifest = json.loads((tmp_path / "results" / "grow2" / "manifest.json").read_text())
+    assert manifest["design"]["second_order"] is True
+    fresh = _config(tmp_path, "fresh2")
+    args = _sweep(fresh, "--design", "sobol", "--samples", "2", *third, "--second-order")
+    assert runner.invoke(app, args).exit_code == 0
+    pd.testing.assert_frame_equal(grown, _runs(tmp_path / "results" / "fresh2"))
