@@ -901,7 +901,7 @@ def sweep(
         typer.Option(
             "--range",
             help="A --design range: KEY=LOW:HIGH (uniform), KEY=LOW:HIGH:log, KEY=LOW:HIGH:int "
-            "or KEY=V1,V2,… (categories); repeatable, adds to / replaces [sweep]'s ranges.",
+            "or KEY=V1,V2 (categories); repeatable, adds to / replaces [sweep]'s ranges.",
             metavar="KEY=LOW:HIGH",
         ),
     ] = None,
