@@ -1,175 +1,176 @@
-"""Markdown tables of the README's two 1,000-seed studies (issues 15 and 16), from campaign results.
+r"""Markdown tables of the docs' two 1,000-seed studies (model mismatch; shooting vs cone program).
 
     python -m benchmarks.study_tables mismatch IDEAL ACTUATOR OUTLIERS
     python -m benchmarks.study_tables methods ABLATION [--mean-hold SWEEP]
     python -m benchmarks.study_tables fallbacks SWEEP
 
+Kept for the commands in the docs. ``mismatch`` and ``methods`` are built by
+``cwrend table`` (:mod:`cwrend_cli.report.table`, the one place that builds
+these tables from the stored statistics) with the options below;
+``fallbacks`` reads the per-solve data, which no statistics file holds.
+
 ``mismatch``: three ``cwrend sweep campaigns/mismatch*.toml`` directories
 (truth model × hold; ideal sensors and actuator, with actuator errors, with
 outliers): per hold, the mean miss with its 95 % bootstrap interval for each
-truth model × architecture × variant, then the paired share of seeds where
-MTF-adaptive misses less than plain-adaptive (Wilson interval), all read
-from each campaign's ``sweep.parquet``.
+truth model × architecture (rows) and variant (columns), then the paired
+share of seeds where MTF-adaptive misses less than plain-adaptive (Wilson
+interval)::
+
+    cwrend table "ideal sensors & actuator=IDEAL" \
+      "+ actuator errors 1 %, 1° (1σ, per step)=ACTUATOR" \
+      "+ 5 % outliers ×20 (nominal periods)=OUTLIERS" --where guidance.hold=mean \
+      --rows truth.model=truth,arch --cols campaign --metric mean.miss
+    cwrend table … (the same three) --where guidance.hold=mean,sample \
+      --rows guidance.hold,truth.model=truth --cols campaign \
+      --metric frac_less.miss@mtf_adaptive-plain_adaptive:2
 
 ``methods``: a ``cwrend ablate --arch everything`` directory (shooting and
-cone-program architectures on the same seeds, hold sample): per
-architecture the miss, Δv, fuel penalty, re-solve time and statuses, then
-each cone-program architecture against its shooting counterpart on the same
-seeds (:func:`cwrend_cli.campaign.statistics.paired`). With ``--mean-hold``
-(the README's ``paper-1000`` sweep) the shooting architectures with
-``hold = "mean"``, correct timing and the fallback chain are added and
-paired with the cone-program ones too (same seeds, hence the same noise).
+cone-program architectures on the same seeds, hold sample) and, with
+``--mean-hold``, the ``paper-1000`` sweep, whose shooting runs with
+``hold = "mean"``, correct timing and the fallback chain line up as rows of
+their own::
+
+    cwrend table ABLATION SWEEP --where SWEEP:guidance.hold=mean \
+      --where SWEEP:guidance.resolve_timing=correct --where SWEEP:solver.fallback=chain \
+      --rows guidance.hold=hold,arch --metric n,mean.miss,median.miss,p95.miss:bare,mean.dv,\
+    mean.fuel:bare:1,solve_mean_ms:bare,solve_max_ms:bare,infeasible_pct,failed_pct
+    cwrend table ABLATION --rows "arch=cone program,other=vs shooting" \
+      --where arch=plain_fixed_socp,mtf_fixed_socp,plain_adaptive_socp,mtf_adaptive_socp \
+      --where other=plain_fixed,mtf_fixed,plain_adaptive,mtf_adaptive \
+      --metric frac_less.miss,median_diff.miss,mean_diff.dv
+
+The cone program against the *mean-hold* shooting runs pairs runs of two
+campaigns, which no statistics file holds: with ``--mean-hold`` they are
+computed here (:func:`cwrend_cli.campaign.statistics.paired` on the runs of
+both). A campaign that stores them is a sweep over the hold with every
+architecture (``cwrend sweep campaigns/paper.toml --seeds 1000 --arch
+everything --param guidance.hold=sample,mean --set
+guidance.resolve_timing='"correct"'``; the cone program ignores the hold),
+whose pairs ``cwrend table`` shows with ``--rows guidance.hold,arch,other``.
 
 ``fallbacks``: any campaign directory (its ``solves/`` dataset): per grid
 point and architecture, the re-solves that ended ``failed``, the runs whose
 chain used the cone program's plan of last resort (``socp_plan``), and the
 worst miss of those runs against the worst miss of the runs that never
-needed it (issue 16's criterion: the plan of last resort must not make a
-run an outlier).
+needed it (the plan of last resort must not make a run an outlier).
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from benchmarks.sweep_table import ARCH_ORDER, _ci
+from benchmarks.sweep_table import ARCH_ORDER
 from cwrend_cli.campaign import statistics
+from cwrend_cli.report import table
 
 VARIANTS = (
     "ideal sensors & actuator",
     "+ actuator errors 1 %, 1° (1σ, per step)",
     "+ 5 % outliers ×20 (nominal periods)",
 )
-TRUTHS = ("cw", "two_body", "j2")
-SOCP_PAIRS = tuple((f"{a}_socp", a) for a in ARCH_ORDER)
+SOCP = tuple(f"{a}_socp" for a in ARCH_ORDER)
+SOCP_PAIRS = tuple(zip(SOCP, ARCH_ORDER, strict=True))
 MEAN_HOLD = "{}, hold mean"
+METHODS = (
+    "n,mean.miss,median.miss,p95.miss:bare,mean.dv,mean.fuel:bare:1,solve_mean_ms:bare,"
+    "solve_max_ms:bare,infeasible_pct,failed_pct"
+)
+PAIRED = "frac_less.miss,median_diff.miss,mean_diff.dv"
 
 
-def _stat(stats: pd.DataFrame, metric: str, statistic: str, scale: float, spec: str) -> str:
-    row = stats[(stats["metric"] == metric) & (stats["statistic"] == statistic)]
-    if row.empty:
-        return "–"
-    r = row.iloc[0]
-    return _ci(r["value"], r["ci_low"], r["ci_high"], scale, spec)
+def _values(text: str) -> list[table.Value]:
+    return [table.parse_value(v) for v in text.split(",")]
 
 
-def _point(sweep: pd.DataFrame, hold: str, truth: str, arch: str, kind: str) -> pd.DataFrame:
-    """The statistics rows of one grid point (hold, truth model) and architecture."""
-    return sweep[
-        (sweep["param.guidance.hold"] == hold)
-        & (sweep["param.truth.model"] == truth)
-        & (sweep["arch"] == arch)
-        & (sweep["kind"] == kind)
-    ]
-
-
-def mismatch(dirs: list[Path]) -> str:
-    """The mismatch tables: hold × truth × architecture rows, one column per variant."""
-    sweeps = [pd.read_parquet(d / "sweep.parquet") for d in dirs]
-    lines: list[str] = []
+def mismatch(dirs: Sequence[Path]) -> str:
+    """The mismatch tables: truth × architecture rows, one column per variant, per hold."""
+    sources = [table.load_source(f"{v}={d}") for v, d in zip(VARIANTS, dirs, strict=True)]
+    parts = []
     for hold in ("mean", "sample"):
-        lines += [
-            f'Mean miss [m] (95 % CI), `hold = "{hold}"`:',
-            "",
-            "| truth | architecture | " + " | ".join(VARIANTS) + " |",
-            "|---|---|" + "---|" * len(VARIANTS),
-        ]
-        for truth in TRUTHS:
-            for arch in ARCH_ORDER:
-                cells = [
-                    _stat(_point(s, hold, truth, arch, "marginal"), "miss_km", "mean", 1e3, ".2f")
-                    for s in sweeps
-                ]
-                lines.append(f"| {truth} | {arch} | " + " | ".join(cells) + " |")
-        lines.append("")
-    lines += [
-        "P(MTF-adaptive misses less than plain-adaptive) on the same seeds (95 % Wilson):",
-        "",
-        "| hold | truth | " + " | ".join(VARIANTS) + " |",
-        "|---|---|" + "---|" * len(VARIANTS),
-    ]
-    for hold in ("mean", "sample"):
-        for truth in TRUTHS:
-            cells = []
-            for s in sweeps:
-                g = _point(s, hold, truth, "mtf_adaptive", "paired")
-                g = g[g["other"] == "plain_adaptive"]
-                cells.append(_stat(g, "miss_km", "frac_less", 1.0, ".2f"))
-            lines.append(f"| {hold} | {truth} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def _mean_hold_runs(sweep: Path) -> pd.DataFrame:
-    """The shooting runs of the ``paper-1000`` sweep with hold mean, correct timing, chain."""
-    runs = pd.read_parquet(sweep / "runs.parquet")
-    keep = (
-        (runs["param.guidance.hold"] == "mean")
-        & (runs["param.guidance.resolve_timing"] == "correct")
-        & (runs["param.solver.fallback"] == "chain")
-    )
-    out = runs[keep].copy()
-    out["arch"] = out["arch"].map(MEAN_HOLD.format)
-    return out
+        built = table.build_table(
+            sources, _values("mean.miss"), rows="truth.model=truth,arch", cols="campaign",
+            where=[f"guidance.hold={hold}"],
+            title=f'Mean miss [m] (95 % CI), `hold = "{hold}"`:',
+        )  # fmt: skip
+        parts.append(table.render(built, "md"))
+    built = table.build_table(
+        sources, _values("frac_less.miss@mtf_adaptive-plain_adaptive:2"),
+        rows="guidance.hold,truth.model=truth", cols="campaign",
+        where=["guidance.hold=mean,sample"],
+        title="P(MTF-adaptive misses less than plain-adaptive) on the same seeds (95 % Wilson):",
+    )  # fmt: skip
+    parts.append(table.render(built, "md"))
+    return "\n\n".join(parts)
 
 
 def methods(ablation: Path, mean_hold: Path | None) -> str:
     """The shooting vs cone-program tables of an ``--arch everything`` ablation."""
-    runs = pd.read_parquet(ablation / "runs.parquet")
-    order = [*ARCH_ORDER, *(f"{a}_socp" for a in ARCH_ORDER)]
-    pairs: list[tuple[str, str]] = list(SOCP_PAIRS)
+    sources = [table.load_source(str(ablation))]
+    where = []
     if mean_hold is not None:
-        extra = _mean_hold_runs(mean_hold)
-        seeds = set(runs["seed"])
-        extra = extra[extra["seed"].isin(seeds)]
-        runs = pd.concat([runs, extra[runs.columns.intersection(extra.columns)]])
-        order += [MEAN_HOLD.format(a) for a in ARCH_ORDER]
-        pairs += [(f"{a}_socp", MEAN_HOLD.format(a)) for a in ARCH_ORDER]
-    stats = statistics.describe(runs, ["arch"])
-    ok = runs[runs["status"] == "ok"]
-    lines = [
-        "| architecture | n | mean miss [m] (95 % CI) | median miss [m] (95 % CI) | p95 miss [m] "
-        "| mean Δv [km/s] (95 % CI) | fuel penalty [%] | re-solve mean / max [ms] "
-        "| infeasible | failed |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for arch in order:
-        g = stats[(stats["arch"] == arch) & (stats["kind"] == "marginal")]
-        r = ok[ok["arch"] == arch]
-        if g.empty or r.empty:
-            continue
-        p95 = g[(g["metric"] == "miss_km") & (g["statistic"] == "p95")]["value"].iloc[0] * 1e3
-        n_solves = r["n_solves"].sum()
-        lines.append(
-            f"| {arch} | {len(r)} | {_stat(g, 'miss_km', 'mean', 1e3, '.2f')} | "
-            f"{_stat(g, 'miss_km', 'median', 1e3, '.2f')} | {p95:.2f} | "
-            f"{_stat(g, 'delta_v_km_s', 'mean', 1.0, '.4f')} | "
-            f"{r['fuel_penalty_pct'].mean():.1f} | "
-            f"{r['solve_mean_ms'].mean():.2f} / {r['solve_max_ms'].max():.1f} | "
-            f"{100 * r['n_infeasible'].sum() / n_solves:.2f} % | "
-            f"{100 * r['n_failed'].sum() / n_solves:.2f} % |"
+        sweep = table.load_source(str(mean_hold))
+        sources.append(sweep)
+        settings = (
+            "guidance.hold=mean",
+            "guidance.resolve_timing=correct",
+            "solver.fallback=chain",
         )
-    paired = statistics.paired(runs, pairs=pairs)
-    lines += [
-        "",
+        where = [f"{sweep.label}:{k}" for k in settings]
+    marginal = table.build_table(
+        sources, _values(METHODS), rows="guidance.hold=hold,arch", where=where
+    )
+    paired = table.build_table(
+        sources[:1], _values(PAIRED), rows="arch=cone program,other=vs shooting",
+        where=[f"arch={','.join(SOCP)}", f"other={','.join(ARCH_ORDER)}"],
+    )  # fmt: skip
+    parts = [table.render(marginal, "md"), table.render(paired, "md")]
+    if mean_hold is not None:
+        parts.append(_mean_hold_pairs(ablation, mean_hold))
+    return "\n\n".join(parts)
+
+
+def _mean_hold_pairs(ablation: Path, sweep: Path) -> str:
+    """Each cone-program architecture against its mean-hold shooting twin: runs of two
+    campaigns, so computed here (no statistics file holds them; see the module's doc)."""
+    runs = pd.read_parquet(ablation / "runs.parquet")
+    other = pd.read_parquet(sweep / "runs.parquet")
+    keep = (
+        (other["param.guidance.hold"] == "mean")
+        & (other["param.guidance.resolve_timing"] == "correct")
+        & (other["param.solver.fallback"] == "chain")
+        & other["seed"].isin(set(runs["seed"]))
+    )
+    extra = other[keep].copy()
+    extra["arch"] = extra["arch"].map(MEAN_HOLD.format)
+    runs = pd.concat([runs, extra[runs.columns.intersection(extra.columns)]])
+    pairs = [(a, MEAN_HOLD.format(b)) for a, b in SOCP_PAIRS]
+    frame = statistics.paired(runs, pairs=pairs)
+    lines = [
         "| cone program | vs shooting | n | P(cone program misses less) (95 % Wilson) "
         "| median miss difference [m] (95 % CI) | mean Δv difference [km/s] (95 % CI) |",
         "|---|---|---|---|---|---|",
     ]
     for a, b in pairs:
-        g = paired[(paired["arch"] == a) & (paired["other"] == b)]
+        g = frame[(frame["arch"] == a) & (frame["other"] == b)].set_index("statistic")
         if g.empty:
             continue
-        lines.append(
-            f"| {a} | {b} | {int(g['n'].iloc[0])} | "
-            f"{_stat(g, 'miss_km', 'frac_less', 1.0, '.3f')} | "
-            f"{_stat(g, 'miss_km', 'median_diff', 1e3, '.2f')} | "
-            f"{_stat(g, 'delta_v_km_s', 'mean_diff', 1.0, '.5f')} |"
-        )
+        cells = [
+            _ci(g.loc["frac_less"], 1.0, ".3f"),
+            _ci(g.loc["median_diff"], 1e3, ".2f"),
+            _ci(g.loc["mean_diff"], 1.0, ".5f"),
+        ]
+        lines.append(f"| {a} | {b} | {int(g['n'].iloc[0])} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _ci(row: pd.Series, scale: float, spec: str) -> str:
+    v, lo, hi = (float(row[c]) * scale for c in ("value", "ci_low", "ci_high"))
+    return f"{v:{spec}} [{lo:{spec}}, {hi:{spec}}]"
 
 
 def fallbacks(campaign: Path) -> str:

@@ -317,3 +317,16 @@ def test_a_directory_without_statistics_is_refused(tmp_path: Path) -> None:
     result = _table(tmp_path)
     assert result.exit_code == 2
     assert "not a campaign directory with statistics" in result.stderr
+
+
+def test_the_benchmark_script_prints_what_cwrend_table_prints(
+    studies: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """benchmarks.sweep_table is cwrend table with the docs' options: one place builds them."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1]))  # the repository's
+    from benchmarks.sweep_table import PAIRED, PER_ARCH, tables
+
+    sweep = studies["sweep"]
+    first = _lines(_table(sweep, "--rows", "guidance.hold,arch", "--metric", PER_ARCH))
+    second = _lines(_table(sweep, "--rows", "guidance.hold", "--metric", PAIRED))
+    assert tables(sweep).splitlines() == [*first, "", *second]
