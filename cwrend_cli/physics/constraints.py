@@ -1,0 +1,300 @@
+"""Geometry of the path constraints (issue 32): pure functions and small frozen types.
+
+The constraints of :class:`cwrend_cli.physics.params.Constraints`, in the relative
+frame of the target (x radial, y along-track, z cross-track; km, s):
+
+* the **keep-out zone** E, the open ellipsoid ``(x/a)² + (y/b)² + (z/c)² < 1``;
+* the **corridor** C, the closed cone with apex at the port p, unit axis â and
+  half-angle θ: ``C = {r : â·(r − p) ≥ cos θ ‖r − p‖}``.
+
+A position is safe when it is outside E or inside C; the **unsafe set** is
+``U = E ∖ C``. Its signed distance (:func:`signed_distance`) is
+
+    φ(r) = max(d_E(r), −d_C(r)),
+
+with d_E the signed Euclidean distance to the ellipsoid's surface (positive
+outside, :func:`ellipsoid_signed_distance`) and d_C that to the cone's surface
+(positive outside the cone, :func:`cone_signed_distance`). φ ≤ 0 exactly on U's
+closure; inside U, −φ is the exact distance to U's boundary (the distance to the
+boundary of an intersection is the smaller of the distances to its parts'
+boundaries); outside U, φ is a lower bound of the distance to U (the larger of
+the distances to the two sets whose intersection U is), so it never overstates
+safety. Without a corridor φ = d_E; without a keep-out zone U is empty and
+φ = +∞. φ is 1-Lipschitz (a maximum of 1-Lipschitz functions): a point that
+moves by at most δ changes φ by at most δ, which is what the between-node
+margins below rest on.
+
+**Between nodes.** A node plan holds the constraints at the grid times t_k; the
+trajectory between two nodes is the zero-order-hold arc of the CW dynamics
+(paper Eq. 1, constant control u over the step, ‖u‖ ≤ u_max). Its acceleration
+is ``r̈ = (3n²x + 2nẏ, −2nẋ, −n²z) + u``, so ``‖r̈‖ ≤ u_max + 3n²‖r‖ + 2n‖v‖``.
+Over a step of length Δt from (r_k, v_k), with A = sup ‖r̈‖ over the step,
+``‖v‖ ≤ ‖v_k‖ + AΔt`` and ``‖r‖ ≤ ‖r_k‖ + ‖v_k‖Δt + AΔt²``, hence
+
+    A ≤ (u_max + 3n²(‖r_k‖ + ‖v_k‖Δt) + 2n‖v_k‖) / (1 − 3n²Δt² − 2nΔt)
+
+whenever the denominator is positive (nΔt < 0.39; the paper's is 1e-3):
+:func:`acceleration_bound`. Two consequences:
+
+* the arc stays within ``‖v_k‖Δt + ½AΔt²`` of r_k (:func:`step_excursion_km`),
+  so φ along the arc is at least φ(r_k) minus that;
+* the arc stays within ``AΔt²/8`` of the chord between its two nodes
+  (:func:`chord_margin_km`: the interpolation error e(τ) = r(τ) − chord(τ)
+  vanishes at both ends and ‖ë‖ = ‖r̈‖ ≤ A, so ‖e(τ)‖ ≤ A τ(Δt − τ)/2 ≤ AΔt²/8).
+  A convex constraint (a half-space, the corridor cone) tightened by that margin
+  at both nodes therefore holds at every point of the arc: the chord lies in the
+  tightened set by convexity and the arc within the margin of the chord.
+
+**Covariance margin.** :func:`covariance_margin_km` gives ``k √(nᵀ P_pos n)``:
+k standard deviations of the position estimate along a constraint's unit
+normal n (``constraints.sigma_margin`` = k).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cwrend_cli.physics.params import Constraints, Corridor, FloatArray, KeepOut
+
+__all__ = [
+    "Geometry",
+    "HalfSpace",
+    "SecondOrderCone",
+    "acceleration_bound",
+    "chord_margin_km",
+    "cone_signed_distance",
+    "corridor_angle_deg",
+    "corridor_cone",
+    "covariance_margin_km",
+    "ellipsoid_level",
+    "ellipsoid_signed_distance",
+    "geometry",
+    "linearise_keep_out",
+    "signed_distance",
+    "step_excursion_km",
+]
+
+#: Bisection steps of the ellipsoid distance (geometric, on a range of at most 1e40):
+#: each halves the logarithm of the bracket, 100 reach the float resolution.
+_BISECTIONS = 100
+#: Smallest relative size of the coordinate along the shortest semi-axis [-]: a point on
+#: that axis's plane is moved this far off it (φ changes by at most as much, φ being
+#: 1-Lipschitz), so the distance equation always has its root in the bracket.
+_AXIS_NUDGE = 1e-12
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The constraints as arrays, the corridor's axis normalised.
+
+    ``semi_axes_km`` (3,) [km] or None; ``port_km`` (3,) [km], ``axis`` (3,) unit
+    vector [-] and ``half_angle_rad`` [rad] of the corridor, or None.
+    """
+
+    semi_axes_km: FloatArray | None
+    port_km: FloatArray | None
+    axis: FloatArray | None
+    half_angle_rad: float | None
+
+
+def geometry(constraints: Constraints) -> Geometry:
+    """The arrays of ``constraints`` (the axis normalised to unit length)."""
+    ko: KeepOut | None = constraints.keep_out
+    co: Corridor | None = constraints.corridor
+    axes = None if ko is None else np.array(ko.semi_axes_km, dtype=np.float64)
+    if co is None:
+        return Geometry(axes, None, None, None)
+    axis = np.array(co.axis, dtype=np.float64)
+    return Geometry(
+        axes,
+        np.array(co.port_km, dtype=np.float64),
+        axis / np.linalg.norm(axis),
+        math.radians(co.half_angle_deg),
+    )
+
+
+def ellipsoid_level(r_km: FloatArray, semi_axes_km: FloatArray) -> FloatArray:
+    """``(x/a)² + (y/b)² + (z/c)²`` of positions ``r_km`` (..., 3) [-]: < 1 inside."""
+    return np.asarray(np.sum((r_km / semi_axes_km) ** 2, axis=-1), dtype=np.float64)
+
+
+def ellipsoid_signed_distance(r_km: FloatArray, semi_axes_km: FloatArray) -> FloatArray:
+    """Signed Euclidean distance of positions (..., 3) to the ellipsoid's surface [km].
+
+    Positive outside, negative inside. The nearest surface point of y (by
+    symmetry, |y|) is ``x_i = a_i² y_i / (t + a_i²)`` with t the root of
+    ``Σ (a_i y_i / (t + a_i²))² = 1`` on t > −a_min² (the Lagrange condition of
+    the nearest point; Eberly, "Distance from a point to an ellipse, an
+    ellipsoid, or a hyperellipsoid", 2013). The left side decreases in t; the
+    root is found by geometric bisection on s = t + a_min² ∈ (0, a_min² + a_max‖y‖]
+    (:data:`_BISECTIONS` steps), with the coordinate along the shortest axis
+    kept at least :data:`_AXIS_NUDGE`·a_min from 0 so that the root exists.
+    """
+    y = np.abs(np.asarray(r_km, dtype=np.float64))
+    shape = y.shape[:-1]
+    y = y.reshape(-1, 3).copy()
+    a = np.asarray(semi_axes_km, dtype=np.float64)
+    j = int(np.argmin(a))
+    a_min = a[j]
+    y[:, j] = np.maximum(y[:, j], _AXIS_NUDGE * a_min)
+    shift = a**2 - a_min**2  # t + a_i² = s + shift_i
+    norm = np.linalg.norm(y, axis=1)
+    lo = np.full(len(y), 1e-30 * a_min**2)
+    hi = a_min**2 + float(np.max(a)) * norm + a_min**2
+    for _ in range(_BISECTIONS):
+        mid = np.sqrt(lo * hi)
+        f = np.sum((a * y / (mid[:, None] + shift)) ** 2, axis=1) - 1.0
+        above = f > 0.0  # root beyond mid
+        lo = np.where(above, mid, lo)
+        hi = np.where(above, hi, mid)
+    s = np.sqrt(lo * hi)
+    x = a**2 * y / (s[:, None] + shift)
+    dist = np.linalg.norm(x - y, axis=1)
+    inside = np.sum((np.abs(np.asarray(r_km).reshape(-1, 3)) / a) ** 2, axis=1) < 1.0
+    return np.asarray(np.where(inside, -dist, dist).reshape(shape), dtype=np.float64)
+
+
+def cone_signed_distance(
+    r_km: FloatArray, apex_km: FloatArray, axis: FloatArray, half_angle_rad: float
+) -> FloatArray:
+    """Signed Euclidean distance of positions (..., 3) to the cone's surface [km].
+
+    Positive outside the cone, negative inside. With w = r − p, h = â·w and
+    ρ = ‖w − hâ‖, in the half-plane (h, ρ) the cone's boundary is the ray at
+    angle θ from the axis: the nearest point is on that ray when
+    ``h cos θ + ρ sin θ ≥ 0`` (distance ``|ρ cos θ − h sin θ|``), else the apex
+    (distance ‖w‖, outside).
+    """
+    w = np.asarray(r_km, dtype=np.float64) - apex_km
+    h = w @ axis
+    rho = np.linalg.norm(w - h[..., None] * axis, axis=-1)
+    c, s = math.cos(half_angle_rad), math.sin(half_angle_rad)
+    across = rho * c - h * s  # > 0 outside
+    along = h * c + rho * s
+    return np.asarray(np.where(along >= 0.0, across, np.linalg.norm(w, axis=-1)), np.float64)
+
+
+def corridor_angle_deg(r_km: FloatArray, apex_km: FloatArray, axis: FloatArray) -> FloatArray:
+    """Angle between r − p and the corridor axis at the port [deg] (0 on the axis; NaN at p)."""
+    w = np.asarray(r_km, dtype=np.float64) - apex_km
+    norm = np.linalg.norm(w, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.clip((w @ axis) / norm, -1.0, 1.0)
+    return np.asarray(np.degrees(np.arccos(cos)), dtype=np.float64)
+
+
+def signed_distance(r_km: FloatArray, geo: Geometry) -> FloatArray:
+    """φ(r) [km]: signed distance of positions (..., 3) to the unsafe set (module docstring).
+
+    ``max(d_E, −d_C)``; d_E alone without a corridor; +∞ without a keep-out zone.
+    """
+    r = np.asarray(r_km, dtype=np.float64)
+    if geo.semi_axes_km is None:
+        return np.full(r.shape[:-1], np.inf)
+    d_e = ellipsoid_signed_distance(r, geo.semi_axes_km)
+    if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
+        return d_e
+    d_c = cone_signed_distance(r, geo.port_km, geo.axis, geo.half_angle_rad)
+    return np.asarray(np.maximum(d_e, -d_c), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class HalfSpace:
+    """The half-space ``normalᵀ r ≥ offset_km`` of positions; ``normal`` a unit vector [-]."""
+
+    normal: FloatArray
+    offset_km: float
+
+    def residual_km(self, r_km: FloatArray) -> FloatArray:
+        """``normalᵀ r − offset`` [km]: ≥ 0 inside; the distance to the plane."""
+        return np.asarray(np.asarray(r_km) @ self.normal - self.offset_km, dtype=np.float64)
+
+
+def linearise_keep_out(
+    semi_axes_km: FloatArray, r_bar_km: FloatArray, margin_km: float
+) -> HalfSpace:
+    """The keep-out constraint linearised at r̄, tightened by ``margin_km`` [km] (for SCP).
+
+    g(r) = Σ (r_i/a_i)² is convex, so its tangent plane at r̄ lies below it:
+    ``g(r̄) + ∇g(r̄)ᵀ (r − r̄) ≥ 1`` implies g(r) ≥ 1 (outside the zone). With
+    n = ∇g/‖∇g‖ that is ``nᵀ r ≥ nᵀ r̄ + (1 − g(r̄))/‖∇g(r̄)‖``; the offset is
+    raised by ``margin_km``, so every point of the returned half-space has its
+    ball of radius ``margin_km`` outside the zone (d_E ≥ margin). r̄ ≠ 0.
+    """
+    a = np.asarray(semi_axes_km, dtype=np.float64)
+    r_bar = np.asarray(r_bar_km, dtype=np.float64)
+    grad = 2.0 * r_bar / a**2
+    size = float(np.linalg.norm(grad))
+    normal = grad / size
+    g = float(np.sum((r_bar / a) ** 2))
+    return HalfSpace(normal, float(normal @ r_bar) + (1.0 - g) / size + margin_km)
+
+
+@dataclass(frozen=True)
+class SecondOrderCone:
+    """The corridor as a second-order cone of positions: ``‖P (r − p)‖ ≤ tan θ âᵀ(r − p) − m``.
+
+    P = I − ââᵀ projects across the axis; m = margin / cos θ [km], so that a
+    position satisfying it has its ball of radius ``margin`` inside the cone
+    (the distance of an inside point to the surface is ``h sin θ − ρ cos θ``).
+    Written for a cone solver as ``‖A r + b‖ ≤ cᵀ r + d``: :meth:`rows`.
+    """
+
+    apex_km: FloatArray
+    axis: FloatArray
+    tan_half: float
+    offset_km: float  # m = margin / cos θ [km]
+
+    def rows(self) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+        """(A (3, 3), b (3,), c (3,), d) with ``‖A r + b‖ ≤ cᵀ r + d``."""
+        proj = np.eye(3) - np.outer(self.axis, self.axis)
+        c = self.tan_half * self.axis
+        return proj, -proj @ self.apex_km, c, float(-c @ self.apex_km - self.offset_km)
+
+    def residual_km(self, r_km: FloatArray) -> FloatArray:
+        """``cᵀ r + d − ‖A r + b‖`` [km]: ≥ 0 inside the (tightened) cone."""
+        a, b, c, d = self.rows()
+        r = np.asarray(r_km, dtype=np.float64)
+        return np.asarray(r @ c + d - np.linalg.norm(r @ a.T + b, axis=-1), dtype=np.float64)
+
+
+def corridor_cone(geo: Geometry, margin_km: float) -> SecondOrderCone:
+    """The corridor of ``geo`` as a second-order cone tightened by ``margin_km`` [km]."""
+    if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
+        raise ValueError("no corridor")
+    theta = geo.half_angle_rad
+    return SecondOrderCone(geo.port_km, geo.axis, math.tan(theta), margin_km / math.cos(theta))
+
+
+def acceleration_bound(
+    r_km: float, v_km_s: float, u_max_km_s2: float, n_rad_s: float, dt_s: float
+) -> float:
+    """A bound on ‖r̈‖ over a ZOH step of length Δt from ‖r_k‖, ‖v_k‖ [km/s²].
+
+    ``(u_max + 3n²(‖r_k‖ + ‖v_k‖Δt) + 2n‖v_k‖) / (1 − 3n²Δt² − 2nΔt)`` (module
+    docstring; CW, paper Eq. 1); ValueError when nΔt is too large for it.
+    """
+    denominator = 1.0 - 3.0 * (n_rad_s * dt_s) ** 2 - 2.0 * n_rad_s * dt_s
+    if denominator <= 0.0:
+        raise ValueError(f"n dt = {n_rad_s * dt_s:g}: the bound needs 3(n dt)² + 2 n dt < 1")
+    gravity = 3.0 * n_rad_s**2 * (r_km + v_km_s * dt_s) + 2.0 * n_rad_s * v_km_s
+    return (u_max_km_s2 + gravity) / denominator
+
+
+def step_excursion_km(v_km_s: float, accel_km_s2: float, dt_s: float) -> float:
+    """``‖v_k‖Δt + ½AΔt²`` [km]: how far the arc of a step gets from its first node."""
+    return v_km_s * dt_s + 0.5 * accel_km_s2 * dt_s**2
+
+
+def chord_margin_km(accel_km_s2: float, dt_s: float) -> float:
+    """``AΔt²/8`` [km]: how far the arc of a step gets from the chord between its nodes."""
+    return accel_km_s2 * dt_s**2 / 8.0
+
+
+def covariance_margin_km(normal: FloatArray, p_pos_km2: FloatArray, k: float) -> float:
+    """``k √(nᵀ P_pos n)`` [km]: k σ of the position estimate along the unit normal n."""
+    n = np.asarray(normal, dtype=np.float64)
+    return k * math.sqrt(max(float(n @ p_pos_km2 @ n), 0.0))
