@@ -434,6 +434,14 @@ VersionChangeOption = Annotated[
         "(refused by default: its numbers could differ in the last bits).",
     ),
 ]
+RepairManifestOption = Annotated[
+    bool,
+    typer.Option(
+        "--repair-manifest",
+        help="Rebuild a damaged manifest.json from the journal and this configuration (the "
+        "journal's runs must be this campaign's; they are kept).",
+    ),
+]
 LargeOption = Annotated[
     bool,
     typer.Option("--yes-large", help=f"Allow more than {limits.MAX_POINTS:,} grid points."),
@@ -509,6 +517,7 @@ class CampaignOptions:
     max_seeds: int = 1000
     strict: bool = False  # ablate --until: exit 1 when the target is not met
     pairs: tuple[str, ...] = ()  # --pair A:B, compared besides statistics.DEFAULT_PAIRS
+    repair_manifest: bool = False  # rebuild a damaged manifest.json from the journal
 
 
 def command_line() -> list[str]:
@@ -695,7 +704,7 @@ def _campaign_step(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
-        argv=command_line(), hold=hold,
+        argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest,
     )  # fmt: skip
     with progress.phase("computing statistics"):
         statistics = campaign.write_statistics(out, command, plan.root_seed, pairs)
@@ -795,6 +804,7 @@ def ablate(
     force: ForceOption = False,
     retry_failed: RetryOption = False,
     allow_version_change: VersionChangeOption = False,
+    repair_manifest: RepairManifestOption = False,
     quiet: QuietOption = False,
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
@@ -842,7 +852,8 @@ def ablate(
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, until=until, batch=batch, max_seeds=max_seeds,
-                           strict=strict, pairs=tuple(pair or ()))  # fmt: skip
+                           strict=strict, pairs=tuple(pair or ()),
+                           repair_manifest=repair_manifest)  # fmt: skip
     _campaign("ablate", file, set_, [], opts)
 
 
@@ -871,6 +882,7 @@ def sweep(
     force: ForceOption = False,
     retry_failed: RetryOption = False,
     allow_version_change: VersionChangeOption = False,
+    repair_manifest: RepairManifestOption = False,
     quiet: QuietOption = False,
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
@@ -925,7 +937,7 @@ def sweep(
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, design=design_, samples=samples,
                            ranges=tuple(range_ or ()), second_order=second_order,
-                           pairs=tuple(pair or ()))  # fmt: skip
+                           pairs=tuple(pair or ()), repair_manifest=repair_manifest)  # fmt: skip
     _campaign("sweep", file, set_, list(param or []), opts)
 
 
@@ -1093,7 +1105,7 @@ def table(
         typer.Argument(
             help="Campaign directories (ablate or sweep), each DIR or LABEL=DIR (the label names "
             "the campaign in the table).",
-            metavar="RESULTS...",
+            metavar="DIR",
         ),
     ],
     rows: Annotated[
@@ -1124,8 +1136,9 @@ def table(
             help="Values, comma-separated, each [STATISTIC.]METRIC[@A-B][:bare][:DIGITS]: "
             "mean|median|p95 of miss, dv, fuel (95 % bootstrap interval); solve_mean_ms, "
             "solve_max_ms, solve_success_pct; paired frac_less.miss (Wilson), median_diff.miss, "
-            "mean_diff.dv, @A-B for one pair; n (ok runs); infeasible_pct, failed_pct (share "
-            "of re-solves, from runs.parquet). :bare drops the interval, :3 shows 3 decimals.",
+            "mean_diff.dv, @A-B for one pair; n (ok runs; seed pairs beside paired values "
+            "only); infeasible_pct, failed_pct (share of re-solves, from runs.parquet). :bare "
+            "drops the interval, :3 shows 3 decimals.",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",

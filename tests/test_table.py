@@ -187,11 +187,11 @@ def test_the_methods_table_pairs_each_cone_program_with_its_shooting_twin(
         "--where",
         "other=plain_adaptive,mtf_adaptive",
         "--metric",
-        "frac_less.miss,median_diff.miss,mean_diff.dv",
+        "n,frac_less.miss,median_diff.miss,mean_diff.dv",
     )
     lines = _lines(result)
     assert lines[0] == (
-        "| cone program | vs shooting | P(A misses less than B) (95 % Wilson) | "
+        "| cone program | vs shooting | n | P(A misses less than B) (95 % Wilson) | "
         "median miss difference [m] (95 % CI) | mean Δv difference [km/s] (95 % CI) |"
     )
     assert [line.split(" | ")[:2] for line in lines[2:4]] == [
@@ -206,7 +206,8 @@ def test_the_methods_table_pairs_each_cone_program_with_its_shooting_twin(
         metric="delta_v_km_s",
         statistic="mean_diff",
     )
-    assert lines[3].split(" | ")[4] == _ci(stored, 1.0, 5) + " |"
+    assert lines[3].split(" | ")[2] == "3"  # seed pairs
+    assert lines[3].split(" | ")[5] == _ci(stored, 1.0, 5) + " |"
 
 
 def test_an_ablation_lines_up_with_a_sweep_on_its_base_value(studies: dict[str, Path]) -> None:

@@ -20,7 +20,8 @@ bootstrap or Wilson) and, for the two shares of re-solves, from its
   ``solve_success_pct`` without), a paired comparison (``frac_less.miss``
   with its Wilson interval, ``median_diff.miss``, ``mean_diff.dv``; ``@A-B``
   fixes the pair, else ``arch`` and ``other`` are fields), the runs counted
-  (``n``), or the share of re-solves certified infeasible or failed
+  (``n``: the ok runs; the seed pairs in a table of paired values only), or
+  the share of re-solves certified infeasible or failed
   (``infeasible_pct``, ``failed_pct``: sums over the cell's ok runs);
 * **filters** (``--where [CAMPAIGN:]FIELD=V1,V2``): keep the entries whose
   field has one of the values, shown in that order (only those of one
@@ -423,9 +424,20 @@ def _cell_value(value: Any) -> Any:
     return value
 
 
-def _entries(source: Source, value: Value, index: int, keys: Sequence[str]) -> pd.DataFrame:
-    """The stored values of ``value`` in ``source``: value, ci_low, ci_high, n, the fields."""
+def _entries(
+    source: Source, value: Value, index: int, keys: Sequence[str], pairs: Value | None = None
+) -> pd.DataFrame:
+    """The stored values of ``value`` in ``source``: value, ci_low, ci_high, n, the fields.
+
+    ``pairs``: the paired value whose seed pairs ``n`` counts (a table of paired values
+    only), else ``n`` counts the ok runs.
+    """
     stats = source.stats
+    if value.kind == "count" and pairs is not None:
+        sel = _entries(source, pairs, index, keys)
+        sel["value"] = sel["n"]
+        sel["ci_low"] = sel["ci_high"] = math.nan
+        return sel
     if value.kind in ("marginal", "count"):
         metric, statistic = (
             ("miss_km", "mean") if value.kind == "count" else (value.metric, value.statistic)
@@ -621,8 +633,11 @@ def build_table(
             + [k for s in sources for k in s.swept]
         )
     )
+    # n counts the seed pairs in a table of paired values only, else the ok runs
+    compared = [v for v in values if v.kind != "count"]
+    pairs = compared[0] if compared and all(v.kind == "paired" for v in compared) else None
     frame = pd.concat(
-        [_entries(s, v, i, keys) for s in sources for i, v in enumerate(values)],
+        [_entries(s, v, i, keys, pairs) for s in sources for i, v in enumerate(values)],
         ignore_index=True,
     )
     if frame.empty:
