@@ -833,7 +833,8 @@ def test_a_corrupt_manifest_exits_2_with_the_fix(tmp_path: Path, content: bytes)
     (out / "manifest.json").write_bytes(content)
     result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
     assert result.exit_code == 2, result.output
-    assert "manifest; use --force to start the campaign over" in result.stderr
+    assert "manifest.json: damaged manifest (" in result.stderr
+    assert "with --repair-manifest to rebuild it from the journal" in result.stderr
     assert "Traceback" not in result.output
 
 

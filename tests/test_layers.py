@@ -24,7 +24,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "cwrend_cli"
 ALLOWED: dict[str, tuple[str, ...]] = {
     "physics": ("cwrend_cli.physics",),
     "config": ("cwrend_cli.config", "cwrend_cli.physics", "cwrend_cli.errors", "cwrend_cli.limits"),
-    "output": ("cwrend_cli.output", "cwrend_cli.physics", "cwrend_cli.errors", "cwrend_cli"),
+    "output": (
+        "cwrend_cli.output",
+        "cwrend_cli.physics",
+        "cwrend_cli.errors",
+        "cwrend_cli.limits",  # the bounds of inputs: a manifest's root seed (issue 36 item 10)
+        "cwrend_cli",
+    ),
     "campaign": (
         "cwrend_cli.campaign",
         "cwrend_cli.config",

@@ -50,6 +50,7 @@ from cwrend_cli.campaign.statistics import METRICS, bootstrap_ci, wilson_ci
 from cwrend_cli.config.io import file_digest
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.output.layout import MANIFEST, RUNS
+from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import PARAM_PREFIX, param_columns, statistics_table
 
 __all__ = [
@@ -130,8 +131,8 @@ def load_campaign(path: Path) -> Campaign:
             f"{path}: not a campaign directory (no {MANIFEST} and {RUNS}; "
             "compare the output of cwrend ablate or cwrend sweep)"
         )
+    manifest = read_manifest(manifest_path, REPAIR_HINT)
     try:
-        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
         runs = pd.read_parquet(runs_path)
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{path}: unreadable campaign ({exc})") from None

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import json
+import gc
 import shutil
 import time
 from collections import deque
@@ -43,6 +43,7 @@ from cwrend_cli.campaign.executors import (
     check_address,
     default_workers,
     executor_alive,
+    executor_workers,
     open_executor,
     run_signals,
 )
@@ -87,6 +88,7 @@ from cwrend_cli.output.layout import (
     recording_path,
     references_path,
 )
+from cwrend_cli.output.manifest import read_manifest
 from cwrend_cli.output.tables import (
     param_columns,
     points_table,
@@ -302,6 +304,7 @@ def run_campaign(
     progress: Progress | None = None,
     argv: Sequence[str] | None = None,
     hold: contextlib.ExitStack | None = None,
+    repair_manifest: bool = False,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -317,6 +320,10 @@ def run_campaign(
     The directory is locked (:func:`hold_campaign`) while this runs, or, with
     ``hold``, until the caller closes that stack: a command that writes the
     statistics and a report after the runs keeps them under the same lock.
+
+    ``repair_manifest``: a damaged ``manifest.json`` is rebuilt from the
+    journal (whose records must name this campaign) and this plan, instead of
+    refused (:func:`~cwrend_cli.campaign.journal.check_same_campaign`).
     """
     progress = progress or _NoProgress()
     try:
@@ -326,7 +333,7 @@ def run_campaign(
             )
             return _run_locked(
                 plan_, out_dir, progress, command, executor_kind, workers, address, force,
-                retry_failed, allow_version_change, argv,
+                retry_failed, allow_version_change, argv, repair_manifest,
             )  # fmt: skip
     except OSError as exc:  # outside the runs (the lock, the first manifest): nothing computed
         raise InfrastructureError(
@@ -377,12 +384,15 @@ def _run_locked(
     retry_failed: bool,
     allow_version_change: bool,
     argv: Sequence[str] | None = None,
+    repair_manifest: bool = False,
 ) -> CampaignSummary:
     """:func:`run_campaign` once the directory exists, is confined and locked."""
     progress = _SettledProgress(progress)
     if force:
         wipe(out_dir)
-    previous = check_same_campaign(out_dir, plan_, allow_version_change=allow_version_change)
+    previous = check_same_campaign(
+        out_dir, plan_, allow_version_change=allow_version_change, repair_manifest=repair_manifest
+    )
     journaled_to, done, owed = _journal_before(out_dir, plan_, retry_failed)
     tasks = [
         replace(t, runs=tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
@@ -414,6 +424,8 @@ def _run_locked(
         stopped = str(exc)
         raise
     finally:
+        if interrupted:  # the pool's queues, held by cycles through the interrupt's traceback,
+            gc.collect()  # release their semaphores now (cwrend ends without a collection)
         # the bar stays (complete) while runs.parquet is written: about 1 s per 10,000 runs
         try:
             journal = load_journal(out_dir / EVENTS)
@@ -600,6 +612,7 @@ def _drive(
     limit = 2 * parallel
     submitted = 0
     dead_s = 0.0  # how long the executor has been unable to deliver results
+    idle_s = 0.0  # how long the executor has had no worker at all (a Dask cluster)
     checked = time.monotonic()  # when the executor was last asked whether it is alive
     events_path = out_dir / EVENTS
     tally = _RunTally(progress)
@@ -643,7 +656,9 @@ def _drive(
             if not finished:
                 if now - checked >= _POLL_S:
                     dead_s = 0.0 if executor_alive(executor) else dead_s + (now - checked)
+                    idle_s = idle_s + (now - checked) if executor_workers(executor) == 0 else 0.0
                     checked = now
+                _check_workers(idle_s, plan_.no_worker_timeout_s)
                 if dead_s >= DASK_LOST_AFTER_S:  # its futures would wait forever: all lost
                     for token, task in in_flight.values():
                         tally.lost(token)
@@ -728,6 +743,19 @@ def _journal_kept(outcome: TaskOutcome, events_path: Path, campaign: str) -> Non
             append_events(events_path, events_of(outcome, campaign, time.time()))
 
 
+def _check_workers(idle_s: float, limit_s: float | None) -> None:
+    """Stop (:class:`_StopError`) an executor without workers for ``limit_s`` [s] or more.
+
+    Its tasks would wait for ever (a Dask scheduler alive, every worker
+    gone); nothing of them is journaled, the same command resumes.
+    """
+    if limit_s is not None and idle_s >= limit_s:
+        raise _StopError(
+            f"the Dask cluster has had no worker for {idle_s:.0f} s "
+            f"(output.dask_no_worker_timeout_s = {limit_s:g}); start workers"
+        )
+
+
 def _count_attempt(task: Task, exc: BaseException, attempts: dict[str, int]) -> str | None:
     """Count a lost execution of ``task``; the cause if the campaign cannot go on, else None."""
     if isinstance(exc, OSError):  # writing results failed (disk full, permission, read-only)
@@ -778,7 +806,7 @@ def _file_metadata(plan_: CampaignPlan) -> dict[str, str]:
 def _stored_metadata(out_dir: Path) -> dict[str, str]:
     """The config and campaign hashes of a campaign directory (its manifest; empty if none)."""
     manifest = out_dir / MANIFEST
-    stored = json.loads(manifest.read_text(encoding="utf-8")) if manifest.exists() else {}
+    stored = read_manifest(manifest, "run the same command again") if manifest.exists() else {}
     return {k: str(stored.get(k, "")) for k in ("config_hash", "campaign_hash")}
 
 

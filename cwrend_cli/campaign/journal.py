@@ -67,6 +67,7 @@ from cwrend_cli.output.layout import (
     STEPS,
     SWEEP_STATS,
 )
+from cwrend_cli.output.manifest import damaged, read_manifest
 
 __all__ = [
     "DATASETS",
@@ -480,7 +481,11 @@ def _changed_versions(previous: Mapping[str, Any]) -> list[str]:
 
 
 def check_same_campaign(
-    out_dir: Path, plan_: CampaignPlan, *, allow_version_change: bool = False
+    out_dir: Path,
+    plan_: CampaignPlan,
+    *,
+    allow_version_change: bool = False,
+    repair_manifest: bool = False,
 ) -> dict[str, Any]:
     """Refuse a directory holding another campaign (other config or grid), unless empty.
 
@@ -490,9 +495,14 @@ def check_same_campaign(
     must hold numbers from one computation (issue 21), unless
     ``allow_version_change``. Returns the directory's previous manifest
     (empty when there is none).
+
+    A damaged manifest (:func:`~cwrend_cli.output.manifest.read_manifest`) is
+    refused with its fix; with ``repair_manifest`` it is treated as lost: the
+    journal's records must name this campaign, and the caller writes a new
+    manifest over it (issue 36 item 10).
     """
     manifest = out_dir / MANIFEST
-    if not manifest.exists():
+    if not manifest.exists() or (repair_manifest and damaged(manifest)):
         # each journal record names its campaign: a lost manifest cannot hide another one
         others = {
             str(e["campaign_hash"])
@@ -500,20 +510,18 @@ def check_same_campaign(
             if "campaign_hash" in e and e["campaign_hash"] != plan_.campaign_hash
         }
         if others:
+            lost = "a damaged" if manifest.exists() else "no"
             raise ConfigError(
-                f"{out_dir} has no manifest.json but its journal holds runs of another campaign "
-                f"(hash {sorted(others)[0][:12]}… vs {plan_.campaign_hash[:12]}…); use --force "
-                "to start over, or another output.name"
+                f"{out_dir} has {lost} manifest.json but its journal holds runs of another "
+                f"campaign (hash {sorted(others)[0][:12]}… vs {plan_.campaign_hash[:12]}…); "
+                "use --force to start over, or another output.name"
             )
         return {}
-    try:
-        previous = json.loads(manifest.read_text(encoding="utf-8"))
-    except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
-        raise ConfigError(
-            f"{manifest}: unreadable manifest; use --force to start the campaign over"
-        ) from None
-    if not isinstance(previous, dict):
-        raise ConfigError(f"{manifest}: not a manifest; use --force to start the campaign over")
+    previous = read_manifest(
+        manifest,
+        "run the same command with --repair-manifest to rebuild it from the journal (the runs "
+        "it holds are kept), or with --force to start the campaign over",
+    )
     if previous.get("campaign_hash") != plan_.campaign_hash:
         raise ConfigError(
             f"{out_dir} holds a campaign with a different configuration or grid "

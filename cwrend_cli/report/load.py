@@ -73,6 +73,7 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     references_path,
 )
+from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import (
     PARAM_PREFIX,
     REFERENCE_SCHEMA,
@@ -264,8 +265,10 @@ def point_values(runs: pd.DataFrame) -> str:
 def _read_json(path: Path) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # ValueError: not UTF-8, not JSON
         raise ReportError(f"{path}: unreadable ({exc})") from None
+    except RecursionError:
+        raise ReportError(f"{path}: unreadable (nested too deep)") from None
     if not isinstance(data, dict):
         raise ReportError(f"{path}: unreadable (not a JSON object)")
     return data
@@ -561,7 +564,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         raise ReportError(f"{root / RUNS}: missing columns {', '.join(sorted(missing))}")
     runs["arch"] = runs["arch"].astype(str)
     manifest = root / MANIFEST
-    meta = _read_json(manifest) if manifest.exists() else {}
+    meta = read_manifest(manifest, REPAIR_HINT) if manifest.exists() else {}
     notes: list[str] = []
     config = _stored_config(meta.get("config"), manifest, notes)
     params = [c for c in param_columns(runs.columns) if runs[c].dropna().astype(str).nunique() > 1]
