@@ -73,6 +73,16 @@ def test_run_without_out_writes_into_its_own_directory_not_a_campaigns(tmp_path:
     assert not (results / "paper").exists()  # the campaign's directory stays untouched
 
 
+def test_run_refuses_a_default_directory_inside_a_campaign_named_runs(tmp_path: Path) -> None:
+    cfg = _write_config(tmp_path / "paper.toml", "paper")
+    (tmp_path / "results" / "runs").mkdir(parents=True)
+    (tmp_path / "results" / "runs" / "manifest.json").write_text("{}")
+    result = runner.invoke(app, ["run", str(cfg), "--arch", "mtf_adaptive", "--no-rrd", "-q"])
+    assert result.exit_code == 2, result.output
+    assert "is a campaign directory" in result.stderr and "--out" in result.stderr
+    assert sorted(p.name for p in (tmp_path / "results" / "runs").iterdir()) == ["manifest.json"]
+
+
 def test_run_help_names_its_default_directory() -> None:
     result = runner.invoke(app, ["run", "--help"], terminal_width=200)
     assert "<output.dir>/runs/<name>-<arch>-seed<N>" in " ".join(result.output.split())
