@@ -54,9 +54,9 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
 
 
 def constraints_of(cfg: CwrendConfig) -> params.Constraints | None:
-    """The configured path constraints (issue 32), or None when the section is off."""
+    """The configured path constraints (issue 32); None without a keep-out zone or corridor."""
     c = cfg.constraints
-    if c == type(c)():
+    if c.keep_out is None and c.corridor is None:  # a margin alone constrains nothing
         return None
     return params.Constraints(
         keep_out=None if c.keep_out is None else _mirror(params.KeepOut, c.keep_out),

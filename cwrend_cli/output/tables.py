@@ -172,6 +172,25 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     ),
     "mean_nees": _col("mean NEES over rows 1..N (6 for a consistent filter)", "-"),
     "error": _col("error text and traceback of a failed run", "-"),
+    # safety of the true trajectory (issue 32; only with [constraints])
+    "safety_min_distance_km": _col(
+        "minimum signed distance of the true trajectory to the unsafe set (keep-out zone "
+        "minus corridor), its arcs sampled every dt/20; < 0: it entered the set"
+    ),
+    "safety_unsafe_time_s": _col("time the true trajectory spent in the unsafe set, to dt/20"),
+    "safety_corridor_violation_deg": _col(
+        "largest angle beyond the corridor half-angle of the true positions inside the "
+        "keep-out zone (0: never outside the corridor there; NaN: no zone or no corridor)"
+    ),
+    "safety_approach_speed_km_s": _col("speed of the true relative state at T ||v(T)||"),
+    "safety_approach_angle_deg": _col(
+        "angle between the true velocity at T and the inward corridor axis -a (0: straight "
+        "down the corridor; NaN: no corridor or at rest)"
+    ),
+    "safety_violated": _col("the true trajectory entered the unsafe set (min distance < 0)", "-"),
+    "safety_distance_km": _col(
+        "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
+    ),
     "duration_s": _col("wall time of the run"),
     # references
     "reference": _col("open-loop reference: energy or fuel", "-"),
@@ -420,13 +439,25 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["degradation_window"] = _stacked(results, "window").astype(np.int64)
     cols["dropout"] = _stacked(results, "dropout").astype(np.bool_)
     cols["outlier"] = _stacked(results, "outlier").astype(np.bool_)
+    if _has_safety(results):
+        safety = [r.safety for r in results if r.safety is not None]
+        cols["safety_distance_km"] = np.concatenate([sf.step_distance_km for sf in safety])
     return cols
+
+
+def _has_safety(results: Sequence[RunResult]) -> bool:
+    """True when the runs carry safety measurements (all or none of them: one problem)."""
+    flags = {r.safety is not None for r in results}
+    if len(flags) > 1:
+        raise ValueError("runs with and without constraints in one steps table")
+    return flags == {True}
 
 
 def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
-    return _conventional(pa.table(cols, schema=STEPS_SCHEMA), metadata)
+    schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    return _conventional(pa.table(cols, schema=schema), metadata)
 
 
 SOLVES_SCHEMA = pa.schema(
@@ -490,12 +521,50 @@ SUMMARY_SCHEMA = pa.schema(
 )
 
 
+#: The runs' safety columns (issue 32), written only when the runs have constraints.
+SAFETY_RUN_FIELDS = [
+    pa.field("safety_min_distance_km", pa.float64()),
+    pa.field("safety_unsafe_time_s", pa.float64()),
+    pa.field("safety_corridor_violation_deg", pa.float64()),
+    pa.field("safety_approach_speed_km_s", pa.float64()),
+    pa.field("safety_approach_angle_deg", pa.float64()),
+    pa.field("safety_violated", pa.bool_()),
+]
+#: The steps' safety columns (issue 32), written only when the runs have constraints.
+SAFETY_STEP_FIELDS = [
+    pa.field("safety_distance_km", pa.float64()),
+]
+
+
 def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
-    """A ``summary.parquet`` / ``runs.parquet`` row of one run (metrics: SPEC §7 convention)."""
+    """A ``summary.parquet`` / ``runs.parquet`` row of one run (metrics: SPEC §7 convention).
+
+    With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
+    """
     metrics = run_metrics(result, fuel_delta_v_km_s)
     # its fields are numbers: no deep copy (dataclasses.asdict) needed
     fields = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
-    return {"arch": result.arch, "seed": result.seed, **fields}
+    row = {"arch": result.arch, "seed": result.seed, **fields}
+    if result.safety is not None:
+        sf = result.safety
+        row["safety_min_distance_km"] = sf.min_distance_km
+        row["safety_unsafe_time_s"] = sf.unsafe_time_s
+        row["safety_corridor_violation_deg"] = sf.corridor_violation_deg
+        row["safety_approach_speed_km_s"] = sf.approach_speed_km_s
+        row["safety_approach_angle_deg"] = sf.approach_angle_deg
+        row["safety_violated"] = sf.violated
+    return row
+
+
+def _with_safety(
+    schema: pa.Schema, fields: Sequence[pa.Field], present: bool, before: str | None = None
+) -> pa.Schema:
+    """``schema`` with the safety ``fields`` (before column ``before``, else last) if present."""
+    if not present:
+        return schema
+    columns = list(schema)
+    at = schema.names.index(before) if before is not None else len(columns)
+    return pa.schema([*columns[:at], *fields, *columns[at:]])
 
 
 def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
@@ -508,7 +577,9 @@ def summary_table(
     rows: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any] | None = None
 ) -> pa.Table:
     """Table of summary rows (see :func:`summary_row`)."""
-    table = pa.Table.from_pylist([dict(r) for r in rows], schema=SUMMARY_SCHEMA)
+    safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
+    schema = _with_safety(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
 
@@ -575,7 +646,10 @@ def campaign_steps_table(
     """
     cols = _steps_columns(results)
     cols.update(_run_columns(extra, [r.t_s.size for r in results]))
-    return _conventional(pa.table(cols, schema=CAMPAIGN_STEPS_SCHEMA), metadata)
+    schema = _with_safety(
+        CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
+    )
+    return _conventional(pa.table(cols, schema=schema), metadata)
 
 
 def campaign_solves_table(
@@ -621,7 +695,8 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
         pa.field("error", pa.string()),
         pa.field("duration_s", pa.float64()),
     ]
-    for f in _RUN_METRICS:
+    safety = any(SAFETY_RUN_FIELDS[0].name in r.get("metrics", {}) for r in records)
+    for f in _RUN_METRICS + (SAFETY_RUN_FIELDS if safety else []):
         cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
         fields.append(f)
     for prefix, key in ((PARAM_PREFIX, "params"), ("disp.", "dispersed")):

@@ -60,8 +60,10 @@ import numpy as np
 from cwrend_cli.physics.params import Constraints, Corridor, FloatArray, KeepOut
 
 __all__ = [
+    "SAFETY_SUBSTEPS",
     "Geometry",
     "HalfSpace",
+    "Safety",
     "SecondOrderCone",
     "acceleration_bound",
     "chord_margin_km",
@@ -72,7 +74,9 @@ __all__ = [
     "ellipsoid_level",
     "ellipsoid_signed_distance",
     "geometry",
+    "hermite_arcs",
     "linearise_keep_out",
+    "measure_safety",
     "signed_distance",
     "step_excursion_km",
 ]
@@ -298,3 +302,148 @@ def covariance_margin_km(normal: FloatArray, p_pos_km2: FloatArray, k: float) ->
     """``k √(nᵀ P_pos n)`` [km]: k σ of the position estimate along the unit normal n."""
     n = np.asarray(normal, dtype=np.float64)
     return k * math.sqrt(max(float(n @ p_pos_km2 @ n), 0.0))
+
+
+# ---------------------------------------------------------------------------
+# Safety of a flown trajectory (issue 32 item 3): measured on the truth
+# ---------------------------------------------------------------------------
+
+#: Sub-samples per step of the true arc [-]: φ is evaluated every Δt/20 (0.05 s on the
+#: paper's 1 s grid).
+SAFETY_SUBSTEPS = 20
+
+
+def hermite_arcs(x: FloatArray, dt_s: float, substeps: int) -> FloatArray:
+    """Positions of every step's arc at ``substeps`` + 1 equally spaced times [km].
+
+    ``x`` (N+1, 6): the states at the nodes [km, km/s]. Each step's arc is the
+    cubic Hermite interpolant of its two end states (positions and velocities):
+    with s = τ/Δt, ``r = h00 r_k + h10 Δt v_k + h01 r_k+1 + h11 Δt v_k+1``. Its
+    error is at most ``Δt⁴/384 · max‖r⁗‖`` within the step (the dynamics are smooth
+    within a step, the control being held; on the paper's scenario
+    ‖r⁗‖ ≲ n²u_max ≈ 1e-9 km/s⁴, so the error is below 1e-11 km at Δt = 1 s).
+    Returns (N, substeps + 1, 3); sample 0 and sample ``substeps`` are the nodes.
+    """
+    s = np.linspace(0.0, 1.0, substeps + 1)[:, None]
+    h00 = 2 * s**3 - 3 * s**2 + 1
+    h10 = s**3 - 2 * s**2 + s
+    h01 = -2 * s**3 + 3 * s**2
+    h11 = s**3 - s**2
+    r0, v0 = x[:-1, None, :3], x[:-1, None, 3:]
+    r1, v1 = x[1:, None, :3], x[1:, None, 3:]
+    arcs = h00 * r0 + h10 * dt_s * v0 + h01 * r1 + h11 * dt_s * v1
+    arcs[:, 0] = x[:-1, :3]  # the nodes exactly
+    arcs[:, -1] = x[1:, :3]
+    return np.asarray(arcs, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Safety:
+    """How safe a flown trajectory was (module docstring; per run and per step).
+
+    Over the arcs sub-sampled every Δt/``substeps`` (:func:`hermite_arcs`). The
+    minimum of φ between two sub-samples is at most ``‖v‖ Δt/(2 substeps)``
+    below the smaller of the two (φ is 1-Lipschitz), which bounds what the
+    sampling can miss.
+    """
+
+    min_distance_km: float  # min φ over the run [km]; < 0: the path entered the unsafe set
+    unsafe_time_s: float  # time with φ < 0, to Δt/substeps [s]
+    corridor_violation_deg: float  # max (angle to the axis − θ)⁺ inside the keep-out zone [deg]
+    approach_speed_km_s: float  # ‖v(T)‖ [km/s]
+    approach_angle_deg: float  # angle between v(T) and −â (0: straight down the corridor) [deg]
+    violated: bool  # min_distance_km < 0
+    step_distance_km: FloatArray  # (N+1,) φ at the nodes t_k [km]
+
+
+def _ellipsoid_distance_bounds(
+    r_km: FloatArray, semi_axes_km: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Lower and upper bounds of :func:`ellipsoid_signed_distance` of positions (M, 3) [km].
+
+    With L the level and q = √L: √(level) is a norm whose gradient is at most
+    1/a_min long, so ``|d_E| ≥ a_min |q − 1|``; the surface point on the ray
+    from the centre, r/q, is at ``‖r‖ |1 − 1/q|``, so ``|d_E| ≤`` that.
+    """
+    q = np.sqrt(ellipsoid_level(r_km, semi_axes_km))
+    norm = np.linalg.norm(r_km, axis=-1)
+    a_min = float(np.min(semi_axes_km))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ray = np.where(q > 0.0, norm * np.abs(1.0 - 1.0 / q), a_min)
+    near = a_min * np.abs(q - 1.0)
+    outside = q >= 1.0
+    return np.where(outside, near, -ray), np.where(outside, ray, -near)
+
+
+def _min_signed_distance(points: FloatArray, geo: Geometry, d_c: FloatArray | None) -> float:
+    """min φ over ``points`` (M, 3) [km], exact, computing d_E only where it can be the minimum.
+
+    φ's bounds from :func:`_ellipsoid_distance_bounds` (d_C is exact and cheap):
+    only the points whose lower bound is at most the smallest upper bound can
+    hold the minimum.
+    """
+    assert geo.semi_axes_km is not None
+    low, high = _ellipsoid_distance_bounds(points, geo.semi_axes_km)
+    if d_c is not None:
+        low, high = np.maximum(low, -d_c), np.maximum(high, -d_c)
+    best = int(np.argmin(high))
+    # a rounding margin: where the bounds meet (a sphere) they may cross by an ulp
+    candidates = low <= high[best] + 1e-12 * (abs(high[best]) + float(np.max(geo.semi_axes_km)))
+    candidates[best] = True
+    exact = ellipsoid_signed_distance(points[candidates], geo.semi_axes_km)
+    if d_c is not None:
+        exact = np.maximum(exact, -d_c[candidates])
+    return float(np.min(exact))
+
+
+def measure_safety(
+    x: FloatArray, dt_s: float, geo: Geometry, substeps: int = SAFETY_SUBSTEPS
+) -> Safety:
+    """The :class:`Safety` of the trajectory ``x`` (N+1, 6) [km, km/s] on a grid of step Δt.
+
+    The minimum distance is exact over the sub-samples (φ computed exactly
+    where its bounds allow it to be the minimum); the unsafe time counts the
+    sub-samples inside the keep-out zone and outside the corridor, from the
+    definitions. The corridor-angle violation is taken over the sub-samples
+    inside the keep-out zone (where the corridor is what makes a position safe):
+    0 when the path never enters it; NaN without a corridor or without a
+    keep-out zone. The approach angle is NaN without a corridor or at rest.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    arcs = hermite_arcs(x, dt_s, substeps)
+    points = np.concatenate([arcs[:, :-1].reshape(-1, 3), x[-1:, :3]])  # every Δt/substeps
+    nodes = signed_distance(x[:, :3], geo)
+    corridor = geo.port_km is not None and geo.axis is not None and geo.half_angle_rad is not None
+    v_end = x[-1, 3:]
+    speed = float(np.linalg.norm(v_end))
+    violation, angle = math.nan, math.nan
+    if corridor and speed > 0.0:
+        assert geo.axis is not None
+        angle = math.degrees(math.acos(min(max(float(-v_end @ geo.axis) / speed, -1.0), 1.0)))
+    if geo.semi_axes_km is None:  # nothing is unsafe
+        min_distance, unsafe_time = math.inf, 0.0
+    else:
+        d_c = None
+        if corridor:
+            assert geo.port_km is not None and geo.axis is not None
+            assert geo.half_angle_rad is not None
+            d_c = cone_signed_distance(points, geo.port_km, geo.axis, geo.half_angle_rad)
+        min_distance = _min_signed_distance(points, geo, d_c)
+        inside = ellipsoid_level(points, geo.semi_axes_km) < 1.0
+        unsafe = inside if d_c is None else inside & (d_c > 0.0)
+        unsafe_time = float(np.count_nonzero(unsafe)) * dt_s / substeps
+        if corridor:
+            assert geo.port_km is not None and geo.axis is not None
+            assert geo.half_angle_rad is not None
+            excess = corridor_angle_deg(points[inside], geo.port_km, geo.axis)
+            excess = excess[np.isfinite(excess)] - math.degrees(geo.half_angle_rad)
+            violation = float(max(excess.max(initial=0.0), 0.0))
+    return Safety(
+        min_distance_km=min_distance,
+        unsafe_time_s=unsafe_time,
+        corridor_violation_deg=violation,
+        approach_speed_km_s=speed,
+        approach_angle_deg=angle,
+        violated=bool(min_distance < 0.0),
+        step_distance_km=np.asarray(nodes, dtype=np.float64),
+    )

@@ -49,6 +49,7 @@ import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import actuator, guidance, references, sensors, truth
+from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
@@ -105,6 +106,8 @@ class RunResult:
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
     dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
+    #: safety of the true trajectory (issue 32), only when the problem has constraints
+    safety: safety_geometry.Safety | None = None
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -369,7 +372,16 @@ def simulate(
         nees=log.nees,
         dropout=dropout,
         outlier=outlier,
+        safety=_safety(problem, log.x),
     )
+
+
+def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
+    """The safety of the true trajectory (issue 32 item 3); None without constraints."""
+    if problem.constraints is None:
+        return None
+    geo = safety_geometry.geometry(problem.constraints)
+    return safety_geometry.measure_safety(x_true, problem.scenario.dt_s, geo)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,173 @@
+"""Safety measured on the true trajectory (issue 32 item 3): per run and per step.
+
+The trajectories here are built in the test with known answers (straight lines at
+constant velocity, whose cubic Hermite arcs are exact), and the expected values
+are computed from the definitions written out in the test: the sphere's distance
+‖r‖ − R, the angle to the axis by arccos. A run is measured only when its config
+has constraints: without them no column changes (tests/test_same_numbers.py
+compares the paper campaigns' columns to its fixture's too).
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+from pathlib import Path
+
+import numpy as np
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.output.tables import unit_of
+from cwrend_cli.physics import constraints as cg
+from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
+
+R = 0.2  # km
+SPHERE = cg.geometry(Constraints(keep_out=KeepOut((R, R, R))))
+runner = CliRunner()
+
+
+def _line(start: np.ndarray, velocity: np.ndarray, n_steps: int, dt: float) -> np.ndarray:
+    """States of uniform straight motion at t_k = k dt (N+1, 6)."""
+    t = np.arange(n_steps + 1)[:, None] * dt
+    return np.hstack([start + t * velocity, np.broadcast_to(velocity, (n_steps + 1, 3))])
+
+
+def test_a_straight_pass_through_the_centre_is_measured() -> None:
+    v = np.array([0.0, 0.0, -0.01])  # 10 m/s along -z
+    x = _line(np.array([0.0, 0.0, 1.0]), v, 200, 1.0)  # through the origin at t = 100 s
+    sf = cg.measure_safety(x, 1.0, SPHERE)
+    assert sf.violated
+    assert sf.min_distance_km == pytest.approx(-R, abs=1e-12)
+    # inside for |1 - 0.01 t| < 0.2: t in (80, 120), 40 s, sampled every 0.05 s
+    assert sf.unsafe_time_s == pytest.approx(40.0, abs=0.05 + 1e-9)
+    assert sf.approach_speed_km_s == pytest.approx(0.01)
+    assert math.isnan(sf.corridor_violation_deg) and math.isnan(sf.approach_angle_deg)
+    expected_nodes = np.linalg.norm(x[:, :3], axis=1) - R
+    np.testing.assert_allclose(sf.step_distance_km, expected_nodes, atol=1e-12)
+
+
+def test_an_entry_between_two_nodes_is_caught() -> None:
+    """Nodes 1 s apart on either side of a 0.2 km sphere at 0.5 km/s: no node is inside."""
+    v = np.array([0.0, 0.0, -0.5])
+    x = _line(np.array([0.0, 0.15, 1.25]), v, 5, 1.0)  # z = 1.25, 0.75, 0.25, -0.25, ...
+    nodes = np.linalg.norm(x[:, :3], axis=1) - R
+    assert np.all(nodes > 0)
+    sf = cg.measure_safety(x, 1.0, SPHERE)
+    # closest approach: the line at y = 0.15 passes 0.15 km from the centre
+    assert sf.min_distance_km == pytest.approx(0.15 - R, abs=1e-12)
+    assert sf.violated
+    assert np.all(sf.step_distance_km > 0)
+
+
+def test_a_path_that_stays_away_is_safe() -> None:
+    x = _line(np.array([0.5, 0.0, 1.0]), np.array([0.0, 0.0, -0.01]), 200, 1.0)
+    sf = cg.measure_safety(x, 1.0, SPHERE)
+    assert not sf.violated
+    assert sf.unsafe_time_s == 0.0
+    assert sf.min_distance_km == pytest.approx(0.5 - R, abs=1e-12)
+
+
+def test_the_hermite_arcs_reproduce_a_cubic() -> None:
+    coef = np.array([[0.1, -0.2, 0.3], [0.01, 0.02, -0.03], [1e-3, 2e-3, 0], [1e-4, 0, -1e-4]])
+    t = np.arange(11.0)
+    r = sum(c * t[:, None] ** i for i, c in enumerate(coef))
+    v = sum(i * c * t[:, None] ** (i - 1) for i, c in enumerate(coef) if i)
+    arcs = cg.hermite_arcs(np.hstack([r, v]), 1.0, 4)
+    tau = t[:-1, None] + np.linspace(0, 1, 5)[None, :]
+    exact = sum(c * tau[..., None] ** i for i, c in enumerate(coef))
+    np.testing.assert_allclose(arcs, exact, atol=1e-13)
+
+
+def test_the_corridor_measures_angle_and_approach() -> None:
+    geo = cg.geometry(
+        Constraints(keep_out=KeepOut((R, R, R)), corridor=Corridor((0, 0, 0.25), (0, 0, 1), 30.0))
+    )
+    # straight down the axis to the port, then stopping there: inside the cone all the way
+    down = _line(np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -0.0075]), 100, 1.0)
+    sf = cg.measure_safety(down, 1.0, geo)
+    assert not sf.violated and sf.corridor_violation_deg == 0.0
+    assert sf.approach_angle_deg == pytest.approx(0.0, abs=1e-6)
+    # across the zone below the port, along -x: the angles inside are those of the nodes'
+    side = _line(np.array([0.35, 0.0, 0.1]), np.array([-0.007, 0.0, 0.0]), 100, 1.0)
+    sf = cg.measure_safety(side, 1.0, geo)
+    w = side[:, :3] - np.array([0.0, 0.0, 0.25])
+    inside = np.linalg.norm(side[:, :3], axis=1) < R
+    angles = np.degrees(np.arccos(w[inside, 2] / np.linalg.norm(w[inside], axis=1)))
+    assert sf.violated
+    assert float(angles.max()) - 30.0 <= sf.corridor_violation_deg <= 180.0 - 30.0
+    assert sf.approach_angle_deg == pytest.approx(90.0, abs=1e-9)
+
+
+CONSTRAINED = [
+    "--set",
+    "constraints.keep_out.semi_axes_km=[0.2, 0.2, 0.2]",
+    "--set",
+    "constraints.corridor.port_km=[0, 0, -0.25]",
+    "--set",
+    "constraints.corridor.axis=[0, 0, -1]",
+    "--set",
+    "constraints.corridor.half_angle_deg=30",
+]
+RUN_COLUMNS = {
+    "safety_min_distance_km",
+    "safety_unsafe_time_s",
+    "safety_corridor_violation_deg",
+    "safety_approach_speed_km_s",
+    "safety_approach_angle_deg",
+    "safety_violated",
+}
+STEP_COLUMNS = {"safety_distance_km"}
+
+
+def _ablate(tmp_path: Path, *extra: str) -> Path:
+    config = tmp_path / "c.toml"
+    config.write_text(f'[output]\ndir = "{tmp_path / "out"}"\n', encoding="utf-8")
+    args = ["ablate", str(config), "--seeds", "1", "--arch", "mtf_fixed_socp", "--workers", "1"]
+    result = runner.invoke(app, [*args, "-q", *extra])
+    assert result.exit_code == 0, result.output
+    return Path(glob.glob(str(tmp_path / "out" / "*"))[0])
+
+
+def test_a_constrained_campaign_writes_the_safety_of_its_runs(tmp_path: Path) -> None:
+    campaign = _ablate(tmp_path, *CONSTRAINED)
+    runs = pq.read_table(campaign / "runs.parquet")
+    assert set(runs.column_names) >= RUN_COLUMNS
+    row = runs.to_pylist()[0]
+    # the unconstrained plan from 31 km along z crosses the sphere to reach the far port
+    assert row["safety_violated"] is True and row["safety_min_distance_km"] < 0
+    for name in RUN_COLUMNS:
+        field = runs.schema.field(name)
+        assert field.metadata[b"unit"].decode() == unit_of(name)
+        assert field.metadata[b"description"]
+    steps = ds.dataset(campaign / "steps", partitioning="hive").to_table()
+    assert set(steps.column_names) >= STEP_COLUMNS
+    # the nodes are among the sub-samples: the run's minimum is at most theirs
+    assert row["safety_min_distance_km"] <= float(np.min(steps["safety_distance_km"]))
+
+
+def test_an_unconstrained_campaign_has_no_safety_columns(tmp_path: Path) -> None:
+    campaign = _ablate(tmp_path)
+    runs = pq.read_table(campaign / "runs.parquet")
+    steps = ds.dataset(campaign / "steps", partitioning="hive").to_table()
+    assert not RUN_COLUMNS & set(runs.column_names)
+    assert not STEP_COLUMNS & set(steps.column_names)
+    assert not [c for c in runs.column_names + steps.column_names if c.startswith("safety")]
+
+
+def test_the_screened_minimum_is_the_minimum_over_every_sub_sample() -> None:
+    """Exact φ is computed only where its bounds allow the minimum: the same minimum."""
+    geo = cg.geometry(
+        Constraints(
+            keep_out=KeepOut((0.2, 0.35, 0.15)), corridor=Corridor((0, 0, -0.25), (0, 0, -1), 30.0)
+        )
+    )
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x = np.cumsum(rng.normal(size=(101, 6)) * 0.02, axis=0)
+        arcs = cg.hermite_arcs(x, 1.0, cg.SAFETY_SUBSTEPS)
+        every = cg.signed_distance(arcs.reshape(-1, 3), geo)
+        assert cg.measure_safety(x, 1.0, geo).min_distance_km == float(every.min())
