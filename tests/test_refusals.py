@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -25,7 +26,7 @@ from typer.testing import CliRunner
 from cwrend_cli.cli import app
 from cwrend_cli.config import overrides
 from cwrend_cli.config.io import load_noise_file
-from cwrend_cli.config.schema import ScheduleConfig
+from cwrend_cli.config.schema import CwrendConfig, ScheduleConfig
 from cwrend_cli.errors import InputDataError
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
@@ -234,3 +235,34 @@ def test_a_parquet_noise_file_of_the_wrong_length_is_refused_from_its_footer(
     monkeypatch.setattr(pd, "read_parquet", decoded)
     with pytest.raises(InputDataError, match="has 100000 rows, expected 800"):
         load_noise_file(path, 800)
+
+
+def _unbounded(schema: dict[str, Any], path: str) -> list[str]:
+    """The numbers under ``schema`` (a JSON schema) without an upper bound, by path."""
+    if "anyOf" in schema:
+        return [p for s in schema["anyOf"] for p in _unbounded(s, path)]
+    if schema.get("type") in ("number", "integer"):
+        bounded = "maximum" in schema or "exclusiveMaximum" in schema
+        return [] if bounded else [path]
+    if schema.get("type") == "array":
+        items = schema.get("items")
+        found = [
+            p
+            for i, s in enumerate(schema.get("prefixItems", []))
+            for p in _unbounded(s, f"{path}.{i}")
+        ]
+        return found + (_unbounded(items, f"{path}[]") if isinstance(items, dict) else [])
+    return []
+
+
+def test_every_number_of_the_configuration_has_an_upper_bound() -> None:
+    """Item 7: each bound is in the schema, where the configuration reference shows it."""
+    definitions = CwrendConfig.model_json_schema()["$defs"]
+    unbounded = [
+        path
+        for name, model in definitions.items()
+        for field, schema in model.get("properties", {}).items()
+        if "diagonal_maximum" not in schema  # a covariance: its diagonal's bounds, each entry's
+        for path in _unbounded(schema, f"{name}.{field}")
+    ]
+    assert unbounded == []

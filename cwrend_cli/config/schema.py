@@ -108,6 +108,10 @@ EPS_MAX = 100.0
 #: Dimensionless weights, scales and gains of the schedule and sensor faults [-].
 GAIN_MAX = 1e6
 
+#: Mean, spread and ends of a dispersion draw [the key's unit]: the largest bound of
+#: any value it may set.
+DISPERSION_MAX = POSITION_VARIANCE_MAX_KM2
+
 PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
 VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
 #: A relative state [x, y, z, ẋ, ẏ, ż] [km, km/s], each entry bounded.
@@ -697,6 +701,29 @@ class TruthConfig(_FrozenModel):
     )
 
 
+class ModelConfig(_FrozenModel):
+    """The design model of the guidance and of the filter (issue 33); CW by default.
+
+    ``"cw"``: Clohessy–Wiltshire (the paper's). ``"ss"``: Schweighart–Sedwick
+    (J2, constant coefficients) about the chief's orbit: radius a = (μ/n²)^{1/3}
+    from ``scenario.mean_motion_rad_s`` and inclination ``truth.inclination_deg``.
+    ``"ya"``: Yamanaka–Ankersen, the exact transition about the Keplerian chief
+    of ``[truth]``: eccentricity ``truth.eccentricity``, true anomaly
+    ``truth.true_anomaly_deg`` at t = 0. Both read the chief from ``[truth]``,
+    so they need a truth that flies one (``truth.model`` ``"two_body"`` or
+    ``"j2"``). Without the section every number and hash is as before.
+    """
+
+    guidance: Literal["cw", "ss", "ya"] = Field(
+        _PAPER.model.guidance,
+        description="design model of the re-solves: 'cw', 'ss' (J2) or 'ya' (eccentric) [-]",
+    )
+    filter: Literal["cw", "ss", "ya"] = Field(
+        _PAPER.model.filter,
+        description="design model of the Kalman filter's prediction: 'cw', 'ss' or 'ya' [-]",
+    )
+
+
 class ActuatorConfig(_FrozenModel):
     """Actuator errors between the commanded and the applied control (issue 15); all off by default.
 
@@ -847,6 +874,14 @@ class OutputConfig(_FrozenModel):
         "past it is recorded "
         "failed 'timed out' and the campaign goes on; unset = 60 s + 0.5 s per step "
         "(460 s for the paper's 800 steps; not enforced on Dask workers)",
+    )
+    dask_no_worker_timeout_s: Float = Field(
+        60.0,
+        gt=0,
+        le=MAX_RUN_TIMEOUT_S,
+        description="campaigns on Dask (--executor dask): how long the cluster may have no "
+        "worker at all before the campaign stops with exit 3 (resumable; its journaled runs "
+        "kept), at most 86,400 [s]",
     )
 
     @field_validator("dir")
@@ -999,10 +1034,32 @@ class Dispersion(_FrozenModel):
     """
 
     dist: Literal["normal", "uniform"] = Field(description="distribution of the draw [-]")
-    mean: Float = Field(0.0, description="normal: mean of the draw [the key's unit]")
-    std: Float | None = Field(None, ge=0, description="normal: standard deviation [the key's unit]")
-    low: Float | None = Field(None, description="uniform: lower bound [the key's unit]")
-    high: Float | None = Field(None, description="uniform: upper bound [the key's unit]")
+    # each within ±DISPERSION_MAX, the largest bound of any value a draw may set (a
+    # position variance); the dispersed run is then validated like any configuration
+    mean: Float = Field(
+        0.0,
+        ge=-DISPERSION_MAX,
+        le=DISPERSION_MAX,
+        description="normal: mean of the draw, within ±1e8 [the key's unit]",
+    )
+    std: Float | None = Field(
+        None,
+        ge=0,
+        le=DISPERSION_MAX,
+        description="normal: standard deviation, in [0, 1e8] [the key's unit]",
+    )
+    low: Float | None = Field(
+        None,
+        ge=-DISPERSION_MAX,
+        le=DISPERSION_MAX,
+        description="uniform: lower bound, within ±1e8 [the key's unit]",
+    )
+    high: Float | None = Field(
+        None,
+        ge=-DISPERSION_MAX,
+        le=DISPERSION_MAX,
+        description="uniform: upper bound, within ±1e8 [the key's unit]",
+    )
     mode: Literal["add", "set"] = Field("add", description="add the draw to the base or set it [-]")
 
     @model_validator(mode="after")
@@ -1045,6 +1102,10 @@ class CwrendConfig(_FrozenModel):
     constraints: ConstraintsConfig = Field(
         default_factory=ConstraintsConfig,
         description="path constraints: keep-out zone, corridor (socp guidance; measured always)",
+    )
+    model: ModelConfig = Field(
+        default_factory=ModelConfig,
+        description="design models of the guidance and the filter (default CW)",
     )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
@@ -1097,7 +1158,36 @@ class CwrendConfig(_FrozenModel):
         out = handler(self)
         if isinstance(out, dict) and self.constraints == ConstraintsConfig():
             out.pop("constraints", None)
+        if isinstance(out, dict) and self.model == ModelConfig():
+            out.pop("model", None)  # no [model]: CW, hashes unchanged (issue 33)
         return out
+
+    @model_validator(mode="after")
+    def _design_model_rules(self) -> Self:
+        problems: list[tuple[str, Any, str]] = []
+        for consumer in ("guidance", "filter"):
+            name = getattr(self.model, consumer)
+            if name != "cw" and self.truth.model == "cw":
+                problems.append(
+                    (
+                        f"model.{consumer}",
+                        name,
+                        f"'{name}' takes the chief's orbit from [truth], which the 'cw' truth "
+                        "does not fly: set truth.model = 'two_body' or 'j2' (with the chief's "
+                        "elements), or use 'cw'",
+                    )
+                )
+        if self.model.filter == "ya":
+            problems.append(
+                (
+                    "model.filter",
+                    "ya",
+                    "the filter's time-varying prediction is not supported yet: use 'cw' or 'ss'",
+                )
+            )
+        if problems:
+            raise rules_error(problems)
+        return self
 
     @model_validator(mode="after")
     def _cross_section_rules(self) -> Self:
