@@ -63,7 +63,7 @@ def _listing(root: Path) -> dict[str, bytes]:
     }
 
 
-@pytest.mark.parametrize("command", ["report", "compare", "ablate"])
+@pytest.mark.parametrize("command", ["report", "compare", "table", "ablate"])
 @pytest.mark.parametrize("case", list(DAMAGED))
 def test_a_damaged_manifest_is_refused_naming_the_file_and_the_repair(
     campaign: tuple[Path, Path], tmp_path: Path, command: str, case: str
@@ -74,6 +74,7 @@ def test_a_damaged_manifest_is_refused_naming_the_file_and_the_repair(
     args = {
         "report": ["report", str(out)],
         "compare": ["compare", str(out), str(out)],
+        "table": ["table", str(out)],
         "ablate": _args(cfg),
     }[command]
     result = runner.invoke(app, args)

@@ -52,6 +52,7 @@ import pandas as pd
 from cwrend_cli.config import get_dotted
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
+from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 from cwrend_cli.report.labels import format_value
@@ -284,8 +285,8 @@ def load_source(text: str) -> Source:
             f"{ABLATION_STATS} or {SWEEP_STATS}); give the directory of a cwrend ablate or "
             "cwrend sweep that ran to its end"
         )
+    manifest = read_manifest(manifest_path, REPAIR_HINT)  # a damaged one: exit 2, its fix
     try:
-        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
         stats = pd.read_parquet(stats_path)
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{path}: unreadable campaign ({exc})") from None
