@@ -50,6 +50,7 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
         truth=_mirror(params.Truth, cfg.truth),
         actuator=_mirror(params.Actuator, cfg.actuator),
         constraints=constraints_of(cfg),
+        model=_mirror(params.DesignModel, cfg.model),
     )
 
 

@@ -231,6 +231,26 @@ class Truth:
     arg_latitude_deg: float = 0.0  # argument of latitude u = ω + f at t = 0 [deg]
 
 
+#: The design models a consumer (guidance, filter) can use (issue 33;
+#: :mod:`cwrend_cli.physics.design_models`).
+DesignModelName = Literal["cw", "ss", "ya"]
+
+
+@dataclass(frozen=True)
+class DesignModel:
+    """The linear model each consumer predicts with (issue 33); CW by default.
+
+    ``"cw"``: Clohessy–Wiltshire (SPEC §1, the paper's). ``"ss"``:
+    Schweighart–Sedwick, J2 with constant coefficients, reference orbit the
+    chief's (a from ``scenario.mean_motion_rad_s``, i = ``truth.inclination_deg``).
+    ``"ya"``: Yamanaka–Ankersen, the exact transition about the eccentric chief
+    of ``[truth]`` (e = ``truth.eccentricity``, f₀ = ``truth.true_anomaly_deg``).
+    """
+
+    guidance: DesignModelName = "cw"  # model of the re-solves [-]
+    filter: DesignModelName = "cw"  # model of the filter's prediction [-]
+
+
 @dataclass(frozen=True)
 class Actuator:
     """Errors of the thruster between the commanded and the applied control (issue 15, item 2).
@@ -338,6 +358,8 @@ class Problem:
     actuator: Actuator = field(default_factory=Actuator)
     #: path constraints (issue 32); None: none, every number as without the section
     constraints: Constraints | None = None
+    #: design models of the guidance and the filter (issue 33); CW by default
+    model: DesignModel = field(default_factory=DesignModel)
 
 
 @dataclass(frozen=True)
