@@ -285,6 +285,43 @@ def test_a_lost_scheduler_stops_the_campaign_and_records_no_result(
     assert json.loads((out / "manifest.json").read_text())["status"].startswith("stopped:")
 
 
+def test_a_cluster_whose_workers_all_died_stops_the_campaign_and_it_resumes(
+    tmp_path: Path, cluster: Cluster, local: Path, _clusters: list[Cluster]
+) -> None:
+    """Scheduler alive, every worker killed: exit 3 after output.dask_no_worker_timeout_s
+    (it waited for ever), nothing recorded for it; the same command resumes on new workers."""
+    out = tmp_path / "results" / "dask"
+    args = ["ablate", str(_config(tmp_path, "dask")), "--seeds", "16", "--arch", ARCHS,
+            "--executor", "dask", "-q", "--set", "output.dask_no_worker_timeout_s=1"]  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, str(HOOKED), "journal", "2", "SIGSTOP", *args, "--address",
+         cluster.address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    _wait_stopped(proc)  # two tasks journaled, the others in flight or queued
+    for worker in cluster.workers:
+        os.killpg(worker.pid, signal.SIGKILL)
+        worker.wait()
+    proc.send_signal(signal.SIGCONT)
+    try:
+        _, stderr = proc.communicate(timeout=HANG_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the campaign waits for ever on a cluster without workers")
+    assert proc.returncode == 3, stderr
+    assert "the Dask cluster has had no worker for" in stderr and "Traceback" not in stderr
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) >= 4 and (runs["status"] == "ok").all()  # nothing recorded for it
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"].startswith("stopped: the Dask cluster has had no worker")
+    (tmp_path / "fresh").mkdir()
+    fresh = Cluster(tmp_path / "fresh", workers=2)
+    _clusters.append(fresh)  # stopped with the module's others; later tests use it
+    resumed = _cwrend(*args, "--address", fresh.address)
+    assert resumed.returncode == 0, resumed.stderr
+    pd.testing.assert_frame_equal(_runs(out), _runs(local))
+    pd.testing.assert_frame_equal(_steps(out), _steps(local), check_exact=True)
+
+
 def test_dask_log_lines_are_silenced_below_critical() -> None:
     """Every distributed/tornado logger, including those distributed's own logging
     configuration sets explicitly (``tornado.application`` at ERROR), stays quiet: a

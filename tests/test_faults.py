@@ -10,7 +10,7 @@ from __future__ import annotations
 import errno
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import pandas as pd
 import pytest
@@ -308,3 +308,49 @@ def test_retry_failed_counts_every_run_it_computed_again(tmp_path: Path) -> None
     assert "2 run(s) computed, 2 already done" in retry.stderr
     manifest = json.loads((tmp_path / "results" / "retry" / "manifest.json").read_text())
     assert manifest["sessions"][-1]["runs_computed"] == 2
+
+
+# --- item 3: a Dask cluster without workers -------------------------------------
+
+
+def test_a_dask_cluster_without_workers_stops_the_campaign_with_exit_3(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Scheduler alive, no worker: the futures would wait for ever (real cluster:
+    tests/test_distributed.py)."""
+    import concurrent.futures
+    from contextlib import contextmanager
+
+    class _WorkerlessClient:
+        status = "running"  # the scheduler answers
+        _scheduler_identity: ClassVar[dict[str, int]] = {"n_workers": 0}  # no worker
+
+    class _Workerless(concurrent.futures.Executor):
+        _client = _WorkerlessClient()
+
+        def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
+            return concurrent.futures.Future()  # never runs
+
+    @contextmanager
+    def workerless(*args: Any, **kwargs: Any) -> Any:
+        yield _Workerless(), 1
+
+    real_wait = concurrent.futures.wait
+    polls = {"n": 0}
+
+    def guarded_wait(*args: Any, **kwargs: Any) -> Any:
+        polls["n"] += 1  # a guard against a hang only (before the fix it waited for ever)
+        assert polls["n"] < 100_000, "the campaign waits for ever on a cluster without workers"
+        return real_wait(*args, **kwargs)
+
+    monkeypatch.setattr(driver_module, "open_executor", workerless)
+    monkeypatch.setattr(driver_module, "wait", guarded_wait)
+    monkeypatch.setattr(driver_module, "_POLL_S", 0.05)
+    monkeypatch.setattr(driver_module, "_SIGNAL_POLL_S", 0.001)
+    cfg = _write_config(tmp_path / "c.toml", "idle", "dask_no_worker_timeout_s = 0.2\n")
+    result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 3, result.output
+    assert "the Dask cluster has had no worker for" in result.stderr
+    assert "output.dask_no_worker_timeout_s = 0.2" in result.stderr
+    manifest = json.loads((tmp_path / "results" / "idle" / "manifest.json").read_text())
+    assert manifest["status"].startswith("stopped: the Dask cluster has had no worker")

@@ -220,6 +220,20 @@ def executor_alive(executor: Executor) -> bool:
     return client is None or getattr(client, "status", "running") == "running"
 
 
+def executor_workers(executor: Executor) -> int | None:
+    """Workers a Dask executor's cluster has; ``None`` for other executors or when unknown.
+
+    What the client last heard from its scheduler (``n_workers``, refreshed by
+    the client every 2 s: no round trip, so a lost scheduler cannot block
+    here). A cluster whose workers all died keeps its tasks waiting for ever:
+    the driver stops after ``output.dask_no_worker_timeout_s`` at 0 (issue 36).
+    """
+    client = getattr(executor, "_client", None)  # distributed.cfexecutor.ClientExecutor
+    identity = getattr(client, "_scheduler_identity", None)
+    count = identity.get("n_workers") if isinstance(identity, dict) else None
+    return count if isinstance(count, int) else None
+
+
 def check_address(address: str, timeout_s: float = DASK_CONNECT_TIMEOUT_S) -> None:
     """Refuse a malformed or unreachable Dask scheduler address (:class:`ConfigError`, exit 2).
 
@@ -347,9 +361,12 @@ def open_executor(
             yield InlineExecutor(), 1
             return
         context = multiprocessing.get_context("spawn")
-        runs: Queue[tuple[int, bool]] = context.Queue()
-        pool = _SignallingPool(runs, n, context)
+        # the workers and multiprocessing's resource tracker (started by the queue's first
+        # semaphore; it ignores SIGINT and SIGTERM itself, not SIGHUP) start with the stop
+        # signals blocked
         with _stop_signals_blocked():
+            runs: Queue[tuple[int, bool]] = context.Queue()
+            pool = _SignallingPool(runs, n, context)
             for _ in range(n):  # start the workers now, while the driver prepares the first tasks
                 pool.submit(_started)
         try:

@@ -53,7 +53,7 @@ from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
-from cwrend_cli.physics.params import Problem
+from cwrend_cli.physics.params import Architecture, DesignModel, Problem
 
 __all__ = [
     "BASE_POINT",
@@ -182,6 +182,8 @@ class CampaignPlan:
     steps_seeds: int | None  # output.steps_seeds: per-step data only below this seed
     rrd_seeds: int | None  # output.rrd_seeds: recordings only below this seed
     run_timeout_s: float | None = None  # output.run_timeout_s (None: guards.run_timeout_s default)
+    #: output.dask_no_worker_timeout_s [s]: a Dask cluster without workers this long stops it
+    no_worker_timeout_s: float | None = None
     design: DesignSpec | None = None  # a sampled design instead of a grid (``grid`` is then empty)
     #: output.design_steps_points: the points with per-step data and recordings (None: all)
     steps_points: frozenset[str] | None = None
@@ -429,6 +431,22 @@ def default_seeds_per_task(n_seeds: int, n_points: int, workers: int | None) -> 
     return max(1, min(MAX_SEEDS_PER_TASK, per_task))
 
 
+def check_design_models(problem: Problem, archs: Sequence[Architecture]) -> None:
+    """Refuse an architecture that cannot fly the configured design model (issue 33).
+
+    Raises :class:`ConfigError` naming ``model.guidance`` and the architecture
+    (:func:`cwrend_cli.physics.design_models.unsupported`); nothing runs.
+    """
+    if problem.model == DesignModel():
+        return  # CW: every architecture (and no physics import on this path)
+    from cwrend_cli.physics.design_models import unsupported
+
+    for arch in archs:
+        reason = unsupported(problem.model, arch, problem.guidance)
+        if reason is not None:
+            raise ConfigError(reason)
+
+
 def plan(
     cfg: CwrendConfig,
     archs: Sequence[str],
@@ -498,6 +516,7 @@ def plan(
         point_cfg = _validated(base, params, f"grid point {pid}")
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
+        check_design_models(problem, [ALL_ARCHITECTURES[a] for a in archs])
         noise_key = (point_cfg.noise.seed, point_cfg.noise.file, problem.scenario.n_steps)
         noise = noises.get(noise_key)
         if noise is None:  # a noise file is hashed and checked once, not once per point
@@ -533,6 +552,7 @@ def plan(
         steps_seeds=cfg.output.steps_seeds,
         rrd_seeds=cfg.output.rrd_seeds,
         run_timeout_s=cfg.output.run_timeout_s,
+        no_worker_timeout_s=cfg.output.dask_no_worker_timeout_s,
         design=spec,
         steps_points=_steps_points(spec, cfg.output.design_steps_points),
     )
