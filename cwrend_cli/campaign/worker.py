@@ -33,7 +33,10 @@ drawn only for the fault kinds some window of the run switches on.
 
 from __future__ import annotations
 
+import _thread
 import hashlib
+import signal
+import threading
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
@@ -44,7 +47,14 @@ from typing import Any
 import numpy as np
 
 from cwrend_cli.campaign import guards
-from cwrend_cli.campaign.plan import Assignment, NoiseSource, RunSpec, Task, noise_source
+from cwrend_cli.campaign.plan import (
+    Assignment,
+    NoiseSource,
+    RunSpec,
+    Task,
+    check_design_models,
+    noise_source,
+)
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
@@ -193,6 +203,7 @@ def run_case(
     """Run ``archs`` on the noise of ``seed`` (references computed if not given)."""
     noise = standard_normal_for(cfg, seed)  # validate input before any computation
     problem = problem_of(cfg)
+    check_design_models(problem, archs)
     refs = refs if refs is not None else simulation.open_loop_references(problem)
     draws = actuator_draws(problem, cfg.noise.seed, seed)
     faults = fault_draws(problem, cfg.noise.seed, seed)
@@ -248,23 +259,41 @@ class TaskInterrupted(KeyboardInterrupt):
         self.outcome = outcome
 
 
-#: This process's stop (pool workers, :func:`stop_task`): asked, and whether a task's runs
-#: are running in the main thread now (where the stop is raised).
-_STOP = {"asked": False, "running": False}
+#: This process's stop (pool workers, :func:`stop_task`): asked; whether a task's runs are
+#: running in the main thread now; whether the run in progress is to be interrupted.
+_STOP = {"asked": False, "running": False, "interrupt": False}
+#: How long a pool worker asked to stop lets the run in progress end before it interrupts
+#: it [s]. Most runs end sooner (5-100 ms) and are kept; an interrupt lands anywhere, even in
+#: a callback of numba's compiler, which prints it and goes on (the run is then dropped at
+#: its end, never recorded failed).
+STOP_PATIENCE_S = 0.25
 
 
 def stop_task() -> None:
     """Ask the task of this pool worker to stop and keep its finished runs (a signal handler's).
 
-    Raises ``KeyboardInterrupt`` into the runs of the task running now, once
-    (a second signal, e.g. the terminal's Ctrl-C and then the driver's, does
-    not interrupt the task while it writes its files); a task that starts
-    later stops before its first run. A run interrupted is not kept.
+    The run in progress may end (within :data:`STOP_PATIENCE_S`, then it is
+    interrupted: ``KeyboardInterrupt`` is raised into it, once, from this same
+    handler) and the task returns (:class:`TaskInterrupted`) with the runs it
+    finished; a task that starts later stops before its first run. A second
+    signal (the terminal's Ctrl-C, then the driver's) changes nothing.
     """
-    first = not _STOP["asked"]
-    _STOP["asked"] = True
-    if first and _STOP["running"]:
+    if _STOP["interrupt"] and _STOP["running"]:  # STOP_PATIENCE_S is over
+        _STOP["interrupt"] = False
         raise KeyboardInterrupt
+    if not _STOP["asked"]:
+        _STOP["asked"] = True
+        if _STOP["running"]:
+            later = threading.Timer(STOP_PATIENCE_S, _interrupt_run)
+            later.daemon = True
+            later.start()
+
+
+def _interrupt_run() -> None:
+    """Interrupt the run in progress, if any (:func:`stop_task` raises in the main thread)."""
+    if _STOP["running"]:
+        _STOP["interrupt"] = True
+        _thread.interrupt_main(signal.SIGINT)
 
 
 def execute_task(
@@ -371,6 +400,8 @@ def execute_task(
             except InputChangedError:  # the campaign's input, not this run: it stops
                 raise
             except Exception as exc:  # failure isolation: the campaign goes on
+                if _STOP["asked"]:  # what the interrupt became (in a library): not a result
+                    raise KeyboardInterrupt from exc
                 kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
                 text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
                 outcomes.append(

@@ -86,13 +86,28 @@ functions on plain floats and arrays.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from cwrend_cli.physics.dynamics import one_minus_cos, x_minus_sin
-from cwrend_cli.physics.params import FloatArray
+from cwrend_cli.physics.dynamics import discretize, one_minus_cos, x_minus_sin
+from cwrend_cli.physics.params import (
+    Architecture,
+    DesignModel,
+    DesignModelName,
+    FloatArray,
+    Guidance,
+    Scenario,
+    Truth,
+)
+from cwrend_cli.physics.truth import (
+    J2_EARTH,
+    MU_EARTH_KM3_S2,
+    R_EARTH_KM,
+    semi_major_axis_km,
+)
 
 #: Gauss–Legendre nodes per panel of the ``ya`` input matrix (module docstring).
 GAUSS_NODES = 8
@@ -374,3 +389,79 @@ def ya_input_matrix(chief: EccentricChief, t0: float, t1: float) -> FloatArray:
             phi = _ya_stm_f(chief, chief.true_anomaly(tau), f1, t1 - tau)
             g += (0.5 * h * float(w)) * phi[:, 3:6]
     return g
+
+
+# ---------------------------------------------------------------------------
+# Per-step tables of a scenario (what the guidance and the filter consume)
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class StepTables:
+    """Φ_k = Φ(t_{k+1}, t_k) and Γ_k of every step k = 0 … N−1 of a scenario (read-only)."""
+
+    phi: FloatArray  # (N, 6, 6)
+    gam: FloatArray  # (N, 6, 3) [s, s²]
+    time_invariant: bool  # every step's Φ_k, Γ_k is the same
+
+
+def ya_chief(truth: Truth, scenario: Scenario) -> EccentricChief:
+    """The Keplerian chief of ``[truth]``: n of the scenario, e, f0 (the ``ya`` model's)."""
+    return EccentricChief(
+        n=scenario.mean_motion_rad_s,
+        e=truth.eccentricity,
+        f0=math.radians(truth.true_anomaly_deg),
+        mu=MU_EARTH_KM3_S2,
+    )
+
+
+def ss_model(truth: Truth, scenario: Scenario) -> LinearTimeInvariant:
+    """The ``ss`` model of the chief: r_ref = a = (μ/n²)^{1/3}, i of ``[truth]``, EGM2008's J2."""
+    n = scenario.mean_motion_rad_s
+    ss = schweighart_sedwick(n, semi_major_axis_km(n), truth.inclination_deg, J2_EARTH, R_EARTH_KM)
+    return ss.lti()
+
+
+@functools.lru_cache(maxsize=16)
+def step_tables(name: DesignModelName, scenario: Scenario, truth: Truth) -> StepTables:
+    """The tables of design model ``name`` on the grid t_k = k Δt of ``scenario``.
+
+    ``"cw"``: Eq. 11 (:func:`cwrend_cli.physics.dynamics.discretize`); ``"ss"``:
+    :func:`lti_stm`, :func:`lti_input_matrix`; ``"ya"``: :func:`ya_stm`,
+    :func:`ya_input_matrix` step by step (time-varying). Cached per scenario
+    and truth (both frozen): a campaign's runs share one table.
+    """
+    steps, dt = scenario.n_steps, scenario.dt_s
+    if name == "ya":
+        chief = ya_chief(truth, scenario)
+        phi = np.empty((steps, 6, 6))
+        gam = np.empty((steps, 6, 3))
+        for k in range(steps):
+            phi[k] = ya_stm(chief, k * dt, (k + 1) * dt)
+            gam[k] = ya_input_matrix(chief, k * dt, (k + 1) * dt)
+    else:
+        if name == "ss":
+            lti = ss_model(truth, scenario)
+            one_phi, one_gam = lti_stm(lti, dt), lti_input_matrix(lti, dt)
+        else:
+            one_phi, one_gam = discretize(scenario.mean_motion_rad_s, dt)
+        phi = np.repeat(one_phi[None], steps, axis=0)
+        gam = np.repeat(one_gam[None], steps, axis=0)
+    phi.flags.writeable = False
+    gam.flags.writeable = False
+    return StepTables(phi=phi, gam=gam, time_invariant=name != "ya")
+
+
+def unsupported(model: DesignModel, arch: Architecture, guidance: Guidance) -> str | None:
+    """Why ``arch`` cannot fly ``model`` yet (a sentence naming the field), or None.
+
+    The cone-program re-solve (``socp``) takes any model (it needs Φ_k, Γ_k
+    only); the shooting re-solve's compiled kernels are CW's (Eq. 11) so far.
+    """
+    if model.guidance != "cw" and arch.resolved_method(guidance) == "shooting":
+        return (
+            f"model.guidance = '{model.guidance}' with architecture {arch.slug}: its shooting "
+            "re-solve supports only 'cw' so far; use the cone-program architectures "
+            "(--arch all_socp, or guidance.method = 'socp')"
+        )
+    return None

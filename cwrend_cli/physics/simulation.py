@@ -48,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import actuator, guidance, references, sensors, truth
+from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import convex, feasibility
@@ -269,7 +269,7 @@ def simulate(
     settings = solver_settings(problem)
     gl_x, gl_w = settings.quadrature()
     t = sc.time_grid()
-    phi, gam = discretize(n, dt)
+    phi, gam = _filter_matrices(problem)
     r_nominal = est.r_nominal_matrix()
     meas = sensors.sensor_noise(
         standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
@@ -314,7 +314,7 @@ def simulate(
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
-        result = convex.solve(_grid(sc, x_hat0, sc.horizon_s), eps0, n)
+        result = convex.solve(_grid(sc, x_hat0, sc.horizon_s, _guidance_tables(problem)), eps0, n)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         _hold_plan(result, 0, model)
         if solves[-1].success:
@@ -533,6 +533,7 @@ def _cone_resolves(
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
     correct = problem.guidance.resolve_timing == "correct"
     threshold = problem.solver.success_residual
+    tables = _guidance_tables(problem)
     lam = state.lam
     records: list[SolveRecord] = []
     k_next, k_plan = 0, 0
@@ -542,12 +543,8 @@ def _cone_resolves(
         k_from = k + 1 if correct else k
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
-        warm = (
-            costate_stm(n, (k_from - k_plan) * dt) @ plan_costate
-            if plan_costate is not None
-            else None
-        )
-        result = convex.solve(_grid(sc, state.x_hat, horizon), scalars.eps, n, warm=warm)
+        warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
+        result = convex.solve(_grid(sc, state.x_hat, horizon, tables), scalars.eps, n, warm=warm)
         rec = _record("resolve", k, (k + 1) * dt, result, threshold)
         records.append(rec)
         if rec.success:
@@ -577,15 +574,89 @@ def _min_miss_if_infeasible(
     sc = problem.scenario
     k = schedule[i]
     stop = schedule[i + 1] if i + 1 < len(schedule) else sc.n_steps - 1
-    _apply_min_miss(sc, x_hat, (k + 1) * sc.dt_s, k + 1, stop, model.u_override, model.override)
-
-
-def _grid(sc: Scenario, x_hat: FloatArray, horizon_s: float) -> feasibility.GridProblem:
-    """One re-solve of the scenario on its zero-order-hold grid (the loop's Δt)."""
-    xf = np.asarray(sc.xf, dtype=float)
-    return feasibility.grid_problem(
-        sc.mean_motion_rad_s, x_hat, xf, horizon_s, sc.dt_s, sc.u_max_km_s2
+    _apply_min_miss(
+        sc,
+        x_hat,
+        (k + 1) * sc.dt_s,
+        k + 1,
+        stop,
+        model.u_override,
+        model.override,
+        _guidance_tables(problem),
     )
+
+
+def _grid(
+    sc: Scenario,
+    x_hat: FloatArray,
+    horizon_s: float,
+    tables: design_models.StepTables | None = None,
+) -> feasibility.GridProblem:
+    """One re-solve of the scenario on its zero-order-hold grid (the loop's Δt).
+
+    ``tables``: the guidance's design model other than CW (issue 33), whose
+    last ``horizon_s/Δt`` steps are the grid's; None: CW (Eq. 11).
+    """
+    xf = np.asarray(sc.xf, dtype=float)
+    if tables is None:
+        return feasibility.grid_problem(
+            sc.mean_motion_rad_s, x_hat, xf, horizon_s, sc.dt_s, sc.u_max_km_s2
+        )
+    k0 = tables.phi.shape[0] - max(1, round(horizon_s / sc.dt_s))
+    return feasibility.grid_problem_from_steps(
+        tables.phi[k0:], tables.gam[k0:], x_hat, xf, sc.dt_s, sc.u_max_km_s2
+    )
+
+
+def _guidance_tables(problem: Problem) -> design_models.StepTables | None:
+    """The per-step Φ_k, Γ_k of the guidance's design model; None for CW (issue 33)."""
+    name = problem.model.guidance
+    if name == "cw":
+        return None
+    return design_models.step_tables(name, problem.scenario, problem.truth)
+
+
+def _filter_matrices(problem: Problem) -> tuple[FloatArray, FloatArray]:
+    """Φ, Γ of one step of the filter's design model (issue 33; CW: Eq. 11).
+
+    The step loop also steps a CW truth with these, so a model other than CW
+    needs a truth of its own (the configuration refuses it with ``truth.model
+    = "cw"``), and the loop takes one Φ, Γ: a time-invariant model only.
+    """
+    sc = problem.scenario
+    name = problem.model.filter
+    if name == "cw":
+        return discretize(sc.mean_motion_rad_s, sc.dt_s)
+    if problem.truth.model == "cw":
+        raise ValueError(f"model.filter = {name!r} needs a truth other than 'cw'")
+    tables = design_models.step_tables(name, sc, problem.truth)
+    if not tables.time_invariant:
+        raise ValueError(f"model.filter = {name!r}: the filter takes time-invariant models only")
+    return tables.phi[0].copy(), tables.gam[0].copy()
+
+
+def _warm_costate(
+    plan_costate: FloatArray | None,
+    k_plan: int,
+    k_from: int,
+    n: float,
+    dt: float,
+    tables: design_models.StepTables | None,
+) -> FloatArray | None:
+    """The last plan's costate carried from step ``k_plan`` to ``k_from``: λ(t) = Φ(T, t)ᵀν.
+
+    CW: ``e^{−Aᵀ(t_from − t_plan)}`` λ; another model: Φ(t_from, t_plan)⁻ᵀ λ with
+    Φ(t_from, t_plan) the product of its steps (issue 33).
+    """
+    if plan_costate is None:
+        return None
+    if tables is None:
+        out: FloatArray = costate_stm(n, (k_from - k_plan) * dt) @ plan_costate
+        return out
+    acc = np.eye(6)
+    for k in range(k_plan, k_from):
+        acc = tables.phi[k] @ acc
+    return np.asarray(np.linalg.solve(acc.T, plan_costate))
 
 
 def _hold_plan(result: guidance.SolveResult, k_first: int, model: sk.LoopModel) -> None:
@@ -611,9 +682,10 @@ def _apply_min_miss(
     k_last: int,
     u_override: FloatArray,
     override: npt.NDArray[np.bool_],
+    tables: design_models.StepTables | None = None,
 ) -> None:
     """Hold the bounded controls minimising the terminal miss for steps ``k_first … k_last``."""
-    g = _grid(sc, x_hat, sc.horizon_s - t_est)
+    g = _grid(sc, x_hat, sc.horizon_s - t_est, tables)
     controls = feasibility.min_miss_controls(g, velocity_weight_s=sc.dt_s)
     if controls is None:
         return

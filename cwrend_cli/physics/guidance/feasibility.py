@@ -36,6 +36,41 @@ class GridProblem:
     row_scale: np.ndarray  # (6,): multiplies the terminal rows
     dt_s: float
     u_max_km_s2: float
+    #: Φ(t_N, t_0) of a design model other than CW (issue 33); None: CW's Φ(N Δt)
+    transition: np.ndarray | None = None
+
+
+def grid_problem_from_steps(
+    phi: np.ndarray,
+    gam: np.ndarray,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    dt_s: float,
+    u_max_km_s2: float,
+) -> GridProblem:
+    """Transcribe a re-solve over the steps of ``phi`` (K, 6, 6) and ``gam`` (K, 6, 3).
+
+    Any linear design model (issue 33; time-varying too): step j maps
+    ``x_{j+1} = Φ_j x_j + Γ_j u_j``, so ``M_j = Φ_{K−1} ⋯ Φ_{j+1} Γ_j`` and
+    ``b = x_f − Φ_{K−1} ⋯ Φ_0 x̂``; the transition Φ(t_K, t_0) is kept for the
+    costate (:func:`costate_from_multiplier`). Row scaling as :func:`grid_problem`.
+    """
+    steps = phi.shape[0]
+    blocks = np.empty((steps, 6, 3))
+    acc = np.eye(6)
+    for j in range(steps - 1, -1, -1):
+        blocks[j] = acc @ gam[j]
+        acc = acc @ phi[j]
+    t = steps * dt_s
+    row_scale = np.array([1.0, 1.0, 1.0, t, t, t]) / (u_max_km_s2 * t * t)
+    return GridProblem(blocks, xf - acc @ x0, row_scale, dt_s, u_max_km_s2, transition=acc)
+
+
+def _transition(g: GridProblem, n: float) -> np.ndarray:
+    """Φ(t_N, t_0) of the grid's design model (CW's closed form unless it carries one)."""
+    if g.transition is not None:
+        return g.transition
+    return stm(n, g.blocks.shape[0] * g.dt_s)
 
 
 def grid_problem(
@@ -307,7 +342,7 @@ def costate_from_multiplier(g: GridProblem, n: float, z_terminal: np.ndarray) ->
     ``Δt`` and ``u_max`` yields ``ν``, and ``λ(0) = Φ(t_rem)ᵀ ν``.
     """
     z_eq = z_terminal * g.row_scale * g.dt_s * g.u_max_km_s2
-    costate: np.ndarray = stm(n, g.blocks.shape[0] * g.dt_s).T @ z_eq
+    costate: np.ndarray = _transition(g, n).T @ z_eq
     return costate
 
 
@@ -319,7 +354,7 @@ def multiplier_from_costate(g: GridProblem, n: float, costate: np.ndarray) -> np
     plan's costate propagated to this grid's start gives this program's
     multiplier of that plan.
     """
-    z_eq = np.linalg.solve(stm(n, g.blocks.shape[0] * g.dt_s).T, costate)
+    z_eq = np.linalg.solve(_transition(g, n).T, costate)
     z: np.ndarray = z_eq / (g.row_scale * g.dt_s * g.u_max_km_s2)
     return z
 

@@ -1,0 +1,113 @@
+"""The design models in the closed loop (issue 33 item 1): the cone program and the filter.
+
+The cone-program re-solve takes any model's Φ_k, Γ_k: its plan, flown through the
+same model step by step (written here), reaches x_f. The filter predicts with its
+model. The shooting re-solve supports CW only so far: any other guidance model with a
+shooting architecture is refused before anything runs (exit 2, the field named).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.physics import design_models as dm
+from cwrend_cli.physics import simulation
+from cwrend_cli.physics.dynamics import discretize
+from cwrend_cli.physics.guidance import convex, feasibility
+from cwrend_cli.physics.params import DesignModel, Problem, Scenario, Truth
+
+REPO = Path(__file__).resolve().parents[1]
+SC = Scenario()
+N = SC.mean_motion_rad_s
+X0 = np.asarray(SC.x0, dtype=float)
+XF = np.asarray(SC.xf, dtype=float)
+J2_TRUTH = Truth(model="j2", inclination_deg=51.6)
+ECCENTRIC = Truth(model="two_body", eccentricity=0.05, true_anomaly_deg=30.0)
+runner = CliRunner()
+
+
+def test_the_step_transcription_of_cw_is_cws_grid() -> None:
+    """grid_problem_from_steps on CW's steps: the blocks and b of grid_problem (to 1e-12)."""
+    phi, gam = discretize(N, SC.dt_s)
+    steps = 300
+    g = feasibility.grid_problem_from_steps(
+        np.repeat(phi[None], steps, 0), np.repeat(gam[None], steps, 0), X0, XF, 1.0, 8e-4
+    )
+    ref = feasibility.grid_problem(N, X0, XF, steps * 1.0, 1.0, 8e-4)
+    assert np.abs(g.blocks - ref.blocks).max() < 1e-12 * np.abs(ref.blocks).max()
+    assert np.abs(g.rhs - ref.rhs).max() < 1e-12 * np.abs(ref.rhs).max()
+    assert np.array_equal(g.row_scale, ref.row_scale)
+    lam = np.array([1e-3, -2e-3, 5e-4, 0.3, -0.1, 0.2])
+    z = feasibility.multiplier_from_costate(g, N, lam)
+    assert np.allclose(feasibility.costate_from_multiplier(g, N, z), lam, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize(("name", "tr"), [("ss", J2_TRUTH), ("ya", ECCENTRIC)])
+def test_the_cone_programs_plan_reaches_xf_in_its_own_model(name: str, tr: Truth) -> None:
+    """The plan of the last 700 steps, flown by x⁺ = Φ_k x + Γ_k u_k of the model, ends at x_f."""
+    tables = dm.step_tables(name, SC, tr)
+    k0 = SC.n_steps - 700
+    g = feasibility.grid_problem_from_steps(
+        tables.phi[k0:], tables.gam[k0:], X0, XF, SC.dt_s, SC.u_max_km_s2
+    )
+    result = convex.solve(g, 0.5, N)
+    assert result.controls is not None
+    x = X0.copy()
+    for k in range(700):
+        x = tables.phi[k0 + k] @ x + tables.gam[k0 + k] @ result.controls[k]
+    assert np.linalg.norm(x[:3] - XF[:3]) < 1e-6  # km; CW's plan in this model misses by more
+    cw = convex.solve(feasibility.grid_problem(N, X0, XF, 700.0, 1.0, SC.u_max_km_s2), 0.5, N)
+    assert cw.controls is not None
+    x = X0.copy()
+    for k in range(700):
+        x = tables.phi[k0 + k] @ x + tables.gam[k0 + k] @ cw.controls[k]
+    assert np.linalg.norm(x[:3] - XF[:3]) > 1e-4
+
+
+def test_the_filter_predicts_with_its_model() -> None:
+    """model.filter = 'ss': the loop's Φ, Γ are Schweighart–Sedwick's; 'cw': Eq. 11's."""
+    problem = Problem(truth=J2_TRUTH, model=DesignModel(filter="ss"))
+    phi, gam = simulation._filter_matrices(problem)
+    lti = dm.ss_model(J2_TRUTH, SC)
+    assert np.array_equal(phi, dm.lti_stm(lti, SC.dt_s))
+    assert np.array_equal(gam, dm.lti_input_matrix(lti, SC.dt_s))
+    cw_phi, cw_gam = simulation._filter_matrices(Problem(truth=J2_TRUTH))
+    ref_phi, ref_gam = discretize(N, SC.dt_s)
+    assert np.array_equal(cw_phi, ref_phi) and np.array_equal(cw_gam, ref_gam)
+    assert not np.array_equal(phi, cw_phi)
+
+
+def test_ya_tables_are_the_transition_of_each_step() -> None:
+    tables = dm.step_tables("ya", SC, ECCENTRIC)
+    chief = dm.ya_chief(ECCENTRIC, SC)
+    assert chief.e == 0.05 and chief.f0 == pytest.approx(math.radians(30.0))
+    assert not tables.time_invariant
+    assert np.array_equal(tables.phi[417], dm.ya_stm(chief, 417.0, 418.0))
+    assert np.array_equal(tables.gam[417], dm.ya_input_matrix(chief, 417.0, 418.0))
+
+
+@pytest.mark.parametrize("command", ["run", "ablate"])
+def test_a_shooting_architecture_with_another_guidance_model_exits_2(
+    command: str, tmp_path: Path
+) -> None:
+    args = [
+        command,
+        str(REPO / "campaigns" / "paper_j2.toml"),
+        "--arch",
+        "mtf_adaptive_socp,plain_fixed",
+        "--set",
+        "model.guidance='ss'",
+        "--set",
+        f"output.dir='{tmp_path}'",
+    ]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "model.guidance = 'ss' with architecture plain_fixed" in result.output
+    assert "Traceback" not in result.output
+    assert not any(tmp_path.iterdir())
