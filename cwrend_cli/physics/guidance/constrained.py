@@ -1,0 +1,429 @@
+"""The constrained cone program: keep-out zone and corridor by sequential convex programming.
+
+Issue 32, item 2. The smoothed minimum-fuel program of :mod:`.convex` (same
+cost, ``Σ (1 − ε)‖ũ_j‖ + max(ε, ρ)‖ũ_j‖²`` in the scaled controls ũ = u/u_max,
+same ``‖ũ_j‖ ≤ 1``, same exact zero-order-hold CW dynamics, paper Eq. 11, and
+terminal state x_f) with the path constraints of
+:mod:`cwrend_cli.physics.constraints` at every node k = 1 … N−1 of the grid,
+written in the states (variables x_1 … x_N, the dynamics as equality rows: a
+sparse program, solved by Clarabel).
+
+**Modes.** The safe set (outside the zone or inside the corridor) is not
+convex; each node gets one of two convex subsets from the previous iterate
+r̄: the *corridor* nodes are the last contiguous stretch of nodes that r̄ has
+inside the corridor cone (the final approach; the terminal node, the port, is
+its apex), the others are *keep-out* nodes. A keep-out node must lie in the
+half-space tangent to the zone at r̄_k (r̄_k projected radially onto the
+surface when inside: :func:`~cwrend_cli.physics.constraints.linearise_keep_out`);
+a corridor node in the cone (a second-order cone, exact); the first corridor
+node in both, so that the chord between any two consecutive nodes lies in one
+convex safe set. The half-space is an inner approximation of the outside of
+the zone (the level function is convex), so **every iterate is safe**, not
+only the last: stopping early costs fuel, never safety.
+
+**Margins.** Every constraint of nodes 1 … N−1 is tightened by the chord
+margin AΔt²/8 (:func:`~cwrend_cli.physics.constraints.chord_margin_km`, A
+from the previous iterate's largest ‖r‖, ‖v‖ plus the trust radius and a
+factor :data:`ACCEL_FACTOR`; checked on the answer, which is refused as
+unconverged if its own bound is larger), so the zero-order-hold arc between
+two nodes satisfies the untightened constraint. The keep-out half-spaces are
+further tightened by ``k √(nᵀ P_pos n)`` (``constraints.sigma_margin`` = k,
+P_pos the filter's position covariance at the re-solve, **held** over the
+horizon: the guidance plans with what the chaser knows now; propagating the
+open-loop prediction would only grow it by Q, 1e-12 km² a step in the paper,
+and the filter's updates shrink it). The corridor is not tightened by the
+covariance: its apex is the port, where any margin would forbid docking. The
+terminal node (the port, fixed by the terminal equality) carries no path
+constraint; the last step's arc is within AΔt²/8 of its chord, which is inside
+the cone.
+
+**Iterations.** Trust region ``‖r_k − r̄_k‖_∞ ≤`` :data:`TRUST_RADIUS_FACTOR`
+× the largest semi-axis; stop when no node moves by more than
+:data:`SCP_TOL_KM` between iterates or the cost falls by less than
+:data:`SCP_COST_RTOL` of itself, with no slack and the modes unchanged, at most
+:data:`SCP_MAX_ITER` iterations; at the cap the last iterate is returned (safe,
+see above) with its status converged if its terminal and path rows hold.
+
+**Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
+cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
+an exact (ℓ∞) penalty, so s = 0 whenever a safe plan exists and its multiplier
+is below the price; s > 0 says by how much the plan had to enter the unsafe
+set (returned as ``slack_km``).
+
+Units: km, s, km/s, km/s².
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+
+from cwrend_cli.physics import constraints as cg
+from cwrend_cli.physics.dynamics import discretize
+from cwrend_cli.physics.guidance import convex, feasibility
+from cwrend_cli.physics.guidance.results import SolveStatus
+
+__all__ = [
+    "ACCEL_FACTOR",
+    "SCP_COST_RTOL",
+    "SCP_MAX_ITER",
+    "SCP_TOL_KM",
+    "SLACK_PENALTY",
+    "SLACK_TOL_KM",
+    "TRUST_RADIUS_FACTOR",
+    "ConstrainedPlan",
+    "node_positions",
+    "plan",
+]
+
+#: Iteration cap of the sequential convex programming [-].
+SCP_MAX_ITER = 8
+#: Stop when no node position moves more than this between iterates [km] (1 mm) ...
+SCP_TOL_KM = 1e-6
+#: ... or when an iterate lowers the cost by less than this fraction of it [-] (0.01 %; a plan
+#: that slides along the curved surface keeps moving by ~0.3 m an iteration while its
+#: cost changes in the sixth digit; every iterate is safe, so stopping costs no safety).
+SCP_COST_RTOL = 1e-4
+#: Trust radius of the node positions, a multiple of the largest semi-axis [-].
+TRUST_RADIUS_FACTOR = 1.0
+#: Price of the path slack in the scaled cost [1/km]: the cost of a plan is of order the
+#: fuel over Δt u_max (at most N), so 1e6 per km outweighs any fuel saving.
+SLACK_PENALTY = 1e6
+#: A slack below this is the interior point's tolerance, not a softening [km] (1 µm).
+SLACK_TOL_KM = 1e-9
+#: Safety factor on the acceleration bound of the chord margin [-].
+ACCEL_FACTOR = 1.5
+
+_CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
+
+
+@dataclass(frozen=True)
+class ConstrainedPlan:
+    """The answer of :func:`plan`.
+
+    ``controls`` (N, 3) [km/s²] and ``positions`` (N+1, 3) [km] of the nodes
+    (row 0 the start) are zero/NaN unless converged; ``modes`` (N+1,) per node:
+    0 none, 1 corridor, 2 keep-out, 3 both; ``slack_km`` the softening used
+    (0: every path constraint held); ``scp_iterations`` the convex programs
+    solved, ``solver_iterations`` Clarabel's iterations summed.
+    """
+
+    status: SolveStatus
+    controls: np.ndarray
+    positions: np.ndarray
+    modes: np.ndarray
+    slack_km: float
+    scp_iterations: int
+    solver_iterations: int
+    wall_time_s: float
+
+
+def node_positions(
+    n: float, dt_s: float, x0: np.ndarray, controls: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """States (N+1, 6) of held ``controls`` from x0 under the exact ZOH dynamics (Eq. 11)."""
+    phi, gam = discretize(n, dt_s)
+    x = np.empty((controls.shape[0] + 1, 6))
+    x[0] = x0
+    for k, u in enumerate(controls):
+        x[k + 1] = phi @ x[k] + gam @ u
+    return x, x[:, :3]
+
+
+def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
+    """Each node's constraint set from the previous iterate (module docstring)."""
+    steps = r_bar.shape[0] - 1
+    modes = np.zeros(steps + 1, dtype=np.int8)
+    if geo.semi_axes_km is None:
+        return modes  # nothing is unsafe: no path constraint
+    modes[1:steps] = _KEEP_OUT
+    if geo.port_km is None:
+        return modes
+    inside = cg.corridor_cone(geo, 0.0).residual_km(r_bar) >= -SCP_TOL_KM
+    first = steps  # the terminal node is the apex
+    while first - 1 >= 1 and inside[first - 1]:
+        first -= 1
+    modes[first:steps] = _CORRIDOR
+    if first < steps:
+        modes[first] = _BOTH
+    return modes
+
+
+def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
+    """The side (a unit vector) on which an iterate that crosses the zone goes round it.
+
+    At the deepest node k* the component of r̄_k* across the path's direction
+    there (r̄_k*+1 − r̄_k*−1); a path straight through the centre has none, and
+    gets the coordinate axis least aligned with its direction, made
+    perpendicular to it (a deterministic choice; the other side costs the same
+    by symmetry).
+    """
+    level = np.sum((r_bar / semi_axes) ** 2, axis=1)
+    k = int(np.argmin(level))
+    ahead, behind = r_bar[min(k + 1, len(r_bar) - 1)], r_bar[max(k - 1, 0)]
+    direction = ahead - behind
+    size = float(np.linalg.norm(direction))
+    d = direction / size if size > 0.0 else np.array([0.0, 0.0, 1.0])
+    side = r_bar[k] - float(r_bar[k] @ d) * d
+    if float(np.linalg.norm(side)) <= 1e-9 * float(np.max(semi_axes)):
+        axis = np.eye(3)[int(np.argmin(np.abs(d)))]
+        side = axis - float(axis @ d) * d
+    return np.asarray(side / np.linalg.norm(side), dtype=np.float64)
+
+
+def _tangent_point(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """The point whose tangent plane bounds node r: r itself outside the zone; inside, the
+    radial projection onto the surface of r moved by the largest semi-axis towards ``side``
+    (so the nodes of a crossing iterate all go round on one side)."""
+    level = float(np.sum((r / semi_axes) ** 2))
+    if level >= 1.0:
+        return r
+    shifted = r + float(np.max(semi_axes)) * side
+    return shifted / math.sqrt(float(np.sum((shifted / semi_axes) ** 2)))
+
+
+def _half_spaces(
+    geo: cg.Geometry,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    margin_km: float,
+    p_pos_km2: np.ndarray | None,
+    sigma_margin: float,
+) -> dict[int, cg.HalfSpace]:
+    """The tightened keep-out half-space H_k of every keep-out node (and of node 0)."""
+    assert geo.semi_axes_km is not None
+    axes = geo.semi_axes_km
+    side = _detour_side(axes, r_bar)
+    out: dict[int, cg.HalfSpace] = {}
+    for k in [0, *np.flatnonzero(modes >= _KEEP_OUT).tolist()]:
+        point = _tangent_point(axes, r_bar[k], side)
+        extra = margin_km
+        if sigma_margin > 0.0 and p_pos_km2 is not None:
+            normal = cg.linearise_keep_out(axes, point, 0.0).normal
+            extra += cg.covariance_margin_km(normal, p_pos_km2, sigma_margin)
+        out[int(k)] = cg.linearise_keep_out(axes, point, extra)
+    return out
+
+
+def _program(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    eps: float,
+    geo: cg.Geometry,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    margin_km: float,
+    half_spaces: dict[int, cg.HalfSpace],
+    trust_km: float,
+) -> tuple[Any, int]:
+    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps)."""
+    steps = modes.size - 1
+    phi, gam = discretize(n, dt_s)
+    gam_u = gam * u_max
+    iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 10 * steps
+    n_vars = 10 * steps + 1
+
+    def xcol(k: int) -> int:  # first column of x_k, k = 1 … N
+        return ix + 6 * (k - 1)
+
+    rows: list[sp.csc_matrix] = []
+    rhs: list[np.ndarray] = []
+    cones: list[Any] = []
+    # dynamics: x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 (x_0 = x0 given), and x_N = x_f
+    eq = sp.lil_matrix((6 * steps + 6, n_vars))
+    b_eq = np.zeros(6 * steps + 6)
+    for k in range(steps):
+        eq[6 * k : 6 * k + 6, xcol(k + 1) : xcol(k + 1) + 6] = np.eye(6)
+        eq[6 * k : 6 * k + 6, iu + 3 * k : iu + 3 * k + 3] = -gam_u
+        if k == 0:
+            b_eq[0:6] = phi @ x0
+        else:
+            eq[6 * k : 6 * k + 6, xcol(k) : xcol(k) + 6] = -phi
+    eq[6 * steps :, xcol(steps) : xcol(steps) + 6] = np.eye(6)
+    b_eq[6 * steps :] = xf
+    rows.append(eq.tocsc())
+    rhs.append(b_eq)
+    cones.append(clarabel.ZeroConeT(6 * steps + 6))
+    # ‖ũ_j‖ ≤ t̃_j ≤ 1
+    rows.append(feasibility.cone_rows(steps, n_vars, it + np.arange(steps)))
+    rhs.append(np.zeros(4 * steps))
+    cones += [clarabel.SecondOrderConeT(4)] * steps
+    cap = sp.csc_matrix(
+        (np.ones(steps), (np.arange(steps), it + np.arange(steps))), (steps, n_vars)
+    )
+    # nonnegative rows: t̃ ≤ 1, s ≥ 0, half-spaces, trust region
+    nonneg = [cap, sp.csc_matrix(([-1.0], ([0], [i_s])), (1, n_vars))]
+    b_nonneg = [np.ones(steps), np.zeros(1)]
+    for k in range(1, steps):
+        # node k in its own half-space and in its predecessor's: the chord k−1 → k then
+        # lies in H_k−1 (convex), the arc within the chord margin of it
+        for j in (k, k - 1):
+            hs = half_spaces.get(j)
+            if hs is None or (j == k - 1 and modes[k] == 0):
+                continue
+            # nᵀ r_k + s ≥ offset  ⇔  −nᵀ r_k − s ≤ −offset
+            row = sp.lil_matrix((1, n_vars))
+            row[0, xcol(k) : xcol(k) + 3] = -hs.normal
+            row[0, i_s] = -1.0
+            nonneg.append(row.tocsc())
+            b_nonneg.append(np.array([-hs.offset_km]))
+    constrained = np.flatnonzero(modes > 0)
+    for node in constrained:  # ±(r_k − r̄_k) ≤ trust
+        cols = xcol(int(node)) + np.arange(3)
+        block = sp.csc_matrix(
+            (np.r_[np.ones(3), -np.ones(3)], (np.arange(6), np.r_[cols, cols])), (6, n_vars)
+        )
+        nonneg.append(block)
+        b_nonneg.append(np.r_[trust_km + r_bar[node], trust_km - r_bar[node]])
+    rows.append(sp.vstack(nonneg).tocsc())
+    rhs.append(np.concatenate(b_nonneg))
+    cones.append(clarabel.NonnegativeConeT(sum(m.shape[0] for m in nonneg)))
+    # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
+    corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    if corridor_nodes.size:
+        soc = cg.corridor_cone(geo, margin_km)
+        a_body, b_body, c_head, d_head = soc.rows()
+        for node in corridor_nodes:
+            col = xcol(int(node))
+            block = sp.lil_matrix((4, n_vars))
+            block[0, col : col + 3] = -c_head
+            block[0, i_s] = -1.0
+            block[1:4, col : col + 3] = -a_body
+            rows.append(block.tocsc())
+            rhs.append(np.r_[d_head, b_body])
+            cones.append(clarabel.SecondOrderConeT(4))
+    a = sp.vstack(rows).tocsc()
+    b = np.concatenate(rhs)
+    weight = max(float(eps), convex.REGULARISATION)
+    q = np.zeros(n_vars)
+    q[it : it + steps] = 1.0 - min(float(eps), 1.0)
+    q[i_s] = SLACK_PENALTY
+    diag = np.zeros(n_vars)
+    diag[: 3 * steps] = 2.0 * weight
+    p = sp.diags(diag, format="csc")
+    sol = feasibility.solve_cone(p, q, a, b, cones)
+    return sol, int(sol.iterations)
+
+
+def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
+    """The acceleration bound of the chord margin over a plan's states (module docstring)."""
+    r = float(np.max(np.linalg.norm(x[:, :3], axis=1))) + extra_km
+    v = float(np.max(np.linalg.norm(x[:, 3:], axis=1)))
+    return cg.acceleration_bound(r, v, u_max, n, dt_s)
+
+
+def plan(
+    n: float,
+    dt_s: float,
+    u_max_km_s2: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    eps: float,
+    geo: cg.Geometry,
+    p_pos_km2: np.ndarray | None = None,
+    sigma_margin: float = 0.0,
+    warm_controls: np.ndarray | None = None,
+) -> ConstrainedPlan:
+    """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
+
+    The first iterate is ``warm_controls`` (an earlier plan's remaining controls,
+    N × 3) or the unconstrained plan of :func:`.convex.plan_controls`.
+    ``p_pos_km2``: the filter's position covariance (3 × 3), for
+    ``sigma_margin``.
+    """
+    start = time.perf_counter()
+    steps = max(1, round(horizon_s / dt_s))
+    x0 = np.asarray(x0, dtype=np.float64)
+    xf = np.asarray(xf, dtype=np.float64)
+    used = 0
+    if warm_controls is None or warm_controls.shape != (steps, 3):
+        g = feasibility.grid_problem(n, x0, xf, horizon_s, dt_s, u_max_km_s2)
+        status, warm_controls, _, iterations = convex.plan_controls(g, eps, n)
+        used += iterations
+        if status is not SolveStatus.CONVERGED:
+            warm_controls = np.zeros((steps, 3))
+    x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
+    trust = TRUST_RADIUS_FACTOR * (
+        float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 1.0
+    )
+    modes = _modes(geo, r_bar)
+    failed = ConstrainedPlan(
+        SolveStatus.FAILED,
+        np.zeros((steps, 3)),
+        np.full((steps + 1, 3), np.nan),
+        modes,
+        math.nan,
+        0,
+        used,
+        0.0,
+    )
+    if not np.any(modes):  # nothing is unsafe: the unconstrained plan
+        return ConstrainedPlan(
+            SolveStatus.CONVERGED,
+            warm_controls,
+            r_bar,
+            modes,
+            0.0,
+            0,
+            used,
+            time.perf_counter() - start,
+        )
+    result = failed
+    cost = math.inf
+    for scp in range(1, SCP_MAX_ITER + 1):
+        margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
+        half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
+        sol, iterations = _program(
+            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust
+        )
+        used += iterations
+        if not feasibility.solved(sol):
+            status = (
+                SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
+            )
+            return ConstrainedPlan(
+                status,
+                failed.controls,
+                failed.positions,
+                modes,
+                math.nan,
+                scp,
+                used,
+                time.perf_counter() - start,
+            )
+        u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3)
+        norms = np.linalg.norm(u, axis=1)
+        u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max_km_s2
+        x_new = np.vstack([x0, np.asarray(sol.x[4 * steps : 10 * steps]).reshape(steps, 6)])
+        slack = float(sol.x[10 * steps])
+        slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
+        moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
+        new_modes = _modes(geo, x_new[:, :3])
+        bound_ok = cg.chord_margin_km(_accel(n, dt_s, u_max_km_s2, x_new, 0.0), dt_s) <= margin
+        result = ConstrainedPlan(
+            SolveStatus.CONVERGED if bound_ok else SolveStatus.FAILED,
+            u,
+            x_new[:, :3],
+            modes,
+            slack,
+            scp,
+            used,
+            time.perf_counter() - start,
+        )
+        x_bar, r_bar = x_new, x_new[:, :3]
+        settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
+        cost = float(sol.obj_val)
+        if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
+            break
+        modes = new_modes
+    return result
