@@ -18,7 +18,7 @@ import faulthandler
 import signal
 import sys
 
-from cwrend_cli.teardown import end_without_teardown
+from cwrend_cli.teardown import end_without_teardown, stop_exit_code, stop_on_signals
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell convention).
 INTERRUPTED_EXIT = 130
@@ -28,10 +28,13 @@ def main() -> None:
     """Run the command line; Ctrl-C during start-up exits 130 without a traceback.
 
     ``kill -USR1 <pid>`` prints every thread's stack to stderr (a campaign that
-    seems stuck can say where), without stopping it.
+    seems stuck can say where), without stopping it. SIGTERM and SIGHUP stop
+    it as Ctrl-C does (:func:`~cwrend_cli.teardown.stop_on_signals`), with exit
+    status 128 + the signal (143, 129) where Ctrl-C's is 130.
     """
     if hasattr(signal, "SIGUSR1"):
         faulthandler.register(signal.SIGUSR1, all_threads=True)
+    stop_on_signals()
     exit_code: list[int] = []  # the command's, once it has ended with one
     end_without_teardown(lambda: exit_code[0] if exit_code else None)
     try:
@@ -42,6 +45,8 @@ def main() -> None:
         except KeyboardInterrupt:  # while importing, or while Typer builds the command line
             sys.exit(INTERRUPTED_EXIT)
     except SystemExit as exc:
+        if exc.code == INTERRUPTED_EXIT:  # Ctrl-C's, or SIGTERM/SIGHUP handled as Ctrl-C
+            exc.code = stop_exit_code()
         if exc.code is None or isinstance(exc.code, int):  # a message the interpreter prints
             exit_code.append(exc.code or 0)
         raise

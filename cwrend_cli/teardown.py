@@ -23,8 +23,10 @@ from __future__ import annotations
 import atexit
 import contextlib
 import os
+import signal
 import sys
 from collections.abc import Callable
+from types import FrameType
 
 
 def end_without_teardown(exit_code: Callable[[], int | None]) -> None:
@@ -49,3 +51,42 @@ def end_without_teardown(exit_code: Callable[[], int | None]) -> None:
         os._exit(code)
 
     atexit.register(_end)
+
+
+#: Signals that stop cwrend as Ctrl-C does (issue 36 item 12): a summary, the manifest
+#: finished, the pool shut down; exit status 128 + the signal's number, the shell's
+#: convention that Ctrl-C's 130 already follows (143 for SIGTERM, 129 for SIGHUP).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+#: The stop signals this process received, in order (Ctrl-C is not recorded: 130).
+_RECEIVED: list[int] = []
+
+
+class StopSignal(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread as a Ctrl-C is (``signum``: which)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: FrameType | None) -> None:
+    _RECEIVED.append(signum)
+    raise StopSignal(signum)
+
+
+def stop_on_signals() -> None:
+    """Handle :data:`STOP_SIGNALS` as Ctrl-C in this process (cwrend's own, not its workers).
+
+    Everything that keeps a Ctrl-C's work (the campaign's journal of the runs
+    finished, its summary and manifest) then keeps theirs; a signal ignored
+    when cwrend started (``nohup``) stays ignored.
+    """
+    for signum in STOP_SIGNALS:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, _stop)
+
+
+def stop_exit_code() -> int:
+    """The exit status of a command stopped by a signal: 128 + the stop signal received
+    (the first, :data:`STOP_SIGNALS`), else 130 (Ctrl-C)."""
+    return 128 + (_RECEIVED[0] if _RECEIVED else signal.SIGINT)

@@ -6,23 +6,26 @@ sends ``SIGNAL`` once the driver has seen the ``N``-th state ``WHEN``:
 
 * ``journal``: the driver appended to ``events.jsonl`` (a task journaled);
 * ``run``: the driver heard a run finish (a per-run signal of a task in flight);
-* ``statistics``: the command is about to write a campaign's statistics (its runs done).
+* ``statistics``: the command is about to write a campaign's statistics (its runs done);
+* ``pool``: the driver opened its process pool (the workers started, still importing).
 
-SIGKILL (``kill -9``) and SIGSTOP (the test then acts while the campaign is
-frozen at that state, and lets it go on with SIGCONT) go to the campaign
-process alone; any other signal to its process group, as a terminal's Ctrl-C
-or hang-up reaches the workers too (tests start the child in a session of its
-own). So the signal lands at the same point of the campaign however fast the
-machine is. The driver's wait for the tasks in flight after Ctrl-C
-(``STOP_GRACE_S``) is set to an hour: what a stop keeps must not depend on the
-machine's speed either.
+SIGKILL (``kill -9``), SIGSTOP (the test then acts while the campaign is
+frozen at that state, and lets it go on with SIGCONT) and a signal written
+``NAME:self`` (``kill <pid>``) go to the campaign process alone; any other
+signal to its process group, as a terminal's Ctrl-C or hang-up reaches the
+workers too (tests start the child in a session of its own). So the signal
+lands at the same point of the campaign however fast the machine is. The
+driver's wait for the tasks in flight after Ctrl-C (``STOP_GRACE_S``) is set
+to an hour: what a stop keeps must not depend on the machine's speed either.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -31,20 +34,20 @@ from cwrend_cli.campaign import driver
 from cwrend_cli.output.layout import EVENTS
 
 
-def _send(signum: signal.Signals) -> None:
-    if signum in (signal.SIGKILL, signal.SIGSTOP):
+def _send(signum: signal.Signals, alone: bool) -> None:
+    if alone or signum in (signal.SIGKILL, signal.SIGSTOP):
         os.kill(os.getpid(), signum)
     else:
         os.killpg(os.getpgrp(), signum)
 
 
-def _hook(when: str, after: int, signum: signal.Signals) -> None:
+def _hook(when: str, after: int, signum: signal.Signals, alone: bool) -> None:
     seen = [0]
 
     def count() -> None:
         seen[0] += 1
         if seen[0] == after:
-            _send(signum)
+            _send(signum, alone)
 
     if when == "journal":
         append = driver.append_events  # type: ignore[attr-defined]
@@ -71,14 +74,25 @@ def _hook(when: str, after: int, signum: signal.Signals) -> None:
             return write(*args, **kwargs)
 
         campaign.write_statistics = writing
+    elif when == "pool":
+        opened = driver.open_executor  # type: ignore[attr-defined]
+
+        @contextlib.contextmanager
+        def opening(*args: Any, **kwargs: Any) -> Iterator[Any]:
+            with opened(*args, **kwargs) as pool:
+                count()
+                yield pool
+
+        driver.open_executor = opening  # type: ignore[attr-defined]
     else:
         raise SystemExit(f"unknown state {when!r}")
 
 
 if __name__ == "__main__":
-    when, after, name = sys.argv[1:4]
+    when, after, target = sys.argv[1:4]
+    name, _, alone = target.partition(":")
     driver.STOP_GRACE_S = 3600.0
-    _hook(when, int(after), signal.Signals[name])
+    _hook(when, int(after), signal.Signals[name], alone == "self")
     sys.argv = ["cwrend", *sys.argv[4:]]
     from cwrend_cli.__main__ import main
 

@@ -9,14 +9,17 @@ run finished), never after a time.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
@@ -128,3 +131,126 @@ def test_a_stopped_pool_leaves_no_file_of_a_run_it_did_not_keep(tmp_path: Path) 
     steps = pd.read_parquet(out / "steps")
     assert set(steps["run_key"]) == kept and len(steps) == len(kept) * 801
     assert os.listdir(out / "steps")  # the data were written, not only journaled
+
+
+# --- signals (issue 36 item 12) ------------------------------------------------
+
+
+def _hooked(when: str, n: int, sig: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``cwrend *args`` sending ``sig`` at its ``n``-th state ``when``, run to its end."""
+    return subprocess.run(
+        [sys.executable, str(HOOKED), when, str(n), sig, *args],
+        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
+        preexec_fn=_sigint_default,
+    )  # fmt: skip
+
+
+def _workers(pid: int) -> list[int]:
+    """The pool workers (spawned children) of process ``pid``."""
+    kids = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if not entry.name.isdigit() or "spawn_main" not in (entry / "cmdline").read_text():
+                continue
+            if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry.name))
+        except OSError:  # gone meanwhile
+            continue
+    return kids
+
+
+def _wait_stopped(proc: subprocess.Popen[str]) -> None:
+    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first."""
+    hang = time.monotonic() + HANG_S
+    while time.monotonic() < hang:
+        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
+        if pid:
+            assert os.WIFSTOPPED(status), "the campaign ended before its state"
+            return
+        time.sleep(0.001)
+    raise AssertionError(f"no state reached in {HANG_S:g} s")
+
+
+def _when_importing(pid: int) -> None:
+    """Stop process ``pid`` as soon as it has loaded numpy (it is importing cwrend's modules)."""
+    maps = Path(f"/proc/{pid}/maps")
+    hang = time.monotonic() + HANG_S
+    while "_multiarray_umath" not in maps.read_text():
+        assert time.monotonic() < hang, f"worker {pid} never loaded numpy"
+        time.sleep(0.001)
+    os.kill(pid, signal.SIGSTOP)
+
+
+def _wait_handled(pid: int, signum: int) -> None:
+    """Wait until process ``pid`` has ended or handles ``signum`` and holds none pending."""
+    bit = 1 << (signum - 1)
+    hang = time.monotonic() + HANG_S
+    while time.monotonic() < hang:
+        try:
+            fields = dict(
+                line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+            )
+        except OSError:  # reaped: it ended
+            return
+        if fields["State"].strip().startswith(("Z", "X")):
+            return
+        pending = int(fields["SigPnd"], 16) | int(fields["ShdPnd"], 16)
+        if int(fields["SigCgt"], 16) & bit and not pending & bit:
+            return
+        time.sleep(0.005)
+    raise AssertionError(f"process {pid} neither ended nor handled signal {signum}")
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs Linux /proc")
+def test_ctrl_c_while_the_workers_import_prints_no_traceback(tmp_path: Path) -> None:
+    """Ctrl-C to the process group while the pool's workers import their modules (each frozen
+    there, then let go with the Ctrl-C pending): exit 130, no worker prints a traceback."""
+    args = ["ablate", str(_config(tmp_path, "early")), "--seeds", "16", "--arch",
+            ",".join(ADAPTIVE), "--no-rrd", "--workers", "2"]  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, str(HOOKED), "pool", "1", "SIGSTOP", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=_sigint_default,
+    )  # fmt: skip
+    try:
+        _wait_stopped(proc)  # at its state: the pool's two workers started
+        hang = time.monotonic() + HANG_S
+        while len(workers := _workers(proc.pid)) < 2:  # each runs Python once it is exec'd
+            assert time.monotonic() < hang, "the pool's workers never ran"
+            time.sleep(0.001)
+        for pid in workers:
+            _when_importing(pid)
+        os.killpg(proc.pid, signal.SIGINT)  # pending in every process, all stopped
+        for pid in workers:  # each handles it before the campaign goes on and stops them
+            os.kill(pid, signal.SIGCONT)
+            _wait_handled(pid, signal.SIGINT)
+        os.kill(proc.pid, signal.SIGCONT)
+        _, stderr = proc.communicate(timeout=HANG_S)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    assert "interrupted: 0 of 32 runs done" in stderr
+
+
+@pytest.mark.parametrize(
+    ("sig", "code"), [("SIGTERM:self", 143), ("SIGHUP", 129), ("SIGINT:self", 130)]
+)
+def test_sigterm_and_sighup_stop_a_campaign_as_ctrl_c_does(
+    tmp_path: Path, sig: str, code: int
+) -> None:
+    """``kill <pid>`` (SIGTERM), a hang-up to the process group (SIGHUP) and ``kill -INT
+    <pid>``: the summary, the manifest finished, no leaked semaphore, exit 128 + signal."""
+    cfg = _config(tmp_path, "signal")
+    args = ["ablate", str(cfg), "--seeds", "16", "--arch", ",".join(ADAPTIVE), "--no-rrd"]
+    proc = _hooked("journal", 1, sig, *args, "--workers", "2")
+    assert proc.returncode == code, proc.stderr
+    found = re.search(r"interrupted: (\d+) of 32 runs done", proc.stderr)
+    assert found and int(found[1]) >= 16, proc.stderr  # the task journaled, at least
+    assert "Traceback" not in proc.stderr and "leaked" not in proc.stderr, proc.stderr
+    out = tmp_path / "results" / "signal"
+    assert json.loads((out / "manifest.json").read_text())["status"] == "interrupted"
+    resumed = runner.invoke(app, [*args, "--workers", "1"])
+    assert resumed.exit_code == 0, resumed.output
+    assert f"{32 - int(found[1])} run(s) computed, {found[1]} already done" in resumed.stderr

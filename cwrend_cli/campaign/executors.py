@@ -361,11 +361,12 @@ def open_executor(
             yield InlineExecutor(), 1
             return
         context = multiprocessing.get_context("spawn")
-        # the workers and multiprocessing's resource tracker (started by the queue's first
-        # semaphore; it ignores SIGINT and SIGTERM itself, not SIGHUP) start with the stop
-        # signals blocked
+        # the workers and multiprocessing's resource tracker start with the stop signals
+        # blocked: the tracker, started by the queue's first semaphore, ignores SIGINT and
+        # SIGTERM itself, not SIGHUP; starting, it unblocks SIGINT here, hence two blocks
         with _stop_signals_blocked():
             runs: Queue[tuple[int, bool]] = context.Queue()
+        with _stop_signals_blocked():
             pool = _SignallingPool(runs, n, context)
             for _ in range(n):  # start the workers now, while the driver prepares the first tasks
                 pool.submit(_started)
