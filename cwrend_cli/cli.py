@@ -317,10 +317,11 @@ def run(
     """
     from cwrend_cli import campaign
     from cwrend_cli.config import config_hash, load_config, resolved_dict
-    from cwrend_cli.config.adapt import windows_of
+    from cwrend_cli.config.adapt import problem_of, windows_of
     from cwrend_cli.console import summary_console_table
     from cwrend_cli.output import recording
     from cwrend_cli.output.files import check_output_dir, write_run
+    from cwrend_cli.physics.compiled import compiling_notice
 
     with user_errors():
         cfg = load_config(file, set_ or ())
@@ -344,7 +345,9 @@ def run(
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)
         else:
-            with console.status("compiling kernels and running…", spinner="dots"):
+            guidance = problem_of(cfg).guidance
+            doing = compiling_notice({a.resolved_method(guidance) for a in archs}) or "running…"
+            with console.status(doing, spinner="dots"):
                 case = campaign.run_case(cfg, archs, seed_)
         written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:
@@ -561,6 +564,23 @@ def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
     )
 
 
+def _first_run_notice(plan: campaign.CampaignPlan) -> str | None:
+    """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
+
+    The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
+    for the guidance methods the plan's runs use.
+    """
+    from cwrend_cli.config import ARCHITECTURES
+    from cwrend_cli.physics.compiled import compiling_notice
+
+    methods = {
+        ARCHITECTURES[r.arch].resolved_method(task.problem.guidance)
+        for task in plan.tasks
+        for r in task.runs
+    }
+    return compiling_notice(methods)
+
+
 @contextmanager
 def _second_ctrl_c_exits_130(err: Console) -> Iterator[None]:
     """A Ctrl-C that reaches the command (a second one, while results are summarised): 130."""
@@ -699,7 +719,9 @@ def _campaign_step(
     )  # fmt: skip
     if not opts.quiet:
         _announce(err, plan)
-    progress = RichProgress(err, f"{command} {out.name}", quiet=opts.quiet)
+    progress = RichProgress(
+        err, f"{command} {out.name}", quiet=opts.quiet, notice=_first_run_notice(plan)
+    )
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,

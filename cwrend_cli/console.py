@@ -144,6 +144,9 @@ class RichProgress:
     The driver reports each finished run (per task on a Dask cluster); the
     rate and the ETA come from :func:`progress_pace` over the completions so
     far. Before a second completion there is no rate and the ETA shows ``–``.
+    ``notice`` (e.g. ``compiling kernels (first run only, about 25 s)…``,
+    :func:`cwrend_cli.physics.compiled.compiling_notice`) is printed when runs
+    start, above the bar, when there are runs to compute.
     """
 
     def __init__(
@@ -152,8 +155,10 @@ class RichProgress:
         label: str,
         quiet: bool = False,
         clock: Callable[[], float] = time.monotonic,
+        notice: str | None = None,
     ) -> None:
         self._clock = clock
+        self._notice = notice
         self._console = console
         self._label = label
         self._quiet = quiet
@@ -175,6 +180,8 @@ class RichProgress:
             return
         if skipped:
             self._console.print(f"{skipped} run(s) already done, {total} to compute")
+        if self._notice and total:
+            self._console.print(self._notice, markup=False)
         if self._console.is_terminal:
             self._bar = Progress(
                 TextColumn("[bold]{task.description}"),

@@ -186,7 +186,8 @@ def mean_control(
     exceeds ``u_max``.
     """
     breaks = np.empty(MAX_QUAD_BREAKS)
-    _, n_breaks = quadrature_breaks(n, lam, 0.0, dt, eps, 1, ws[WS_SWITCHES], breaks, ws)
+    one_cell = int(np.int64(1))  # a runtime int, not a literal (guidance._kernels' docstring)
+    _, n_breaks = quadrature_breaks(n, lam, 0.0, dt, eps, one_cell, ws[WS_SWITCHES], breaks, ws)
     lam_t = ws[WS_LAM_T, :6]
     u = np.empty(3)
     acc0 = 0.0
@@ -233,12 +234,32 @@ def advance(
     again inside (:func:`_advance`): numba resolves a NamedTuple argument
     about seven times slower than a plain tuple (measured: 4.0 against 0.6 µs
     per call with two small tuples), and this is called once per re-solve.
+    The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`).
     """
     out = _advance(
-        k_start, k_stop, n_steps, tuple(model), tuple(truth), tuple(act), tuple(sched),
+        k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(state), tuple(scalars), tuple(log),
     )  # fmt: skip
     return LoopScalars(*out)
+
+
+def _optional(
+    truth: TruthModel, act: ActuatorModel
+) -> tuple[tuple[Any, ...] | None, tuple[Any, ...] | None]:
+    """The truth and actuator as the compiled loop takes them: ``None`` for the CW truth
+    and for the ideal actuator, else their plain tuples.
+
+    With a ``None`` argument numba prunes the branch that uses the model before
+    typing it (``if truth is None`` in :func:`_steps`), so a run with the CW truth
+    and the ideal actuator (the paper's) never compiles the nonlinear truth's
+    RK8 step nor the actuator's errors (issue 37 item 12: the compiled loop's
+    first compile took 13.6 CPU s with them, 8.7 s without). A run that uses
+    them compiles its own specialisation of the loop, with the same arithmetic.
+    """
+    return (
+        None if truth.kind == TRUTH_CW else tuple(truth),
+        None if act.ideal else tuple(act),
+    )
 
 
 @njit(cache=True)
@@ -247,8 +268,8 @@ def _advance(
     k_stop: int,
     n_steps: int,
     model_t: tuple[Any, ...],
-    truth_t: tuple[Any, ...],
-    act_t: tuple[Any, ...],
+    truth_t: tuple[Any, ...] | None,
+    act_t: tuple[Any, ...] | None,
     sched_t: tuple[Any, ...],
     state_t: tuple[Any, ...],
     scalars_t: tuple[Any, ...],
@@ -256,10 +277,11 @@ def _advance(
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
     scalars = LoopScalars(*scalars_t)
+    truth = None if truth_t is None else TruthModel(*truth_t)
+    act = None if act_t is None else ActuatorModel(*act_t)
     return _steps(
-        k_start, k_stop, n_steps, LoopModel(*model_t), TruthModel(*truth_t),
-        ActuatorModel(*act_t), ScheduleParams(*sched_t), LoopState(*state_t),
-        scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
+        k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
+        LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
     )  # fmt: skip
 
 
@@ -269,8 +291,8 @@ def _steps(
     k_stop: int,
     n_steps: int,
     model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
+    truth: TruthModel | None,
+    act: ActuatorModel | None,
     sched: ScheduleParams,
     state: LoopState,
     eps: float,
@@ -278,7 +300,11 @@ def _steps(
     first: bool,
     log: StepLog,
 ) -> tuple[float, float, bool]:
-    """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one."""
+    """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
+
+    ``truth`` ``None``: the CW truth; ``act`` ``None``: the ideal actuator
+    (:func:`_optional`).
+    """
     m = model
     ws = workspace()
     u = np.empty(3)
@@ -298,7 +324,7 @@ def _steps(
         log.u_cmd[k] = u
         # the actuator: what the truth receives (the command delayed by act.delay steps,
         # then its errors); an ideal actuator applies the command itself
-        if act.ideal:
+        if act is None:
             u_applied[:] = u
         elif k >= act.delay:
             actuate(act, k, log.u_cmd[k - act.delay], u_applied)
@@ -307,7 +333,7 @@ def _steps(
         log.u[k] = u_applied
         # truth step with zero-order hold: CW x_{k+1} = Φ x_k + Γ u_k (exact), or the
         # nonlinear truth integrated over the step (truth.py)
-        if truth.kind == TRUTH_CW:
+        if truth is None:
             x_next = zoh_step(m.phi, m.gam, x_true, u_applied)
         else:
             x_next = truth_step(truth, state.chief, x_true, u_applied)
@@ -463,7 +489,7 @@ def resolve_loop(
     tuples and are named again inside.
     """
     i, eps, sbar, first = _resolve_loop(
-        i_start, k_start, n_steps, tuple(model), tuple(truth), tuple(act), tuple(sched),
+        i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
@@ -475,8 +501,8 @@ def _resolve_loop(
     k_start: int,
     n_steps: int,
     model_t: tuple[Any, ...],
-    truth_t: tuple[Any, ...],
-    act_t: tuple[Any, ...],
+    truth_t: tuple[Any, ...] | None,
+    act_t: tuple[Any, ...] | None,
     sched_t: tuple[Any, ...],
     resolve_t: tuple[Any, ...],
     state_t: tuple[Any, ...],
@@ -487,8 +513,8 @@ def _resolve_loop(
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments."""
     m = LoopModel(*model_t)
-    truth = TruthModel(*truth_t)
-    act = ActuatorModel(*act_t)
+    truth = None if truth_t is None else TruthModel(*truth_t)
+    act = None if act_t is None else ActuatorModel(*act_t)
     sched = ScheduleParams(*sched_t)
     rs = ResolveModel(*resolve_t)
     state = LoopState(*state_t)

@@ -27,6 +27,12 @@ Integrals are evaluated arc by arc between switching times (roots of
 ``‖λ_v‖² = (1 ± ε)²``) with Gauss–Legendre quadrature, which is spectrally
 accurate because the integrand is analytic on each arc. At ε = 0 the Hessian
 gains a jump term ``−u_max W q̂ q̂ᵀ Wᵀ / |ṗ|`` at each switching time.
+
+Kernels hand other kernels flags and small integers as runtime values
+(``bool(np.bool_(True))``, ``int(np.int64(1))``), never as literals: numba
+compiles a callee once per literal value it is called with (a ``Literal[int](2)``
+signature beside the ``int64`` one), which was about 10 % of a first compile
+(issue 37 item 12). Same arithmetic, so the same numbers.
 """
 
 from __future__ import annotations
@@ -228,7 +234,7 @@ def _speed_and_rate(
 ) -> tuple[float, float, float]:
     """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM, 3:6]`` holds λ_v(t) afterwards."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
-    _primer(n, lam0, t, 1, q)
+    _primer(n, lam0, t, int(np.int64(1)), q)  # runtime ints (module docstring)
     lam = ws[WS_LAM]
     lam[3] = q[0, 0]
     lam[4] = q[0, 1]
@@ -245,7 +251,7 @@ def _switch_derivs(
 ) -> tuple[float, float, float, float]:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
-    _primer(n, lam0, t, 3, q)
+    _primer(n, lam0, t, int(np.int64(3)), q)
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
@@ -356,6 +362,8 @@ def find_switches(
         n_levels = 1
         lv0 = (1.0 + eps) ** 2
         lv1 = lv0
+    # the derivative orders of f solved for, as runtime ints (module docstring)
+    crossing, extremum, inflection = int(np.int64(0)), int(np.int64(1)), int(np.int64(2))
     count = 0
     n_min = 0
     pieces = np.empty(4)
@@ -373,21 +381,21 @@ def find_switches(
         is_min[:] = False
         inflect = -1.0
         if (fa2 < 0.0) != (fb2 < 0.0):
-            inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, 2, 0.0, ws)
+            inflect = _bracketed_root(n, lam0, a, b, fa2, fb2, inflection, 0.0, ws)
         if inflect > a and inflect < b:
             _, fi1, _, _ = _switch_derivs(n, lam0, inflect, ws)
             if (fa1 < 0.0) != (fi1 < 0.0):
-                pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, 1, 0.0, ws)
+                pieces[n_pieces] = _bracketed_root(n, lam0, a, inflect, fa1, fi1, extremum, 0.0, ws)
                 is_min[n_pieces] = fa1 < 0.0
                 n_pieces += 1
             pieces[n_pieces] = inflect
             n_pieces += 1
             if (fi1 < 0.0) != (fb1 < 0.0):
-                pieces[n_pieces] = _bracketed_root(n, lam0, inflect, b, fi1, fb1, 1, 0.0, ws)
+                pieces[n_pieces] = _bracketed_root(n, lam0, inflect, b, fi1, fb1, extremum, 0.0, ws)
                 is_min[n_pieces] = fi1 < 0.0
                 n_pieces += 1
         elif (fa1 < 0.0) != (fb1 < 0.0):
-            pieces[n_pieces] = _bracketed_root(n, lam0, a, b, fa1, fb1, 1, 0.0, ws)
+            pieces[n_pieces] = _bracketed_root(n, lam0, a, b, fa1, fb1, extremum, 0.0, ws)
             is_min[n_pieces] = fa1 < 0.0
             n_pieces += 1
         for k in range(1, n_pieces):
@@ -412,7 +420,7 @@ def find_switches(
                     ga = fu0 - lv
                     gb = fv0 - lv
                     if (ga < 0.0) != (gb < 0.0) and count < breaks.shape[0]:
-                        breaks[count] = _bracketed_root(n, lam0, u, v, ga, gb, 0, lv, ws)
+                        breaks[count] = _bracketed_root(n, lam0, u, v, ga, gb, crossing, lv, ws)
                         count += 1
             u = v
             fu0 = fv0
@@ -841,8 +849,9 @@ def newton_ascent(
     for i in range(3):
         metric[i] = u_max * horizon**3 / 3.0
         metric[i + 3] = u_max * horizon
+    with_hess = bool(np.bool_(True))  # a runtime flag (module docstring)
     best, value, cert = best_start(
-        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, True, grad, hess, ws
+        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, with_hess, grad, hess, ws
     )
     lam = starts[best].copy()
     mu = 0.0
@@ -879,7 +888,7 @@ def newton_ascent(
                     gl_x,
                     gl_w,
                     n_cells,
-                    True,
+                    with_hess,
                     grad_t,
                     hess_t,
                     ws,

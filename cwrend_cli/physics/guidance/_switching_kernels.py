@@ -84,6 +84,7 @@ def burn_integral(
     extension of the structure). Gauss–Legendre on arcs of at most
     :data:`MAX_ARC_S`.
     """
+    with_hess = bool(np.bool_(True))  # a runtime flag, not a literal (_kernels' docstring)
     span = b - a
     arcs = max(1, int(np.ceil(abs(span) / MAX_ARC_S)))
     h = span / arcs
@@ -95,7 +96,7 @@ def burn_integral(
             kern.input_kernel(n, tau, w)
             q0, q1, q2, p = kern.node_primer(lam0, w)
             wk = half * gl_w[k]
-            kern.add_control_node(w, q0, q1, q2, p, wk, 1.0, 0.0, u_max, True, grad, hess, wq)
+            kern.add_control_node(w, q0, q1, q2, p, wk, 1.0, 0.0, u_max, with_hess, grad, hess, wq)
 
 
 @njit(cache=True)
@@ -477,8 +478,9 @@ def bang_bang_ascent(
     grad = np.empty(6)
     hess = np.empty((6, 6))
     res = np.empty(6)
+    no_hess = bool(np.bool_(False))  # a runtime flag, not a literal (_kernels' docstring)
     best, _, best_cert = kern.best_start(
-        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
+        n, starts, d, horizon, eps, u_max, gl_x, gl_w, n_cells, no_hess, grad, hess, ws
     )
     start = starts[best].copy()
     # the ascent below would choose this row again (same dual values): hand it only this one
@@ -496,7 +498,7 @@ def bang_bang_ascent(
     )  # fmt: skip
     if solved:
         kern.dual_evaluate(
-            n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, False, grad, hess, ws
+            n, lam, d, horizon, eps, u_max, gl_x, gl_w, n_cells, no_hess, grad, hess, ws
         )
         rp, rv = kern.terminal_residual(n, horizon, grad, res)
         if rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s:
