@@ -188,6 +188,15 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "down the corridor; NaN: no corridor or at rest)"
     ),
     "safety_violated": _col("the true trajectory entered the unsafe set (min distance < 0)", "-"),
+    "scp_iterations": _col(
+        "convex programs the constrained cone program solved (sequential convex "
+        "programming); 0: not a constrained solve",
+        "-",
+    ),
+    "slack_km": _col(
+        "path-constraint softening the constrained cone program needed (0: every keep-out "
+        "and corridor row held)"
+    ),
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
@@ -485,20 +494,32 @@ _solve_values = operator.attrgetter(*_SOLVE_FIELDS)
 
 
 def _solves_columns(results: Sequence[RunResult]) -> dict[str, Any]:
-    """The :data:`SOLVES_SCHEMA` columns but ``arch`` of ``results``, one run after another."""
+    """The :data:`SOLVES_SCHEMA` columns but ``arch`` of ``results``, one run after another.
+
+    With constraints, also :data:`SCP_SOLVE_FIELDS`.
+    """
     counts = [len(r.solves) for r in results]
     rows = [_solve_values(s) for r in results for s in r.solves]
     values = zip(*rows, strict=True) if rows else [()] * len(_SOLVE_FIELDS)
-    return {
+    cols = {
         "seed": np.repeat(np.array([r.seed for r in results], dtype=np.int64), counts),
         **dict(zip(_SOLVE_FIELDS, values, strict=True)),
     }
+    if _has_safety(results):
+        cols["scp_iterations"] = [s.scp_iterations for r in results for s in r.solves]
+        cols["slack_km"] = [s.slack_km for r in results for s in r.solves]
+    return cols
+
+
+#: The solves' columns of the constrained cone program (issue 32), only with constraints.
+SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km", pa.float64())]
 
 
 def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per solve (the initial one of adaptive runs, then every re-solve)."""
     cols = {"arch": [result.arch] * len(result.solves), **_solves_columns([result])}
-    return _conventional(pa.table(cols, schema=SOLVES_SCHEMA), metadata)
+    schema = _with_safety(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
+    return _conventional(pa.table(cols, schema=schema), metadata)
 
 
 SUMMARY_SCHEMA = pa.schema(
@@ -660,7 +681,9 @@ def campaign_solves_table(
     """Solves of several runs for the hive-partitioned ``solves/`` dataset (as the steps)."""
     cols = _solves_columns(results)
     cols.update(_run_columns(extra, [len(r.solves) for r in results]))
-    return _conventional(pa.table(cols, schema=CAMPAIGN_SOLVES_SCHEMA), metadata)
+    safety = _has_safety(results)
+    schema = _with_safety(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
+    return _conventional(pa.table(cols, schema=schema), metadata)
 
 
 _RUN_METRICS = [f for f in SUMMARY_SCHEMA if f.name not in ("arch", "seed")]

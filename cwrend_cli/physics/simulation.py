@@ -40,6 +40,7 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,7 +52,7 @@ from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
-from cwrend_cli.physics.guidance import convex, feasibility
+from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
 
@@ -71,6 +72,8 @@ class SolveRecord:
     residual_km: float
     wall_time_ms: float
     success: bool  # converged and residual below solver.success_residual (SPEC §5)
+    scp_iterations: int = 0  # constrained cone program (issue 32): its convex programs
+    slack_km: float = 0.0  # constrained cone program: the path softening it needed [km]
 
 
 @dataclass(frozen=True)
@@ -190,9 +193,17 @@ def resolve_steps(problem: Problem) -> list[int]:
 
 
 def _record(
-    kind: str, step: int, t_s: float, result: guidance.SolveResult, threshold: float
+    kind: str,
+    step: int,
+    t_s: float,
+    result: guidance.SolveResult,
+    threshold: float,
+    scp: tuple[int, float] | None = None,
 ) -> SolveRecord:
+    scp_iterations, slack_km = (0, 0.0) if scp is None else scp
     return SolveRecord(
+        scp_iterations=scp_iterations,
+        slack_km=slack_km,
         kind=kind,
         step=step,
         t_s=t_s,
@@ -314,8 +325,16 @@ def simulate(
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
-        result = convex.solve(_grid(sc, x_hat0, sc.horizon_s, _guidance_tables(problem)), eps0, n)
-        solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
+        scp = _constrained_plan(problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0)
+        if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
+            result = scp[0]
+        else:
+            result = convex.solve(
+                _grid(sc, x_hat0, sc.horizon_s, _guidance_tables(problem)), eps0, n
+            )
+        solves.append(
+            _record("initial", -1, 0.0, result, settings.success_residual, scp and scp[1])
+        )
         _hold_plan(result, 0, model)
         if solves[-1].success:
             plan_costate = result.costate
@@ -544,8 +563,13 @@ def _cone_resolves(
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
         warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
-        result = convex.solve(_grid(sc, state.x_hat, horizon, tables), scalars.eps, n, warm=warm)
-        rec = _record("resolve", k, (k + 1) * dt, result, threshold)
+        scp = _constrained_plan(problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from)
+        if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
+            result = scp[0]
+        else:
+            grid = _grid(sc, state.x_hat, horizon, tables)
+            result = convex.solve(grid, scalars.eps, n, warm=warm)
+        rec = _record("resolve", k, (k + 1) * dt, result, threshold, scp and scp[1])
         records.append(rec)
         if rec.success:
             plan_costate, k_plan = result.costate, k_from
@@ -554,6 +578,66 @@ def _cone_resolves(
         _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
     loop.advance(k_next, n_steps, n_steps, scalars)
     return records
+
+
+def _constrained_plan(
+    problem: Problem,
+    x_hat: FloatArray,
+    horizon_s: float,
+    eps: float,
+    p: FloatArray,
+    model: sk.LoopModel | None,
+    k_from: int,
+) -> tuple[guidance.SolveResult, tuple[int, float]] | None:
+    """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
+
+    From the estimate ``x_hat`` at step ``k_from`` over ``horizon_s``, with the
+    filter's position covariance (``p[:3, :3]``, held over the horizon) for
+    ``constraints.sigma_margin``; warm-started from the plan held from
+    ``k_from`` on (``model``'s override), else from the unconstrained plan.
+    Returns the result (its plan the held controls; no costate) and
+    (SCP iterations, slack [km]).
+    """
+    c = problem.constraints
+    if c is None or c.keep_out is None:
+        return None
+    sc = problem.scenario
+    steps = max(1, round(horizon_s / sc.dt_s))
+    warm = None
+    held = model is not None and k_from + steps <= model.override.size
+    if model is not None and held and bool(np.all(model.override[k_from : k_from + steps])):
+        warm = model.u_override[k_from : k_from + steps].copy()
+    xf = np.asarray(sc.xf, dtype=float)
+    ans = constrained.plan(
+        sc.mean_motion_rad_s,
+        sc.dt_s,
+        sc.u_max_km_s2,
+        x_hat,
+        xf,
+        horizon_s,
+        eps,
+        safety_geometry.geometry(c),
+        np.asarray(p)[:3, :3],
+        c.sigma_margin,
+        warm,
+    )
+    converged = ans.status is guidance.SolveStatus.CONVERGED
+    miss = math.nan
+    if converged:
+        states, _ = constrained.node_positions(sc.mean_motion_rad_s, sc.dt_s, x_hat, ans.controls)
+        miss = float(np.linalg.norm(states[-1] - xf))
+    result = guidance.SolveResult(
+        costate=np.full(6, np.nan),
+        status=ans.status,
+        step="socp_scp",
+        iterations=ans.solver_iterations,
+        residual_km=miss,
+        wall_time_s=ans.wall_time_s,
+        eps=float(eps),
+        horizon_s=steps * sc.dt_s,
+        controls=ans.controls if converged else None,
+    )
+    return result, (ans.scp_iterations, 0.0 if math.isnan(ans.slack_km) else ans.slack_km)
 
 
 def _min_miss_if_infeasible(
