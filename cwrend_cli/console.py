@@ -21,7 +21,7 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 from rich.progress import Task as RichTask
-from rich.table import Table
+from rich.table import Column, Table
 from rich.text import Text
 
 from cwrend_cli.campaign import CaseResult
@@ -183,16 +183,27 @@ class RichProgress:
         if self._notice and total:
             self._console.print(self._notice, markup=False)
         if self._console.is_terminal:
+            # one line at any width from 80 columns: the label cut to PROGRESS_LABEL_WIDTH
+            # (with an ellipsis), no text column wraps, the bar takes what is left
             self._bar = Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("[red]{task.fields[failed]} failed"),
-                TimeElapsedColumn(),
+                TextColumn(
+                    "[bold]{task.description}",
+                    table_column=Column(
+                        no_wrap=True, overflow="ellipsis", max_width=PROGRESS_LABEL_WIDTH
+                    ),
+                ),
+                BarColumn(bar_width=None),
+                MofNCompleteColumn(
+                    table_column=Column(no_wrap=True, min_width=2 * len(str(total)) + 1)
+                ),
+                _Text(self._failed_text, style="red"),
+                TimeElapsedColumn(table_column=Column(no_wrap=True, min_width=7)),
                 _Text(self._rate_text),
                 _Text(self._eta_text),
                 console=self._console,
                 transient=False,
+                expand=True,
+                get_time=self._clock,
             )
             self._bar.start()
             self._task = self._bar.add_task(self._label, total=total, failed=0)
@@ -207,12 +218,19 @@ class RichProgress:
         return progress_pace(self._first, self._last, self._total, now)[1]
 
     def _rate_text(self) -> str:
+        """``2.1 runs/s``; empty until there is a rate (two completions)."""
         rate = self.rate()
-        return "– runs/s" if rate is None else f"{rate:.3g} runs/s"
+        if rate is None:
+            return ""
+        return f"{rate:.3g} runs/s" if rate < 1000 else f"{rate:.0f} runs/s"
 
     def _eta_text(self) -> str:
+        """``ETA 33 s``; empty until there is a rate."""
         eta = self.eta()
-        return "ETA –" if eta is None else f"ETA {_duration(eta)}"
+        return "" if eta is None else f"ETA {_duration(eta)}"
+
+    def _failed_text(self) -> str:
+        return f"{self._failed} failed" if self._failed else ""
 
     def advance(self, ok: int, failed: int) -> None:
         """Runs just completed (negative: runs of a lost task, to run again)."""
@@ -229,11 +247,14 @@ class RichProgress:
             return
         elapsed = now - self._t0
         if self._done >= self._total or elapsed >= self._next_report:
+            pace = [t for t in (self._rate_text(), self._eta_text()) if t]  # none before a rate
             self._console.print(
-                f"{self._label}: {self._done}/{self._total} runs, {self._failed} failed, "
-                f"{elapsed:.0f} s elapsed, {self._rate_text()}, {self._eta_text()}",
+                ", ".join(
+                    [f"{self._label}: {self._done}/{self._total} runs", f"{self._failed} failed",
+                     f"{elapsed:.0f} s elapsed", *pace]
+                ),
                 markup=False,
-            )
+            )  # fmt: skip
             self._next_report = elapsed + 10.0
 
     def close(self) -> None:
@@ -265,15 +286,22 @@ def phase(console: Console, text: str, quiet: bool = False) -> Iterator[None]:
         yield
 
 
+#: Widest label of the progress bar (``ablate <name>``), cut with an ellipsis beyond:
+#: with the other columns at their widest (12345/100000, 9 failed, 0:12:34, 999 runs/s,
+#: ETA 2 h 07 min) the bar then keeps a few columns at 80 (issue 37 item 14).
+PROGRESS_LABEL_WIDTH = 16
+
+
 class _Text(ProgressColumn):
     """A progress column showing the text of a callable (the campaign-wide rate and ETA)."""
 
-    def __init__(self, text: Callable[[], str]) -> None:
-        super().__init__()
+    def __init__(self, text: Callable[[], str], style: str = "progress.remaining") -> None:
+        super().__init__(table_column=Column(no_wrap=True))
         self._text = text
+        self._style = style
 
     def render(self, task: RichTask) -> Text:
-        return Text(self._text(), style="progress.remaining")
+        return Text(self._text(), style=self._style)
 
 
 def _duration(seconds: float) -> str:
