@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from enum import StrEnum
@@ -728,9 +728,20 @@ def _campaign_step(
         allow_version_change=opts.allow_version_change, progress=progress,
         argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest,
     )  # fmt: skip
+    if summary.set_aside:  # said even with -q: runs were computed again
+        err.print(_set_aside_line(summary.set_aside), soft_wrap=True, markup=False)
     with progress.phase("computing statistics"):
         statistics = campaign.write_statistics(out, command, plan.root_seed, pairs)
     return plan, summary, statistics
+
+
+def _set_aside_line(set_aside: Mapping[str, int]) -> str:
+    """The console line of the journal's run records that were not reused (issue 36 item 4)."""
+    reasons = ", ".join(f"{why}: {n}" for why, n in sorted(set_aside.items()))
+    return (
+        f"journal: {sum(set_aside.values())} run record(s) set aside ({reasons}): they do not "
+        "prove they are this campaign's and these versions', so their runs are computed again"
+    )
 
 
 def _report_campaign(

@@ -28,7 +28,7 @@ import time
 from collections import deque
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, Protocol
 
@@ -48,6 +48,7 @@ from cwrend_cli.campaign.executors import (
     run_signals,
 )
 from cwrend_cli.campaign.journal import (
+    JournalOwner,
     JournalState,
     append_events,
     campaign_lock,
@@ -59,6 +60,7 @@ from cwrend_cli.campaign.journal import (
     new_manifest,
     read_events,
     remove_orphan_files,
+    versions_digest,
     wipe,
 )
 from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task
@@ -175,6 +177,9 @@ class CampaignSummary:
     failed: int  # in the whole campaign directory
     interrupted: bool
     planned: int = 0  # runs of the plan (this invocation's command)
+    #: run records of the journal not reused, by reason: not provably this campaign's or
+    #: these versions' (journal.JournalOwner); their runs are computed again
+    set_aside: Mapping[str, int] = field(default_factory=dict)
 
 
 class _PointReferences:
@@ -393,7 +398,11 @@ def _run_locked(
     previous = check_same_campaign(
         out_dir, plan_, allow_version_change=allow_version_change, repair_manifest=repair_manifest
     )
-    journaled_to, done, owed = _journal_before(out_dir, plan_, retry_failed)
+    # only the journal lines that prove this campaign and these versions count (legacy ones,
+    # without versions, when the manifest proves them)
+    digest = None if allow_version_change else versions_digest()
+    owner = JournalOwner(plan_.campaign_hash, digest, legacy=bool(previous))
+    journaled_to, done, owed, set_aside = _journal_before(out_dir, plan_, retry_failed, owner)
     tasks = [
         replace(t, runs=tuple(r for r in t.runs if r.run_key not in done)) for t in plan_.tasks
     ]
@@ -428,12 +437,12 @@ def _run_locked(
             gc.collect()  # release their semaphores now (cwrend ends without a collection)
         # the bar stays (complete) while runs.parquet is written: about 1 s per 10,000 runs
         try:
-            journal = load_journal(out_dir / EVENTS)
+            journal = load_journal(out_dir / EVENTS, owner=owner)
             records = list(journal.runs.values())
             # runs journaled by this invocation, from the journal itself (a Ctrl-C between a
             # journal write and the progress update must not make the count lie), also those
             # rerun under an execution name they had before (--retry-failed of a whole task)
-            since = load_journal(out_dir / EVENTS, start=journaled_to).runs.values()
+            since = load_journal(out_dir / EVENTS, start=journaled_to, owner=owner).runs.values()
             new = [e["status"] == "ok" for e in since]
             computed = len(new)
             progress.settle(sum(new), computed - sum(new))  # the bar ends on what is kept
@@ -465,7 +474,9 @@ def _run_locked(
             f"and kept ({failed} failed), none was recorded for this fault; fix the cause and run "
             "the same command to compute exactly the missing runs"
         )
-    return CampaignSummary(out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs))
+    return CampaignSummary(
+        out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs), set_aside
+    )
 
 
 def _points_of(records: Sequence[Mapping[str, Any]]) -> list[tuple[str, Mapping[str, Any]]]:
@@ -477,20 +488,21 @@ def _points_of(records: Sequence[Mapping[str, Any]]) -> list[tuple[str, Mapping[
 
 
 def _journal_before(
-    out_dir: Path, plan_: CampaignPlan, retry_failed: bool
-) -> tuple[int, set[str], list[Task]]:
-    """Clean the orphans of a campaign directory; its journal's size [bytes], its done runs
-    and the tasks that write again the recordings it owes (:func:`_owed_recordings`).
+    out_dir: Path, plan_: CampaignPlan, retry_failed: bool, owner: JournalOwner
+) -> tuple[int, set[str], list[Task], Mapping[str, int]]:
+    """Clean the orphans of a campaign directory; its journal's size [bytes], its done runs,
+    the tasks that write again the recordings it owes (:func:`_owed_recordings`) and the
+    run records set aside as not ``owner``'s (by reason).
 
     Done: ok runs, failed ones too unless ``retry_failed``. The journal's
     state is released on return, so the campaign never holds it while it
     runs, nor beside the state read again at its end.
     """
-    journal = load_journal(out_dir / EVENTS)
+    journal = load_journal(out_dir / EVENTS, owner=owner)
     remove_orphan_files(out_dir, journal.files)
     size = (out_dir / EVENTS).stat().st_size if (out_dir / EVENTS).exists() else 0
     done = {k for k, e in journal.runs.items() if e["status"] == "ok" or not retry_failed}
-    return size, done, _owed_recordings(out_dir, plan_, journal, done)
+    return size, done, _owed_recordings(out_dir, plan_, journal, done), journal.set_aside
 
 
 def _owed_recordings(

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import hashlib
 import json
 import os
 import shlex
@@ -38,8 +39,9 @@ import shutil
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -73,6 +75,7 @@ __all__ = [
     "DATASETS",
     "RUN_FIELDS",
     "STATS_FILES",
+    "JournalOwner",
     "JournalState",
     "append_events",
     "campaign_lock",
@@ -86,6 +89,7 @@ __all__ = [
     "new_manifest",
     "read_events",
     "remove_orphan_files",
+    "versions_digest",
     "wipe",
 ]
 
@@ -207,6 +211,7 @@ def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str,
             "execution": outcome.execution,
             "campaign_hash": campaign,
             "cwrend_version": __version__,
+            "versions": versions_digest(),
         }
         events.append({"event": "run_started", "time": iso(o.started_at), **common})
         events.append(
@@ -236,9 +241,40 @@ def events_of(outcome: TaskOutcome, campaign: str, now: float) -> list[dict[str,
             "files": list(outcome.files),
             "campaign_hash": campaign,
             "cwrend_version": __version__,
+            "versions": versions_digest(),
         }
     )
     return events
+
+
+@dataclass(frozen=True)
+class JournalOwner:
+    """Whose journal lines count (issue 36 item 4): each line names its campaign and versions.
+
+    ``campaign_hash``: the campaign's; ``versions``: the :func:`versions_digest`
+    a line must carry (``None``: any, ``--allow-version-change``); ``legacy``:
+    lines written before lines carried their versions count when their cwrend
+    version is this one's (the caller has checked the manifest's environment).
+    """
+
+    campaign_hash: str
+    versions: str | None
+    legacy: bool = False
+
+    def reason_against(self, event: Mapping[str, Any]) -> str | None:
+        """Why ``event`` is not this owner's (a few words), or ``None`` when it is."""
+        campaign = event.get("campaign_hash")
+        if campaign is None:
+            return "no campaign hash"
+        if campaign != self.campaign_hash:
+            return "another campaign"
+        if self.versions is None:
+            return None
+        versions = event.get("versions")
+        if versions is None:
+            legacy = self.legacy and event.get("cwrend_version") == __version__
+            return None if legacy else "no versions"
+        return None if versions == self.versions else "other versions"
 
 
 #: The fields of an outcome event that :func:`load_journal` keeps: what ``runs.parquet``
@@ -282,13 +318,20 @@ class JournalState:
 
     runs: Mapping[str, Mapping[str, Any]]  # run_key -> its latest complete outcome (RUN_FIELDS)
     files: frozenset[str]  # data files written by completed task executions
+    set_aside: Mapping[str, int] = field(default_factory=dict)  # why -> run records not owned
 
 
-def load_journal(path: str | Path, start: int = 0) -> JournalState:
+def load_journal(
+    path: str | Path, start: int = 0, owner: JournalOwner | None = None
+) -> JournalState:
     """Runs and files of every task execution that completed (its ``task_done`` was written).
 
     ``start``: only the events from this byte on (:func:`iter_events`), e.g.
     the runs an invocation journaled, however their executions are named.
+    ``owner``: only the lines that prove they are its campaign's and versions'
+    (:meth:`JournalOwner.reason_against`) count; the run records set aside are
+    counted by reason in ``set_aside``, and the files of a ``task_done`` set
+    aside are orphans (removed on resume, computed again).
 
     Streams the journal (:func:`iter_events`) and keeps what the state needs:
     per run key its latest outcome event (by position in the journal) that a
@@ -315,8 +358,15 @@ def load_journal(path: str | Path, start: int = 0) -> JournalState:
         else:
             latest[0] = min(latest[0], position)
 
+    set_aside: dict[str, int] = {}
     for position, event in enumerate(iter_events(path, start)):
         kind = event.get("event")
+        if owner is not None and kind in ("run_finished", "run_failed", "task_done"):
+            reason = owner.reason_against(event)
+            if reason is not None:  # never reused: its runs are computed again
+                if kind != "task_done":
+                    set_aside[reason] = set_aside.get(reason, 0) + 1
+                continue
         if kind in ("run_finished", "run_failed"):
             execution = event.get("execution")
             # counts once a task_done of its execution follows it: the name of an execution
@@ -331,6 +381,7 @@ def load_journal(path: str | Path, start: int = 0) -> JournalState:
     return JournalState(
         {key: entry[2] for key, entry in ordered},
         frozenset(f for named in files.values() for f in named),
+        set_aside,
     )
 
 
@@ -465,6 +516,17 @@ def environment() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             versions[name] = "absent"
     return versions
+
+
+@lru_cache(maxsize=1)
+def versions_digest() -> str:
+    """A short digest of :func:`environment` that every journal line carries (16 hex digits).
+
+    Proves which versions computed a line's runs in 26 bytes, where the
+    versions themselves would take about 100 (the manifest lists them).
+    """
+    text = json.dumps(environment(), sort_keys=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
 
 def _changed_versions(previous: Mapping[str, Any]) -> list[str]:
