@@ -166,7 +166,7 @@ def test_time_series_views_have_no_legend_over_the_data(rrd: Path) -> None:
     assert series and all(v["PlotLegend:visible"].to_pylist() == [False] for v in series)
     about = [c for c in RrdReader(rrd).stream() if c.entity_path == "/about"]
     text = about[0].to_record_batch().column("TextDocument:text").to_pylist()[0][0]
-    for key in ("green mtf_adaptive", "red plain_fixed", "grey open-loop fuel"):
+    for key in ("| green | mtf_adaptive |", "| red | plain_fixed |", "| grey | open-loop fuel |"):
         assert key in text  # the colours are explained once
 
 

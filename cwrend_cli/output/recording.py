@@ -53,6 +53,7 @@ if TYPE_CHECKING:
     import rerun as rr
     import rerun.blueprint as rrb
 
+    from cwrend_cli.physics.references import OpenLoopResult
     from cwrend_cli.physics.simulation import References, RunResult
 
 
@@ -235,10 +236,11 @@ def build_blueprint(
         ],
         eye_controls=_eye(rrb, bounds) if bounds is not None else None,
     )
+    about = about_share(len(slugs) + len(reference_names))
     left = rrb.Vertical(
         spatial,
         rrb.TextDocumentView(name="about: colours, arrows, results", origin="/about"),
-        row_shares=[3, 1],
+        row_shares=[1.0 - about, about],  # the about text whole, every case (about_share)
     )
     middle = rrb.Vertical(
         _series_view(rrb, "thrust ‖u‖ [km/s²]", arch("u_norm") + ref("u_norm")),
@@ -335,6 +337,26 @@ def _send_path(
     )
 
 
+#: The about panel at the default 1600×1000 window (:func:`build_blueprint`): height of a
+#: line of its markdown and of its title bar and margins [px], the height of the left
+#: column it shares with the 3D view [px], and the characters a line holds at its width
+#: (half the window, ~8 px a character).
+ABOUT_LINE_PX = 24
+ABOUT_CHROME_PX = 48
+LEFT_COLUMN_PX = 940
+ABOUT_LINE_CHARS = 96
+#: Lines of the about text besides its table's rows (the key under it, two lines; the
+#: arrows; the degradation windows; the gaps between paragraphs; :func:`_about`).
+ABOUT_TEXT_LINES = 7
+
+
+def about_share(n_cases: int) -> float:
+    """The share of the left column the about panel needs to show ``n_cases`` table rows
+    (runs and open-loop references) and its text without scrolling (issue 37 item 14)."""
+    needed = ABOUT_CHROME_PX + ABOUT_LINE_PX * (1 + n_cases + ABOUT_TEXT_LINES)
+    return min(needed / LEFT_COLUMN_PX, 0.6)
+
+
 def _about(
     runs: Sequence[RunResult],
     refs: References,
@@ -342,39 +364,37 @@ def _about(
     arrow_scale_s2: float,
     u_max_km_s2: float,
 ) -> str:
+    """The about panel: one table row per case with its colour, Δv [m/s] and miss [m]
+    (the units of every cwrend table), then a short key; compact enough that
+    :func:`about_share` of the window shows it whole."""
+
     def name(hex_colour: str) -> str:
         return COLOUR_NAMES.get(hex_colour, hex_colour)
 
-    key = [f"{name(arch_colour(r.arch, i))} {r.arch}" for i, r in enumerate(runs)]
-    key += [
-        f"{name(REFERENCE_COLOURS.get(ref.name, _FALLBACK[-1]))} open-loop {ref.name}"
+    cases: list[tuple[str, str, RunResult | OpenLoopResult]] = [
+        (name(REFERENCE_COLOURS.get(ref.name, _FALLBACK[-1])), f"open-loop {ref.name}", ref)
         for ref in (refs.energy, refs.fuel)
     ]
-    if windows:
-        key.append(f"{name(DEGRADATION_COLOUR)} degradation windows")
-    lines = [
-        "**Colours** (every view): " + ", ".join(key) + ". "
-        "3D: thick line true path, thin line filter estimate, white dot the target; "
-        "score: thin line filtered score s̄.",
-        "",
-        f"Noise realisation (seed): {', '.join(sorted({str(r.seed) for r in runs})) or '-'}. "
-        "Timeline `sim_time` in seconds; positions in km (CW frame, target at the origin).",
-        "",
-        "| case | Δv [km/s] | miss [km] |",
-        "|---|---|---|",
+    cases += [(name(arch_colour(r.arch, i)), r.arch, r) for i, r in enumerate(runs)]
+    seeds = ", ".join(sorted({str(r.seed) for r in runs})) or "-"
+    lines = ["| colour | case | Δv [m/s] | miss [m] |", "|---|---|---|---|"]
+    lines += [
+        f"| {colour} | {label} | {c.delta_v_km_s * 1e3:.2f} | {c.miss_km * 1e3:.3g} |"
+        for colour, label, c in cases
     ]
-    for ref in (refs.energy, refs.fuel):
-        lines.append(f"| open-loop {ref.name} | {ref.delta_v_km_s:.6g} | {ref.miss_km:.3g} |")
-    for r in runs:
-        lines.append(f"| {r.arch} | {r.delta_v_km_s:.6g} | {r.miss_km:.3g} |")
     lines += [
         "",
-        f"Thrust arrows: length = {arrow_scale_s2:.4g} s² × u "
+        f"Seed {seeds}; `sim_time` in s; positions in km (CW frame, target at the origin). "
+        "3D: thick line true path, thin line estimate, white dot target; "
+        "score: thin line filtered s̄.",
+        "",
+        f"Thrust arrows: {arrow_scale_s2:.4g} s² × u "
         f"({arrow_scale_s2 * u_max_km_s2:.3g} km at u_max = {u_max_km_s2:g} km/s²).",
     ]
     if windows:
-        lines.append("Degradation: " + "; ".join(
-            f"{window_label(i, w)} on [{w.start_s:g}, {w.end_s:g}] s"
+        lines.append("")
+        lines.append(f"Degradation ({name(DEGRADATION_COLOUR)}): " + "; ".join(
+            f"{window_label(i, w)} [{w.start_s:g}, {w.end_s:g}] s"
             for i, w in enumerate(windows, start=1)
         ))  # fmt: skip
     return "\n".join(lines) + "\n"
