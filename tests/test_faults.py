@@ -354,3 +354,63 @@ def test_a_dask_cluster_without_workers_stops_the_campaign_with_exit_3(
     assert "output.dask_no_worker_timeout_s = 0.2" in result.stderr
     manifest = json.loads((tmp_path / "results" / "idle" / "manifest.json").read_text())
     assert manifest["status"].startswith("stopped: the Dask cluster has had no worker")
+
+
+# --- item 13: every computation a campaign starts has a bound ---------------------
+
+
+def test_the_default_run_limit_is_a_small_multiple_of_what_the_run_costs() -> None:
+    from cwrend_cli.campaign import guards
+    from cwrend_cli.config.adapt import problem_of
+
+    paper = problem_of(CwrendConfig())
+    assert guards.resolves(paper) == 79  # every 10 s until 20 s are left, and at t = 0
+    cost = guards.run_cost_s(800, 79)
+    assert cost == pytest.approx(100e-6 * 800 * 79 / 2)
+    assert guards.run_timeout_s(None, paper) == pytest.approx(10.0 + 3.0 * cost)  # 19.5 s
+    first = guards.run_timeout_s(None, paper, first=True)
+    assert first == pytest.approx(10.0 + 3.0 * cost + guards.FIRST_RUN_ALLOWANCE_S)
+    assert guards.run_timeout_s(2.5, paper, first=True) == 2.5  # output.run_timeout_s wins
+    long = problem_of(CwrendConfig.model_validate({"scenario": {"horizon_s": 20000.0}}))
+    assert guards.run_timeout_s(None, long) < 10_060.0 * 0.6  # the old default: 60 s + 0.5 s/step
+
+
+def test_references_past_the_run_limit_are_stopped_and_their_runs_reported_timed_out(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The open-loop references were computed in the campaign process with no bound."""
+    import time
+
+    from cwrend_cli.physics import simulation
+
+    def slow_references(*args: Any, **kwargs: Any) -> Any:
+        for _ in range(2000):  # a guard against a hang only: 20 s unbounded, then an error
+            time.sleep(0.01)
+        raise AssertionError("the references ran without a bound")
+
+    monkeypatch.setattr(simulation, "open_loop_references", slow_references)
+    cfg = _write_config(tmp_path / "c.toml", "refs", "run_timeout_s = 0.05\n")
+    result = _cli("ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1", "-q")
+    assert result.exit_code == 1, result.output  # the runs failed: a result, reported
+    runs = pd.read_parquet(tmp_path / "results" / "refs" / "runs.parquet")
+    assert len(runs) == 2
+    assert runs["error"].str.contains("timed out: the run took longer than 0.05 s").all()
+
+
+def test_a_processs_first_run_of_an_architecture_gets_the_allowance_for_its_kernels(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from cwrend_cli.campaign import guards
+
+    firsts: list[bool] = []
+    real = guards.run_timeout_s
+
+    def recorded(configured: float | None, problem: Any, *, first: bool = False) -> float:
+        firsts.append(first)
+        return real(configured, problem, first=first)
+
+    monkeypatch.setattr(guards, "run_timeout_s", recorded)
+    monkeypatch.setattr(worker_module, "_ARCHS_RUN", set())  # a fresh process
+    task = campaign.plan(CwrendConfig(), ["mtf_adaptive", "plain_adaptive"], [0, 1]).tasks[0]
+    worker_module.execute_task(task, None, str(tmp_path), metadata={"config_hash": "c"})
+    assert firsts == [True, True, False, False]  # seed 0's two architectures, then seed 1's

@@ -35,7 +35,7 @@ from typing import Any, Literal, Protocol
 import pandas as pd
 import pyarrow as pa
 
-from cwrend_cli.campaign import design, statistics
+from cwrend_cli.campaign import design, guards, statistics
 from cwrend_cli.campaign.executors import (
     DASK_LOST_AFTER_S,
     ExecutorKind,
@@ -197,8 +197,15 @@ class _PointReferences:
     its own error, as it would have alone.
     """
 
-    def __init__(self, out_dir: Path, campaign_hash: str, config_hash: str) -> None:
+    def __init__(
+        self,
+        out_dir: Path,
+        campaign_hash: str,
+        config_hash: str,
+        run_timeout_s: float | None = None,
+    ) -> None:
         self._out_dir = out_dir
+        self._run_timeout_s = run_timeout_s  # the references get their runs' limit
         self._campaign_hash = campaign_hash
         self._config_hash = config_hash
         self._by_key: dict[ReferencesKey, simulation.References | None] = {}
@@ -212,9 +219,11 @@ class _PointReferences:
         """The references of ``task``'s point (``None`` if they cannot be computed)."""
         key = references_key(task.problem)
         if key not in self._by_key:
+            limit = guards.run_timeout_s(self._run_timeout_s, task.problem, first=True)
             try:
-                self._by_key[key] = simulation.open_loop_references(task.problem)
-            except Exception:  # the runs report it, one by one
+                with guards.time_limit(limit):
+                    self._by_key[key] = simulation.open_loop_references(task.problem)
+            except Exception:  # the runs report it (a time limit too), one by one
                 self._by_key[key] = None
         refs = self._by_key[key]
         if refs is not None and task.point not in self._indexed:
@@ -577,7 +586,9 @@ def _execute(
     campaign cannot go on.
     """
     attempts: dict[str, int] = {}
-    references = _PointReferences(out_dir, plan_.campaign_hash, plan_.config_hash)
+    references = _PointReferences(
+        out_dir, plan_.campaign_hash, plan_.config_hash, plan_.run_timeout_s
+    )
     pending = list(tasks)
     reopened = 0
     while pending:

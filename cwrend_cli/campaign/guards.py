@@ -20,12 +20,15 @@ import numpy as np
 
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.physics import metrics
+from cwrend_cli.physics.params import Problem
 from cwrend_cli.physics.simulation import RunResult
 
 __all__ = [
     "NonFiniteRunError",
     "RunTimeoutError",
     "check_finite",
+    "resolves",
+    "run_cost_s",
     "run_timeout_s",
     "time_limit",
 ]
@@ -115,13 +118,48 @@ def check_finite(result: RunResult) -> None:
         raise NonFiniteRunError("non-finite mean_nis_nominal (the NIS rows overflow their mean)")
 
 
-def run_timeout_s(configured: float | None, n_steps: int) -> float:
-    """A run's wall-time limit [s]: ``output.run_timeout_s``, else 60 s + 0.5 s per step.
+#: What a re-solve costs at most per step of the horizon it solves over [s]. Measured on a
+#: 2-core AMD EPYC (2026-12-02): fixed-ε shooting at T = 8,000 s (its fallback chain to
+#: Clarabel at most re-solves) 197-300 s for 800 re-solves over 4,000 steps on average,
+#: 62-94 µs; cone programs (socp) at 800 / 3,200 steps 29 / 41 µs; adaptive shooting
+#: 0.2-2 µs.
+RESOLVE_STEP_COST_S = 100e-6
+#: A run's default limit is this multiple of its cost (:func:`run_cost_s`) ...
+COST_MULTIPLE = 3.0
+#: ... plus this [s] (a worker's pauses: the machine's other processes, the file writes).
+RUN_BASE_S = 10.0
+#: Added to the default limit of a process's first run of an architecture [s]: loading
+#: its numba kernels, or compiling them on a fresh install (30-40 s on 2 cores), is not
+#: the run's cost.
+FIRST_RUN_ALLOWANCE_S = 120.0
 
-    The default is generous: a paper run (800 steps) takes 5–100 ms on 2 cores,
-    about 1 s with every fallback of the shooting chain at every re-solve.
+
+def resolves(problem: Problem) -> int:
+    """Re-solves of a run of ``problem``: every ``t_resolve_s`` until ``t_min_rem_s`` is left."""
+    span = problem.scenario.horizon_s - problem.guidance.t_min_rem_s
+    return max(math.ceil(span / problem.guidance.t_resolve_s), 0) + 1
+
+
+def run_cost_s(n_steps: int, n_resolves: int) -> float:
+    """What a run should cost at most [s]: each of its ``n_resolves`` re-solves over the
+    remaining horizon (half of the ``n_steps`` on average) at :data:`RESOLVE_STEP_COST_S`."""
+    return RESOLVE_STEP_COST_S * n_steps * n_resolves / 2
+
+
+def run_timeout_s(configured: float | None, problem: Problem, *, first: bool = False) -> float:
+    """A run's wall-time limit [s]: ``output.run_timeout_s``, else a small multiple of its cost.
+
+    Default: :data:`RUN_BASE_S` + :data:`COST_MULTIPLE` × :func:`run_cost_s`, and
+    :data:`FIRST_RUN_ALLOWANCE_S` more for the ``first`` run of an architecture in
+    a process. The paper's run (800 steps, 79 re-solves): 19.5 s (129.5 s the first),
+    where it takes 5-100 ms and about 1 s with a cone program at every re-solve; a
+    20,000-step run (1,999 re-solves): 6,007 s (10,060 s before). The open-loop references of a grid
+    point get the limit of its runs (issue 36, item 13).
     """
-    return configured if configured is not None else 60.0 + 0.5 * n_steps
+    if configured is not None:
+        return configured
+    cost = run_cost_s(problem.scenario.n_steps, resolves(problem))
+    return RUN_BASE_S + COST_MULTIPLE * cost + (FIRST_RUN_ALLOWANCE_S if first else 0.0)
 
 
 @contextmanager

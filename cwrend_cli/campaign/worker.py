@@ -223,6 +223,11 @@ def run_case(
 # ---------------------------------------------------------------------------
 
 
+#: Architectures this process has started a run of: the first one of each also loads (or
+#: compiles) its kernels, which its time limit allows for (:func:`guards.run_timeout_s`).
+_ARCHS_RUN: set[str] = set()
+
+
 @dataclass(frozen=True)
 class RunOutcome:
     """What a worker returns for one run: small, whatever the run's length."""
@@ -372,15 +377,17 @@ def execute_task(
                 problem = problems.get(spec.dispersed)
                 if problem is None:
                     problem = problems[spec.dispersed] = with_values(task.problem, spec.dispersed)
-                run_refs = _references(problem, references)
                 noise = noises.get((spec.dispersed, spec.seed))
                 if noise is None:
                     n_steps = problem.scenario.n_steps
                     noise = noises[spec.dispersed, spec.seed] = standard_normal(
                         task.noise, spec.seed, n_steps
                     )
-                limit = guards.run_timeout_s(run_timeout_s, problem.scenario.n_steps)
-                with guards.time_limit(limit):
+                first = spec.arch not in _ARCHS_RUN
+                _ARCHS_RUN.add(spec.arch)
+                limit = guards.run_timeout_s(run_timeout_s, problem, first=first)
+                with guards.time_limit(limit):  # the references too, when computed here
+                    run_refs = _references(problem, references)
                     result = simulation.simulate(
                         problem,
                         ALL_ARCHITECTURES[spec.arch],

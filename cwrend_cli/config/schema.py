@@ -872,8 +872,10 @@ class OutputConfig(_FrozenModel):
         le=MAX_RUN_TIMEOUT_S,
         description="campaigns: wall-time limit of one run, at most 86,400 (a day) [s]; a run "
         "past it is recorded "
-        "failed 'timed out' and the campaign goes on; unset = 60 s + 0.5 s per step "
-        "(460 s for the paper's 800 steps; not enforced on Dask workers)",
+        "failed 'timed out' and the campaign goes on; the open-loop references of a grid "
+        "point get the same limit; unset = 10 s + 3 x 100 µs x steps x re-solves / 2, "
+        "120 s more for a process's first run of an architecture (19.5 s for the paper's "
+        "800 steps and 79 re-solves; not enforced on Dask workers)",
     )
     dask_no_worker_timeout_s: Float = Field(
         60.0,
@@ -1094,7 +1096,8 @@ class CwrendConfig(_FrozenModel):
         default_factory=DegradationConfig, description="sensor degradation windows"
     )
     truth: TruthConfig = Field(
-        default_factory=TruthConfig, description="truth dynamics (guidance and filter: CW)"
+        default_factory=TruthConfig,
+        description="truth dynamics (guidance and filter: CW unless [model])",
     )
     actuator: ActuatorConfig = Field(
         default_factory=ActuatorConfig, description="actuator errors (the truth gets them)"
