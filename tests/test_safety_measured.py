@@ -207,3 +207,20 @@ def test_the_constrained_socp_flies_round_the_zone_and_shooting_does_not(tmp_pat
     assert (socp["fallback_step"] == "socp_scp").all()
     assert (socp["scp_iterations"] >= 1).all() and (socp["slack_km"] == 0.0).all()
     assert (solves[solves["arch"] == "mtf_fixed"]["scp_iterations"] == 0).all()
+
+
+def test_a_constrained_campaign_states_its_violation_rate(tmp_path: Path) -> None:
+    campaign = _ablate(tmp_path, *CONSTRAINED)
+    stats = pq.read_table(campaign / "ablation.parquet").to_pandas()
+    share = stats[(stats["metric"] == "safety_violated") & (stats["statistic"] == "share")]
+    assert len(share) == 1
+    row = share.iloc[0]
+    # one run, through the zone: 1 of 1, Wilson's interval [0.2065, 1]
+    assert row["value"] == 1.0 and row["n"] == 1
+    assert row["ci_low"] == pytest.approx(0.2065, abs=1e-4) and row["ci_high"] == 1.0
+    assert {"median", "p1"} <= set(stats[stats["metric"] == "safety_min_distance_km"]["statistic"])
+
+
+def test_an_unconstrained_campaign_has_no_safety_statistics(tmp_path: Path) -> None:
+    stats = pq.read_table(_ablate(tmp_path) / "ablation.parquet").to_pandas()
+    assert not stats["metric"].str.startswith("safety").any()

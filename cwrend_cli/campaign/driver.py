@@ -104,6 +104,8 @@ __all__ = [
     "CampaignStatistics",
     "CampaignSummary",
     "Progress",
+    "hold_campaign",
+    "no_statistics",
     "run_campaign",
     "write_sensitivity",
     "write_statistics",
@@ -238,7 +240,8 @@ class _PointReferences:
                 table = references_table(refs, meta)
                 write_parquet(table, self._out_dir / rel, root=self._out_dir)
             self._written.add(rel)
-            append_events(self._out_dir / REFERENCES_INDEX, [{"point": task.point, "file": rel}])
+            index = self._out_dir / REFERENCES_INDEX
+            append_events(index, [{"point": task.point, "file": rel}], root=self._out_dir)
             self._indexed.add(task.point)
         return refs
 
@@ -803,6 +806,12 @@ class CampaignStatistics:
     path: Path | None  # the file written (None when there was nothing to write)
 
 
+def no_statistics(command: Literal["ablate", "sweep"]) -> CampaignStatistics:
+    """No statistics, none written (an interrupted campaign's: written when it completes)."""
+    groups: tuple[str, ...] = () if command == "ablate" else ("point",)
+    return CampaignStatistics(pd.DataFrame(), groups, None)
+
+
 def _statistics(
     runs: pd.DataFrame,
     command: Literal["ablate", "sweep"],
@@ -811,13 +820,14 @@ def _statistics(
 ) -> tuple[pd.DataFrame, tuple[str, ...]]:
     groups = () if command == "ablate" else ("point", *param_columns(runs.columns))
     by = [*groups, "arch"]
-    frame = pd.concat(
-        [
-            statistics.describe(runs, by, seed=root_seed),
-            statistics.paired(runs, list(groups), seed=root_seed, pairs=pairs),
-        ],
-        ignore_index=True,
-    )
+    frames = [
+        statistics.describe(runs, by, seed=root_seed),
+        statistics.paired(runs, list(groups), seed=root_seed, pairs=pairs),
+    ]
+    safety = statistics.safety(runs, by, seed=root_seed)  # issue 32: constrained campaigns
+    if not safety.empty:
+        frames.append(safety)
+    frame = pd.concat(frames, ignore_index=True)
     return frame, groups
 
 

@@ -442,6 +442,77 @@ def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFra
     )
 
 
+#: Stream of the safety rows' bootstrap: ``default_rng([seed, SAFETY_STREAM])``, its own, so
+#: that they change no other row (issue 32).
+SAFETY_STREAM = 2**32 - 3
+
+
+def _p1(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    p1: np.ndarray = np.percentile(x, 1, axis=axis)
+    return p1
+
+
+#: Safety rows (issue 32): (metric, statistic name, statistic) with bootstrap intervals.
+SAFETY_STATISTICS: tuple[tuple[str, str, Statistic], ...] = (
+    ("safety_min_distance_km", "median", np.median),
+    ("safety_min_distance_km", "p1", _p1),
+    ("safety_unsafe_time_s", "mean", np.mean),
+)
+
+
+def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame:
+    """Per group, the safety of the true trajectories of a constrained campaign (issue 32).
+
+    ``safety_violated`` / ``share``: the share of ok runs that entered the unsafe
+    set, with its Wilson interval; the median and 1st percentile of
+    ``safety_min_distance_km`` and the mean of ``safety_unsafe_time_s`` with
+    bootstrap intervals from a stream of their own (:data:`SAFETY_STREAM`).
+    Empty when the runs have no safety columns (a campaign without constraints).
+    """
+    if "safety_violated" not in runs.columns:
+        return pd.DataFrame([])
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    if not keys:
+        return pd.DataFrame([])
+    spans = list(pairwise(bounds))
+    sizes = np.diff(bounds)
+    violated = ok["safety_violated"].to_numpy(dtype=float)[order]
+    counts = np.array([np.sum(violated[a:b]) for a, b in spans])
+    share_lo, share_hi = wilson_cis(counts, sizes)
+    samples: list[FloatArray] = []
+    fns: list[Statistic] = []
+    for a, b in spans:
+        for metric, _, fn in SAFETY_STATISTICS:
+            samples.append(ok[metric].to_numpy(dtype=float)[order][a:b])
+            fns.append(fn)
+    ci = bootstrap_cis(samples, fns, np.random.default_rng([seed, SAFETY_STREAM]))
+    per_group = 1 + len(SAFETY_STATISTICS)
+    value = np.empty((len(keys), per_group))
+    low = np.empty_like(value)
+    high = np.empty_like(value)
+    value[:, 0], low[:, 0], high[:, 0] = counts / sizes, share_lo, share_hi
+    for k, (_, _, fn) in enumerate(SAFETY_STATISTICS):
+        value[:, 1 + k] = _point_values(samples[k :: len(SAFETY_STATISTICS)], fn)
+    low[:, 1:] = ci[:, 0].reshape(len(keys), len(SAFETY_STATISTICS))
+    high[:, 1:] = ci[:, 1].reshape(len(keys), len(SAFETY_STATISTICS))
+    labels = [("safety_violated", "share")] + [(m, n) for m, n, _ in SAFETY_STATISTICS]
+    return _frame(
+        by,
+        keys,
+        per_group,
+        {
+            "kind": "marginal",
+            "metric": [m for _ in keys for m, _ in labels],
+            "statistic": [st for _ in keys for _, st in labels],
+            "value": value.ravel(),
+            "ci_low": low.ravel(),
+            "ci_high": high.ravel(),
+            "n": np.repeat(sizes.astype(np.int64), per_group),
+        },
+    )
+
+
 def paired(
     runs: pd.DataFrame,
     by: Sequence[str] = (),
