@@ -68,7 +68,9 @@ def _run(command: list[str], limit_s: float) -> tuple[int | None, float, str]:
     try:
         _, err = proc.communicate(timeout=limit_s)
         return proc.returncode, time.monotonic() - started, err
-    except subprocess.TimeoutExpired:
+    except subprocess.TimeoutExpired:  # where it hangs: cwrend dumps its stacks on SIGUSR1
+        os.kill(proc.pid, signal.SIGUSR1)
+        time.sleep(2.0)
         os.killpg(proc.pid, signal.SIGKILL)
         _, err = proc.communicate()
         return None, time.monotonic() - started, err
@@ -110,7 +112,7 @@ def _attempt(mount: Path, size_mb: int, args: argparse.Namespace, reference: Tab
         command = _command(mount, args.seeds, args.workers)
         code, seconds, err = _run(command, args.limit_s)
         if code != 3:
-            return Attempt(size_mb, code, seconds, f"expected exit 3: {err.strip()[-300:]}")
+            return Attempt(size_mb, code, seconds, f"expected exit 3: {err.strip()[-3000:]}")
         _mount(mount, ROOMY, remount=True)
         again, _, err = _run(command, args.rerun_limit_s)
         if again != 0:

@@ -190,7 +190,9 @@ def test_a_write_confined_to_a_directory_never_follows_a_link_below_it(tmp_path:
     assert list(elsewhere.iterdir()) == []
 
 
-@pytest.mark.parametrize("planted", ["steps/arch=mtf_adaptive", "recordings", "events.jsonl"])
+@pytest.mark.parametrize(
+    "planted", ["steps/arch=mtf_adaptive", "recordings", "references", "events.jsonl"]
+)
 def test_a_link_planted_after_start_up_is_never_written_through(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, planted: str
 ) -> None:

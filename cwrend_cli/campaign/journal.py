@@ -52,7 +52,7 @@ from cwrend_cli import __version__
 from cwrend_cli.campaign.plan import CampaignPlan
 from cwrend_cli.campaign.worker import TaskOutcome
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output.files import refuse_links
+from cwrend_cli.output.files import open_confined_dir, refuse_links
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     DESIGN,
@@ -109,7 +109,9 @@ def iso(unix: float) -> str:
 # ---------------------------------------------------------------------------
 
 
-def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None:
+def append_events(
+    path: str | Path, events: Sequence[Mapping[str, Any]], *, root: Path | None = None
+) -> None:
     """Append JSON lines in one write and fsync.
 
     A ``kill -9`` or a full disk can only tear the last line; the next append
@@ -120,26 +122,29 @@ def append_events(path: str | Path, events: Sequence[Mapping[str, Any]]) -> None
     directory) are flushed to disk first: workers write them without waiting
     for the disk (issue 17), and a task counts once its event is in the
     journal, so the event must never be on disk before its files.
+
+    Never through a link: the file itself (``O_NOFOLLOW``), and with ``root``
+    every directory between ``root`` and the file too
+    (:func:`~cwrend_cli.output.files.open_confined_dir`).
     """
-    root = Path(path).parent
-    _flush(root / f for e in events if e.get("event") == "task_done" for f in e.get("files", ()))
+    base = Path(path).parent
+    _flush(base / f for e in events if e.get("event") == "task_done" for f in e.get("files", ()))
     text = "".join(json.dumps(e, sort_keys=True, default=_json_default) + "\n" for e in events)
-    with open(_open_to_append(Path(path)), "ab") as fh:
-        if fh.tell() > 0:
-            with open(path, "rb") as tail:
-                tail.seek(-1, os.SEEK_END)
-                if tail.read(1) != b"\n":
-                    text = "\n" + text
+    with open(_open_to_append(Path(path), root), "ab") as fh:
+        if fh.tell() > 0 and os.pread(fh.fileno(), 1, fh.tell() - 1) != b"\n":
+            text = "\n" + text
         fh.write(text.encode("utf-8"))
         fh.flush()
         os.fsync(fh.fileno())
 
 
-def _open_to_append(path: Path) -> int:
+def _open_to_append(path: Path, root: Path | None = None) -> int:
     """A descriptor appending to ``path``, never through a link planted after start-up (issue 36,
     item 6): a link is an :class:`OSError` ``ELOOP`` naming it."""
+    flags = os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW
+    directory = open_confined_dir(root, path.parent) if root is not None else None
     try:
-        return os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        return os.open(path if directory is None else path.name, flags, 0o644, dir_fd=directory)
     except OSError as exc:
         if exc.errno != errno.ELOOP:
             raise
@@ -149,6 +154,9 @@ def _open_to_append(path: Path) -> int:
             "command again",
             str(path),
         ) from None
+    finally:
+        if directory is not None:
+            os.close(directory)
 
 
 def _flush(paths: Iterable[Path]) -> None:

@@ -76,8 +76,7 @@ def atomic_path(path: Path, *, durable: bool = True, root: Path | None = None) -
     ``root`` the directory of ``path`` is made as given (links followed).
     """
     path = Path(path)
-    if root is None:
-        path.parent.mkdir(parents=True, exist_ok=True)
+    (path.parent if root is None else root).mkdir(parents=True, exist_ok=True)
     directory = open_confined_dir(root if root is not None else path.parent, path.parent)
     try:
         name = _create_temporary(directory, path.name)
