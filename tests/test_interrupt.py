@@ -109,6 +109,9 @@ def test_ctrl_c_to_a_pool_keeps_the_finished_runs_the_summary_counts(tmp_path: P
     assert found, proc.stderr
     done = int(found[1])
     assert done > 0 and int(found[2]) == done
+    # out at once: the statistics are written when the campaign completes
+    assert "run the same command to resume (and to write the statistics)" in proc.stderr
+    assert not (tmp_path / "results" / "pool" / "ablation.parquet").exists()
     resumed = runner.invoke(app, [*args, "--workers", "1"])
     assert resumed.exit_code == 0, resumed.output
     assert f"{32 - done} run(s) computed, {done} already done" in resumed.stderr
