@@ -1180,14 +1180,6 @@ class CwrendConfig(_FrozenModel):
                         "elements), or use 'cw'",
                     )
                 )
-        if self.model.filter == "ya":
-            problems.append(
-                (
-                    "model.filter",
-                    "ya",
-                    "the filter's time-varying prediction is not supported yet: use 'cw' or 'ss'",
-                )
-            )
         if problems:
             raise rules_error(problems)
         return self

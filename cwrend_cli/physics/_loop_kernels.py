@@ -69,8 +69,8 @@ from cwrend_cli.physics.truth import TRUTH_CW, TruthModel, truth_step
 class LoopModel(NamedTuple):
     """What the step loop holds constant over a run."""
 
-    phi: np.ndarray  # (6, 6) Φ(Δt) = e^{AΔt}
-    gam: np.ndarray  # (6, 3) Γ(Δt) = ∫₀^Δt e^{Aτ}B dτ
+    phi: np.ndarray  # (6, 6) Φ(Δt) = e^{AΔt} of CW (the CW truth's step)
+    gam: np.ndarray  # (6, 3) Γ(Δt) = ∫₀^Δt e^{Aτ}B dτ of CW
     lam_step: np.ndarray  # (6, 6) costate propagation e^{−AᵀΔt}
     q: np.ndarray  # (6, 6) process-noise covariance Q
     r_nominal: np.ndarray  # (3, 3) nominal measurement covariance R [km²]
@@ -86,6 +86,8 @@ class LoopModel(NamedTuple):
     u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
     override: np.ndarray  # (N,) bool
     dropout: np.ndarray  # (N,) bool: no measurement at t_{k+1} (predict only)
+    filter_phi: np.ndarray  # (N, 6, 6) Φ_k of the filter's design model (issue 33)
+    filter_gam: np.ndarray  # (N, 6, 3) Γ_k of the filter's design model
 
 
 class ScheduleParams(NamedTuple):
@@ -342,7 +344,7 @@ def _steps(
         y = x_next[:3] + m.noise[k]
         # Kalman filter predict (with the commanded control: the filter does not
         # know the actuator errors) and update (Eqs. 11–23)
-        x_pred, p_pred = kf_predict(x_hat, p, m.phi, m.gam, u, m.q)
+        x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
             x_hat[:] = x_pred

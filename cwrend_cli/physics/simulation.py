@@ -280,7 +280,8 @@ def simulate(
     settings = solver_settings(problem)
     gl_x, gl_w = settings.quadrature()
     t = sc.time_grid()
-    phi, gam = _filter_matrices(problem)
+    phi, gam = discretize(n, dt)
+    filter_phi, filter_gam = _filter_tables(problem, phi, gam)
     r_nominal = est.r_nominal_matrix()
     meas = sensors.sensor_noise(
         standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
@@ -321,6 +322,8 @@ def simulate(
         u_override=np.zeros((n_steps, 3)),
         override=np.zeros(n_steps, dtype=np.bool_),
         dropout=meas.dropout,
+        filter_phi=filter_phi,
+        filter_gam=filter_gam,
     )
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
@@ -700,23 +703,21 @@ def _guidance_tables(problem: Problem) -> design_models.StepTables | None:
     return design_models.step_tables(name, problem.scenario, problem.truth)
 
 
-def _filter_matrices(problem: Problem) -> tuple[FloatArray, FloatArray]:
-    """Φ, Γ of one step of the filter's design model (issue 33; CW: Eq. 11).
+def _filter_tables(
+    problem: Problem, phi: FloatArray, gam: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Φ_k (N, 6, 6) and Γ_k (N, 6, 3) the filter predicts with at each step (issue 33).
 
-    The step loop also steps a CW truth with these, so a model other than CW
-    needs a truth of its own (the configuration refuses it with ``truth.model
-    = "cw"``), and the loop takes one Φ, Γ: a time-invariant model only.
+    CW (``model.filter = "cw"``): every step is ``phi``, ``gam`` (Eq. 11), the
+    same numbers as before. Another model: its :func:`design_models.step_tables`
+    (writable copies, so that the compiled loop sees the arrays it always did).
     """
-    sc = problem.scenario
+    n_steps = problem.scenario.n_steps
     name = problem.model.filter
     if name == "cw":
-        return discretize(sc.mean_motion_rad_s, sc.dt_s)
-    if problem.truth.model == "cw":
-        raise ValueError(f"model.filter = {name!r} needs a truth other than 'cw'")
-    tables = design_models.step_tables(name, sc, problem.truth)
-    if not tables.time_invariant:
-        raise ValueError(f"model.filter = {name!r}: the filter takes time-invariant models only")
-    return tables.phi[0].copy(), tables.gam[0].copy()
+        return np.repeat(phi[None], n_steps, axis=0), np.repeat(gam[None], n_steps, axis=0)
+    tables = design_models.step_tables(name, problem.scenario, problem.truth)
+    return np.array(tables.phi), np.array(tables.gam)
 
 
 def _warm_costate(
