@@ -20,6 +20,9 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
     /reference/{energy,fuel}/{u_norm, dv_cum, pos_err_km}
     /target                            Points3D at the origin (static)
     /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
+    /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static)
+    /arch/<slug>/safety_distance_km    Scalars: φ to the unsafe set (with [constraints])
+    /arch/<slug>/trajectory/unsafe     Points3D: the nodes inside the unsafe set (static)
     /about                             TextDocument: what is in the recording, arrow scale
 
 Every time series is sent with one ``send_columns`` call (no per-step
@@ -53,6 +56,7 @@ if TYPE_CHECKING:
     import rerun as rr
     import rerun.blueprint as rrb
 
+    from cwrend_cli.physics.constraints import Geometry
     from cwrend_cli.physics.references import OpenLoopResult
     from cwrend_cli.physics.simulation import References, RunResult
 
@@ -207,6 +211,7 @@ def build_blueprint(
     n_windows: int,
     *,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    safety: bool = False,
 ) -> rrb.Blueprint:
     """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors).
 
@@ -233,6 +238,7 @@ def build_blueprint(
             *[f"/arch/{s}/thrust" for s in slugs],
             *[f"/reference/{r}/trajectory" for r in reference_names],
             "/target",
+            "/constraints/**",
         ],
         eye_controls=_eye(rrb, bounds) if bounds is not None else None,
     )
@@ -254,6 +260,11 @@ def build_blueprint(
         _series_view(rrb, "estimation error [km]", arch("est_err_km")),
         _series_view(rrb, "NIS [-]", arch("nis")),
         _series_view(rrb, "MTF ratio ρ [-]", arch("mtf_ratio")),
+        *(
+            [_series_view(rrb, "distance to the unsafe set [km]", arch("safety_distance_km"))]
+            if safety
+            else []
+        ),
     )
     return rrb.Blueprint(
         rrb.Horizontal(left, middle, right, column_shares=[2, 1, 1]),
@@ -426,6 +437,9 @@ def _log_case(
         ),
         static=True,
     )
+    geo = next((r.safety.geometry for r in runs if r.safety is not None), None)
+    if geo is not None:  # issue 32: the keep-out zone and the corridor
+        _log_constraints(rec, geo, line_r)
     rec.log(
         "/about",
         rr.TextDocument(
@@ -474,6 +488,17 @@ def _log_case(
                 rec, f"{base}/{name}", t, values, name=label, colour=colour,
                 width=1.0 if name == "score_filtered" else 1.5,
             )  # fmt: skip
+        if run.safety is not None:  # issue 32: the distance, and where the path was unsafe
+            _send_scalars(
+                rec, f"{base}/safety_distance_km", t, run.safety.step_distance_km,
+                name=run.arch, colour=colour,
+            )  # fmt: skip
+            unsafe = run.x_true[run.safety.step_distance_km < 0.0, :3]
+            rec.log(
+                f"{base}/trajectory/unsafe",
+                rr.Points3D(unsafe, colors=[UNSAFE_COLOUR], radii=[0.6 * point_r]),
+                static=True,
+            )
         resolves = run.resolves
         _send_scalars(
             rec,
@@ -517,6 +542,50 @@ def _log_case(
                 level=["WARN", "INFO"],
             ),
         )
+
+
+#: Colour of the keep-out zone, the corridor and the unsafe nodes of a path (issue 32).
+UNSAFE_COLOUR = (230, 60, 60)
+CORRIDOR_COLOUR = (90, 200, 120)
+#: Generator lines drawn of the corridor cone [-].
+_CONE_LINES = 12
+
+
+def _log_constraints(rec: rr.RecordingStream, geo: Geometry, line_radius: float) -> None:
+    """The keep-out ellipsoid (``/constraints/keep_out``) and the corridor cone
+    (``/constraints/corridor``: generator lines and two rings, out to twice the largest
+    semi-axis or port distance), static."""
+    import rerun as rr
+
+    if geo.semi_axes_km is not None:
+        rec.log(
+            "/constraints/keep_out",
+            rr.Ellipsoids3D(
+                half_sizes=[geo.semi_axes_km], centers=[[0.0, 0.0, 0.0]], colors=[UNSAFE_COLOUR]
+            ),
+            static=True,
+        )
+    if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
+        return
+    size = max(
+        float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 0.0,
+        float(np.linalg.norm(geo.port_km)),
+    )
+    length = 2.0 * size if size > 0 else 1.0
+    helper = np.eye(3)[int(np.argmin(np.abs(geo.axis)))]
+    e1 = np.cross(geo.axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(geo.axis, e1)
+    psi = np.linspace(0.0, 2.0 * np.pi, 4 * _CONE_LINES + 1)
+    c, s = np.cos(geo.half_angle_rad), np.sin(geo.half_angle_rad)
+    rim = geo.axis[None, :] * c + s * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    strips = [np.stack([geo.port_km, geo.port_km + length * d]) for d in rim[::4][:-1]]
+    strips += [geo.port_km + f * length * rim for f in (0.5, 1.0)]
+    rec.log(
+        "/constraints/corridor",
+        rr.LineStrips3D(strips, colors=[CORRIDOR_COLOUR], radii=[0.5 * line_radius]),
+        static=True,
+    )
 
 
 #: Values of the ``RERUN`` environment variable that turn Rerun's logging off, in any case
@@ -612,7 +681,11 @@ def encode_case(
     _require_enabled(rec)
     slugs = [r.arch for r in runs]
     blueprint = build_blueprint(
-        slugs, ("energy", "fuel"), len(windows), bounds=scene_bounds(runs, refs)
+        slugs,
+        ("energy", "fuel"),
+        len(windows),
+        bounds=scene_bounds(runs, refs),
+        safety=any(r.safety is not None for r in runs),
     )
     memory = rec.memory_recording()
     rec.send_blueprint(blueprint, make_active=False, make_default=True)

@@ -354,6 +354,7 @@ class Safety:
     approach_angle_deg: float  # angle between v(T) and −â (0: straight down the corridor) [deg]
     violated: bool  # min_distance_km < 0
     step_distance_km: FloatArray  # (N+1,) φ at the nodes t_k [km]
+    geometry: Geometry  # what was measured against (drawn by the recordings)
 
 
 def _ellipsoid_distance_bounds(
@@ -446,4 +447,5 @@ def measure_safety(
         approach_angle_deg=angle,
         violated=bool(min_distance < 0.0),
         step_distance_km=np.asarray(nodes, dtype=np.float64),
+        geometry=geo,
     )
