@@ -469,7 +469,8 @@ def test_misses_are_in_m_in_report_md_and_figures(ablation_dir: Path) -> None:
     header = next(ln for ln in md.splitlines() if ln.startswith("| case |"))
     assert "| miss [m] |" in header
     run = data.ok_runs().query("arch == 'mtf_adaptive' and seed == 0").iloc[0]
-    assert _row(md, "MTF KF, adaptive ε")[2] == f"{run.miss_km * 1e3:.2f}"
+    per_seed = md.split("## Noise seed 0")[1]  # after the campaign's statistics
+    assert _row(per_seed, "MTF KF, adaptive ε")[2] == f"{run.miss_km * 1e3:.2f}"
     for draw in (figures.fig_miss_distribution, figures.fig_dv_vs_miss):
         assert draw(data).axes[0].get_ylabel().endswith("[m]")
     paired = figures.fig_paired_miss(data).axes[0]
@@ -580,7 +581,43 @@ def test_report_html_is_self_contained(ablation_report: Path) -> None:
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
     assert "<code>abc</code>" in page  # the config hash
-    assert '"beta": 0.25' in page  # the resolved config
+    assert "beta = 0.25" in page  # the resolved config, as TOML
+
+
+def test_report_html_says_what_it_is_when_and_by_which_cwrend(ablation_report: Path) -> None:
+    from cwrend_cli import __version__
+
+    page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
+    assert "<title>cwrend report · ablation</title>" in page
+    assert "<h1>cwrend report · ablation</h1>" in page
+    made = re.search(r"Made (\d{4}-\d\d-\d\d \d\d:\d\d UTC) by cwrend (\S+);", page)
+    assert made is not None and made.group(2) == __version__
+    assert "config hash <code>abc</code>" in page
+
+
+def test_report_html_has_a_table_of_contents_of_its_sections(ablation_report: Path) -> None:
+    page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
+    nav = page[page.index("<nav>") : page.index("</nav>")]
+    sections = re.findall(r'<h([23]) id="([^"]+)">', page)
+    assert len(sections) > 5 and page.index("</nav>") < page.index("<h2")
+    for _, anchor in sections:
+        assert f'href="#{anchor}"' in nav
+    assert [a for _, a in sections][-1] == "configuration"
+
+
+def test_report_html_configuration_is_toml_that_loads_back(ablation_report: Path) -> None:
+    import html
+    import tomllib
+
+    page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
+    toml = html.unescape(page.split("<pre>")[-1].split("</pre>")[0])
+    assert tomllib.loads(toml)["schedule"]["beta"] == 0.25
+
+
+def test_report_gives_the_campaign_statistics_before_one_seeds_rows(ablation_dir: Path) -> None:
+    md = report_md(load_results(ablation_dir), ablation_dir, [])
+    assert md.index("## Over 3 noise seeds") < md.index("## Noise seed 0")
+    assert md.index("### Paired comparisons") < md.index("## Noise seed 0")
 
 
 # ---------------------------------------------------------------------------

@@ -3,7 +3,11 @@
 Renders the markdown that :func:`~cwrend_cli.report.markdown.report_md`
 writes (headings, paragraphs, tables, images, ``code`` and **bold**), with
 every figure embedded as a base64 PNG, followed by the resolved
-configuration (JSON) and its hash, so the one file can be mailed.
+configuration (TOML, as ``cwrend config show`` prints it and ``--config``
+reads it back) and its hash, so the one file can be mailed. Its head says
+what it is: the title (the results directory), when it was made, the cwrend
+version and the config hash, then a table of contents of its sections
+(issue 37 item 14).
 """
 
 from __future__ import annotations
@@ -21,6 +25,9 @@ th:first-child, td:first-child { text-align: left; }
 th { background: #f0f4f8; }
 img { max-width: 100%; }
 pre { background: #f6f6f6; padding: 1em; overflow-x: auto; font-size: 0.85em; }
+nav { background: #f6f8fa; padding: 0.5em 1em; margin: 1em 0; }
+nav ul { margin: 0.25em 0; padding-left: 1.5em; }
+.made { color: #555; }
 """
 
 
@@ -51,11 +58,57 @@ def _image(alt: str, file: str, images: Mapping[str, bytes]) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
 
 
+def _anchor(text: str, taken: set[str]) -> str:
+    """An id for a heading: its words, lower case, joined by ``-``; unique in the page."""
+    base = re.sub(r"[^\w]+", "-", text.lower()).strip("-") or "section"
+    anchor, k = base, 2
+    while anchor in taken:
+        anchor, k = f"{base}-{k}", k + 1
+    taken.add(anchor)
+    return anchor
+
+
+def _contents(headings: list[tuple[int, str, str]]) -> str:
+    """The table of contents: the level-2 sections, their level-3 ones nested."""
+    out = ["<nav><strong>Contents</strong>", "<ul>"]
+    open_sub = False
+    for level, anchor, text in headings:
+        item = f'<li><a href="#{anchor}">{text}</a>'
+        if level == 2:
+            if open_sub:
+                out.append("</ul></li>")
+                open_sub = False
+            out.append(item)
+        elif level == 3:
+            if not open_sub:
+                out.append("<ul>")
+                open_sub = True
+            out.append(item + "</li>")
+    if open_sub:
+        out.append("</ul></li>")
+    return "\n".join([*out, "</ul></nav>"])
+
+
 def report_html(
-    markdown: str, images: Mapping[str, bytes], config_json: str | None, config_hash: str
+    markdown: str,
+    images: Mapping[str, bytes],
+    config_toml: str | None,
+    config_hash: str,
+    *,
+    title: str,
+    made: str,
+    version: str,
 ) -> str:
-    """The HTML page of ``markdown`` with ``images`` (file name → PNG bytes) embedded."""
+    """The HTML page of ``markdown`` with ``images`` (file name → PNG bytes) embedded.
+
+    ``title``: what the report is of (e.g. the results directory's name);
+    ``made``: when (e.g. ``2026-12-02 09:14 UTC``); ``version``: cwrend's. The
+    head of the page gives them with the config hash, then the contents of
+    the level-2 and level-3 sections; the configuration ends the page.
+    """
     body: list[str] = []
+    headings: list[tuple[int, str, str]] = []
+    taken: set[str] = set()
     lines = markdown.splitlines()
     i = 0
     while i < len(lines):
@@ -69,23 +122,39 @@ def report_html(
             continue
         heading = re.match(r"(#{1,6}) (.*)", line)
         image = re.fullmatch(r"!\[([^\]]*)\]\(([^)]+)\)", line.strip())
-        if heading:
+        if heading and len(heading.group(1)) == 1:  # the page's own title replaces it
+            pass
+        elif heading:
             level = len(heading.group(1))
-            body.append(f"<h{level}>{_inline(heading.group(2))}</h{level}>")
+            text = _inline(heading.group(2))
+            anchor = _anchor(heading.group(2), taken)
+            headings.append((level, anchor, text))
+            body.append(f'<h{level} id="{anchor}">{text}</h{level}>')
         elif image:
             body.append(_image(image.group(1), image.group(2), images))
         elif line.strip():
             body.append(f"<p>{_inline(line)}</p>")
         i += 1
-    body.append("<h2>Configuration</h2>")
-    body.append(f"<p>Config hash <code>{html.escape(config_hash or '(none)')}</code></p>")
-    config = config_json if config_json is not None else "(no configuration stored)"
+    anchor = _anchor("configuration", taken)
+    headings.append((2, anchor, "Configuration"))
+    body.append(f'<h2 id="{anchor}">Configuration</h2>')
+    hash_html = f"<code>{html.escape(config_hash or '(none)')}</code>"
+    body.append(f"<p>Config hash {hash_html}; the resolved configuration as TOML:</p>")
+    config = config_toml if config_toml is not None else "(no configuration stored)"
     body.append(f"<pre>{html.escape(config, quote=False)}</pre>")
+    name = html.escape(f"cwrend report · {title}")
+    head = [
+        f"<h1>{name}</h1>",
+        f'<p class="made">Made {html.escape(made)} by cwrend {html.escape(version)}; '
+        f"config hash {hash_html}.</p>",
+        _contents(headings),
+    ]
     return "\n".join(
         [
             "<!DOCTYPE html>",
-            '<html lang="en"><head><meta charset="utf-8"><title>cwrend report</title>',
+            f'<html lang="en"><head><meta charset="utf-8"><title>{name}</title>',
             f"<style>{_STYLE}</style></head><body>",
+            *head,
             *body,
             "</body></html>",
             "",

@@ -341,7 +341,12 @@ def _design_lines(data: ReportData) -> list[str]:
 
 
 def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, str]]) -> str:
-    """The text of ``report.md``: provenance, notes, tables, then ``figures`` (file, caption)."""
+    """The text of ``report.md``: provenance, notes, tables, then ``figures`` (file, caption).
+
+    The tables: the statistics over the campaign's seeds (with the paired
+    comparisons) before the rows of the one seed the per-seed figures show,
+    then the sweep or design tables.
+    """
     n_seeds = int(data.ok_runs()["seed"].nunique())
     lines = [
         "# cwrend report",
@@ -360,8 +365,8 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
         )
         lines.append(f"Degradation windows (shaded in the figures): {wins}.")
     lines += [f"{note}" for note in data.notes]
-    lines += ["", f"## Noise seed {data.seed}", "", seed_table(data), ""]
-    if n_seeds > 1:
+    lines += [""]
+    if n_seeds > 1:  # the campaign's statistics first, then one seed's rows (issue 37 item 14)
         stats = data.point_stats()
         about = (
             "Values [95 % bootstrap interval], from the campaign's statistics file."
@@ -376,6 +381,7 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
                       "bootstrap otherwise).", "", pairs, ""]  # fmt: skip
         if _flagged(stats):
             lines += [UNRELIABLE_NOTE, ""]
+    lines += [f"## Noise seed {data.seed}", "", seed_table(data), ""]
     if data.design:
         lines += _design_lines(data)
     elif data.params:

@@ -11,9 +11,9 @@ place where the report writes files.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,8 @@ import matplotlib as mpl
 import pandas as pd
 from matplotlib.figure import Figure
 
-from cwrend_cli.config import resolved_dict
+from cwrend_cli import __version__
+from cwrend_cli.config import to_toml
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.output.layout import REPORT_DIR
 from cwrend_cli.report.figures import DPI, STYLE, fig_compare, planned_figures
@@ -75,10 +76,15 @@ def write_report(
     with atomic_path(md, root=results_dir) as tmp:
         tmp.write_text(text, encoding="utf-8")
     page = out / "report.html"
-    config = json.dumps(resolved_dict(data.config), indent=2) if data.config else None
+    config = to_toml(data.config) if data.config else None
     images = {path.name: path.read_bytes() for path in figures}
+    made = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    page_text = report_html(
+        text, images, config, data.config_hash,
+        title=results_dir.resolve().name, made=made, version=__version__,
+    )  # fmt: skip
     with atomic_path(page, root=results_dir) as tmp:
-        tmp.write_text(report_html(text, images, config, data.config_hash), encoding="utf-8")
+        tmp.write_text(page_text, encoding="utf-8")
     return ReportSummary(
         results_dir=results_dir,
         out_dir=out,
