@@ -163,3 +163,19 @@ def test_the_corridor_half_angle_is_dispersed_like_any_value() -> None:
             angles.append(problem.constraints.corridor.half_angle_deg)
     assert len(set(angles)) == 3
     assert all(15.0 <= a <= 25.0 for a in angles)
+
+
+@pytest.mark.parametrize(
+    ("column", "unit"),
+    [
+        ("param.constraints.sigma_margin", "-"),
+        ("param.constraints.corridor.axis.1", "-"),
+        ("disp.constraints.corridor.half_angle_deg", "deg"),
+        ("param.constraints.keep_out.semi_axes_km.0", "km"),
+        ("param.constraints.corridor.port_km.2", "km"),
+    ],
+)
+def test_swept_and_dispersed_constraint_values_have_units(column: str, unit: str) -> None:
+    from cwrend_cli.output.tables import unit_of
+
+    assert unit_of(column) == unit

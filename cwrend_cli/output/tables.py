@@ -234,6 +234,8 @@ _DIMENSIONLESS_KEYS = (
     "solver.on_infeasible",
     "solver.max_iter",
     "solver.quadrature_nodes",
+    "constraints.sigma_margin",
+    "constraints.corridor.axis",
 )
 #: Configuration keys without a unit suffix that are not dimensionless.
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
