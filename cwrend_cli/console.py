@@ -29,6 +29,9 @@ from cwrend_cli.output.tables import reference_row, summary_row
 from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import setting_text, swept_values
 
+#: Metres per kilometre: the console shows misses in m (Δv in km/s), as report.md does.
+M_PER_KM = 1e3
+
 
 def _num(value: float, spec: str) -> str:
     return "–" if math.isnan(value) else f"{value:{spec}}"
@@ -40,6 +43,11 @@ def _solves(r: Mapping[str, Any]) -> str:
     ok = r["n_converged"]
     text = f"{ok}/{r['n_solves']}"
     return text + (f" ({r['n_infeasible']} inf.)" if r["n_infeasible"] else "")
+
+
+#: Table options that leave the widest rows whole at 80 columns: no outer edge, one
+#: space before each column (two between columns with the separator), as the run table.
+_NARROW: dict[str, Any] = {"show_edge": False, "padding": (0, 0, 0, 1)}
 
 
 def _table(title: str | None, **options: Any) -> Table:
@@ -67,14 +75,14 @@ def summary_console_table(case: CaseResult, title: str = "") -> Group:
         padding=(0, 0, 0, 1),  # with the column separator: two spaces between columns
     )
     table.add_column("case", no_wrap=True)
-    for name in ("Δv km/s", "miss km", "vs fuel", "converged", "solve ms"):
-        # fold rather than cut a number that does not fit (never an ellipsis)
-        table.add_column(name, justify="right", overflow="fold")
+    for name in ("Δv km/s", "miss m", "vs fuel", "converged", "solve ms"):
+        # never cut or fold a number: the widest cells are short enough for 80 columns
+        table.add_column(name, justify="right", no_wrap=True)
     for r in rows:
         table.add_row(
             r["arch"].replace("open_loop_", "open-loop "),
             f"{r['delta_v_km_s']:.5f}",
-            f"{r['miss_km']:.2e}",
+            f"{r['miss_km'] * M_PER_KM:.3g}",  # misses in m, as every cwrend table
             _num(r["fuel_penalty_pct"], "+.1f") + "%",
             _solves(r),
             f"{_num(r['solve_mean_ms'], '.2f')}/{_num(r['solve_max_ms'], '.1f')}",
@@ -370,7 +378,7 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
     """
     marginal = stats[stats["kind"] == "marginal"]
     n = int(marginal["n"].max()) if not marginal.empty else 0
-    table = _table(f"{title} · {n} seed(s)")
+    table = _table(f"{title} · {n} seed(s)", **_NARROW)
     table.add_column("architecture", no_wrap=True)
     for name in ("Δv km/s", "miss m", "fuel pen. %", "solves ok %\nms mean/max"):
         table.add_column(name, justify="right", no_wrap=True)
@@ -396,9 +404,8 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
     pairs = stats[stats["kind"] == "paired"]
     if pairs.empty:
         return None
-    table = Table(
-        title="paired comparisons (same noise)", header_style="bold cyan", box=box.SIMPLE_HEAD
-    )
+    table = _table("paired comparisons (same noise)", **_NARROW)
+    table.title_style = None  # as before: a plain title under the bold one of the ablation
     table.add_column("A vs B", no_wrap=True)
     for name in ("seeds", "P(miss\nA < B)", "median\nΔmiss m", "mean\nΔΔv km/s"):
         table.add_column(name, justify="right", no_wrap=True)
@@ -421,7 +428,7 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
 
 def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) -> Table:
     """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
-    table = _table(title)
+    table = _table(title, **_NARROW)
     params = [c for c in point_cols if c != "point"]
     for p in params:
         table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)

@@ -3,7 +3,7 @@
 At the default 1600×1000 window the about panel gets the share of the left
 column its text needs (:func:`recording.about_share`): a table row per case
 (the open-loop references and every architecture, up to all eight) and a
-short key. Δv in m/s and miss in m, as every cwrend table.
+short key. Δv in km/s and miss in m, as every cwrend table.
 """
 
 from __future__ import annotations
@@ -63,13 +63,13 @@ def test_the_about_panel_of_all_eight_architectures_needs_no_scrolling(
         assert f"| {run.arch} |" in text
 
 
-def test_the_about_panel_gives_dv_in_m_s_and_miss_in_m(
+def test_the_about_panel_gives_dv_in_km_s_and_miss_in_m(
     everything: tuple[CaseResult, str],
 ) -> None:
     case, text = everything
-    assert "| colour | case | Δv [m/s] | miss [m] |" in text
+    assert "| colour | case | Δv [km/s] | miss [m] |" in text
     run = case.runs[0]
-    assert f"| {run.delta_v_km_s * 1e3:.2f} | {run.miss_km * 1e3:.3g} |" in text
+    assert f"| {run.delta_v_km_s:.5f} | {run.miss_km * 1e3:.3g} |" in text
 
 
 def test_the_3d_view_keeps_most_of_the_column_for_the_paper_ablation() -> None:

@@ -9,9 +9,17 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
+import pandas as pd
 from rich.console import Console
 
-from cwrend_cli.console import RichProgress
+from cwrend_cli.campaign import statistics
+from cwrend_cli.console import (
+    RichProgress,
+    ablation_console_table,
+    paired_console_table,
+    sweep_console_table,
+)
 
 
 class _Clock:
@@ -69,3 +77,75 @@ def test_the_progress_shows_no_rate_before_it_has_one() -> None:
         assert "4 runs/s" in line and "ETA 28 s" in line
     finally:
         progress.close()
+
+
+# --- the tables at 80 columns (item 11) ------------------------------------------------
+
+
+def _render(table: object) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=80, highlight=False, color_system=None).print(table)
+    text = buf.getvalue()
+    assert max(len(line) for line in text.splitlines()) <= 80
+    assert "…" not in text
+    return text
+
+
+def _cells(text: str) -> set[str]:
+    """Every cell of a rendered table as a whole word (what a reader sees between spaces)."""
+    return set(text.replace("│", " ").split())
+
+
+def test_the_run_table_shows_every_case_and_number_whole_at_80_columns() -> None:
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_from_dict, parse_archs
+    from cwrend_cli.console import summary_console_table
+
+    case = campaign.run_case(config_from_dict({}), parse_archs("everything"), 0)
+    cells = _cells(_render(summary_console_table(case, title="cwrend run · paper.toml")))
+    for run in case.runs:
+        assert run.arch in cells
+        assert f"{run.delta_v_km_s:.5f}" in cells
+        assert f"{run.miss_km * 1e3:.3g}" in cells  # the miss in m
+
+
+def _stats(archs: list[str], points: int = 1) -> pd.DataFrame:
+    rng = np.random.default_rng(3)
+    rows = []
+    for point in range(points):
+        for seed in range(12):
+            for k, arch in enumerate(archs):
+                rows.append(
+                    {"point": f"p{point}", "param.schedule.beta": 0.125 * (point + 1),
+                     "seed": seed, "arch": arch, "status": "ok",
+                     "miss_km": 10.0 ** (k - 4) * (1 + 0.3 * rng.standard_normal()),
+                     "delta_v_km_s": 0.14 + 1e-3 * rng.standard_normal(),
+                     "fuel_penalty_pct": 125.0 + rng.standard_normal(),
+                     "solve_success_pct": 99.5, "solve_mean_ms": 123.45,
+                     "solve_max_ms": 9876.5, "n_infeasible": 0}
+                )  # fmt: skip
+    runs = pd.DataFrame(rows)
+    by = ["point", "param.schedule.beta", "arch"] if points > 1 else ["arch"]
+    groups = [c for c in by if c != "arch"]
+    return pd.concat([statistics.describe(runs, by), statistics.paired(runs, groups)])
+
+
+SLUGS = ["plain_adaptive_socp", "mtf_adaptive_socp", "plain_fixed_socp", "mtf_fixed_socp"]
+
+
+def test_the_campaign_tables_show_every_name_and_number_whole_at_80_columns() -> None:
+    """The ablation, its paired comparisons and a sweep (compare: test_compare)."""
+    stats = _stats(SLUGS)
+    text = _render(ablation_console_table(stats, "cwrend ablate · a-long-campaign-name"))
+    cells = _cells(text)
+    marginal = stats[stats["kind"] == "marginal"]
+    for arch in SLUGS:
+        assert arch in cells
+        miss = marginal.query("arch == @arch and metric == 'miss_km' and statistic == 'mean'")
+        (value,) = miss["value"]
+        assert f"{value * 1e3:.2f}" in cells
+    paired = _render(paired_console_table(stats))
+    assert all(arch in _cells(paired) for arch in SLUGS)
+    sweep = _stats(SLUGS, points=3)
+    text = _render(sweep_console_table(sweep, ["point", "param.schedule.beta"], "sweep"))
+    assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)

@@ -375,7 +375,7 @@ def _about(
     arrow_scale_s2: float,
     u_max_km_s2: float,
 ) -> str:
-    """The about panel: one table row per case with its colour, Δv [m/s] and miss [m]
+    """The about panel: one table row per case with its colour, Δv [km/s] and miss [m]
     (the units of every cwrend table), then a short key; compact enough that
     :func:`about_share` of the window shows it whole."""
 
@@ -388,9 +388,9 @@ def _about(
     ]
     cases += [(name(arch_colour(r.arch, i)), r.arch, r) for i, r in enumerate(runs)]
     seeds = ", ".join(sorted({str(r.seed) for r in runs})) or "-"
-    lines = ["| colour | case | Δv [m/s] | miss [m] |", "|---|---|---|---|"]
+    lines = ["| colour | case | Δv [km/s] | miss [m] |", "|---|---|---|---|"]
     lines += [
-        f"| {colour} | {label} | {c.delta_v_km_s * 1e3:.2f} | {c.miss_km * 1e3:.3g} |"
+        f"| {colour} | {label} | {c.delta_v_km_s:.5f} | {c.miss_km * 1e3:.3g} |"
         for colour, label, c in cases
     ]
     lines += [
