@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -25,6 +26,7 @@ from typer.testing import CliRunner
 from cwrend_cli import campaign
 from cwrend_cli.cli import app
 from cwrend_cli.config import load_config
+from cwrend_cli.physics import simulation
 
 runner = CliRunner()
 ADAPTIVE = ["mtf_adaptive", "plain_adaptive"]  # the fast architectures
@@ -79,6 +81,33 @@ def test_ctrl_c_in_a_task_keeps_the_runs_it_finished(tmp_path: Path) -> None:
     steps = pd.read_parquet(out / "steps").sort_values(["run_key", "step"], ignore_index=True)
     expected = pd.read_parquet(whole / "steps").sort_values(["run_key", "step"], ignore_index=True)
     pd.testing.assert_frame_equal(steps, expected, check_exact=True)  # no duplicate, no gap
+
+
+def test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """In-process, Ctrl-C during the third run, which the code it lands in turns into an
+    error: the run is dropped, never recorded failed, and the campaign stops with two runs."""
+    real = simulation.simulate
+    calls: list[int] = []
+
+    def simulate(*args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 3:
+            try:
+                signal.raise_signal(signal.SIGINT)  # Ctrl-C, handled before this returns
+            except KeyboardInterrupt as exc:
+                raise RuntimeError("a library's own error") from exc
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(simulation, "simulate", simulate)
+    plan_ = campaign.plan(load_config(_config(tmp_path, "lib")), ADAPTIVE, list(range(8)))
+    out = tmp_path / "results" / "lib"
+    summary = campaign.run_campaign(plan_, out, command="ablate", workers=1)
+    assert summary.interrupted
+    assert (summary.executed, summary.failed) == (2, 0)
+    assert set(pd.read_parquet(out / "runs.parquet")["status"]) == {"ok"}
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
 
 
 def _runs(out: Path) -> pd.DataFrame:

@@ -42,6 +42,7 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numpy as np
@@ -294,6 +295,32 @@ def stop_task() -> None:
             later.start()
 
 
+def _ctrl_c_noted() -> Callable[[], None]:
+    """In-process, note a Ctrl-C as this task's stop when it is raised; what restores.
+
+    Python's own handler raises ``KeyboardInterrupt`` wherever the main thread
+    is; in a library it may become an error of the run (or be printed and
+    dropped by a compiler callback). Noted, the run is dropped rather than
+    recorded failed, and the task stops after it at the latest. A pool
+    worker's handler (:func:`stop_task`) notes its stop itself.
+    """
+    in_main = threading.current_thread() is threading.main_thread()
+    if not in_main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return lambda: None
+
+    def noted(signum: int, frame: FrameType | None) -> None:
+        _STOP["asked"] = True
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, noted)
+
+    def restore() -> None:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _STOP["asked"] = False
+
+    return restore
+
+
 def _interrupt_run() -> None:
     """Interrupt the run in progress, if any (:func:`stop_task` raises in the main thread)."""
     if _STOP["running"]:
@@ -366,6 +393,7 @@ def execute_task(
         references[references_key(task.problem)] = refs
     noises: dict[tuple[Assignment, int], FloatArray] = {}  # shared by the archs of a seed
     stopped = False
+    restore = _ctrl_c_noted()
     _STOP["running"] = True
     try:
         for spec in task.runs:
@@ -421,6 +449,7 @@ def execute_task(
         stopped = True
     finally:
         _STOP["running"] = False
+        restore()
     files: list[str] = []
     # the runs executed: the task's, or those finished before a stop
     digest = hashlib.sha256(" ".join(o.spec.run_key for o in outcomes).encode()).hexdigest()[:8]
