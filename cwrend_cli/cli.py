@@ -185,6 +185,25 @@ class OutputFormat(StrEnum):
     json = "json"
 
 
+class TableFormat(StrEnum):
+    """Formats of a command's table for scripts (``--format``)."""
+
+    md = "md"
+    csv = "csv"
+    json = "json"
+
+
+TableFormatOption = Annotated[
+    TableFormat | None,
+    typer.Option(
+        "--format",
+        help="Print the command's table for scripts on stdout instead of the console tables: "
+        "md (GitHub markdown), csv or json (records), every value unrounded, no progress.",
+        metavar="md|csv|json",
+    ),
+]
+
+
 def _version_callback(value: bool) -> None:
     if value:
         typer.echo(f"cwrend {__version__}")
@@ -308,6 +327,7 @@ def run(
         bool,
         typer.Option("--spawn", help="Open the recording in the Rerun viewer (needs a display)."),
     ] = False,
+    fmt: TableFormatOption = None,
 ) -> None:
     """Run closed-loop case(s) and the open-loop references; write Parquet results.
 
@@ -318,7 +338,7 @@ def run(
     from cwrend_cli import campaign
     from cwrend_cli.config import config_hash, load_config, resolved_dict
     from cwrend_cli.config.adapt import problem_of, windows_of
-    from cwrend_cli.console import summary_console_table
+    from cwrend_cli.console import script_table, summary_console_table, summary_frame
     from cwrend_cli.output import recording
     from cwrend_cli.output.files import check_output_dir, write_run
     from cwrend_cli.physics.compiled import compiling_notice
@@ -361,7 +381,9 @@ def run(
                     f"warning: no Rerun viewer could be started (no `rerun` executable or no "
                     f"display); open the file elsewhere with `rerun {rrd_path}`"
                 )
-        if not quiet:
+        if fmt is not None:  # the rows of the console table, for scripts
+            sys.stdout.write(script_table(summary_frame(case), fmt.value))
+        elif not quiet:
             _console().print(summary_console_table(case, title=f"cwrend run · {file}"))
             console.print(f"results written to {written}", soft_wrap=True, markup=False)
 
@@ -521,6 +543,7 @@ class CampaignOptions:
     strict: bool = False  # ablate --until: exit 1 when the target is not met
     pairs: tuple[str, ...] = ()  # --pair A:B, compared besides statistics.DEFAULT_PAIRS
     repair_manifest: bool = False  # rebuild a damaged manifest.json from the journal
+    table_format: str | None = None  # --format: the statistics for scripts on stdout
 
 
 def command_line() -> list[str]:
@@ -663,8 +686,9 @@ def _campaign(
                         markup=False,
                     )
         _report_campaign(command, plan, summary, statistics, out, opts, err, pairs)
-        if achieved and not opts.quiet:
-            _console().print(until_console_table(achieved, opts.until or ""))
+        if achieved and not opts.quiet:  # on stderr when stdout is a --format table
+            shown = _console() if opts.table_format is None else err
+            shown.print(until_console_table(achieved, opts.until or ""))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         if unmet and not summary.interrupted and (opts.strict or not opts.quiet):
             err.print(sequential.unmet_message(achieved, opts.max_seeds), markup=False)
@@ -724,8 +748,9 @@ def _campaign_step(
     if not opts.quiet:
         _announce(err, plan)
     progress = RichProgress(
-        err, f"{command} {out.name}", quiet=opts.quiet, notice=_first_run_notice(plan)
-    )
+        err, f"{command} {out.name}", quiet=opts.quiet or opts.table_format is not None,
+        notice=_first_run_notice(plan),
+    )  # fmt: skip
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
@@ -768,6 +793,7 @@ def _report_campaign(
         ablation_console_table,
         paired_console_table,
         phase,
+        script_table,
         sensitivity_console_table,
         sweep_console_table,
     )
@@ -791,7 +817,9 @@ def _report_campaign(
             f"the directory holds {len(held)} and {stats_file} covers them all",
             markup=False,
         )
-    if opts.quiet:
+    if opts.table_format is not None:  # the statistics as stored, for scripts
+        sys.stdout.write(script_table(statistics.frame, opts.table_format))
+    if opts.quiet or opts.table_format is not None:
         return
     stats = statistics.frame
     stdout = _console()
@@ -851,6 +879,7 @@ def ablate(
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
     yes_large: LargeOption = False,
+    fmt: TableFormatOption = None,
     until: Annotated[
         str | None,
         typer.Option(
@@ -895,7 +924,8 @@ def ablate(
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, until=until, batch=batch, max_seeds=max_seeds,
                            strict=strict, pairs=tuple(pair or ()),
-                           repair_manifest=repair_manifest)  # fmt: skip
+                           repair_manifest=repair_manifest,
+                           table_format=fmt.value if fmt else None)  # fmt: skip
     _campaign("ablate", file, set_, [], opts)
 
 
@@ -929,6 +959,7 @@ def sweep(
     rrd: RrdOption = True,
     rrd_seeds: RrdSeedsOption = None,
     yes_large: LargeOption = False,
+    fmt: TableFormatOption = None,
     design_: Annotated[
         str | None,
         typer.Option(
@@ -979,7 +1010,8 @@ def sweep(
                            retry_failed, quiet, rrd, rrd_seeds, allow_version_change,
                            yes_large, design=design_, samples=samples,
                            ranges=tuple(range_ or ()), second_order=second_order,
-                           pairs=tuple(pair or ()), repair_manifest=repair_manifest)  # fmt: skip
+                           pairs=tuple(pair or ()), repair_manifest=repair_manifest,
+                           table_format=fmt.value if fmt else None)  # fmt: skip
     _campaign("sweep", file, set_, list(param or []), opts)
 
 
@@ -1079,6 +1111,7 @@ def compare(
     quiet: Annotated[
         bool, typer.Option("--quiet", "-q", help="Print nothing but errors (no tables).")
     ] = False,
+    fmt: TableFormatOption = None,
 ) -> None:
     """Compare two campaigns seed by seed on the runs they share.
 
@@ -1096,7 +1129,11 @@ def compare(
     """
     with user_errors():
         from cwrend_cli.campaign import compare as cmp
-        from cwrend_cli.console import compare_console_tables, config_diff_console_table
+        from cwrend_cli.console import (
+            compare_console_tables,
+            config_diff_console_table,
+            script_table,
+        )
         from cwrend_cli.output.files import make_output_dir, write_parquet
         from cwrend_cli.report import write_compare_figure
 
@@ -1113,7 +1150,9 @@ def compare(
             result.frame, a.name, b.name, out / COMPARE_FIGURE, dirs=(a, b),
             differences=differences,
         )  # fmt: skip
-        if not quiet:
+        if fmt is not None:  # the paired differences as computed, for scripts
+            sys.stdout.write(script_table(result.frame, fmt.value))
+        elif not quiet:
             stdout = _console()
             stdout.print(
                 f"cwrend compare: {result.compared} run pair(s) on the same noise\n"

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+import numpy as np
 import pandas as pd
 from rich import box
 from rich.console import Console, Group
@@ -57,15 +59,56 @@ def _table(title: str | None, **options: Any) -> Table:
     )
 
 
+def _summary_rows(case: CaseResult) -> list[dict[str, Any]]:
+    """The open-loop references' rows, then each run's (``summary.parquet``'s columns)."""
+    fuel = case.references.fuel.delta_v_km_s
+    rows = [reference_row(case.references.energy, fuel), reference_row(case.references.fuel, fuel)]
+    return rows + [summary_row(r, fuel) for r in case.runs]
+
+
+def summary_frame(case: CaseResult) -> pd.DataFrame:
+    """The rows of :func:`summary_console_table` as stored (``cwrend run --format``)."""
+    return pd.DataFrame(_summary_rows(case))
+
+
+def script_table(frame: pd.DataFrame, fmt: str) -> str:
+    """``frame`` for scripts (``--format``): ``csv``, ``json`` (a list of records) or ``md``.
+
+    Every value as stored, unrounded (CSV and JSON write the shortest text that
+    reads back to the same float); a missing value is empty in CSV and
+    markdown, ``null`` in JSON. No colour, no markup.
+    """
+    if fmt == "csv":
+        return str(frame.to_csv(index=False))
+    records = [{str(k): _plain(v) for k, v in row.items()} for row in frame.to_dict("records")]
+    if fmt == "json":
+        return json.dumps(records, ensure_ascii=False) + "\n"
+    header = [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += [
+        "| " + " | ".join("" if v is None else str(v) for v in r.values()) + " |" for r in records
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _plain(value: Any) -> Any:
+    """A JSON-ready Python value: numpy scalars as Python's, NaN and NA as ``None``."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
+        return None
+    if isinstance(value, (bool, int, float, str)):
+        return value
+    return str(value)
+
+
 def summary_console_table(case: CaseResult, title: str = "") -> Group:
     """Compact tables: one row per open-loop reference and closed-loop run (fits 80 columns),
     then the filter consistency of each closed-loop run (mean NIS and NEES, faults).
 
     The seed (one per case) goes into the title, not into a column.
     """
-    fuel = case.references.fuel.delta_v_km_s
-    rows = [reference_row(case.references.energy, fuel), reference_row(case.references.fuel, fuel)]
-    rows += [summary_row(r, fuel) for r in case.runs]
+    rows = _summary_rows(case)
     seeds = sorted({int(r["seed"]) for r in rows if r["seed"] >= 0})
     if seeds:
         title = f"{title} · seed {', '.join(map(str, seeds))}" if title else f"seed {seeds[0]}"
