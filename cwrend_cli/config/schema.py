@@ -657,7 +657,7 @@ class DegradationConfig(_FrozenModel):
 
 
 class TruthConfig(_FrozenModel):
-    """The dynamics the true relative state obeys (issue 15); guidance and filter keep CW.
+    """The dynamics the true relative state obeys (issue 15); guidance and filter: see [model].
 
     ``model``: ``"cw"`` (the design model itself, the paper's setting),
     ``"two_body"`` (exact nonlinear relative motion about a Keplerian chief,

@@ -211,7 +211,8 @@ class Degradation:
 class Truth:
     """The dynamics the true relative state obeys (issue 15; :mod:`cwrend_cli.physics.truth`).
 
-    The guidance and the filter always use the CW model; ``model`` chooses
+    The guidance and the filter use the CW model unless :class:`DesignModel`
+    says otherwise (issue 33); ``model`` chooses
     the truth: ``"cw"`` (the same model, stepped exactly), ``"two_body"``
     (exact nonlinear relative motion about a Keplerian chief, in its rotating
     local-vertical frame) or ``"j2"`` (both spacecraft under two-body + J2,

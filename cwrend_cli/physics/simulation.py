@@ -342,7 +342,7 @@ def simulate(
         if solves[-1].success:
             plan_costate = result.costate
     sched = schedule_params(sch)
-    # the true relative state obeys problem.truth; guidance and filter keep CW (issue 15)
+    # the true relative state obeys problem.truth; guidance and filter their [model] (issue 33)
     truth_model = truth.truth_model(problem.truth, sc)
     act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
     state = sk.LoopState(
