@@ -9,6 +9,7 @@ run finished), never after a time.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import re
@@ -24,6 +25,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
+from cwrend_cli.campaign import worker
 from cwrend_cli.cli import app
 from cwrend_cli.config import load_config
 from cwrend_cli.physics import simulation
@@ -108,6 +110,25 @@ def test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run(
     assert (summary.executed, summary.failed) == (2, 0)
     assert set(pd.read_parquet(out / "runs.parquet")["status"]) == {"ok"}
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+
+
+def test_a_stop_that_lands_in_a_compiled_callback_is_dropped_silently(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """numba's compiler calls Python through ctypes, which can only print an exception: the
+    stop's KeyboardInterrupt landing there prints nothing (the task stops after its run)."""
+
+    def callback() -> None:
+        raise KeyboardInterrupt
+
+    call = ctypes.CFUNCTYPE(None)(callback)
+    monkeypatch.setattr(sys, "unraisablehook", worker.unraisable_stop)
+    monkeypatch.setitem(worker._STOP, "asked", True)
+    call()
+    assert capsys.readouterr().err == ""
+    monkeypatch.setitem(worker._STOP, "asked", False)  # not a stop's: printed as usual
+    call()
+    assert "KeyboardInterrupt" in capsys.readouterr().err
 
 
 def _runs(out: Path) -> pd.DataFrame:

@@ -37,6 +37,7 @@ import os
 import queue
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -49,7 +50,7 @@ from types import FrameType
 from typing import Literal, ParamSpec, Protocol, TypeVar
 from urllib.parse import urlsplit
 
-from cwrend_cli.campaign.worker import stop_task
+from cwrend_cli.campaign.worker import stop_task, unraisable_stop
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.teardown import end_without_teardown
 
@@ -130,6 +131,7 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     global _RUN_QUEUE
     for signum in WORKER_STOP_SIGNALS:
         signal.signal(signum, _stop_task)
+    sys.unraisablehook = unraisable_stop
     signal.pthread_sigmask(signal.SIG_UNBLOCK, WORKER_STOP_SIGNALS)
     if runs is not None:
         runs.cancel_join_thread()

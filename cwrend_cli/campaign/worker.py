@@ -36,6 +36,7 @@ from __future__ import annotations
 import _thread
 import hashlib
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -313,12 +314,24 @@ def _ctrl_c_noted() -> Callable[[], None]:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, noted)
+    sys.unraisablehook = unraisable_stop
 
     def restore() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        sys.unraisablehook = sys.__unraisablehook__
         _STOP["asked"] = False
 
     return restore
+
+
+def unraisable_stop(unraisable: Any) -> None:
+    """``sys.unraisablehook`` of a process running tasks: a stop's ``KeyboardInterrupt`` that
+    landed in a callback of compiled code (numba's compiler calls Python through ctypes,
+    which can only print it) is dropped silently; the task stops after its run. Anything
+    else is printed as Python does."""
+    if _STOP["asked"] and isinstance(unraisable.exc_value, KeyboardInterrupt):
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def _interrupt_run() -> None:
