@@ -14,8 +14,10 @@ hands them to the tasks and writes them once per scenario and solver to
 from ``runs.parquet``. Progress is reported through the :class:`Progress`
 protocol, run by run where the executor signals runs (the local pool and
 in-process; a Dask cluster per task, see
-:func:`~cwrend_cli.campaign.executors.run_signals`); the journal still
-records a task only when it comes back.
+:func:`~cwrend_cli.campaign.executors.run_signals`); the journal records a
+task execution when it comes back, whole or, after Ctrl-C, with the runs it
+finished (:func:`_keep_finished_runs`), and the progress ends on what the
+journal holds (:class:`_SettledProgress`).
 """
 
 from __future__ import annotations
@@ -330,9 +332,10 @@ def run_campaign(
     which starts over; one computed with other versions of cwrend or the
     numerics is refused unless ``allow_version_change``. Each finished task
     appends its run events and a ``task_done`` record to ``events.jsonl`` in
-    one write, so an interrupted campaign (Ctrl-C or ``kill -9``) keeps every
-    completed task and leaves no partial data: files of unfinished executions
-    are removed on resume. ``argv``: the command line, recorded in the manifest's session.
+    one write, so an interrupted campaign keeps every completed task (``kill
+    -9``), or every finished run (Ctrl-C, SIGTERM, SIGHUP: a stopped task
+    returns its finished runs), and leaves no partial data: files of
+    unfinished executions are removed on resume. ``argv``: the command line, recorded in the manifest's session.
 
     The directory is locked (:func:`hold_campaign`) while this runs, or, with
     ``hold``, until the caller closes that stack: a command that writes the

@@ -24,8 +24,8 @@ of a few bytes per run, about 10 µs, beside runs of 5–90 ms); in-process
 per-task granularity: its workers may be on other machines, which a local
 queue does not reach, and a Dask queue or pub/sub would cost a scheduler
 round trip per run; the driver then counts a task's runs when it completes.
-Signals are only progress: the journal records a task when it comes back,
-as before.
+Signals are only progress: the journal records a task when it comes back
+(after Ctrl-C with the runs it finished, :func:`ask_workers_to_stop`).
 """
 
 from __future__ import annotations
