@@ -335,7 +335,8 @@ def run_campaign(
     one write, so an interrupted campaign keeps every completed task (``kill
     -9``), or every finished run (Ctrl-C, SIGTERM, SIGHUP: a stopped task
     returns its finished runs), and leaves no partial data: files of
-    unfinished executions are removed on resume. ``argv``: the command line, recorded in the manifest's session.
+    unfinished executions are removed on resume. ``argv``: the command line,
+    recorded in the manifest's session.
 
     The directory is locked (:func:`hold_campaign`) while this runs, or, with
     ``hold``, until the caller closes that stack: a command that writes the
