@@ -593,11 +593,11 @@ def _first_run_notice(plan: campaign.CampaignPlan) -> str | None:
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
     for the guidance methods the plan's runs use.
     """
-    from cwrend_cli.config import ARCHITECTURES
+    from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
 
     methods = {
-        ARCHITECTURES[r.arch].resolved_method(task.problem.guidance)
+        ALL_ARCHITECTURES[r.arch].resolved_method(task.problem.guidance)
         for task in plan.tasks
         for r in task.runs
     }
