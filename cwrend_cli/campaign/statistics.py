@@ -387,6 +387,37 @@ def _frame(
     return pd.DataFrame({**cols, **columns})
 
 
+def _marginal_frame(
+    by: Sequence[str],
+    keys: Sequence[tuple[Hashable, ...]],
+    sizes: np.ndarray,
+    labels: Sequence[tuple[str, str]],
+    value: FloatArray,
+    low: FloatArray,
+    high: FloatArray,
+) -> pd.DataFrame:
+    """Marginal rows: per group key, one row per ``(metric, statistic)`` of ``labels``.
+
+    ``value``, ``low`` and ``high`` are (groups × labels); ``sizes`` the ok runs per group
+    (column ``n``).
+    """
+    per_group = len(labels)
+    return _frame(
+        by,
+        keys,
+        per_group,
+        {
+            "kind": "marginal",
+            "metric": [m for _ in keys for m, _ in labels],
+            "statistic": [s for _ in keys for _, s in labels],
+            "value": value.ravel(),
+            "ci_low": low.ravel(),
+            "ci_high": high.ravel(),
+            "n": np.repeat(sizes.astype(np.int64), per_group),
+        },
+    )
+
+
 def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame:
     """Per group: mean/median/p95 of Δv, miss and fuel penalty with bootstrap CIs.
 
@@ -425,21 +456,7 @@ def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFra
     labels = [(m, s) for m in METRICS for s in STATISTICS] + [
         (m, s) for m, s, _ in SOLVE_STATISTICS
     ]
-    per_group = len(labels)
-    return _frame(
-        by,
-        keys,
-        per_group,
-        {
-            "kind": "marginal",
-            "metric": [m for _ in keys for m, _ in labels],
-            "statistic": [s for _ in keys for _, s in labels],
-            "value": value.ravel(),
-            "ci_low": low.ravel(),
-            "ci_high": high.ravel(),
-            "n": np.repeat(sizes.astype(np.int64), per_group),
-        },
-    )
+    return _marginal_frame(by, keys, sizes, labels, value, low, high)
 
 
 #: Stream of the safety rows' bootstrap: ``default_rng([seed, SAFETY_STREAM])``, its own, so
@@ -497,20 +514,7 @@ def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame
     low[:, 1:] = ci[:, 0].reshape(len(keys), len(SAFETY_STATISTICS))
     high[:, 1:] = ci[:, 1].reshape(len(keys), len(SAFETY_STATISTICS))
     labels = [("safety_violated", "share")] + [(m, n) for m, n, _ in SAFETY_STATISTICS]
-    return _frame(
-        by,
-        keys,
-        per_group,
-        {
-            "kind": "marginal",
-            "metric": [m for _ in keys for m, _ in labels],
-            "statistic": [st for _ in keys for _, st in labels],
-            "value": value.ravel(),
-            "ci_low": low.ravel(),
-            "ci_high": high.ravel(),
-            "n": np.repeat(sizes.astype(np.int64), per_group),
-        },
-    )
+    return _marginal_frame(by, keys, sizes, labels, value, low, high)
 
 
 def paired(
