@@ -24,7 +24,9 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -32,6 +34,28 @@ from typing import Any
 from cwrend_cli import campaign
 from cwrend_cli.campaign import driver
 from cwrend_cli.output.layout import EVENTS
+
+#: This script, for the tests to run (``[sys.executable, str(HOOKED), WHEN, N, SIGNAL, …]``).
+HOOKED = Path(__file__)
+#: Guards against a hang only: no assertion depends on how long a campaign takes [s].
+HANG_S = 600.0
+
+
+def wait_stopped(proc: subprocess.Popen[str], poll_s: float = 0.02) -> None:
+    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first.
+
+    Polls the child's state every ``poll_s`` s (``waitpid`` with ``WUNTRACED``);
+    after :data:`HANG_S` s without a stop the campaign hangs, and is killed.
+    """
+    hang = time.monotonic() + HANG_S
+    while time.monotonic() < hang:
+        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
+        if pid:
+            assert os.WIFSTOPPED(status), "the campaign ended before its state"
+            return
+        time.sleep(poll_s)
+    proc.kill()
+    raise AssertionError(f"no state reached in {HANG_S:g} s: the campaign hangs")
 
 
 def _send(signum: signal.Signals, alone: bool) -> None:

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
+from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from pydantic import BaseModel
 from typer.testing import CliRunner
 
@@ -409,29 +410,10 @@ def _events_done(path: Path) -> int:
     return sum(e["event"] == "task_done" for e in journal.read_events(path))
 
 
-#: ``cwrend`` that sends a signal at a state of the campaign (tests/hooked_cwrend.py).
-HOOKED = Path(__file__).with_name("hooked_cwrend.py")
-#: Guards against a hang only: no assertion depends on how long a campaign takes.
-HANG_S = 600.0
-
-
 def _hooked(when: str, n: int, sig: str, *args: str, **popen: Any) -> subprocess.Popen[str]:
     """``cwrend *args`` sending ``sig`` at its ``n``-th state ``when`` ("journal" or "run")."""
     command = [sys.executable, str(HOOKED), when, str(n), sig, *args]
     return subprocess.Popen(command, text=True, **popen)
-
-
-def _wait_stopped(proc: subprocess.Popen[str]) -> None:
-    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first."""
-    hang = time.monotonic() + HANG_S
-    while time.monotonic() < hang:
-        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
-        if pid:
-            assert os.WIFSTOPPED(status), "the campaign ended before its state"
-            return
-        time.sleep(0.02)
-    proc.kill()
-    raise AssertionError(f"no state reached in {HANG_S:g} s: the campaign hangs")
 
 
 @pytest.fixture(scope="module")
@@ -495,7 +477,7 @@ def test_workers_exit_when_the_campaign_is_killed(tmp_path: Path) -> None:
     cfg = _write_config(tmp_path / "c.toml", "orphans")
     args = ["ablate", str(cfg), "--seeds", "400", "--arch", ADAPTIVE, "--workers", "2", "-q"]
     proc = _hooked("journal", 1, "SIGSTOP", *args, stdout=subprocess.DEVNULL)
-    _wait_stopped(proc)  # frozen after its first task: its pool is running
+    wait_stopped(proc)  # frozen after its first task: its pool is running
     workers = [
         p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()
     ]
@@ -562,7 +544,7 @@ def test_a_killed_worker_is_replaced_and_its_task_rerun(
     args = ["ablate", str(cfg), "--seeds", "24", "--arch", ADAPTIVE, "--workers", "2", "-q"]
     proc = _hooked("journal", 1, "SIGSTOP", *args, stdout=subprocess.DEVNULL,
                    stderr=subprocess.PIPE)  # fmt: skip
-    _wait_stopped(proc)  # frozen after the first of 12 tasks: the kill lands mid-campaign
+    wait_stopped(proc)  # frozen after the first of 12 tasks: the kill lands mid-campaign
     workers = [
         p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()
     ]
@@ -731,7 +713,7 @@ def test_a_second_process_on_the_same_campaign_is_refused(tmp_path: Path) -> Non
     first = _hooked("journal", 1, "SIGSTOP", *args, stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL)  # fmt: skip
     try:
-        _wait_stopped(first)  # frozen mid-campaign, holding the lock
+        wait_stopped(first)  # frozen mid-campaign, holding the lock
         second = _cli("ablate", str(cfg), "--seeds", "300", "--arch", ADAPTIVE, "-q")
         assert second.exit_code == 2, second.output
         assert f"is in use by another cwrend process (pid {first.pid}, since" in second.stderr

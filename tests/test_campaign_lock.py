@@ -11,36 +11,19 @@ by a time.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
+from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
 
 runner = CliRunner()
-HOOKED = Path(__file__).with_name("hooked_cwrend.py")
-#: Guards against a hang only: no assertion depends on the time taken.
-HANG_S = 600.0
 ARCHS = "mtf_adaptive,plain_adaptive"
-
-
-def _wait_stopped(proc: subprocess.Popen[str]) -> None:
-    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first."""
-    hang = time.monotonic() + HANG_S
-    while time.monotonic() < hang:
-        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
-        if pid:
-            assert os.WIFSTOPPED(status), "the campaign ended before its state"
-            return
-        time.sleep(0.02)
-    proc.kill()
-    raise AssertionError(f"no state reached in {HANG_S:g} s")
 
 
 def test_a_forced_campaign_cannot_write_between_anothers_runs_and_its_statistics(
@@ -55,7 +38,7 @@ def test_a_forced_campaign_cannot_write_between_anothers_runs_and_its_statistics
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        _wait_stopped(a)  # A's runs are done and journaled; its statistics not yet written
+        wait_stopped(a)  # A's runs are done and journaled; its statistics not yet written
         a_hash = json.loads((out / "manifest.json").read_text())["campaign_hash"]
         b = runner.invoke(
             app, ["ablate", str(cfg), "--seeds", "1", "--arch", ARCHS, "--workers", "1",
@@ -83,7 +66,7 @@ def test_a_report_is_refused_while_a_campaign_holds_the_directory(tmp_path: Path
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
     )  # fmt: skip
     try:
-        _wait_stopped(a)
+        wait_stopped(a)
         report = runner.invoke(app, ["report", str(out)])
         assert report.exit_code == 2, report.output
         assert "is in use by another cwrend process" in report.stderr

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from typer.testing import CliRunner
 
 from cwrend_cli.campaign import journal
@@ -32,10 +33,6 @@ pytestmark = pytest.mark.skipif(shutil.which("dask") is None, reason="needs Dask
 
 ARCHS = "mtf_adaptive,plain_adaptive"
 TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
-#: Guards against a hang only: no assertion depends on how fast the machine is.
-HANG_S = 600.0
-#: ``cwrend`` that sends a signal at a state of the campaign (tests/hooked_cwrend.py).
-HOOKED = Path(__file__).with_name("hooked_cwrend.py")
 
 
 def _free_port() -> int:
@@ -228,25 +225,12 @@ def _start_campaign(tmp_path: Path, cluster: Cluster, seeds: int) -> subprocess.
     return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _wait_stopped(proc: subprocess.Popen[str]) -> None:
-    """Wait until ``proc`` has stopped itself at its state; fail if it ended first."""
-    hang = time.monotonic() + HANG_S
-    while time.monotonic() < hang:
-        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
-        if pid:
-            assert os.WIFSTOPPED(status), "the campaign ended before its state"
-            return
-        time.sleep(0.05)
-    proc.kill()
-    raise AssertionError(f"no state reached in {HANG_S:g} s: the campaign hangs")
-
-
 def _kill_mid_campaign(
     tmp_path: Path, cluster: Cluster, seeds: int, victim: subprocess.Popen[bytes]
 ) -> tuple[int, str]:
     """Start a Dask campaign, kill ``victim`` once two tasks are done; its exit code and stderr."""
     proc = _start_campaign(tmp_path, cluster, seeds)
-    _wait_stopped(proc)  # frozen with two tasks journaled: the kill lands mid-campaign
+    wait_stopped(proc)  # frozen with two tasks journaled: the kill lands mid-campaign
     assert _events_done(tmp_path / "results" / "dask") == 2
     os.killpg(victim.pid, signal.SIGKILL)
     proc.send_signal(signal.SIGCONT)
@@ -297,7 +281,7 @@ def test_a_cluster_whose_workers_all_died_stops_the_campaign_and_it_resumes(
         [sys.executable, str(HOOKED), "journal", "2", "SIGSTOP", *args, "--address",
          cluster.address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
-    _wait_stopped(proc)  # two tasks journaled, the others in flight or queued
+    wait_stopped(proc)  # two tasks journaled, the others in flight or queued
     for worker in cluster.workers:
         os.killpg(worker.pid, signal.SIGKILL)
         worker.wait()

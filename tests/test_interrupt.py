@@ -22,6 +22,7 @@ from typing import Any
 
 import pandas as pd
 import pytest
+from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
@@ -32,9 +33,6 @@ from cwrend_cli.physics import simulation
 
 runner = CliRunner()
 ADAPTIVE = ["mtf_adaptive", "plain_adaptive"]  # the fast architectures
-HOOKED = Path(__file__).with_name("hooked_cwrend.py")
-#: Only guards against a hang: what is asserted never depends on the time taken.
-HANG_S = 600
 
 
 def _config(tmp_path: Path, name: str) -> Path:
@@ -212,18 +210,6 @@ def _workers(pid: int) -> list[int]:
     return kids
 
 
-def _wait_stopped(proc: subprocess.Popen[str]) -> None:
-    """Wait until ``proc`` has stopped itself (SIGSTOP at its state); fail if it ended first."""
-    hang = time.monotonic() + HANG_S
-    while time.monotonic() < hang:
-        pid, status = os.waitpid(proc.pid, os.WUNTRACED | os.WNOHANG)
-        if pid:
-            assert os.WIFSTOPPED(status), "the campaign ended before its state"
-            return
-        time.sleep(0.001)
-    raise AssertionError(f"no state reached in {HANG_S:g} s")
-
-
 def _when_importing(pid: int) -> None:
     """Stop process ``pid`` as soon as it has loaded numpy (it is importing cwrend's modules)."""
     maps = Path(f"/proc/{pid}/maps")
@@ -266,7 +252,7 @@ def test_ctrl_c_while_the_workers_import_prints_no_traceback(tmp_path: Path) -> 
         preexec_fn=_sigint_default,
     )  # fmt: skip
     try:
-        _wait_stopped(proc)  # at its state: the pool's two workers started
+        wait_stopped(proc, poll_s=0.001)  # at its state: the pool's two workers started
         hang = time.monotonic() + HANG_S
         while len(workers := _workers(proc.pid)) < 2:  # each runs Python once it is exec'd
             assert time.monotonic() < hang, "the pool's workers never ran"
