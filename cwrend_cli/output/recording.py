@@ -42,7 +42,7 @@ import sys
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, Unpack
 
 import numpy as np
 
@@ -613,26 +613,31 @@ def check_enabled() -> None:
         raise RecordingError(_DISABLED)
 
 
+class CaseOptions(TypedDict, total=False):
+    """The keyword options of :func:`encode_case`, which :func:`record_case` passes on."""
+
+    application_id: str
+    recording_id: str | None
+    recording_name: str | None
+    u_max_km_s2: float
+
+
 def record_case(
     path: Path,
     runs: Sequence[RunResult],
     refs: References,
     windows: Sequence[Window],
     *,
-    application_id: str = "cwrend",
-    recording_id: str | None = None,
-    recording_name: str | None = None,
-    u_max_km_s2: float = 8e-4,
     root: Path | None = None,
+    **options: Unpack[CaseOptions],
 ) -> Path:
     """Write one ``.rrd`` overlaying ``runs`` (one noise realisation) and the references.
 
     ``runs`` are the closed-loop results of one seed (any subset of the
     architectures), ``refs`` the open-loop references, ``windows`` the
-    degradation windows of the config. ``recording_id`` defaults to a fresh
-    UUID (never the process-wide default, which child processes inherit);
-    files sharing a recording id merge in the viewer. ``u_max_km_s2`` only
-    scales the thrust arrows. ``root``: a directory the write must not leave
+    degradation windows of the config; ``options`` those of :func:`encode_case`
+    (application id, recording id and name, ``u_max_km_s2``). ``root``: a
+    directory the write must not leave
     (:func:`~cwrend_cli.output.files.atomic_path`). Returns ``path``.
 
     The recording is encoded in memory (:func:`encode_case`) and its bytes
@@ -641,10 +646,7 @@ def record_case(
     disk is an :class:`OSError` here instead of a sink that dies in the
     background and blocks the next recording for ever (issue 36, item 1).
     """
-    data = encode_case(
-        runs, refs, windows, application_id=application_id, recording_id=recording_id,
-        recording_name=recording_name, u_max_km_s2=u_max_km_s2,
-    )  # fmt: skip
+    data = encode_case(runs, refs, windows, **options)
     return write_recording(Path(path), data, root=root)
 
 
@@ -666,6 +668,10 @@ def encode_case(
     u_max_km_s2: float = 8e-4,
 ) -> bytes:
     """The ``.rrd`` bytes of :func:`record_case`, encoded in memory (no file, no disk).
+
+    ``recording_id`` defaults to a fresh UUID (never the process-wide default,
+    which child processes inherit); files sharing a recording id merge in the
+    viewer. ``u_max_km_s2`` [km/s²] only scales the thrust arrows.
 
     The default blueprint is sent as a file sink's ``default_blueprint`` is
     (the default, not made active); the bytes end with the footer a file
