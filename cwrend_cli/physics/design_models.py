@@ -325,28 +325,26 @@ def _ya_fundamental(e: float, f: float, j: float) -> FloatArray:
     return psi
 
 
+def _per_axis(position: float, coupling: float, velocity: float) -> FloatArray:
+    """6×6 [[position·I, 0], [coupling·I, velocity·I]]: the same 2×2 map on each axis."""
+    t = np.zeros((6, 6))
+    for i in range(3):
+        t[i, i] = position
+        t[3 + i, i] = coupling
+        t[3 + i, 3 + i] = velocity
+    return t
+
+
 def _to_physical(e: float, k2: float, f: float) -> FloatArray:
     """T(f) (6×6): scaled state [x̃, x̃′] → physical [x, ẋ] per axis (module docstring)."""
     rho = 1.0 + e * math.cos(f)
-    es = e * math.sin(f)
-    t = np.zeros((6, 6))
-    for i in range(3):
-        t[i, i] = 1.0 / rho
-        t[3 + i, i] = k2 * es
-        t[3 + i, 3 + i] = k2 * rho
-    return t
+    return _per_axis(1.0 / rho, k2 * (e * math.sin(f)), k2 * rho)
 
 
 def _to_scaled(e: float, k2: float, f: float) -> FloatArray:
     """T(f)⁻¹ (6×6): physical [x, ẋ] → scaled [x̃, x̃′] = [ρx, ẋ/(k²ρ) − e sin f · x]."""
     rho = 1.0 + e * math.cos(f)
-    es = e * math.sin(f)
-    t = np.zeros((6, 6))
-    for i in range(3):
-        t[i, i] = rho
-        t[3 + i, i] = -es
-        t[3 + i, 3 + i] = 1.0 / (k2 * rho)
-    return t
+    return _per_axis(rho, -(e * math.sin(f)), 1.0 / (k2 * rho))
 
 
 def ya_stm(chief: EccentricChief, t0: float, t1: float) -> FloatArray:
