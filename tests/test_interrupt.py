@@ -141,16 +141,21 @@ def _sigint_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _hooked(when: str, n: int, sig: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``cwrend *args`` sending ``sig`` at its ``n``-th state ``when``, run to its end."""
+    return subprocess.run(
+        [sys.executable, str(HOOKED), when, str(n), sig, *args],
+        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
+        preexec_fn=_sigint_default,
+    )  # fmt: skip
+
+
 def test_ctrl_c_to_a_pool_keeps_the_finished_runs_the_summary_counts(tmp_path: Path) -> None:
     """Two workers, two tasks of 16 runs; Ctrl-C to the process group when the first run
     finishes: the summary's done count is > 0 and is exactly what the resume skips."""
     cfg = _config(tmp_path, "pool")
     args = ["ablate", str(cfg), "--seeds", "16", "--arch", ",".join(ADAPTIVE), "--no-rrd"]
-    proc = subprocess.run(
-        [sys.executable, str(HOOKED), "run", "1", "SIGINT", *args, "--workers", "2"],
-        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
-        preexec_fn=_sigint_default,
-    )  # fmt: skip
+    proc = _hooked("run", 1, "SIGINT", *args, "--workers", "2")
     assert proc.returncode == 130, proc.stderr
     assert "Traceback" not in proc.stderr + proc.stdout
     found = re.search(r"interrupted: (\d+) of 32 runs done \((\d+) computed now\)", proc.stderr)
@@ -169,11 +174,7 @@ def test_a_stopped_pool_leaves_no_file_of_a_run_it_did_not_keep(tmp_path: Path) 
     """The files a stopped execution wrote name only the runs it journaled."""
     cfg = _config(tmp_path, "files")
     args = ["ablate", str(cfg), "--seeds", "16", "--arch", ",".join(ADAPTIVE), "--no-rrd", "-q"]
-    proc = subprocess.run(
-        [sys.executable, str(HOOKED), "run", "3", "SIGINT", *args, "--workers", "2"],
-        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
-        preexec_fn=_sigint_default,
-    )  # fmt: skip
+    proc = _hooked("run", 3, "SIGINT", *args, "--workers", "2")
     assert proc.returncode == 130, proc.stderr
     out = tmp_path / "results" / "files"
     kept = set(pd.read_parquet(out / "runs.parquet")["run_key"])
@@ -185,15 +186,6 @@ def test_a_stopped_pool_leaves_no_file_of_a_run_it_did_not_keep(tmp_path: Path) 
 
 
 # --- signals (issue 36 item 12) ------------------------------------------------
-
-
-def _hooked(when: str, n: int, sig: str, *args: str) -> subprocess.CompletedProcess[str]:
-    """``cwrend *args`` sending ``sig`` at its ``n``-th state ``when``, run to its end."""
-    return subprocess.run(
-        [sys.executable, str(HOOKED), when, str(n), sig, *args],
-        capture_output=True, text=True, timeout=HANG_S, start_new_session=True,
-        preexec_fn=_sigint_default,
-    )  # fmt: skip
 
 
 def _workers(pid: int) -> list[int]:
