@@ -26,19 +26,29 @@ runner = CliRunner()
 ARCHS = "mtf_adaptive,plain_adaptive"
 
 
+def _before_its_statistics(
+    tmp_path: Path, name: str, seeds: int
+) -> tuple[subprocess.Popen[str], Path]:
+    """Campaign A (and its config), an ablation of ARCHS in ``results/<name>``, frozen
+    (SIGSTOP) once its runs are done and journaled, before it writes its statistics."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "{name}"\n')
+    args = ["ablate", str(cfg), "--seeds", str(seeds), "--arch", ARCHS, "--workers", "1",
+            "--no-rrd", "-q"]  # fmt: skip
+    a = subprocess.Popen(
+        [sys.executable, str(HOOKED), "statistics", "1", "SIGSTOP", *args],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    wait_stopped(a)
+    return a, cfg
+
+
 def test_a_forced_campaign_cannot_write_between_anothers_runs_and_its_statistics(
     tmp_path: Path,
 ) -> None:
-    cfg = tmp_path / "c.toml"
-    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "shared"\n')
     out = tmp_path / "results" / "shared"
-    a_args = ["ablate", str(cfg), "--seeds", "2", "--arch", ARCHS, "--workers", "1", "--no-rrd"]
-    a = subprocess.Popen(
-        [sys.executable, str(HOOKED), "statistics", "1", "SIGSTOP", *a_args, "-q"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    a, cfg = _before_its_statistics(tmp_path, "shared", seeds=2)
     try:
-        wait_stopped(a)  # A's runs are done and journaled; its statistics not yet written
         a_hash = json.loads((out / "manifest.json").read_text())["campaign_hash"]
         b = runner.invoke(
             app, ["ablate", str(cfg), "--seeds", "1", "--arch", ARCHS, "--workers", "1",
@@ -57,16 +67,9 @@ def test_a_forced_campaign_cannot_write_between_anothers_runs_and_its_statistics
 
 
 def test_a_report_is_refused_while_a_campaign_holds_the_directory(tmp_path: Path) -> None:
-    cfg = tmp_path / "c.toml"
-    cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "busy"\n')
     out = tmp_path / "results" / "busy"
-    args = ["ablate", str(cfg), "--seeds", "1", "--arch", ARCHS, "--workers", "1", "--no-rrd"]
-    a = subprocess.Popen(
-        [sys.executable, str(HOOKED), "statistics", "1", "SIGSTOP", *args, "-q"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
-    )  # fmt: skip
+    a, _ = _before_its_statistics(tmp_path, "busy", seeds=1)
     try:
-        wait_stopped(a)
         report = runner.invoke(app, ["report", str(out)])
         assert report.exit_code == 2, report.output
         assert "is in use by another cwrend process" in report.stderr
