@@ -176,3 +176,32 @@ class RecordingProgress:
 def recording_progress() -> type[RecordingProgress]:
     """The class of a progress object that records each advance (one per campaign run)."""
     return RecordingProgress
+
+
+def two_architecture_runs(n: int, points: int = 1) -> pd.DataFrame:
+    """Hand-made ``runs.parquet`` rows: ``n`` ok seeds of mtf_adaptive and plain_adaptive
+    at each of ``points`` grid points (``schedule.beta`` 0.25, 0.5, …).
+
+    Misses about 1 and 2 m with 30 % noise, Δv 0.14 km/s ± 1e-4, drawn from
+    ``default_rng(1)`` in row order (point, seed, architecture).
+    """
+    rng = np.random.default_rng(1)
+    rows = []
+    for point in range(points):
+        for seed in range(n):
+            for arch, scale in (("mtf_adaptive", 1.0), ("plain_adaptive", 2.0)):
+                rows.append(
+                    {"point": f"p{point}", "param.schedule.beta": 0.25 * (point + 1),
+                     "seed": seed, "arch": arch, "status": "ok",
+                     "miss_km": scale * 1e-3 * (1 + 0.3 * rng.standard_normal()),
+                     "delta_v_km_s": 0.14 + 1e-4 * rng.standard_normal(),
+                     "fuel_penalty_pct": 25.0, "solve_success_pct": 100.0,
+                     "solve_mean_ms": 1.0, "solve_max_ms": 2.0, "n_infeasible": 0}
+                )  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+@pytest.fixture(scope="session")
+def synthetic_runs() -> Callable[..., pd.DataFrame]:
+    """Factory ``(n, points=1) ↦ runs`` of :func:`two_architecture_runs` (no campaign run)."""
+    return two_architecture_runs

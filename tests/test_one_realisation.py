@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 from rich.console import Console
@@ -30,23 +30,6 @@ from cwrend_cli.console import (
 runner = CliRunner()
 
 
-def _runs(n: int, points: int = 1) -> pd.DataFrame:
-    rng = np.random.default_rng(1)
-    rows = []
-    for point in range(points):
-        for seed in range(n):
-            for arch, scale in (("mtf_adaptive", 1.0), ("plain_adaptive", 2.0)):
-                rows.append(
-                    {"point": f"p{point}", "param.schedule.beta": 0.25 * (point + 1),
-                     "seed": seed, "arch": arch, "status": "ok",
-                     "miss_km": scale * 1e-3 * (1 + 0.3 * rng.standard_normal()),
-                     "delta_v_km_s": 0.14 + 1e-4 * rng.standard_normal(),
-                     "fuel_penalty_pct": 25.0, "solve_success_pct": 100.0,
-                     "solve_mean_ms": 1.0, "solve_max_ms": 2.0, "n_infeasible": 0}
-                )  # fmt: skip
-    return pd.DataFrame(rows)
-
-
 def _stats(runs: pd.DataFrame, by: list[str]) -> pd.DataFrame:
     groups = [c for c in by if c != "arch"]
     return pd.concat([statistics.describe(runs, by), statistics.paired(runs, groups)])
@@ -58,8 +41,10 @@ def _caption(table: object) -> str:
     return " ".join(buf.getvalue().split())
 
 
-def test_one_seed_ablation_says_one_realisation_not_bootstrap() -> None:
-    stats = _stats(_runs(1), ["arch"])
+def test_one_seed_ablation_says_one_realisation_not_bootstrap(
+    synthetic_runs: Callable[..., pd.DataFrame],
+) -> None:
+    stats = _stats(synthetic_runs(1), ["arch"])
     text = _caption(ablation_console_table(stats, "t"))
     assert f"means; {ONE_REALISATION}" in text and "bootstrap" not in text
     paired = _caption(paired_console_table(stats))
@@ -67,14 +52,18 @@ def test_one_seed_ablation_says_one_realisation_not_bootstrap() -> None:
     assert "Wilson interval below P" in paired  # P(A < B) has an interval even from one seed
 
 
-def test_one_seed_per_point_sweep_says_one_realisation() -> None:
-    stats = _stats(_runs(1, points=2), ["point", "param.schedule.beta", "arch"])
+def test_one_seed_per_point_sweep_says_one_realisation(
+    synthetic_runs: Callable[..., pd.DataFrame],
+) -> None:
+    stats = _stats(synthetic_runs(1, points=2), ["point", "param.schedule.beta", "arch"])
     text = _caption(sweep_console_table(stats, ["point", "param.schedule.beta"], "t"))
     assert ONE_REALISATION in text and "bootstrap" not in text
 
 
-def test_a_table_with_one_realisation_in_some_rows_says_so_for_them() -> None:
-    runs = _runs(12)
+def test_a_table_with_one_realisation_in_some_rows_says_so_for_them(
+    synthetic_runs: Callable[..., pd.DataFrame],
+) -> None:
+    runs = synthetic_runs(12)
     runs = runs[(runs["arch"] == "mtf_adaptive") | (runs["seed"] == 0)]  # plain: one seed
     text = _caption(ablation_console_table(_stats(runs, ["arch"]), "t"))
     assert "means, 95 % bootstrap interval below" in text

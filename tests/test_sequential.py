@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -63,23 +63,10 @@ def test_widths_are_checked_only_after_the_minimum_batches_and_seeds() -> None:
     assert sequential.ready(max(sequential.MIN_BATCHES * 25, sequential.MIN_SEEDS), batch=25)
 
 
-def _runs(n: int) -> pd.DataFrame:
-    rng = np.random.default_rng(1)
-    rows = []
-    for seed in range(n):
-        for arch, scale in (("mtf_adaptive", 1.0), ("plain_adaptive", 2.0)):
-            rows.append(
-                {"seed": seed, "arch": arch, "status": "ok",
-                 "miss_km": scale * 1e-3 * (1 + 0.3 * rng.standard_normal()),
-                 "delta_v_km_s": 0.14 + 1e-4 * rng.standard_normal(),
-                 "fuel_penalty_pct": 25.0, "solve_success_pct": 100.0,
-                 "solve_mean_ms": 1.0, "solve_max_ms": 2.0, "n_infeasible": 0}
-            )  # fmt: skip
-    return pd.DataFrame(rows)
-
-
-def test_achieved_widths_are_the_reported_intervals() -> None:
-    runs = _runs(200)
+def test_achieved_widths_are_the_reported_intervals(
+    synthetic_runs: Callable[..., pd.DataFrame],
+) -> None:
+    runs = synthetic_runs(200)
     stats = pd.concat([statistics.describe(runs, ["arch"]), statistics.paired(runs)])
     target = sequential.parse_until("miss_km:10%")
     got = sequential.achieved(stats, target, ["mtf_adaptive", "plain_adaptive"])
@@ -96,7 +83,9 @@ def test_achieved_widths_are_the_reported_intervals() -> None:
     assert paired[0].value < 0 and math.isfinite(paired[0].half_width)
 
 
-def test_an_architecture_without_runs_never_meets_its_target() -> None:
-    stats = statistics.describe(_runs(30), ["arch"])
+def test_an_architecture_without_runs_never_meets_its_target(
+    synthetic_runs: Callable[..., pd.DataFrame],
+) -> None:
+    stats = statistics.describe(synthetic_runs(30), ["arch"])
     got = sequential.achieved(stats, sequential.parse_until("miss_km:1"), ["mtf_fixed"])
     assert len(got) == 1 and not got[0].met and got[0].n == 0
