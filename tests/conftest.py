@@ -9,8 +9,11 @@ energy-optimal costate (SPEC §1–2).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import concurrent.futures
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -205,3 +208,29 @@ def two_architecture_runs(n: int, points: int = 1) -> pd.DataFrame:
 def synthetic_runs() -> Callable[..., pd.DataFrame]:
     """Factory ``(n, points=1) ↦ runs`` of :func:`two_architecture_runs` (no campaign run)."""
     return two_architecture_runs
+
+
+class _NeverRuns(concurrent.futures.Executor):
+    """An executor whose futures never complete; ``_client`` as a Dask ClientExecutor's."""
+
+    def __init__(self, client: object) -> None:
+        self._client = client
+
+    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> concurrent.futures.Future[Any]:
+        return concurrent.futures.Future()  # never runs
+
+
+@pytest.fixture(scope="session")
+def stalled_executor() -> Callable[[object], Callable[..., Any]]:
+    """Factory ``client ↦ open_executor``: a stand-in for the driver's ``open_executor``
+    that opens one worker whose tasks never run, on a Dask ``client`` stand-in (its
+    ``status`` and ``_scheduler_identity`` are what the driver asks of a cluster)."""
+
+    def opener(client: object) -> Callable[..., Any]:
+        @contextmanager
+        def open_executor(*args: Any, **kwargs: Any) -> Iterator[tuple[_NeverRuns, int]]:
+            yield _NeverRuns(client), 1
+
+        return open_executor
+
+    return opener

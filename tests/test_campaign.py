@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -930,26 +931,14 @@ def test_resume_with_another_chunking_computes_only_the_missing_runs(tmp_path: P
 
 
 def test_an_executor_that_lost_its_scheduler_does_not_hang_the_campaign(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stalled_executor: Callable[..., Any]
 ) -> None:
     """A Dask client may reconnect forever while its futures wait: the driver gives up (exit 3)."""
-    import concurrent.futures
-    from contextlib import contextmanager
 
     class _LostClient:
         status = "connecting"  # what distributed.Client says while it looks for its scheduler
 
-    class _Stalled(concurrent.futures.Executor):
-        _client = _LostClient()
-
-        def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
-            return concurrent.futures.Future()  # never completes
-
-    @contextmanager
-    def stalled(*args: Any, **kwargs: Any) -> Any:
-        yield _Stalled(), 1
-
-    monkeypatch.setattr(driver_module, "open_executor", stalled)
+    monkeypatch.setattr(driver_module, "open_executor", stalled_executor(_LostClient()))
     monkeypatch.setattr(driver_module, "_POLL_S", 0.05)
     monkeypatch.setattr(driver_module, "DASK_LOST_AFTER_S", 0.2)
     monkeypatch.setattr(driver_module, "RETRY_BACKOFF_S", 0.0)

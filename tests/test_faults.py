@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -316,26 +317,15 @@ def test_retry_failed_counts_every_run_it_computed_again(tmp_path: Path) -> None
 
 
 def test_a_dask_cluster_without_workers_stops_the_campaign_with_exit_3(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stalled_executor: Callable[..., Any]
 ) -> None:
     """Scheduler alive, no worker: the futures would wait for ever (real cluster:
     tests/test_distributed.py)."""
     import concurrent.futures
-    from contextlib import contextmanager
 
     class _WorkerlessClient:
         status = "running"  # the scheduler answers
         _scheduler_identity: ClassVar[dict[str, int]] = {"n_workers": 0}  # no worker
-
-    class _Workerless(concurrent.futures.Executor):
-        _client = _WorkerlessClient()
-
-        def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
-            return concurrent.futures.Future()  # never runs
-
-    @contextmanager
-    def workerless(*args: Any, **kwargs: Any) -> Any:
-        yield _Workerless(), 1
 
     real_wait = concurrent.futures.wait
     polls = {"n": 0}
@@ -345,7 +335,7 @@ def test_a_dask_cluster_without_workers_stops_the_campaign_with_exit_3(
         assert polls["n"] < 100_000, "the campaign waits for ever on a cluster without workers"
         return real_wait(*args, **kwargs)
 
-    monkeypatch.setattr(driver_module, "open_executor", workerless)
+    monkeypatch.setattr(driver_module, "open_executor", stalled_executor(_WorkerlessClient()))
     monkeypatch.setattr(driver_module, "wait", guarded_wait)
     monkeypatch.setattr(driver_module, "_POLL_S", 0.05)
     monkeypatch.setattr(driver_module, "_SIGNAL_POLL_S", 0.001)
