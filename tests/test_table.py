@@ -311,7 +311,7 @@ def test_a_bad_table_exits_2_saying_why(
 
 def test_unknown_field_suggests_the_swept_key(studies: dict[str, Path]) -> None:
     result = _table(studies["sweep"], "--rows", "hold")
-    assert "did you mean guidance.hold?" in result.stderr
+    assert "did you mean 'guidance.hold'?" in result.stderr
 
 
 def test_a_directory_without_statistics_is_refused(tmp_path: Path) -> None:

@@ -50,6 +50,7 @@ from cwrend_cli.config import (
 )
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -483,6 +484,7 @@ def plan(
         raise ConfigError(
             f"unknown architecture(s) {', '.join(unknown)} "
             f"(allowed: {', '.join(ALL_ARCHITECTURES)})"
+            f"{did_you_mean(unknown[0], list(ALL_ARCHITECTURES))}"
         )
     if len(set(seeds)) != len(seeds) or any(not 0 <= s <= MAX_SEED for s in seeds):
         raise ConfigError(f"seeds must be distinct integers in [0, {MAX_SEED}] (2**63 − 1)")

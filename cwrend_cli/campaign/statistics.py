@@ -43,6 +43,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from cwrend_cli.campaign.executors import default_workers
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 
@@ -129,6 +130,7 @@ def campaign_pairs(asked: Sequence[str], archs: Sequence[str]) -> tuple[tuple[st
                 known = "not in this campaign" if slug in ALL_ARCHITECTURES else "unknown"
                 raise ConfigError(
                     f"--pair {text!r}: architecture {slug!r} is {known} (choices: {choices})"
+                    f"{did_you_mean(slug, list(archs))}"
                 )
         if a == b:
             raise ConfigError(f"--pair {text!r}: name two different architectures ({choices})")

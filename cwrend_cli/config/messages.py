@@ -21,7 +21,7 @@ from pydantic_core import PydanticCustomError
 
 from cwrend_cli.limits import MAX_LISTED_PROBLEMS
 
-__all__ = ["fmt_num", "format_validation_error", "rules_error"]
+__all__ = ["did_you_mean", "fmt_num", "format_validation_error", "rules_error"]
 
 # ---------------------------------------------------------------------------
 # Errors raised from validators. Model-level rules report the field they are
@@ -64,6 +64,21 @@ def _fmt_value(value: Any, limit: int = 80) -> str:
     if len(text) > limit:
         text = text[: limit - 3] + "..."
     return text
+
+
+def did_you_mean(word: object, choices: Sequence[str]) -> str:
+    """``"; did you mean 'beta'?"`` for the closest of ``choices`` to ``word``, else ``""``.
+
+    The one suggestion every "unknown …" error appends (config keys, architectures,
+    table fields): :func:`difflib.get_close_matches` with its default similarity
+    cutoff (0.6), so an unrelated word gets no suggestion.
+    """
+    import difflib
+
+    if not isinstance(word, str):
+        return ""
+    near = difflib.get_close_matches(word, list(choices), n=1)
+    return f"; did you mean {near[0]!r}?" if near else ""
 
 
 # ---------------------------------------------------------------------------
@@ -162,7 +177,8 @@ def format_validation_error(
         elif kind == "extra_forbidden":
             model = _model_at(root_model, loc[:-1])
             allowed = f" (allowed: {', '.join(model.model_fields)})" if model else ""
-            lines.append(f"{path}: unknown key{allowed}")
+            hint = did_you_mean(loc[-1], list(model.model_fields)) if model else ""
+            lines.append(f"{path}: unknown key{allowed}{hint}")
         elif kind == "missing":
             lines.append(f"{path}: missing required key")
         else:

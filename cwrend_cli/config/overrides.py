@@ -21,6 +21,7 @@ from decimal import Context, Decimal, localcontext
 from types import MappingProxyType
 from typing import Any
 
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_NESTING, MAX_SWEPT_KEYS, MAX_VALUES_PER_KEY
@@ -340,7 +341,8 @@ def parse_arch(slug: str) -> Architecture:
         return ALL_ARCHITECTURES[slug.strip()]
     except KeyError:
         allowed = ", ".join(ALL_ARCHITECTURES)
-        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed})") from None
+        hint = did_you_mean(slug.strip(), list(ALL_ARCHITECTURES))
+        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed}){hint}") from None
 
 
 #: Names of architecture groups accepted by :func:`parse_archs`.

@@ -50,6 +50,7 @@ import numpy as np
 import pandas as pd
 
 from cwrend_cli.config import get_dotted
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
@@ -335,8 +336,9 @@ def _field(text: str, sources: Sequence[Source], option: str) -> _Field:
         return _Field(name, header or name.rsplit(".", 1)[-1])
     swept = sorted({k for s in sources for k in s.swept})
     last = name.rsplit(".", 1)[-1]
-    near = [k for k in [*swept, *_config_keys(sources)] if k.rsplit(".", 1)[-1] == last]
-    hint = f"; did you mean {near[0]}?" if near else ""
+    keys = [*swept, *_config_keys(sources)]
+    near = [k for k in keys if k.rsplit(".", 1)[-1] == last]
+    hint = f"; did you mean {near[0]!r}?" if near else did_you_mean(name, [*FIELDS, *keys])
     raise ConfigError(
         f"{option} {name!r}: unknown field (fields: {', '.join(FIELDS)}, or a configuration "
         f"key{': swept here ' + ', '.join(swept) if swept else ''}){hint}"

@@ -1,0 +1,53 @@
+"""An unknown name is answered with the closest known one (issue 37 item 14).
+
+One suggestion function (:func:`cwrend_cli.config.messages.did_you_mean`) serves every
+"unknown …" error: configuration keys (in files and ``--set``), architectures
+(``--arch``, ``--pair``) and the fields of ``cwrend table``. Every refusal still exits 2.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.config.messages import did_you_mean
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
+runner = CliRunner()
+
+
+def _refused(args: list[str]) -> str:
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    return result.output
+
+
+def test_a_misspelt_config_key_is_answered_with_the_key_meant() -> None:
+    out = _refused(["config", "validate", str(PAPER), "--set", "schedule.betta=0.5"])
+    assert "schedule.betta: unknown key" in out
+    assert "did you mean 'beta'?" in out
+
+
+def test_a_misspelt_architecture_is_answered_with_the_one_meant(tmp_path: Path) -> None:
+    out_dir = f"output.dir={json.dumps(str(tmp_path))}"
+    out = _refused(["ablate", str(PAPER), "--arch", "mtf_adaptve", "--set", out_dir])
+    assert "did you mean 'mtf_adaptive'?" in out
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_a_misspelt_pair_is_answered_with_an_architecture_of_the_campaign(
+    tmp_path: Path,
+) -> None:
+    out_dir = f"output.dir={json.dumps(str(tmp_path))}"
+    args = ["ablate", str(PAPER), "--arch", "plain_adaptive,mtf_adaptive"]
+    out = _refused([*args, "--pair", "mtf_adaptive:plain_adaptiv", "--set", out_dir])
+    assert "did you mean 'plain_adaptive'?" in out
+
+
+def test_an_unrelated_word_gets_no_suggestion() -> None:
+    assert did_you_mean("zzz", ["beta", "kappa_mtf"]) == ""
+    assert did_you_mean(3, ["beta"]) == ""  # a list index is not a name
