@@ -45,7 +45,7 @@ import pandas as pd
 import pyarrow.dataset as ds
 
 from cwrend_cli.config import (
-    ARCHITECTURES,
+    ALL_ARCHITECTURES,
     CwrendConfig,
     config_from_dict,
     get_dotted,
@@ -221,8 +221,8 @@ def results_world(results_dir: Path) -> str:
 
 
 def arch_label(slug: str) -> str:
-    """Display name of an architecture (the slug itself if unknown)."""
-    arch = ARCHITECTURES.get(slug)
+    """Display name of an architecture, the cone-program ones too (the slug itself if unknown)."""
+    arch = ALL_ARCHITECTURES.get(slug)
     return arch.label if arch is not None else slug
 
 
@@ -350,7 +350,7 @@ def _stored_config(raw: Any, source: Path, notes: list[str]) -> CwrendConfig | N
 
 def _order_archs(names: Iterable[object]) -> tuple[str, ...]:
     present = {str(n) for n in names}
-    known = [a for a in ARCHITECTURES if a in present]
+    known = [a for a in ALL_ARCHITECTURES if a in present]
     return (*known, *sorted(present - set(known)))
 
 
