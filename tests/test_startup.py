@@ -72,6 +72,20 @@ def test_invalid_config_is_reported_without_heavy_libraries(tmp_path: Path) -> N
     assert _loaded(["config", "validate", str(bad)]) == {"code": 2, "heavy": []}
 
 
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["ablate", str(PAPER), "--set", "schedule.beta=-1"],
+        ["sweep", str(PAPER), "--set", "schedule.betta=0.5"],
+        ["ablate", str(PAPER), "--arch", "mtf_adaptve"],
+    ],
+    ids=["ablate bad value", "sweep unknown key", "ablate unknown architecture"],
+)
+def test_a_campaign_input_error_exits_before_the_heavy_libraries(args: list[str]) -> None:
+    # the config and the architectures are checked before the campaign package is imported
+    assert _loaded(args) == {"code": 2, "heavy": []}
+
+
 def test_a_nonlinear_truth_is_still_checked_against_the_earth(tmp_path: Path) -> None:
     """The perigee check, whose helpers live with the compiled truth model, still runs."""
     cfg = tmp_path / "low.toml"
