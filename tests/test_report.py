@@ -967,3 +967,21 @@ def test_the_cone_program_architectures_are_named_and_ordered_like_the_paper_fou
         "plain_fixed_socp",
         "mtf_adaptive_socp",
     )
+
+
+def test_the_paired_miss_figure_pairs_the_cone_program_architectures_too() -> None:
+    from cwrend_cli.physics.params import ALL_ARCHITECTURES
+    from cwrend_cli.report.figures import _pairs
+
+    socp = [a for a in ALL_ARCHITECTURES if a.endswith("_socp")]
+    assert _pairs(pd.DataFrame(columns=socp)) == [
+        ("plain_adaptive_socp", "mtf_adaptive_socp"),
+        ("plain_fixed_socp", "mtf_fixed_socp"),
+        ("mtf_fixed_socp", "mtf_adaptive_socp"),
+    ]
+    # with both methods, the paper's three panels, as before
+    assert _pairs(pd.DataFrame(columns=list(ALL_ARCHITECTURES))) == [
+        ("plain_adaptive", "mtf_adaptive"),
+        ("plain_fixed", "mtf_fixed"),
+        ("mtf_fixed", "mtf_adaptive"),
+    ]

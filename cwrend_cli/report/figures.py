@@ -708,11 +708,18 @@ def fig_dv_distribution(data: ReportData) -> Figure:
     return _distribution(data, "delta_v_km_s", "Δv [km/s]", False, "Δv")
 
 
+#: The pairs of the paired-miss figure (x-axis, y-axis): the paper's three, then the same
+#: three of the cone-program architectures; at most :data:`_MAX_PAIR_PANELS` are drawn,
+#: the first present, so a cone-program campaign gets its own panels.
 _PAIRS = (
     ("plain_adaptive", "mtf_adaptive"),
     ("plain_fixed", "mtf_fixed"),
     ("mtf_fixed", "mtf_adaptive"),
+    ("plain_adaptive_socp", "mtf_adaptive_socp"),
+    ("plain_fixed_socp", "mtf_fixed_socp"),
+    ("mtf_fixed_socp", "mtf_adaptive_socp"),
 )
+_MAX_PAIR_PANELS = 3
 
 
 def _miss_by_seed(data: ReportData) -> pd.DataFrame:
@@ -724,7 +731,8 @@ def _miss_by_seed(data: ReportData) -> pd.DataFrame:
 
 
 def _pairs(pivot: pd.DataFrame) -> list[tuple[str, str]]:
-    return [p for p in _PAIRS if p[0] in pivot.columns and p[1] in pivot.columns]
+    present = [p for p in _PAIRS if p[0] in pivot.columns and p[1] in pivot.columns]
+    return present[:_MAX_PAIR_PANELS]
 
 
 def fig_paired_miss(data: ReportData) -> Figure:
