@@ -16,7 +16,8 @@ driver journals.
 The noise of realisation ``seed`` is the stream ``SeedSequence(noise.seed,
 spawn_key=(seed, 0))`` (or ``noise.file`` replayed), so realisation ``seed``
 is the same in a single run, an ablation and a sweep, whatever worker
-computes it. All architectures of a seed share it (SPEC §6).
+computes it. All architectures of a seed share it (a fair comparison: a convention of cwrend;
+not in the paper, see docs/method.md).
 
 Every other random draw of a run has its own child of the realisation's
 seed: ``(seed, 1)`` the dispersions (:mod:`cwrend_cli.campaign.plan`),

@@ -6,7 +6,8 @@ provenance (:func:`resolved_dict`, :func:`config_hash`, :func:`to_toml`,
 :func:`to_json`) and the external noise realisation (:func:`load_noise_file`).
 
 Units: the noise file holds standard-normal draws (dimensionless), one row
-per step, scaled by chol(R_true) at use (SPEC §6).
+per step, scaled by chol(R_true) at use (the v_k of paper Eq. 13; a convention
+of cwrend, not in the paper).
 """
 
 from __future__ import annotations

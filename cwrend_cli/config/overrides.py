@@ -331,7 +331,7 @@ def expand_grid(
 
 
 # ---------------------------------------------------------------------------
-# Architectures (the ablation of SPEC §6)
+# Architectures (the ablation of paper Sec. "Numerical Results and Discussion")
 # ---------------------------------------------------------------------------
 
 

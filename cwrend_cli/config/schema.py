@@ -4,7 +4,8 @@ A run is described by a TOML file whose tables mirror :class:`CwrendConfig`
 (``[scenario]``, ``[estimator]``, ``[schedule]``, ``[guidance]``, ``[solver]``,
 ``[degradation]``, ``[truth]``, ``[actuator]``, ``[noise]``, ``[output]``). Every
 field has a default equal to the paper's scenario (Candan & Servadio, AAS
-26-893, Table 1; SPEC §6), so an empty file is the paper scenario. The file is read by
+26-893, Table 1, plus the settings of the authors' code that the paper leaves out:
+docs/method.md), so an empty file is the paper scenario. The file is read by
 :func:`~cwrend_cli.config.io.load_config`, ``--set key=value`` overrides are
 applied (:mod:`cwrend_cli.config.overrides`), and the result is validated into
 frozen model objects that the rest of the package receives; nothing downstream
@@ -14,7 +15,7 @@ This module holds the models only, with the validators they use (field
 lengths, covariance normalisation, cross-field rules); the texts of their
 errors are built in :mod:`cwrend_cli.config.messages`.
 
-Units everywhere (SPEC): km, s, km/s, km/s²; covariances in the matching
+Units everywhere (the paper's, Table 1): km, s, km/s, km/s²; covariances in the matching
 squared units. Field names carry their unit (``horizon_s``, ``u_max_km_s2``).
 """
 
@@ -101,8 +102,8 @@ VARIANCE_MIN = 1e-30
 #: Times [s]: 1e6 s (11.6 days) at the coarsest step still has at most MAX_STEPS steps
 #: at dt = 10 s; any rendezvous horizon is shorter.
 TIME_MAX_S = 1e6
-#: Homotopy parameter ε [-] (SPEC §1: the smoothing width of the switching function,
-#: which is of order 1; the paper's continuation starts at 1): at 100 the smoothed
+#: Homotopy parameter ε [-] (paper Eq. 10: the smoothing width of the switching function,
+#: which is of order 1; ε_max = 1 in paper Table 1): at 100 the smoothed
 #: plan is half thrust within 1 %.
 EPS_MAX = 100.0
 #: Dimensionless weights, scales and gains of the schedule and sensor faults [-].
@@ -119,11 +120,13 @@ State6 = tuple[PositionKm, PositionKm, PositionKm, VelocityKmS, VelocityKmS, Vel
 # A covariance as given: n diagonal entries, or a full n×n matrix (rows).
 Covariance = tuple[Float, ...] | tuple[tuple[Float, ...], ...]
 
-#: The defaults of every section: the paper's scenario (SPEC §6, paper Table 1),
-#: defined once with the physics parameters.
+#: The defaults of every section: the paper's scenario (paper Table 1 plus the settings of
+#: the authors' code that the paper leaves out, docs/method.md), defined once with the
+#: physics parameters.
 _PAPER = params.Problem()
 
-# Tolerance for "a whole multiple of dt" (SPEC: integer number of 1 s steps).
+# Tolerance for "a whole multiple of dt" (a convention of cwrend: times are whole
+# numbers of steps; not in the paper).
 _MULTIPLE_TOL = 1e-9
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _NOISE_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -154,7 +157,11 @@ def _check_length(value: Any, n: int) -> Any:
 
 
 class ScenarioConfig(_FrozenModel):
-    """Rendezvous geometry and timing (SPEC §1, §6; paper Table 1)."""
+    """Rendezvous geometry and timing (paper Eqs. 3–4, Table 1).
+
+    x0 is given in paper Sec. "Numerical Results and Discussion". The mean motion
+    is the authors' code's (a convention of cwrend; not in the paper).
+    """
 
     mean_motion_rad_s: Float = Field(
         _PAPER.scenario.mean_motion_rad_s,
@@ -304,7 +311,7 @@ def _normalise_covariance(
 
 
 class EstimatorConfig(_FrozenModel):
-    """Kalman filter covariances (SPEC §3, §6).
+    """Kalman filter covariances (paper Eqs. 11–21; defaults: paper Table 1).
 
     Each covariance is given either as its diagonal (a list of n positive
     numbers) or as a full symmetric positive-definite n×n matrix.
@@ -374,7 +381,7 @@ class EstimatorConfig(_FrozenModel):
 
 
 class ScheduleConfig(_FrozenModel):
-    """Innovation-adaptive homotopy schedule (SPEC §4; paper Table 1).
+    """Innovation-adaptive homotopy schedule (paper Eqs. 24–26, Table 1).
 
     Score ``s = min(max(NIS - nis_offset, 0) + kappa_mtf ρ, score_max)``, low-pass
     ``s̄_k = score_lowpass s̄_{k-1} + (1 - score_lowpass) s_k``, target
@@ -476,9 +483,10 @@ class ScheduleConfig(_FrozenModel):
 
 
 class GuidanceConfig(_FrozenModel):
-    """Receding-horizon re-solve settings (SPEC §5).
+    """Receding-horizon re-solve settings (paper Sec. "Receding-Horizon Indirect Guidance").
 
-    ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
+    The timing and the hold are conventions of cwrend, not in the paper
+    (docs/method.md). ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
     remaining horizon T - t_{k+1}; ``"reference"`` reproduces the authors' code
     (T - t_k, then the solved costate propagated one step). ``hold`` chooses
     how the plan's control is held over a step: sampled at its start (authors)
@@ -513,7 +521,7 @@ class GuidanceConfig(_FrozenModel):
 
 
 class SolverConfig(_FrozenModel):
-    """Shooting solver settings (SPEC §1, §5)."""
+    """Shooting solver settings (paper Eqs. 8–10; the settings are cwrend's, not in the paper)."""
 
     fallback: Literal["chain", "none"] = Field(
         _PAPER.solver.fallback,
@@ -566,7 +574,7 @@ class SolverConfig(_FrozenModel):
 
 
 class DegradationWindow(_FrozenModel):
-    """One sensor-degradation interval (SPEC §6).
+    """One sensor-degradation interval (the paper gives no values: docs/method.md).
 
     The window is active when ``start_s <= t <= end_s`` (both ends included).
     While active, the true measurement covariance is ``r_scale * R_nominal``
@@ -648,7 +656,10 @@ _PAPER_WINDOWS = tuple(
 
 
 class DegradationConfig(_FrozenModel):
-    """Measurement degradation schedule (SPEC §6); an empty list means none."""
+    """Measurement degradation schedule; an empty list means none.
+
+    The default windows are not in the paper (docs/method.md).
+    """
 
     windows: tuple[DegradationWindow, ...] = Field(
         _PAPER_WINDOWS,
@@ -784,7 +795,7 @@ class ActuatorConfig(_FrozenModel):
 
 
 class NoiseConfig(_FrozenModel):
-    """Measurement-noise realisation (SPEC §6).
+    """Measurement-noise realisation (v_k of paper Eq. 13; a convention of cwrend).
 
     Either drawn from ``seed`` or read from ``file``: a CSV or Parquet table
     with columns n1, n2, n3 of standard-normal draws, one row per step, scaled
@@ -1077,7 +1088,7 @@ class Dispersion(_FrozenModel):
 
 
 class CwrendConfig(_FrozenModel):
-    """The whole configuration of a cwrend run or campaign (defaults: SPEC §6).
+    """The whole configuration of a cwrend run or campaign (defaults: docs/method.md).
 
     ``sweep`` and ``dispersions`` describe campaigns (``cwrend sweep``); a
     single run ignores them.

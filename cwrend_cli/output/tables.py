@@ -560,7 +560,10 @@ SAFETY_STEP_FIELDS = [
 
 
 def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
-    """A ``summary.parquet`` / ``runs.parquet`` row of one run (metrics: SPEC §7 convention).
+    """A ``summary.parquet`` / ``runs.parquet`` row of one run.
+
+    Among its metrics those of paper Sec. "Numerical Results and Discussion" (Δv, miss,
+    fuel penalty, solve times and success).
 
     With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
     """

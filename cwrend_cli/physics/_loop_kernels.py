@@ -1,10 +1,11 @@
 """Compiled step loop of the closed loop (private; see :mod:`cwrend_cli.physics.simulation`).
 
-One step k (SPEC §5, authors' order): control from the current costate and ε
-→ actuator (the applied control, :mod:`cwrend_cli.physics.actuator`) → truth
-step → measurement (noise of the window at t_k) → KF predict (with the
-commanded control) → innovation, NIS, MTF → update → score → ε → [re-solve,
-done by the caller] → costate propagated by Δt.
+One step k (the authors' code's order; not in the paper, see docs/method.md):
+control from the current costate and ε → actuator (the applied control,
+:mod:`cwrend_cli.physics.actuator`) → truth step → measurement (noise of the
+window at t_k) → KF predict (with the commanded control) → innovation, NIS,
+MTF → update → score → ε → [re-solve, done by the caller] → costate
+propagated by Δt.
 
 A dropout step (``LoopModel.dropout``, a sensor fault of the window at t_k,
 :mod:`cwrend_cli.physics.sensors`) has no measurement: the filter predicts
@@ -80,8 +81,8 @@ class LoopModel(NamedTuple):
     dt: float  # step Δt [s]
     gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
     gl_w: np.ndarray  # and weights
-    use_mtf: bool  # MTF inflation of the filter (SPEC §3)
-    adaptive: bool  # ε from the innovation score (SPEC §4), else held
+    use_mtf: bool  # MTF inflation of the filter (paper Eqs. 16–19)
+    adaptive: bool  # ε from the innovation score (paper Eqs. 24–26), else held
     hold_mean: bool  # control averaged over the step, else sampled at its start
     u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
     override: np.ndarray  # (N,) bool
@@ -91,7 +92,7 @@ class LoopModel(NamedTuple):
 
 
 class ScheduleParams(NamedTuple):
-    """The homotopy schedule of SPEC §4 (Eqs. 24–26)."""
+    """The homotopy schedule of paper Eqs. 24–26."""
 
     nis_offset: float  # m
     kappa_mtf: float  # κ_MTF
@@ -426,7 +427,7 @@ class ResolveModel(NamedTuple):
     xf: np.ndarray  # (6,) target state [km, km/s]
     horizon_s: float  # the scenario's horizon T [s]
     correct: bool  # guidance.resolve_timing = "correct" (else "reference")
-    success_residual: float  # a re-solve succeeds below this terminal residual [km] (SPEC §5)
+    success_residual: float  # a re-solve succeeds below this terminal residual [km] (cwrend's)
     newton: tuple[Any, ...]  # the fields of the solver's NewtonSettings
     switching_max_iter: int  # steps of the switching-time Newton at ε = 0
     stop_every: bool  # return after every warm attempt (a re-solve observer is watching)

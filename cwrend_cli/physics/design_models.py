@@ -1,6 +1,6 @@
 """Design models beyond Clohessy–Wiltshire: eccentric chief (``ya``) and J2 (``ss``).
 
-The guidance and the filter of the paper use the CW model (SPEC §1, Eqs. 3–4,
+The guidance and the filter of the paper use the CW model (paper Eqs. 3–4,
 11; :mod:`cwrend_cli.physics.dynamics`). This module gives two linear models
 that describe the orbit better, each as its exact zero-order-hold
 discretisation over one step, ``x_{k+1} = Φ_k x_k + Γ_k u_k``:

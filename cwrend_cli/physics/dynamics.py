@@ -1,4 +1,4 @@
-"""Clohessy–Wiltshire relative motion in closed form (SPEC §1; paper Eqs. 3–4, 11).
+"""Clohessy–Wiltshire relative motion in closed form (paper Eqs. 3–4, 11).
 
 Units throughout: km, s, km/s, km/s², rad/s. Frame: x radial, y along-track,
 z cross-track; the state is ``[x, y, z, ẋ, ẏ, ż]``.
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-#: Mean motion of the paper's scenario [rad/s] (SPEC §1).
+#: Mean motion of the paper's scenario [rad/s] (the authors' code's; the paper gives no value).
 MEAN_MOTION_PAPER_RAD_S = 0.00104218449
 
 
@@ -65,7 +65,7 @@ def x_minus_sin(x: float) -> float:
 
 @njit(cache=True)
 def stm(n: float, t: float) -> np.ndarray:
-    """State-transition matrix ``Φ(t) = e^{A t}`` in closed form (Eq. 11, SPEC §1).
+    """State-transition matrix ``Φ(t) = e^{A t}`` in closed form (paper Eq. 11).
 
     Valid for negative ``t`` too (backward propagation).
     """
@@ -122,7 +122,7 @@ def input_matrix(n: float, t: float) -> np.ndarray:
 
 @njit(cache=True)
 def costate_stm(n: float, t: float) -> np.ndarray:
-    """Costate transition ``e^{−Aᵀ t} = Φ(−t)ᵀ``, so ``λ(t) = e^{−Aᵀt} λ(0)`` (SPEC §1)."""
+    """Costate transition ``e^{−Aᵀ t} = Φ(−t)ᵀ``, so ``λ(t) = e^{−Aᵀt} λ(0)`` (from paper Eq. 7)."""
     return stm(n, -t).T.copy()
 
 

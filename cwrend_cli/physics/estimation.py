@@ -1,4 +1,4 @@
-"""Linear Kalman filter with measurement-side MTF covariance inflation (SPEC §3).
+"""Linear Kalman filter with measurement-side MTF covariance inflation.
 
 Paper Eqs. (11)–(23). Pure step functions on arrays (compiled with numba so the
 closed loop can call them); history is kept by the caller. Units: km, km/s.
@@ -16,9 +16,11 @@ from numba import njit
 
 from cwrend_cli.physics.dynamics import zoh_step
 
-#: Regularisation added to the innovation covariance before inversion (SPEC §3).
+#: Regularisation added to the innovation covariance before inversion (none in paper
+#: Eq. 19: the authors' code's, a convention of cwrend).
 GAIN_REGULARISATION = 1e-12
-#: Floor of tr(S) in the MTF ratio (SPEC §3).
+#: Floor of tr(S) in the MTF ratio (none in paper Eq. 23: the authors' code's,
+#: a convention of cwrend).
 TRACE_FLOOR = 1e-12
 
 

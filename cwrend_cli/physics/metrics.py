@@ -1,14 +1,16 @@
-"""What a run is judged by: Δv, miss, fuel penalty and its re-solve statistics (SPEC §2, §7).
+"""What a run is judged by: Δv, miss, fuel penalty and its re-solve statistics.
 
-Δv is the trapezoid of ‖u‖ sampled on the grid t = 0 … T (SPEC §2; in closed
+The quantities paper Sec. "Numerical Results and Discussion" reports.
+
+Δv is the trapezoid of ‖u‖ sampled on the grid t = 0 … T (a convention of cwrend; in closed
 loop no control is computed at t = T, so that sample is 0); the miss is the
 distance ‖r(T) − r_f‖; the fuel penalty is Δv relative to the open-loop
 fuel-optimal Δv. Solve statistics are over the receding-horizon re-solves,
-not the initial solve (the convention of the paper's Table 2, SPEC §7).
+not the initial solve (a convention of cwrend; the paper does not say).
 
 Filter consistency (issue 15, item 6), the chi-square tests of Bar-Shalom,
 Li & Kirubarajan 2001, *Estimation with Applications to Tracking and
-Navigation*, §5.4: the NIS ``νᵀ S⁻¹ ν`` of SPEC §3 (S with the nominal R) is
+Navigation*, §5.4: the NIS ``νᵀ S⁻¹ ν`` of paper Eq. 22 (S with the nominal R) is
 χ² with 3 degrees of freedom for a filter whose model matches the world, so
 its mean is 3; the NEES ``(x̂ − x)ᵀ P⁻¹ (x̂ − x)`` against the simulated truth
 is χ² with 6, mean 6. Means well below say the filter is conservative (its P
@@ -35,7 +37,7 @@ if TYPE_CHECKING:  # types only: simulation and references import this module
 
 
 def delta_v(t_s: FloatArray, u: FloatArray) -> float:
-    """Δv [km/s]: trapezoid of ‖u‖ over the grid (SPEC §2)."""
+    """Δv [km/s]: trapezoid of ‖u‖ over the grid (a convention of cwrend; not in the paper)."""
     return float(np.trapezoid(np.linalg.norm(u, axis=1), t_s))
 
 
@@ -65,7 +67,7 @@ class RunMetrics:
     n_converged: int
     n_infeasible: int
     n_failed: int
-    solve_success_pct: float  # converged with ‖residual‖ below the threshold (SPEC §5)
+    solve_success_pct: float  # converged with ‖residual‖ below the threshold (not in the paper)
     solve_mean_ms: float  # wall time per solve
     solve_max_ms: float
     mean_nis_nominal: float  # mean NIS outside the degradation windows; 3 if consistent
@@ -79,7 +81,7 @@ def mean_nis_nominal(nis: FloatArray, window: np.ndarray) -> float:
     :attr:`~cwrend_cli.physics.simulation.RunResult.window`: the window whose
     noise the row's measurement carries). Rows without a measurement (row 0,
     dropouts) have NaN NIS and are skipped. E[NIS] = 3 (the measurement's
-    dimension, χ²₃; SPEC §3, Bar-Shalom et al. 2001, §5.4.2) for a
+    dimension, χ²₃; paper Eq. 22, Bar-Shalom et al. 2001, §5.4.2) for a
     consistent filter. NaN when no such row exists.
     """
     values = np.asarray(nis, dtype=float)[np.asarray(window) < 0]

@@ -7,7 +7,7 @@ file. The configuration layer (:mod:`cwrend_cli.config`) validates user input
 once and converts it into these types (:mod:`cwrend_cli.config.adapt`);
 nothing in :mod:`cwrend_cli.physics` ever sees a pydantic model.
 
-Units everywhere (SPEC): km, s, km/s, km/s², rad/s; covariances in the
+Units everywhere (the paper's, Table 1): km, s, km/s, km/s², rad/s; covariances in the
 matching squared units.
 """
 
@@ -60,7 +60,11 @@ def covariance_matrix(value: Covariance) -> FloatArray:
 
 @dataclass(frozen=True)
 class Scenario:
-    """Rendezvous geometry and timing (SPEC §1, §6; paper Table 1)."""
+    """Rendezvous geometry and timing (paper Eqs. 3–4, Table 1).
+
+    x0 is given in paper Sec. "Numerical Results and Discussion". The mean motion
+    is the authors' code's (a convention of cwrend; not in the paper).
+    """
 
     mean_motion_rad_s: float = 0.00104218449  # CW mean motion n [rad/s]
     horizon_s: float = 800.0  # rendezvous horizon T [s]
@@ -83,7 +87,7 @@ class Scenario:
 
 @dataclass(frozen=True)
 class Estimator:
-    """Kalman filter covariances and initial error (SPEC §3, §6)."""
+    """Kalman filter covariances (paper Eqs. 11–21, Table 1) and initial error (cwrend's)."""
 
     r_nominal_km2: Covariance = (1e-6, 1e-6, 1e-6)  # nominal measurement covariance R [km²]
     q_process: Covariance = (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14)  # Q [km², km²/s²]
@@ -105,7 +109,7 @@ class Estimator:
 
 @dataclass(frozen=True)
 class Schedule:
-    """Innovation-adaptive homotopy schedule (SPEC §4; paper Eqs. 24–26, Table 1)."""
+    """Innovation-adaptive homotopy schedule (paper Eqs. 24–26, Table 1)."""
 
     beta: float = 0.25  # score-to-homotopy sensitivity β [1/score]
     nis_offset: float = 3.0  # NIS offset m [-]
@@ -122,9 +126,10 @@ class Schedule:
 
 @dataclass(frozen=True)
 class Guidance:
-    """Receding-horizon re-solve settings (SPEC §5).
+    """Receding-horizon re-solve settings (paper Sec. "Receding-Horizon Indirect Guidance").
 
-    ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
+    The timing and the hold are conventions of cwrend, not in the paper
+    (docs/method.md). ``resolve_timing = "correct"`` solves from the estimate at t_{k+1} with
     remaining horizon T − t_{k+1}; ``"reference"`` reproduces the authors'
     code (T − t_k, then the solved costate propagated one step). ``hold``:
     the plan's control sampled at the start of each step (authors) or
@@ -142,7 +147,7 @@ class Guidance:
 
 @dataclass(frozen=True)
 class Solver:
-    """Shooting-solver settings of a closed loop (SPEC §1, §5)."""
+    """Shooting-solver settings of a closed loop (paper Eqs. 8–10; cwrend's, not in the paper)."""
 
     fallback: Literal["chain", "none"] = "chain"
     on_infeasible: Literal["keep", "min_miss"] = "keep"
@@ -156,7 +161,8 @@ class Solver:
 
 @dataclass(frozen=True)
 class Window:
-    """One sensor-degradation interval, active on ``start_s ≤ t ≤ end_s`` (SPEC §6).
+    """One sensor-degradation interval, active on ``start_s ≤ t ≤ end_s`` (the paper gives
+    no values: docs/method.md).
 
     While active the true measurement covariance is ``r_scale · R_nominal``
     and ``bias_km`` is added to each measurement. The sensor faults of
@@ -193,7 +199,8 @@ class Window:
         return f"R×{self.r_scale:g}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
 
 
-#: The paper's degradation windows (SPEC §6): R × 300 on [250, 325], then also a bias.
+#: The degradation windows of the paper's study (the authors' code; the paper gives no values,
+#: docs/method.md): R × 300 on [250, 325], then also a bias.
 PAPER_WINDOWS = (
     Window(start_s=250.0, end_s=325.0, r_scale=300.0),
     Window(start_s=325.0, end_s=400.0, r_scale=300.0, bias_km=(0.010, -0.008, 0.012)),
@@ -241,7 +248,7 @@ DesignModelName = Literal["cw", "ss", "ya"]
 class DesignModel:
     """The linear model each consumer predicts with (issue 33); CW by default.
 
-    ``"cw"``: Clohessy–Wiltshire (SPEC §1, the paper's). ``"ss"``:
+    ``"cw"``: Clohessy–Wiltshire (paper Eqs. 3–4, the paper's). ``"ss"``:
     Schweighart–Sedwick, J2 with constant coefficients, reference orbit the
     chief's (a from ``scenario.mean_motion_rad_s``, i = ``truth.inclination_deg``).
     ``"ya"``: Yamanaka–Ankersen, the exact transition about the eccentric chief
@@ -390,7 +397,8 @@ class Architecture:
         return self.method if self.method is not None else guidance.method
 
 
-#: The ablation of SPEC §6, in the paper's order (``--arch all``).
+#: The ablation of paper Sec. "Numerical Results and Discussion",
+#: in the paper's order (``--arch all``).
 ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
     {
         a.slug: a

@@ -1,4 +1,4 @@
-"""Open-loop energy- and fuel-optimal references (SPEC §2; paper Table 1 results).
+"""Open-loop energy- and fuel-optimal references (paper Sec. "Numerical Results and Discussion").
 
 Energy-optimal: unbounded ``min ∫½‖u‖²`` solved in closed form. Fuel-optimal:
 ε-continuation 1.0, 0.9, …, 0.0 of the shooting problem, each solve
@@ -20,7 +20,7 @@ from cwrend_cli.physics.dynamics import costate_stm, cw_system
 from cwrend_cli.physics.errors import ScenarioError
 from cwrend_cli.physics.metrics import delta_v
 
-#: ε sequence of the fuel-optimal continuation (SPEC §2).
+#: ε sequence of the fuel-optimal continuation (the authors' code's; not in the paper).
 FUEL_CONTINUATION = tuple(round(1.0 - 0.1 * i, 1) for i in range(11))
 
 

@@ -1,4 +1,4 @@
-"""Innovation-adaptive homotopy schedule (SPEC §4; paper Eqs. 24–26).
+"""Innovation-adaptive homotopy schedule (paper Eqs. 24–26).
 
 Pure scalar functions, compiled so that the closed loop can call them.
 """
@@ -13,7 +13,7 @@ from numba import njit
 def composite_score(
     nis: float, mtf_ratio: float, nis_offset: float, kappa_mtf: float, score_max: float
 ) -> float:
-    """``s = min(max(NIS − m, 0) + κ_MTF ρ, score_max)`` (Eq. 24 with the cap of SPEC §4)."""
+    """``s = min(max(NIS − m, 0) + κ_MTF ρ, score_max)`` (paper Eq. 24; cap: Table 1)."""
     return min(max(nis - nis_offset, 0.0) + kappa_mtf * mtf_ratio, score_max)
 
 
@@ -51,5 +51,5 @@ def eps_target(
 
 @njit(cache=True)
 def eps_blend(eps_previous: float, eps_star: float, alpha_eps: float) -> float:
-    """Applied homotopy parameter ``ε_k = (1 − α_ε) ε_{k−1} + α_ε ε*`` (SPEC §4)."""
+    """Applied homotopy parameter ``ε_k = (1 − α_ε) ε_{k−1} + α_ε ε*`` (α_ε: paper Table 1)."""
     return (1.0 - alpha_eps) * eps_previous + alpha_eps * eps_star

@@ -1,11 +1,12 @@
-"""Measurement noise: degradation windows and standard-normal streams (SPEC §3, §6).
+"""Measurement noise: degradation windows and standard-normal streams (v_k of paper Eq. 13).
 
 No file I/O here: an external realisation is read by :mod:`cwrend_cli.config.io`.
 
 The truth is measured as ``y = H x + chol(R_true) n + b`` where ``n`` is one
 standard-normal 3-vector per step, shared by every architecture of a seed
-(fair comparison, SPEC §6), and ``R_true = r_scale · R_nominal`` and the bias
-``b`` come from the degradation window active at the step's start time.
+(fair comparison; a convention of cwrend, not in the paper), and
+``R_true = r_scale · R_nominal`` and the bias ``b`` come from the degradation
+window active at the step's start time.
 
 Sensor faults (issue 15, item 3; :class:`~cwrend_cli.physics.params.Window`)
 compose with these: a dropout removes the step's measurement (the filter
@@ -132,8 +133,8 @@ def sensor_noise(
 ) -> SensorNoise:
     """Noise, dropouts and outliers of each step under ``windows`` and their faults.
 
-    Row k uses the window at ``times_s[k]`` (the step's start, SPEC §5, the
-    authors' code): ``v_k = c_k chol(r_scale R_nominal) n_k + bias + d_k``
+    Row k uses the window at ``times_s[k]`` (the step's start, as in the
+    authors' code; docs/method.md): ``v_k = c_k chol(r_scale R_nominal) n_k + bias + d_k``
     with ``c_k = outlier_scale`` on an outlier step (``faults.outlier[k] <
     outlier_probability``) and 1 otherwise, and ``d`` the window's bias
     random walk: zero on its first active step, then
@@ -188,7 +189,7 @@ def measurement_noise(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Noise added to each measurement (N, 3) [km] and the active window index (N,).
 
-    Row k uses the window at ``times_s[k]`` (the step's start, SPEC §5):
+    Row k uses the window at ``times_s[k]`` (the step's start, the authors' code):
     ``v_k = chol(r_scale R_nominal) n_k + bias`` (:func:`sensor_noise`
     without faults).
     """

@@ -1,4 +1,6 @@
-"""Closed-loop receding-horizon simulation of one architecture (SPEC §3–5).
+"""Closed-loop receding-horizon simulation of one architecture.
+
+Paper Eqs. 11–26 and Sec. "Receding-Horizon Indirect Guidance".
 
 An architecture is estimator {plain, MTF} × schedule {fixed, adaptive}: the
 same loop with two switches. The loop runs compiled
@@ -71,7 +73,7 @@ class SolveRecord:
     iterations: int
     residual_km: float
     wall_time_ms: float
-    success: bool  # converged and residual below solver.success_residual (SPEC §5)
+    success: bool  # converged and residual below solver.success_residual (not in the paper)
     scp_iterations: int = 0  # constrained cone program (issue 32): its convex programs
     slack_km: float = 0.0  # constrained cone program: the path softening it needed [km]
 
@@ -103,7 +105,7 @@ class RunResult:
     trace_p: np.ndarray
     window: np.ndarray  # index of the degradation window that corrupted the measurement, −1 none
     solves: tuple[SolveRecord, ...]
-    delta_v_km_s: float  # trapezoid of ‖u‖ (applied) over the grid (SPEC §2)
+    delta_v_km_s: float  # trapezoid of ‖u‖ (applied) over the grid (not in the paper)
     miss_km: float
     u_cmd: np.ndarray  # commanded control (the filter's input)
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
@@ -170,7 +172,10 @@ def _shooting(
 
 
 def open_loop_references(problem: Problem) -> References:
-    """Energy- and fuel-optimal open-loop references of the scenario (SPEC §2)."""
+    """Energy- and fuel-optimal open-loop references of the scenario.
+
+    The references of paper Sec. "Numerical Results and Discussion".
+    """
     sc = problem.scenario
     t = sc.time_grid()
     first = _shooting(sc, np.asarray(sc.x0), sc.horizon_s, 0.0)
@@ -181,7 +186,7 @@ def open_loop_references(problem: Problem) -> References:
 
 
 def resolve_steps(problem: Problem) -> list[int]:
-    """Steps k at which a re-solve is due (SPEC §5)."""
+    """Steps k at which a re-solve is due (t_resolve, t_min,rem of paper Table 1)."""
     sc, gd = problem.scenario, problem.guidance
     every = round(gd.t_resolve_s / sc.dt_s)
     out = []
@@ -289,13 +294,14 @@ def simulate(
     noise, active = meas.noise, meas.active
 
     x0 = np.asarray(sc.x0, dtype=float)
-    # the filter starts at the true initial state (SPEC §3) unless an initial error is set
+    # the filter starts at the true initial state (a convention of cwrend; not in the paper)
+    # unless an initial error is set
     x_hat0 = x0 + np.asarray(est.initial_error, dtype=float)
     solves: list[SolveRecord] = []
     socp = arch.resolved_method(gd) == "socp"
     if arch.adaptive and not socp:
         eps0 = sch.eps_max
-        # initial solve at ε_max from the energy costate; on failure keep it (SPEC §4)
+        # initial solve at ε_max from the energy costate; on failure keep it (not in the paper)
         first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
         result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
@@ -652,7 +658,7 @@ def _min_miss_if_infeasible(
     model: sk.LoopModel,
 ) -> None:
     """After an infeasible re-solve ``i`` with ``solver.on_infeasible = "min_miss"``: hold the
-    minimum-miss controls until the next re-solve (SPEC §5)."""
+    minimum-miss controls until the next re-solve (cwrend's; docs/solvers.md)."""
     if not (
         result.status is guidance.SolveStatus.INFEASIBLE
         and problem.solver.on_infeasible == "min_miss"

@@ -1,6 +1,6 @@
 """Truth dynamics: the world the closed loop flies in, separate from the CW design model.
 
-The guidance and the filter always use the Clohessy–Wiltshire model (SPEC §1);
+The guidance and the filter always use the Clohessy–Wiltshire model (paper Eqs. 3–4);
 ``truth.model`` chooses what the true relative state obeys (issue 15, item 1):
 
 * ``"cw"``: the same CW model, stepped exactly by ``x⁺ = Φx + Γu`` (Eq. 11);

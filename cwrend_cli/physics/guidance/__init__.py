@@ -1,4 +1,4 @@
-"""Indirect minimum-fuel guidance: the shooting re-solve and its convex checks (SPEC §1, §5).
+"""Indirect minimum-fuel guidance: the shooting re-solve and its convex checks (paper Eqs. 5–10).
 
 :mod:`~cwrend_cli.physics.guidance.shooting` is the typed API over the
 compiled kernels of :mod:`~cwrend_cli.physics.guidance._kernels`;

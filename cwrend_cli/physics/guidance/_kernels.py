@@ -2,8 +2,9 @@
 
 Units: km, s, km/s, km/s², rad/s. Arrays and floats only, no config objects.
 
-The shooting problem (SPEC §1): find ``λ₀`` so that the state, driven by the
-control law of Eq. (10) with ``λ(τ) = e^{−Aᵀτ} λ₀``, reaches ``x_f`` at ``T``.
+The shooting problem (paper Sec. "Receding-Horizon Indirect Guidance"): find
+``λ₀`` so that the state, driven by the control law of Eq. (10) with
+``λ(τ) = e^{−Aᵀτ} λ₀``, reaches ``x_f`` at ``T``.
 With ``W(τ) = Φ(−τ) B`` we have ``λ_v(τ) = W(τ)ᵀ λ₀`` and
 
     x(T) = Φ(T) [x₀ + ∫₀ᵀ W(τ) u(τ) dτ],
@@ -44,7 +45,7 @@ from numba import njit
 
 from cwrend_cli.physics.dynamics import one_minus_cos, stm, x_minus_sin
 
-#: ε below this is exactly bang-bang (SPEC §1).
+#: ε below this is exactly bang-bang (paper Eq. 10 as ε → 0; the threshold is not in the paper).
 EPS_BANG_BANG = 1e-12
 #: Most switching times one evaluation can track.
 MAX_BREAKS = 64
@@ -151,7 +152,7 @@ def input_kernel(n: float, tau: float, w: np.ndarray) -> None:
 
 @njit(cache=True)
 def costate_at(n: float, tau: float, lam0: np.ndarray, out: np.ndarray) -> None:
-    """Write ``λ(τ) = Φ(−τ)ᵀ λ₀`` into ``out`` (SPEC §1, closed-form costate)."""
+    """Write ``λ(τ) = Φ(−τ)ᵀ λ₀`` into ``out`` (closed-form costate, from paper Eq. 7)."""
     p = stm(n, -tau)
     for j in range(6):
         acc = 0.0

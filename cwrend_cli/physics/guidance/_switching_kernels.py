@@ -18,7 +18,7 @@ unknowns beside ``λ₀``, the classical switching-time shooting: with the burns
 ``[a_i, b_i]`` (an end either fixed at 0 or at the horizon ``T``, or a
 switching time ``t_k``), the unknowns ``z = (λ₀, t_1 … t_m)`` solve
 
-    F_G(z) = Σ_i ∫_{a_i}^{b_i} W(τ) (−u_max q̂(τ)) dτ − d = 0    (6 equations; SPEC §1)
+    F_G(z) = Σ_i ∫_{a_i}^{b_i} W(τ) (−u_max q̂(τ)) dτ − d = 0    (6 equations; paper Eq. 10, ε = 0)
     F_k(z) = ‖λ_v(t_k)‖ − 1 = 0                                  (one per switching time)
 
 which is smooth in ``z`` for a fixed structure, even where a burn has zero or

@@ -1,6 +1,6 @@
-"""Convex guidance: the smoothed minimum-fuel problem as a cone program (SPEC §1, §5; issue 16).
+"""Convex guidance: the smoothed minimum-fuel problem as a cone program (paper Eqs. 5–10; issue 16).
 
-The smoothed control law of Eq. (10) (SPEC §1: throttle 0 for ``S > ε``,
+The smoothed control law of paper Eq. 10 (throttle 0 for ``S > ε``,
 ``(ε − S)/(2ε)`` for ``|S| ≤ ε``, 1 for ``S < −ε``, ``S = 1 − ‖λ_v‖``) is the
 pointwise minimiser over ``‖u‖ ≤ u_max`` of the Hamiltonian
 
@@ -61,7 +61,7 @@ fixed-ε closed loops 19 → 7 ms mean (degenerate re-solves, where the primer
 stays near 1 over the whole horizon, keep every step). Clarabel also answers
 whenever the ascent neither converges nor finds a certificate.
 
-Infeasible re-solves (the final burn, SPEC §5) are recognised by a dual
+Infeasible re-solves (the final burn; not in the paper, docs/method.md) are recognised by a dual
 certificate: some ``ν`` with ``νᵀb > Σ_j ‖A_jᵀν‖`` proves by weak duality
 that no bounded controls reach ``x_f`` — found by the ascent, or given by
 Clarabel as its primal infeasibility certificate. When Clarabel stops
@@ -250,7 +250,7 @@ def _clarabel_plan(
         infeasible = sol.status in _INFEASIBLE
         if not infeasible:
             # No certificate (within ~1e-4 of the boundary the interior point stalls):
-            # the grid's own test, SPEC §5, on exactly this grid.
+            # the grid's own test (feasibility.min_peak_thrust), on exactly this grid.
             infeasible = feasibility.min_peak_thrust(g) > g.u_max_km_s2
         status = SolveStatus.INFEASIBLE if infeasible else SolveStatus.FAILED
         return status, np.zeros((steps, 3)), np.full(6, np.nan), used
@@ -285,7 +285,7 @@ def _clarabel_program(g: feasibility.GridProblem, linear: float, weight: float) 
 
 
 def terminal_miss(g: feasibility.GridProblem, controls: np.ndarray) -> float:
-    """``‖x_N − x_f‖`` of held ``controls`` under the exact discrete dynamics (SPEC §5 norm)."""
+    """``‖x_N − x_f‖`` of held ``controls`` under the exact discrete dynamics (6-vector norm)."""
     reached = np.einsum("jab,jb->a", g.blocks, controls)
     return float(np.linalg.norm(reached - g.rhs))
 

@@ -1,10 +1,12 @@
-"""Convex checks on the zero-order-hold grid, solved with Clarabel (SPEC §5).
+"""Convex checks on the zero-order-hold grid, solved with Clarabel (not in the paper).
+
+See docs/solvers.md.
 
 Three second-order-cone problems over ``N = t_rem/Δt`` held controls ``u_j``
 with the exact discrete dynamics ``x_N = Φᴺ x̂ + Σ_j Φ^{N−1−j} Γ u_j``:
 
 * :func:`min_peak_thrust` — the smallest ``max_j ‖u_j‖`` that reaches ``x_f``.
-  Above ``u_max`` the re-solve has no solution on the grid (SPEC §5).
+  Above ``u_max`` the re-solve has no solution on the grid (docs/method.md).
 * :func:`min_fuel_costate` — the discretised minimum-fuel problem; the
   multiplier ``ν`` of its terminal constraint gives a costate guess
   ``λ(0) = Φ(t_rem)ᵀ ν`` for the shooting solver's last fallback step.
@@ -245,7 +247,9 @@ def _support_upper_bound(n: float, lam: np.ndarray, horizon_s: float, half_s: fl
 def continuous_peak_thrust(
     n: float, x0: np.ndarray, xf: np.ndarray, horizon_s: float, cells: int = 0, nodes: int = 8
 ) -> float:
-    """Certified lower bound of the smallest ``max_t ‖u(t)‖`` reaching ``x_f`` [km/s²] (SPEC §5).
+    """Certified lower bound of the smallest ``max_t ‖u(t)‖`` reaching ``x_f`` [km/s²].
+
+    Of the bound of paper Eq. 6.
 
     Continuous-time dual bound (issue 16, item 3). With ``W(τ) = e^{−Aτ}B``
     the target is reached iff ``∫₀^T W u dτ = d``, ``d = Φ(T)⁻¹x_f − x₀``. The

@@ -1,4 +1,7 @@
-"""Outcome of one guidance re-solve, shooting or cone program (SPEC §5)."""
+"""Outcome of one guidance re-solve, shooting or cone program.
+
+A re-solve of paper Sec. "Receding-Horizon Indirect Guidance".
+"""
 
 from __future__ import annotations
 
@@ -30,7 +33,7 @@ class SolveResult:
     status: SolveStatus
     step: str  # fallback step that ended the solve: warm, continuation_warm, ...
     iterations: int
-    residual_km: float  # ‖x(T) − x_f‖ (6-vector norm, km and km/s as in SPEC §5)
+    residual_km: float  # ‖x(T) − x_f‖ (6-vector norm of km and km/s; not in the paper)
     wall_time_s: float
     eps: float
     horizon_s: float

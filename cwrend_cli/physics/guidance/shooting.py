@@ -1,4 +1,4 @@
-"""Indirect minimum-fuel guidance: control law and the shooting re-solve (SPEC §1, §5).
+"""Indirect minimum-fuel guidance: control law and the shooting re-solve (paper Eqs. 8–10).
 
 The typed API over the compiled kernels of :mod:`cwrend_cli.physics.guidance._kernels`.
 One re-solve finds ``λ(0)`` so that the state reaches ``x_f`` at the remaining
@@ -95,7 +95,7 @@ class SolverSettings:
     quadrature_nodes: int = 12
     fallback: Literal["chain", "none"] = "chain"
     success_residual: float = (
-        1e-4  # SPEC §5: a solve succeeds if converged and ‖x(T)−x_f‖ below this
+        1e-4  # not in the paper: a solve succeeds if converged and ‖x(T)−x_f‖ below this
     )
     dt_grid_s: float = 1.0  # zero-order-hold grid of the convex checks
     #: Newton steps of the switching-time Newton tried first at ε = 0 (0: the dual ascent
@@ -143,7 +143,9 @@ def control(costate_v: np.ndarray, eps: float, u_max_km_s2: float) -> np.ndarray
 
 
 def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
-    """``λ(0)`` of the unbounded energy-optimal problem (SPEC §2), in closed form.
+    """``λ(0)`` of the unbounded energy-optimal problem, in closed form.
+
+    The paper's open-loop energy reference (paper Sec. "Numerical Results and Discussion").
 
     With ``u = −Bᵀλ`` the state–costate system is linear,
     ``d/dt [x; λ] = [[A, −BBᵀ], [0, −Aᵀ]] [x; λ]``; its 12×12 matrix exponential
@@ -284,7 +286,9 @@ def solve(
     settings: SolverSettings | None = None,
     alternatives: Sequence[np.ndarray] = (),
 ) -> SolveResult:
-    """Solve one shooting problem from the warm start ``guess`` (SPEC §5).
+    """Solve one shooting problem from the warm start ``guess``.
+
+    One re-solve of paper Sec. "Receding-Horizon Indirect Guidance".
 
     Returns the costate with status ``converged``, ``infeasible`` (a
     certificate that no bounded control reaches ``x_f``) or ``failed``; on
@@ -504,7 +508,9 @@ def switching_times(
 
 
 def classify_failure(problem: ShootingProblem) -> SolveStatus:
-    """``infeasible`` if the continuous-time dual bound certifies it, else ``failed`` (SPEC §5).
+    """``infeasible`` if the continuous-time dual bound certifies it, else ``failed``.
+
+    Not in the paper (docs/solvers.md).
 
     :func:`~cwrend_cli.physics.guidance.feasibility.continuous_peak_thrust` is
     a certified lower bound of the least peak thrust reaching ``x_f``, so a
