@@ -22,7 +22,7 @@ from cwrend_cli.campaign import driver as driver_module
 from cwrend_cli.campaign import journal
 from cwrend_cli.campaign import worker as worker_module
 from cwrend_cli.cli import app
-from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.config import ARCHITECTURES, CwrendConfig, config_from_dict
 from cwrend_cli.errors import InfrastructureError
 from cwrend_cli.output import recording
 
@@ -406,3 +406,18 @@ def test_a_processs_first_run_of_an_architecture_gets_the_allowance_for_its_kern
     task = campaign.plan(CwrendConfig(), ["mtf_adaptive", "plain_adaptive"], [0, 1]).tasks[0]
     worker_module.execute_task(task, None, str(tmp_path), metadata={"config_hash": "c"})
     assert firsts == [True, True, False, False]  # seed 0's two architectures, then seed 1's
+
+
+def test_each_compiled_variant_of_the_loop_gets_the_first_run_allowance() -> None:
+    # a nonlinear truth or an actuator with errors compiles its own loop: its first run in a
+    # process is a first run, even after runs of the same architecture in the CW world
+    from cwrend_cli.config.adapt import problem_of
+
+    paper = problem_of(CwrendConfig())
+    j2 = problem_of(config_from_dict({"truth": {"model": "j2"}}))
+    noisy = problem_of(config_from_dict({"actuator": {"magnitude_sigma": 0.01}}))
+    variants = {worker_module.kernel_variant(p, "mtf_adaptive") for p in (paper, j2, noisy)}
+    assert len(variants) == 3
+    assert worker_module.kernel_variant(paper, "mtf_adaptive") != worker_module.kernel_variant(
+        paper, "mtf_fixed"
+    )

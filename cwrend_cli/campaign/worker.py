@@ -226,9 +226,22 @@ def run_case(
 # ---------------------------------------------------------------------------
 
 
-#: Architectures this process has started a run of: the first one of each also loads (or
-#: compiles) its kernels, which its time limit allows for (:func:`guards.run_timeout_s`).
-_ARCHS_RUN: set[str] = set()
+#: Compiled variants this process has started a run of (:func:`kernel_variant`): the first
+#: run of each also loads (or compiles) its kernels, which its time limit allows for
+#: (:func:`guards.run_timeout_s`).
+_ARCHS_RUN: set[tuple[object, ...]] = set()
+
+
+def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
+    """What chooses the compiled code a run of ``arch`` on ``problem`` loads or compiles.
+
+    The architecture, and whether the closed loop carries a nonlinear truth or an
+    actuator with errors: each compiles its own specialisation of the loop
+    (:func:`cwrend_cli.physics._loop_kernels._optional`), 10-15 CPU s on a fresh
+    install, so the first run of each gets the first-run allowance of its time limit,
+    not only the first run of each architecture.
+    """
+    return (arch, problem.truth.model, problem.actuator.ideal)
 
 
 @dataclass(frozen=True)
@@ -425,8 +438,9 @@ def execute_task(
                     noise = noises[spec.dispersed, spec.seed] = standard_normal(
                         task.noise, spec.seed, n_steps
                     )
-                first = spec.arch not in _ARCHS_RUN
-                _ARCHS_RUN.add(spec.arch)
+                variant = kernel_variant(problem, spec.arch)
+                first = variant not in _ARCHS_RUN
+                _ARCHS_RUN.add(variant)
                 limit = guards.run_timeout_s(run_timeout_s, problem, first=first)
                 with guards.time_limit(limit):  # the references too, when computed here
                     run_refs = _references(problem, references)
