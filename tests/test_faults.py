@@ -27,6 +27,7 @@ from cwrend_cli.errors import InfrastructureError
 from cwrend_cli.output import recording
 
 runner = CliRunner()
+ROOT = Path(__file__).resolve().parents[1]
 ADAPTIVE = "mtf_adaptive,plain_adaptive"  # the fast architectures (a few ms per run)
 TIMING = ("duration_s", "solve_mean_ms", "solve_max_ms", "wall_time_ms", "error")
 
@@ -363,6 +364,19 @@ def test_the_default_run_limit_is_a_small_multiple_of_what_the_run_costs() -> No
     first = guards.run_timeout_s(None, paper, first=True)
     assert first == pytest.approx(10.0 + 3.0 * cost + guards.FIRST_RUN_ALLOWANCE_S)
     assert guards.run_timeout_s(2.5, paper, first=True) == 2.5  # output.run_timeout_s wins
+
+
+def test_a_constrained_run_gets_the_limit_of_its_costlier_re_solves() -> None:
+    # a constrained cone-program run of campaigns/safe_approach.toml takes 17-18 s on a
+    # 2-core machine: the paper run's 19.5 s limit would time it out on a slower one
+    from cwrend_cli.campaign import guards
+    from cwrend_cli.config import load_config
+    from cwrend_cli.config.adapt import problem_of
+
+    safe = problem_of(load_config(ROOT / "campaigns" / "safe_approach.toml", []))
+    assert safe.constraints is not None and guards.resolves(safe) == 79
+    cost = guards.run_cost_s(800, 79, guards.CONSTRAINED_RESOLVE_STEP_COST_S)
+    assert guards.run_timeout_s(None, safe) == pytest.approx(10.0 + 3.0 * cost)  # 104.8 s
     long = problem_of(CwrendConfig.model_validate({"scenario": {"horizon_s": 20000.0}}))
     assert guards.run_timeout_s(None, long) < 10_060.0 * 0.6  # the old default: 60 s + 0.5 s/step
 

@@ -124,6 +124,12 @@ def check_finite(result: RunResult) -> None:
 #: 62-94 µs; cone programs (socp) at 800 / 3,200 steps 29 / 41 µs; adaptive shooting
 #: 0.2-2 µs.
 RESOLVE_STEP_COST_S = 100e-6
+#: The same for a constrained re-solve (``[constraints]``: sequential convex programming,
+#: a sparse Clarabel program per iteration) [s]. Measured on a 2-core Intel Xeon
+#: (Sapphire Rapids, 2026-12-02): campaigns/safe_approach.toml's mtf_adaptive_socp run,
+#: 79 re-solves in 17-18 s, 213 ms mean (670 ms max) over 400 steps on average: 0.53 ms a
+#: step; twice that, so the limit stays a few times the cost on a machine twice as slow.
+CONSTRAINED_RESOLVE_STEP_COST_S = 1e-3
 #: A run's default limit is this multiple of its cost (:func:`run_cost_s`) ...
 COST_MULTIPLE = 3.0
 #: ... plus this [s] (a worker's pauses: the machine's other processes, the file writes).
@@ -140,10 +146,12 @@ def resolves(problem: Problem) -> int:
     return max(math.ceil(span / problem.guidance.t_resolve_s), 0) + 1
 
 
-def run_cost_s(n_steps: int, n_resolves: int) -> float:
+def run_cost_s(n_steps: int, n_resolves: int, per_step_s: float = RESOLVE_STEP_COST_S) -> float:
     """What a run should cost at most [s]: each of its ``n_resolves`` re-solves over the
-    remaining horizon (half of the ``n_steps`` on average) at :data:`RESOLVE_STEP_COST_S`."""
-    return RESOLVE_STEP_COST_S * n_steps * n_resolves / 2
+    remaining horizon (half of the ``n_steps`` on average) at ``per_step_s`` a step
+    (:data:`RESOLVE_STEP_COST_S`, or :data:`CONSTRAINED_RESOLVE_STEP_COST_S` with
+    ``[constraints]``)."""
+    return per_step_s * n_steps * n_resolves / 2
 
 
 def run_timeout_s(configured: float | None, problem: Problem, *, first: bool = False) -> float:
@@ -152,13 +160,17 @@ def run_timeout_s(configured: float | None, problem: Problem, *, first: bool = F
     Default: :data:`RUN_BASE_S` + :data:`COST_MULTIPLE` × :func:`run_cost_s`, and
     :data:`FIRST_RUN_ALLOWANCE_S` more for the ``first`` run of an architecture in
     a process. The paper's run (800 steps, 79 re-solves): 19.5 s (129.5 s the first),
-    where it takes 5-100 ms and about 1 s with a cone program at every re-solve; a
+    where it takes 5-100 ms and about 1 s with a cone program at every re-solve; with
+    ``[constraints]`` (campaigns/safe_approach.toml, 17-18 s a cone-program run) 104.8 s; a
     20,000-step run (1,999 re-solves): 6,007 s (10,060 s before). The open-loop references of a grid
     point get the limit of its runs (issue 36, item 13).
     """
     if configured is not None:
         return configured
-    cost = run_cost_s(problem.scenario.n_steps, resolves(problem))
+    per_step = (
+        RESOLVE_STEP_COST_S if problem.constraints is None else CONSTRAINED_RESOLVE_STEP_COST_S
+    )
+    cost = run_cost_s(problem.scenario.n_steps, resolves(problem), per_step)
     return RUN_BASE_S + COST_MULTIPLE * cost + (FIRST_RUN_ALLOWANCE_S if first else 0.0)
 
 
