@@ -48,6 +48,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         "cwrend_cli.output",
         "cwrend_cli.physics.params",
         "cwrend_cli.physics.metrics",
+        "cwrend_cli.physics.constraints",  # the shapes of the keep-out zone and corridor drawn
         "cwrend_cli.errors",
         "cwrend_cli.lazy",
         "cwrend_cli",

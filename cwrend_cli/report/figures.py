@@ -22,7 +22,12 @@ both the drawing and the figure list of ``report.md``:
 * for a ``sobol`` design: ``sensitivity.png`` (first-order and total Sobol
   indices per architecture and metric, with their 95 % intervals);
 * when the steps hold it: ``nees.png`` (filter consistency, every seed of
-  the reported point).
+  the reported point);
+* when the configuration has path constraints (issue 32, ``[constraints]``):
+  ``safety_trajectories.png`` (the reported seed's paths near the target in
+  the x–y, x–z and y–z planes with the keep-out zone and the corridor, unsafe
+  nodes marked) and ``safety_distance.png`` (the signed distance to the unsafe
+  set against time, degradation windows shaded).
 
 Every figure names the simulated world it shows (:attr:`ReportData.world`:
 the truth model, and actuator errors and sensor faults when configured) in
@@ -47,14 +52,22 @@ from matplotlib.axes import Axes
 from matplotlib.collections import Collection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
+from matplotlib.patches import Ellipse, Patch, Polygon
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
+from scipy.spatial import ConvexHull
 from scipy.stats import chi2
 
 from cwrend_cli.config import ARCHITECTURES
-from cwrend_cli.output.recording import DEGRADATION_COLOUR, REFERENCE_COLOURS, arch_colour
+from cwrend_cli.output.recording import (
+    CORRIDOR_COLOUR,
+    DEGRADATION_COLOUR,
+    REFERENCE_COLOURS,
+    UNSAFE_COLOUR,
+    arch_colour,
+)
 from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.physics.constraints import Geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import (
@@ -647,6 +660,204 @@ def _has_nees(data: ReportData) -> bool:
 
 
 # ---------------------------------------------------------------------------
+# Path constraints (issue 32): the keep-out zone, the corridor, the distance to them
+# ---------------------------------------------------------------------------
+
+#: The three planes of the safety figure: (horizontal axis, vertical axis) of the frame.
+_PLANES = ((0, 1), (0, 2), (1, 2))
+_AXIS_NAMES = ("x (radial)", "y (along-track)", "z (cross-track)")
+_POSITION_COLUMNS = ("x_km", "y_km", "z_km")
+#: Half-width of the safety figure's views, in units of the constraints' size (the largest
+#: semi-axis or port distance): the approach near the target, where the constraints act.
+_SAFETY_VIEW = 3.0
+#: Points of the corridor's base circle projected to draw the cone's outline.
+_CONE_CIRCLE = 96
+
+
+def _rgb(colour: tuple[int, int, int]) -> tuple[float, float, float]:
+    return (colour[0] / 255.0, colour[1] / 255.0, colour[2] / 255.0)
+
+
+def _constraint_size(geo: Geometry) -> float:
+    """The constraints' size [km]: the largest semi-axis or the port's distance to the target."""
+    sizes = [0.0]
+    if geo.semi_axes_km is not None:
+        sizes.append(float(np.max(geo.semi_axes_km)))
+    if geo.port_km is not None:
+        sizes.append(float(np.linalg.norm(geo.port_km)))
+    return max(sizes) or 1.0
+
+
+def _cone_outline(geo: Geometry, plane: tuple[int, int], half_km: float) -> np.ndarray | None:
+    """Outline (k, 2) of the corridor cone within the view, seen in ``plane``.
+
+    The cone is cut where its axis leaves the cube of half-width ``half_km``
+    around the target (the views' extent; at least ``half_km`` from the apex
+    if the apex lies outside it); its outline is the convex hull of the
+    projections of the apex and of the circle of the cut (the projection of a
+    truncated cone is the hull of its apex's and its base's projections).
+    ``None`` without a corridor.
+    """
+    if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
+        return None
+    axis = geo.axis
+    with np.errstate(divide="ignore"):
+        exits = (half_km - np.sign(axis) * geo.port_km) / np.abs(axis)
+    length_km = float(np.min(exits))
+    if not length_km > 0.0:
+        length_km = half_km
+    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    phi = np.linspace(0.0, 2.0 * np.pi, _CONE_CIRCLE, endpoint=False)[:, None]
+    radius = length_km * np.tan(geo.half_angle_rad)
+    circle = geo.port_km + length_km * axis + radius * (np.cos(phi) * e1 + np.sin(phi) * e2)
+    points = np.vstack([geo.port_km, circle])[:, list(plane)]
+    hull = ConvexHull(points, qhull_options="QJ")  # joggled: a flat projection still has one
+    return np.asarray(points[hull.vertices], dtype=float)
+
+
+def _unsafe_steps(g: pd.DataFrame) -> pd.DataFrame:
+    """The rows of one run's steps whose true position was inside the unsafe set (φ < 0)."""
+    if "safety_distance_km" not in g.columns:
+        return g.iloc[:0]
+    return g[g["safety_distance_km"].to_numpy(dtype=float) < 0.0]
+
+
+def fig_safety_trajectories(data: ReportData) -> Figure:
+    """The reported seed's true paths near the target with the constraints, in three planes.
+
+    x–y, x–z and y–z of the relative frame (km), each a projection: the
+    keep-out ellipsoid's (its section through the target too, its axes being
+    the frame's), the corridor cone's (apex at the port, cut beyond the view)
+    and each architecture's path; its nodes inside the unsafe set (per-step
+    ``safety_distance_km`` < 0) marked. The views span ±:data:`_SAFETY_VIEW`
+    times the constraints' size around the target. Raises ``ValueError``
+    without constraints (see :data:`FIGURES`).
+    """
+    geo = data.constraints
+    if geo is None:
+        raise ValueError("no path constraints configured")
+    half = _SAFETY_VIEW * _constraint_size(geo)
+    unsafe, corridor = _rgb(UNSAFE_COLOUR), _rgb(CORRIDOR_COLOUR)
+    fig = _figure(16, 6.6)
+    axes = fig.subplots(1, 3)
+    marked = False
+    for ax, plane in zip(axes, _PLANES, strict=True):
+        i, j = plane
+        if geo.semi_axes_km is not None:
+            a = geo.semi_axes_km
+            ax.add_patch(Ellipse((0.0, 0.0), 2 * a[i], 2 * a[j], facecolor=(*unsafe, 0.22),
+                                 edgecolor=unsafe, lw=1.6, zorder=1))  # fmt: skip
+        outline = _cone_outline(geo, plane, half)
+        if outline is not None:
+            ax.add_patch(Polygon(outline, closed=True, facecolor=(*corridor, 0.15),
+                                 edgecolor=corridor, lw=1.6, ls="--", zorder=1))  # fmt: skip
+        for arch, g in _by_arch(data.steps, data.archs):
+            ax.plot(g[_POSITION_COLUMNS[i]], g[_POSITION_COLUMNS[j]],
+                    **_arch_style(arch, data.archs), zorder=3)  # fmt: skip
+            bad = _unsafe_steps(g)
+            if not bad.empty:
+                marked = True
+                ax.scatter(bad[_POSITION_COLUMNS[i]], bad[_POSITION_COLUMNS[j]], s=16,
+                           marker="x", color=unsafe, lw=1.0, zorder=4,
+                           gid=f"unsafe:{arch}")  # fmt: skip
+        if geo.port_km is not None:  # under the target, which it may hide in projection
+            ax.scatter(geo.port_km[i], geo.port_km[j], marker="D", s=90, facecolor="white",
+                       edgecolor="black", zorder=5)  # fmt: skip
+        ax.scatter(0.0, 0.0, marker="*", s=150, color="black", zorder=6)
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{_AXIS_NAMES[i]} [km]")
+        ax.set_ylabel(f"{_AXIS_NAMES[j]} [km]")
+        ax.set_title(f"{_AXIS_NAMES[i][0]}–{_AXIS_NAMES[j][0]} plane")
+    handles: list[Any] = _arch_handles(data.archs)
+    if geo.semi_axes_km is not None:
+        handles.append(Patch(facecolor=(*unsafe, 0.22), edgecolor=unsafe, label="keep-out zone"))
+    if geo.port_km is not None:
+        handles.append(Patch(facecolor=(*corridor, 0.15), edgecolor=corridor, ls="--",
+                             label="approach corridor (keep-out waived)"))  # fmt: skip
+    if marked:
+        handles.append(Line2D([], [], marker="x", ls="", ms=7, color=unsafe,
+                              label="node inside the unsafe set"))  # fmt: skip
+    handles.append(Line2D([], [], marker="*", ls="", ms=12, color="black", label="target"))
+    if geo.port_km is not None:
+        handles.append(Line2D([], [], marker="D", ls="", ms=7, mfc="white", mec="black",
+                              label="docking port"))  # fmt: skip
+    _legend_below(fig, handles, ncol=4)
+    fig.suptitle(f"Safe approach: true paths near the target, keep-out zone and corridor "
+                 f"({_title(data)})")  # fmt: skip
+    return _finished(fig)
+
+
+def fig_safety_distance(data: ReportData) -> Figure:
+    """Signed distance of the reported seed's true paths to the unsafe set against time.
+
+    Per-step ``safety_distance_km`` (φ of :mod:`cwrend_cli.physics.constraints`:
+    negative inside the unsafe set) per architecture; the zero line and the
+    region below it (unsafe) marked; degradation windows shaded. Left: the
+    whole run, symmetric-log axis (linear within a tenth of the smallest
+    semi-axis); right: a close-up, linear, from when the first path comes
+    within :data:`_SAFETY_VIEW` constraint sizes of the unsafe set. Raises
+    ``ValueError`` without a keep-out zone or stored distances (see :data:`FIGURES`).
+    """
+    geo = data.constraints
+    if geo is None or geo.semi_axes_km is None or "safety_distance_km" not in data.steps:
+        raise ValueError("no distance to an unsafe set stored")
+    near = _SAFETY_VIEW * _constraint_size(geo)
+    unsafe = _rgb(UNSAFE_COLOUR)
+    fig = _figure(14, 6.4)
+    ax_all, ax_near = fig.subplots(1, 2, width_ratios=[1.4, 1])
+    close: list[pd.DataFrame] = []
+    for arch, g in _by_arch(data.steps, data.archs):
+        style = _arch_style(arch, data.archs)
+        for ax in (ax_all, ax_near):
+            ax.plot(g["t_s"], g["safety_distance_km"], **style)
+        within = g[g["safety_distance_km"].to_numpy(dtype=float) < near]
+        close.append(within)
+    horizon = float(data.steps["t_s"].max()) if not data.steps.empty else 1.0
+    start = min((float(c["t_s"].min()) for c in close if not c.empty), default=0.9 * horizon)
+    start = min(start, 0.9 * horizon)
+    for ax in (ax_all, ax_near):
+        _shade(ax, data.windows)
+        ax.axhline(0.0, color="black", lw=1.1)
+        ax.axhspan(-1e9, 0.0, color=unsafe, alpha=0.08, lw=0)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("distance to the unsafe set φ [km]")
+    ax_all.set_yscale("symlog", linthresh=0.1 * float(np.min(geo.semi_axes_km)))
+    ax_near.set_xlim(start, horizon)
+    tail = data.steps[data.steps["t_s"] >= start]["safety_distance_km"].to_numpy(dtype=float)
+    tail = tail[np.isfinite(tail)]
+    lo = min(float(tail.min()) if tail.size else 0.0, 0.0)
+    hi = max(float(tail.max()) if tail.size else near, 0.0)
+    pad = 0.06 * (hi - lo or 1.0)
+    ax_near.set_ylim(lo - pad, hi + pad)
+    values = data.steps["safety_distance_km"].to_numpy(dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size:
+        ax_all.set_ylim(min(values.min(), 0.0) * 1.5 - 0.01 * near, values.max() * 1.5)
+    ax_all.set_title("whole run (symmetric log: linear near zero)")
+    ax_near.set_title("close-up: the approach, linear")
+    handles: list[Any] = _arch_handles(data.archs)
+    handles.append(Patch(color=unsafe, alpha=0.2, label="φ < 0: inside the unsafe set"))
+    _legend_below(fig, handles + _window_handles(data.windows), ncol=4)
+    fig.suptitle(f"Distance to the unsafe set, the keep-out zone outside the corridor "
+                 f"({_title(data)})")  # fmt: skip
+    return _finished(fig)
+
+
+def _has_constraints(data: ReportData) -> bool:
+    return data.constraints is not None
+
+
+def _has_safety_distance(data: ReportData) -> bool:
+    geo = data.constraints
+    return geo is not None and geo.semi_axes_km is not None and "safety_distance_km" in data.steps
+
+
+# ---------------------------------------------------------------------------
 # Campaign figures
 # ---------------------------------------------------------------------------
 
@@ -1163,6 +1374,22 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "consistent; mean 6), log scale.",
         fig_nees,
         _has_nees,
+    ),
+    FigureEntry(
+        "safety_trajectories.png",
+        "Path constraints: the true paths of the reported seed near the target, projected on "
+        "the x–y, x–z and y–z planes, with the keep-out zone (red) and the approach corridor "
+        "(green, dashed; inside it the keep-out zone is waived); crosses: nodes inside the "
+        "unsafe set.",
+        fig_safety_trajectories,
+        _has_constraints,
+    ),
+    FigureEntry(
+        "safety_distance.png",
+        "Signed distance of the reported seed's true paths to the unsafe set (negative: "
+        "inside), the whole run and a close-up of the approach, degradation windows shaded.",
+        fig_safety_distance,
+        _has_safety_distance,
     ),
 )
 

@@ -52,7 +52,7 @@ from cwrend_cli.config import (
     resolved_dict,
     set_dotted,
 )
-from cwrend_cli.config.adapt import problem_of, windows_of
+from cwrend_cli.config.adapt import constraints_of, problem_of, windows_of
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output.files import refuse_links
 from cwrend_cli.output.layout import (
@@ -80,6 +80,7 @@ from cwrend_cli.output.tables import (
     normalize_steps,
     param_columns,
 )
+from cwrend_cli.physics.constraints import Geometry, geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import format_value
@@ -159,6 +160,17 @@ class ReportData:
     def windows(self) -> tuple[Window, ...]:
         """The degradation windows of the configuration (none without one)."""
         return windows_of(self.config) if self.config is not None else ()
+
+    @property
+    def constraints(self) -> Geometry | None:
+        """The path constraints of the configuration as arrays (issue 32; ``None`` without).
+
+        The keep-out ellipsoid and the corridor cone the safety columns were measured
+        against (:func:`~cwrend_cli.physics.constraints.geometry`); ``None`` without a
+        stored configuration or when it has neither a keep-out zone nor a corridor.
+        """
+        found = constraints_of(self.config) if self.config is not None else None
+        return geometry(found) if found is not None else None
 
     @property
     def u_max_km_s2(self) -> float | None:

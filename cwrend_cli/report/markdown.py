@@ -12,7 +12,10 @@ marked with :data:`UNRELIABLE_MARK`. The filter-consistency means of the
 runs (``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
 averaged over the seeds (no interval is stored for them). A sampled design
 (``sweep --design``) gets the table of its Sobol indices
-(``sensitivity.parquet``) instead of a row per design point.
+(``sensitivity.parquet``) instead of a row per design point. A campaign
+whose configuration has path constraints (issue 32) gets a table of the
+safety of its true trajectories (:func:`safety_table`), from the safety rows
+of its statistics file.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ FUEL = ".2f"  # %
 SHARE = ".2f"  # a proportion
 CONSISTENCY = ".2f"  # mean NEES / NIS (dimensionless)
 INDEX = ".2f"  # a Sobol index
+UNSAFE_TIME = ".1f"  # s
 
 
 def _fmt(value: Any, spec: str = ".4g") -> str:
@@ -187,6 +191,73 @@ def paired_table(data: ReportData) -> str | None:
             _ci(get.get("median_diff"), MISS, M_PER_KM), _ci(get.get("mean_diff"), DV),
         ])  # fmt: skip
     return markdown_table(header, rows)
+
+
+def safety_table(data: ReportData) -> str | None:
+    """The safety of the true trajectories per architecture (issue 32), as stored.
+
+    From the safety rows of ``ablation.parquet`` / ``sweep.parquet`` of the
+    reported point (``campaign.statistics.safety``, never recomputed): the share
+    of runs that entered the unsafe set with its 95 % Wilson interval, the
+    median and 1st percentile of the minimum signed distance (m; negative:
+    inside) and the mean time inside (s) with their bootstrap intervals.
+    ``None`` without path constraints in the configuration or without stored
+    safety rows.
+    """
+    stats = data.point_stats()
+    if data.constraints is None or stats is None:
+        return None
+    rows_of = stats[(stats["kind"] == "marginal") & stats["metric"].astype(str).str.startswith(
+        "safety_")]  # fmt: skip
+    if rows_of.empty:
+        return None
+    header = ["architecture", "runs", "violated (share) [95 % Wilson]",
+              "median min distance [m]", "p1 min distance [m]",
+              "mean unsafe time [s]"]  # fmt: skip
+    rows = []
+    for a in data.archs:
+        get = _lookup(rows_of[rows_of["arch"] == a])
+        share = get.get(("safety_violated", "share"))
+        if share is None:
+            continue
+        n = int(share["n"])
+        count = round(float(share["value"]) * n)
+        rows.append([
+            arch_label(a), str(n), f"{count} of {n}: {_ci(share, SHARE, bootstrap=False)}",
+            _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
+            _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
+            _ci(get.get(("safety_unsafe_time_s", "mean")), UNSAFE_TIME),
+        ])  # fmt: skip
+    return markdown_table(header, rows) if rows else None
+
+
+def _safety_lines(data: ReportData) -> list[str]:
+    """The safety section of a constrained campaign (none otherwise)."""
+    table = safety_table(data)
+    if table is None:
+        return []
+    lines = [
+        "## Safety (path constraints)",
+        "",
+        "Measured on the true trajectories against the keep-out zone outside the corridor "
+        "(the unsafe set), between steps too; from the campaign's statistics file. "
+        "Violated: the run entered the unsafe set (95 % Wilson interval); min distance: the "
+        "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
+        "(95 % bootstrap interval).",
+        "",
+        table,
+        "",
+    ]
+    stats = data.point_stats()
+    once = int(data.ok_runs()["seed"].nunique()) > 1  # then the note closes the section above
+    safety = (
+        stats[stats["metric"].astype(str).str.startswith("safety_min")]
+        if stats is not None
+        else None
+    )
+    if not once and _flagged(safety):
+        lines += [UNRELIABLE_NOTE, ""]
+    return lines
 
 
 def _flagged(stats: pd.DataFrame | None) -> bool:
@@ -381,6 +452,7 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
                       "bootstrap otherwise).", "", pairs, ""]  # fmt: skip
         if _flagged(stats):
             lines += [UNRELIABLE_NOTE, ""]
+    lines += _safety_lines(data)
     lines += [f"## Noise seed {data.seed}", "", seed_table(data), ""]
     if data.design:
         lines += _design_lines(data)

@@ -1,0 +1,179 @@
+"""`cwrend report` of a constrained campaign (issue 32 item 4): the paths with the keep-out
+zone and the corridor in three planes, the distance to the unsafe set over time and a
+violations table from the stored statistics; a report without constraints has none of them."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.patches import Ellipse, Polygon
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.report import load_results
+from cwrend_cli.report.figures import (
+    fig_safety_distance,
+    fig_safety_trajectories,
+    planned_figures,
+)
+
+CAMPAIGNS = Path(__file__).resolve().parents[1] / "campaigns"
+SAFETY_FIGURES = ("safety_trajectories.png", "safety_distance.png")
+SEMI_AXES_KM = 0.2  # campaigns/safe_approach.toml: a keep-out sphere of 200 m
+PORT_KM = (0.0, 0.0, -0.25)
+
+runner = CliRunner()
+
+
+def _ablate(config: Path, out: Path, archs: str) -> Path:
+    args = ["ablate", str(config), "--seeds", "2", "--arch", archs, "--workers", "1",
+            "--no-rrd", "-q", "--set", f"output.dir={out}", "--name", "c"]  # fmt: skip
+    result = runner.invoke(app, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    return out / "c"
+
+
+def _reported(root: Path) -> Path:
+    result = runner.invoke(app, ["report", str(root)], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    return root / "report"
+
+
+@pytest.fixture(scope="module")
+def constrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The safe approach, shooting (unconstrained: enters the keep-out zone) and cone program."""
+    out = tmp_path_factory.mktemp("safe")
+    return _ablate(CAMPAIGNS / "safe_approach.toml", out, "mtf_adaptive,mtf_adaptive_socp")
+
+
+@pytest.fixture(scope="module")
+def constrained_report(constrained: Path) -> Path:
+    return _reported(constrained)
+
+
+def test_a_constrained_report_holds_the_two_safety_figures(constrained_report: Path) -> None:
+    md = (constrained_report / "report.md").read_text(encoding="utf-8")
+    for name in SAFETY_FIGURES:
+        image = matplotlib.image.imread(constrained_report / name)
+        assert image.shape[0] > 400 and image.shape[1] > 400
+        assert f"![{Path(name).stem}]({name})" in md
+    html = (constrained_report / "report.html").read_text(encoding="utf-8")
+    assert "safety_trajectories" in html and "safety_distance" in html
+
+
+def test_the_paths_are_drawn_with_the_keep_out_zone_and_corridor_in_three_planes(
+    constrained: Path,
+) -> None:
+    data = load_results(constrained)
+    fig = fig_safety_trajectories(data)
+    axes = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in axes] == ["x–y plane", "x–z plane", "y–z plane"]
+    for ax in axes:
+        (ellipse,) = [p for p in ax.patches if isinstance(p, Ellipse)]
+        assert ellipse.width == pytest.approx(2 * SEMI_AXES_KM)
+        assert ellipse.height == pytest.approx(2 * SEMI_AXES_KM)
+        (cone,) = [p for p in ax.patches if isinstance(p, Polygon)]
+        assert cone.get_xy().size > 0
+    x_z = axes[1]
+    cone_xz = next(p for p in x_z.patches if isinstance(p, Polygon)).get_xy()
+    # the cone's outline starts at the port (its apex) and opens away from the target (−z)
+    assert np.min(np.linalg.norm(cone_xz - [PORT_KM[0], PORT_KM[2]], axis=1)) < 1e-6
+    assert np.max(cone_xz[:, 1]) == pytest.approx(PORT_KM[2], abs=1e-6)
+    # the shooting run enters the unsafe set and is marked; the constrained one is not
+    gids = {str(c.get_gid()) for ax in axes for c in ax.collections}
+    assert "unsafe:mtf_adaptive" in gids and "unsafe:mtf_adaptive_socp" not in gids
+    steps = data.steps[data.steps["arch"] == "mtf_adaptive"]
+    inside = int((steps["safety_distance_km"] < 0).sum())
+    marks = next(c for c in x_z.collections if c.get_gid() == "unsafe:mtf_adaptive")
+    assert np.asarray(marks.get_offsets()).shape[0] == inside > 0
+
+
+def test_the_distance_figure_draws_the_stored_distances_and_the_zero_line(
+    constrained: Path,
+) -> None:
+    data = load_results(constrained)
+    fig = fig_safety_distance(data)
+    ax = fig.axes[0]
+    for arch in ("mtf_adaptive", "mtf_adaptive_socp"):
+        stored = data.steps[data.steps["arch"] == arch].sort_values("t_s")
+        drawn = [
+            line for line in ax.get_lines()
+            if np.array_equal(line.get_xdata(), stored["t_s"].to_numpy())
+            and np.array_equal(line.get_ydata(), stored["safety_distance_km"].to_numpy())
+        ]  # fmt: skip
+        assert len(drawn) == 1, arch
+    zero = [line for line in ax.get_lines() if np.array_equal(line.get_ydata(), [0.0, 0.0])]
+    assert zero
+    assert len(data.windows) == 2 and len(ax.patches) >= 2  # the degradation windows shaded
+
+
+def _row(md: str, label: str) -> list[str]:
+    section = md.split("## Safety (path constraints)", 1)[1].split("\n## ", 1)[0]
+    line = next(ln for ln in section.splitlines() if ln.startswith(f"| {label} |"))
+    return [cell.strip() for cell in line.strip("|").split("|")]
+
+
+def test_the_violations_table_holds_the_stored_statistics(
+    constrained: Path, constrained_report: Path
+) -> None:
+    md = (constrained_report / "report.md").read_text(encoding="utf-8")
+    stats = pd.read_parquet(constrained / "ablation.parquet")
+
+    def stored(arch: str, metric: str, statistic: str) -> pd.Series:
+        sel = stats[(stats["arch"] == arch) & (stats["metric"] == metric)]
+        return sel[sel["statistic"] == statistic].iloc[0]
+
+    for arch, label, count in (
+        ("mtf_adaptive", "MTF KF, adaptive ε", 2),
+        ("mtf_adaptive_socp", "MTF KF, adaptive ε, SOCP", 0),
+    ):
+        row = _row(md, label)
+        share = stored(arch, "safety_violated", "share")
+        assert row[1] == "2"
+        assert row[2] == (
+            f"{count} of 2: {share['value']:.2f} [{share['ci_low']:.2f}, {share['ci_high']:.2f}]"
+        )
+        for cell, (metric, statistic, scale, spec) in zip(
+            row[3:],
+            (
+                ("safety_min_distance_km", "median", 1e3, ".2f"),
+                ("safety_min_distance_km", "p1", 1e3, ".2f"),
+                ("safety_unsafe_time_s", "mean", 1.0, ".1f"),
+            ),
+            strict=True,
+        ):
+            s = stored(arch, metric, statistic)
+            lo, hi = s["ci_low"] * scale, s["ci_high"] * scale
+            assert cell == f"{s['value'] * scale:{spec}} [{lo:{spec}}, {hi:{spec}}]\\*"
+
+
+def test_a_report_without_constraints_has_no_safety_figure_or_table(
+    tmp_path: Path, constrained: Path
+) -> None:
+    root = _ablate(CAMPAIGNS / "paper.toml", tmp_path, "mtf_adaptive")
+    names = {f.file for f in planned_figures(load_results(root))}
+    assert not names & set(SAFETY_FIGURES)
+    md = (_reported(root) / "report.md").read_text(encoding="utf-8")
+    assert "Safety" not in md and "safety_" not in md
+    assert not any((root / "report" / name).exists() for name in SAFETY_FIGURES)
+
+
+def test_a_stored_config_without_constraints_draws_none_even_with_safety_columns(
+    tmp_path: Path, constrained: Path
+) -> None:
+    """The figures and the table follow the configuration, not the columns."""
+    root = tmp_path / "c"
+    shutil.copytree(constrained, root)
+    manifest = root / "manifest.json"
+    meta = json.loads(manifest.read_text(encoding="utf-8"))
+    meta["config"].pop("constraints", None)
+    manifest.write_text(json.dumps(meta), encoding="utf-8")
+    data = load_results(root)
+    assert data.constraints is None
+    assert not {f.file for f in planned_figures(data)} & set(SAFETY_FIGURES)
