@@ -1,10 +1,11 @@
-"""Shared fixtures of the numerics tests: the paper scenario (SPEC §6) and its references.
+"""Shared fixtures of the numerics tests: the paper scenario and its references.
 
 The session-scoped fixtures are computed once per test process: the paper
-configuration, its open-loop references (SPEC §2, ~0.5 s once the kernels are
-compiled) and the shooting costates of the paper problem at the homotopy
-parameters the guidance tests use, obtained by ε-continuation from the
-energy-optimal costate (SPEC §1–2).
+configuration (paper Table 1 plus the settings of the authors' code:
+docs/method.md), its open-loop references (paper Sec. "Numerical Results and Discussion",
+~0.5 s once the kernels are compiled) and the shooting costates of the paper
+problem at the homotopy parameters the guidance tests use, obtained by
+ε-continuation from the energy-optimal costate (docs/method.md).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ EPS_CONTINUATION = (1.0, 0.3, 0.05, 0.0)
 
 
 def spec_cw_matrices(n: float) -> tuple[np.ndarray, np.ndarray]:
-    """``A`` (6×6) and ``B`` (6×3) written out from SPEC §1 / paper Eq. (4).
+    """``A`` (6×6) and ``B`` (6×3) written out from paper Eq. 4.
 
     Built here independently of :func:`cwrend_cli.dynamics.cw_system` so that
     reference computations (matrix exponentials, brute-force integration) do
@@ -50,19 +51,22 @@ def spec_cw_matrices(n: float) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="session")
 def cw_matrices() -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
-    """Factory ``n ↦ (A, B)`` of SPEC §1, independent of the package."""
+    """Factory ``n ↦ (A, B)`` of paper Eq. 4, independent of the package."""
     return spec_cw_matrices
 
 
 @pytest.fixture(scope="session")
 def paper_cfg() -> CwrendConfig:
-    """The paper scenario: every default of the config (SPEC §6, paper Table 1)."""
+    """The paper scenario: every default of the config (paper Table 1; docs/method.md)."""
     return CwrendConfig()
 
 
 @pytest.fixture(scope="session")
 def paper_refs(paper_cfg: CwrendConfig) -> simulation.References:
-    """Open-loop energy- and fuel-optimal references of the paper scenario (SPEC §2)."""
+    """Open-loop energy- and fuel-optimal references of the paper scenario.
+
+    The references of paper Sec. "Numerical Results and Discussion".
+    """
     return simulation.open_loop_references(problem_of(paper_cfg))
 
 
@@ -95,7 +99,7 @@ def paper_costates(
     """``λ(0)`` solving the paper problem at each ε of :data:`EPS_CONTINUATION`.
 
     ε-continuation 1 → 0.3 → 0.05 → 0 with :func:`guidance.solve`, the first
-    solve warm-started from the closed-form energy-optimal costate (SPEC §2).
+    solve warm-started from the closed-form energy-optimal costate (docs/method.md).
     """
     lam = guidance.energy_optimal_costate(paper_problem(EPS_CONTINUATION[0]))
     out: dict[float, np.ndarray] = {}

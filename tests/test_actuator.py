@@ -13,7 +13,7 @@ References:
   between the χ² quantiles 0.5e-6 and 1 − 0.5e-6: a false-alarm rate of 1e-6
   (two-sided), with the draws of a fixed stream (so the outcome is fixed too).
 * The filter predicts with the commanded control (issue 15: it does not know
-  the actuator errors): SPEC §3, x⁻ = Φ x⁺ + Γ u.
+  the actuator errors): paper Eq. 11, x⁻ = Φ x⁺ + Γ u.
 * Random streams: NumPy ``SeedSequence`` spawn keys, ``(seed, 0)`` the
   measurement noise, ``(seed, 1)`` the dispersions, ``(seed, 2)`` the
   actuator (children 0: magnitude, 1: pointing).

@@ -53,7 +53,10 @@ def test_steps_has_one_row_per_grid_time_and_architecture(paper_run: Path) -> No
 
 
 def test_steps_last_control_is_zero(paper_run: Path) -> None:
-    """SPEC §2: in closed loop no control is computed at t = T."""
+    """In closed loop no control is computed at t = T.
+
+    A convention of cwrend / the authors' code, not in the paper (docs/method.md).
+    """
     steps = pd.read_parquet(paper_run / "steps.parquet")
     assert (steps.loc[steps["t_s"] == 800.0, "u_norm_km_s2"] == 0.0).all()
 
@@ -67,7 +70,7 @@ def test_summary_holds_references_and_runs(paper_run: Path) -> None:
     fuel = summary.loc["open_loop_fuel", "delta_v_km_s"]
     row = summary.loc["mtf_adaptive"]
     assert row["fuel_penalty_pct"] == pytest.approx(100 * (row["delta_v_km_s"] / fuel - 1))
-    assert summary.loc["mtf_adaptive", "n_solves"] == 78  # SPEC §5: t = 0, 10, …, 770 s
+    assert summary.loc["mtf_adaptive", "n_solves"] == 78  # paper Table 1: t = 0, 10, …, 770 s
 
 
 def test_config_json_holds_resolved_config_and_hash(paper_run: Path) -> None:

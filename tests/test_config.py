@@ -49,7 +49,9 @@ def config_error(data: dict) -> str:
 
 
 def test_defaults_are_the_paper_scenario() -> None:
-    # Source: Candan & Servadio, AAS 26-893, Table 1, and SPEC §6 (exact values).
+    # Source: Candan & Servadio, AAS 26-893, Table 1, and x0, x_f of its Sec. "Numerical
+    # Results and Discussion" (exact values); the mean motion and success_residual are the
+    # authors' code's, not in the paper.
     cfg = CwrendConfig()
     sc, sch, g = cfg.scenario, cfg.schedule, cfg.guidance
     assert sc.mean_motion_rad_s == 0.00104218449
@@ -61,7 +63,7 @@ def test_defaults_are_the_paper_scenario() -> None:
     assert (sch.kappa_mtf, sch.score_max) == (12.0, 50.0)
     assert (sch.eps_min, sch.eps_max, sch.alpha_eps) == (0.0, 1.0, 0.10)
     assert (g.t_resolve_s, g.t_min_rem_s) == (10.0, 20.0)
-    assert cfg.solver.success_residual == 1e-4  # SPEC §5
+    assert cfg.solver.success_residual == 1e-4  # the authors' code's, not in the paper
 
 
 def test_default_covariances_are_the_paper_values() -> None:
@@ -73,7 +75,8 @@ def test_default_covariances_are_the_paper_values() -> None:
 
 
 def test_default_degradation_windows_are_the_paper_windows() -> None:
-    # Source: SPEC §6, degradation row.
+    # Source: docs/method.md, "The paper's scenario", degradation row (the authors' code;
+    # the paper gives no values).
     w1, w2 = CwrendConfig().degradation.windows
     assert (w1.start_s, w1.end_s, w1.r_scale, w1.bias_km) == (250.0, 325.0, 300.0, (0.0,) * 3)
     assert (w2.start_s, w2.end_s, w2.r_scale) == (325.0, 400.0, 300.0)
@@ -456,7 +459,11 @@ def test_override_in_output_keeps_stem_name(tmp_path: Path) -> None:
 
 
 def test_defaults_are_the_physics_paper_scenario() -> None:
-    """The config's defaults and the physics parameters' defaults are one definition (SPEC §6)."""
+    """The config's defaults and the physics parameters' defaults are one definition.
+
+    Both are the paper's scenario: paper Table 1 plus the settings of the authors' code
+    (docs/method.md).
+    """
     from cwrend_cli.config.adapt import problem_of
     from cwrend_cli.physics.params import Problem
 

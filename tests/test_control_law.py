@@ -1,4 +1,4 @@
-"""Control law of Eqs. (8)–(10) (SPEC §1): direction, switching function, smoothed throttle.
+"""Control law of paper Eqs. 8–10: direction, switching function, smoothed throttle.
 
 ``S = 1 − ‖λ_v‖``; ``u = 0`` if ``S > ε``; ``u_max (ε − S)/(2ε) α`` if ``−ε ≤ S ≤ ε``;
 ``u_max α`` if ``S < −ε``; ``α = −λ_v/‖λ_v‖``; ε below 1e-12 is exactly bang-bang.
@@ -50,7 +50,10 @@ def test_throttle_bang_bang_at_eps_zero(p: float, expected: float) -> None:
 
 
 def test_eps_below_threshold_is_bang_bang() -> None:
-    """SPEC §1: ε below 1e-12 is treated as exactly 0, not as a (very steep) ramp.
+    """ε below 1e-12 is treated as exactly 0, not as a (very steep) ramp.
+
+    Paper Eq. 10 as ε → 0; the threshold is a convention of cwrend, not in the paper
+    (docs/method.md).
 
     At ε = 1e-13 and S = ∓2e-14 the ramp would give 0.4 / 0.6; bang-bang gives 0 / 1.
     """

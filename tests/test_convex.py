@@ -125,7 +125,7 @@ def test_cone_program_converges_to_shooting(eps: float) -> None:
     state at T/2 (error ratio ≥ 5^1.5 ≈ 11.2), and at 0.1 s fuel < 5e-8 and
     costate < 1e-7 relative, state at T/2 < 1e-6 km and 3e-9 km/s (observed at
     most 2.1e-8, 5.2e-8, 3.5e-7 km, 1.6e-9 km/s). Both plans reach x_f: the
-    cone program's to 1e-11 (6-norm, SPEC §5; observed ≤ 2.5e-12).
+    cone program's to 1e-11 (6-norm of km and km/s, not in the paper; observed ≤ 2.5e-12).
     """
     problem, costate = _shooting(eps)
     fuel_ref = _shooting_fuel(problem, costate, 0.005)

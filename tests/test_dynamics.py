@@ -1,6 +1,6 @@
-"""Clohessy–Wiltshire dynamics in closed form (SPEC §1; paper Eqs. 3–4 and 11).
+"""Clohessy–Wiltshire dynamics in closed form (paper Eqs. 3–4 and 11).
 
-References: ``scipy.linalg.expm`` of the SPEC §1 matrices (written out in
+References: ``scipy.linalg.expm`` of the matrices of paper Eq. 4 (written out in
 ``conftest.spec_cw_matrices``, not taken from the package) and 80-digit
 ``decimal`` Taylor series for the cancellation-prone scalar functions.
 
@@ -20,7 +20,7 @@ import scipy.linalg
 
 from cwrend_cli.physics import dynamics
 
-N = dynamics.MEAN_MOTION_PAPER_RAD_S  # SPEC §1: n = 0.00104218449 rad/s
+N = dynamics.MEAN_MOTION_PAPER_RAD_S  # n = 0.00104218449 rad/s: the authors' code's
 EPS_MACH = np.finfo(float).eps
 SCALE = np.diag([1.0, 1.0, 1.0, N, N, N])
 SCALE_INV = np.diag([1.0, 1.0, 1.0, 1.0 / N, 1.0 / N, 1.0 / N])
@@ -50,7 +50,7 @@ def assert_matrix_close(actual: np.ndarray, expected: np.ndarray, rel: float) ->
 
 
 def test_cw_system_matches_spec_entries(cw_matrices) -> None:
-    """SPEC §1: 3n² at (4,1), 2n at (4,5), −2n at (5,4), −n² at (6,3) (1-based); B = [0; I]."""
+    """Paper Eq. 4: 3n² at (4,1), 2n at (4,5), −2n at (5,4), −n² at (6,3) (1-based); B = [0; I]."""
     a, b = dynamics.cw_system(N)
     assert a[3, 0] == 3.0 * N * N
     assert a[3, 4] == 2.0 * N
@@ -63,7 +63,7 @@ def test_cw_system_matches_spec_entries(cw_matrices) -> None:
 
 
 def test_costate_derivative_is_minus_a_transpose(cw_matrices) -> None:
-    """SPEC §1: λ̇ = −Aᵀ λ."""
+    """λ̇ = −Aᵀ λ (from the Hamiltonian, paper Eq. 7)."""
     a, _ = cw_matrices(N)
     lam = np.array([1e-4, -2e-3, 3e-4, 0.5, -0.7, 0.2])
     out = np.empty(6)
@@ -81,14 +81,14 @@ def test_stm_at_zero_is_identity() -> None:
 
 @pytest.mark.parametrize("t", TIMES_S)
 def test_stm_matches_expm(t: float, cw_matrices) -> None:
-    """SPEC §1 / Eq. (11): Φ(t) = e^{A t}, for positive and negative t."""
+    """Paper Eq. 11: Φ(t) = e^{A t}, for positive and negative t."""
     a, _ = cw_matrices(N)
     assert_matrix_close(scaled(dynamics.stm(N, t)), scaled(scipy.linalg.expm(a * t)), REL_TOL_EXPM)
 
 
 @pytest.mark.parametrize("t", TIMES_S)
 def test_input_matrix_matches_augmented_expm(t: float, cw_matrices) -> None:
-    """SPEC §1 / Eq. (11): Γ(t) = ∫₀ᵗ e^{Aτ} B dτ = top-right block of exp([[A, B],[0, 0]] t)."""
+    """Paper Eq. 11: Γ(t) = ∫₀ᵗ e^{Aτ} B dτ = top-right block of exp([[A, B],[0, 0]] t)."""
     a, b = cw_matrices(N)
     aug = np.zeros((9, 9))
     aug[:6, :6] = a
@@ -104,7 +104,7 @@ def test_input_matrix_matches_augmented_expm(t: float, cw_matrices) -> None:
 
 @pytest.mark.parametrize("t", TIMES_S)
 def test_costate_stm_matches_expm(t: float, cw_matrices) -> None:
-    """SPEC §1: λ(t) = e^{−Aᵀ t} λ(0)."""
+    """λ(t) = e^{−Aᵀ t} λ(0) (from paper Eq. 7)."""
     a, _ = cw_matrices(N)
     # costates scale inversely to states: T Ψ T⁻¹ is dimensionless
     assert_matrix_close(
@@ -132,7 +132,7 @@ def test_stm_semigroup() -> None:
 
 
 def test_discretize_is_stm_and_input_matrix() -> None:
-    """SPEC §1: the exact ZOH discretisation over Δt is (Φ(Δt), Γ(Δt))."""
+    """Paper Eq. 11: the exact ZOH discretisation over Δt is (Φ(Δt), Γ(Δt))."""
     phi, gam = dynamics.discretize(N, 1.0)
     np.testing.assert_array_equal(phi, dynamics.stm(N, 1.0))
     np.testing.assert_array_equal(gam, dynamics.input_matrix(N, 1.0))

@@ -1,6 +1,6 @@
-"""Linear Kalman filter with measurement-side MTF inflation (SPEC §3; paper Eqs. 11–23).
+"""Linear Kalman filter with measurement-side MTF inflation (paper Eqs. 11–23).
 
-The reference below is a plain-numpy transcription of SPEC §3 with explicit
+The reference below is a plain-numpy transcription of paper Eqs. 14–23 with explicit
 ``H = [I 0]`` and explicit inverses, so it shares no code path with the
 compiled filter (which uses slices and ``solve``).
 """
@@ -19,7 +19,8 @@ H = np.hstack([np.eye(3), np.zeros((3, 3))])  # Eq. (13)
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1 (1 m σ)
 Q = np.diag([1e-12] * 3 + [1e-14] * 3)  # paper Table 1
 P0 = np.diag([1e-6] * 3 + [1e-10] * 3)  # paper Table 1
-X0 = np.array([0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0])  # SPEC §6
+# x0 of paper Sec. "Numerical Results and Discussion" [km, km/s]
+X0 = np.array([0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0])
 
 #: State agreement [km, km/s]: rounding of a 31 km state is ~4e-15 km; 1e-13 km = 0.1 nm.
 TOL_X = 1e-13
@@ -31,7 +32,11 @@ REL_TOL_P = 1e-12
 def reference_update(
     x_pred: np.ndarray, p_pred: np.ndarray, y: np.ndarray, r_nom: np.ndarray, use_mtf: bool
 ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray]:
-    """SPEC §3, Eqs. (14)–(23), verbatim. Returns (x⁺, P⁺, NIS, ρ, R_eff)."""
+    """Paper Eqs. 14–23, verbatim. Returns (x⁺, P⁺, NIS, ρ, R_eff).
+
+    The 1e-12 regularisation of the gain and floor of tr(S) are the authors' code's, not in
+    the paper (docs/method.md).
+    """
     nu = y - H @ x_pred  # Eq. (14)
     s = H @ p_pred @ H.T + r_nom  # Eq. (15)
     nis = float(nu @ np.linalg.inv(s) @ nu)  # Eq. (22)
@@ -87,7 +92,7 @@ def test_kf_predict_matches_eqs_11_12() -> None:
     ids=["nominal", "degraded"],
 )
 def test_kf_update_matches_spec_reference(predicted, noise_km: np.ndarray, use_mtf: bool) -> None:
-    """x⁺, P⁺, NIS and ρ_MTF of SPEC §3 (plain-numpy reference)."""
+    """x⁺, P⁺, NIS and ρ_MTF of paper Eqs. 14–23 (plain-numpy reference)."""
     x_pred, p_pred = predicted
     truth = x_pred + np.array([2e-4, -1e-4, 3e-4, 1e-6, 0.0, -2e-6])
     y = truth[:3] + noise_km
@@ -109,7 +114,7 @@ def test_nis_value_for_a_known_innovation() -> None:
 
 
 def test_mtf_ratio_is_zero_when_mtf_off(predicted) -> None:
-    """SPEC §3: ρ = 0 without MTF, even for a huge innovation."""
+    """ρ = 0 without MTF, even for a huge innovation (docs/method.md; the paper does not say)."""
     x_pred, p_pred = predicted
     y = x_pred[:3] + np.array([1.0, -1.0, 1.0])  # 1 km innovation
     _, _, nis, rho = kf_update(x_pred, p_pred, y, R_NOM, False)

@@ -1,4 +1,7 @@
-"""Convex checks on the zero-order-hold grid (SPEC §5) and ``solver.on_infeasible``."""
+"""Convex checks on the zero-order-hold grid and ``solver.on_infeasible``.
+
+Not in the paper: docs/solvers.md.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +17,8 @@ from cwrend_cli.physics.guidance import feasibility
 
 N = MEAN_MOTION_PAPER_RAD_S
 U_MAX = 8e-4  # km/s², paper Table 1
-X0 = np.array([0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0])  # SPEC §6
+# x0 of paper Sec. "Numerical Results and Discussion" [km, km/s]
+X0 = np.array([0.03031809, 0.0, 31.16639, -0.02963377, 0.04570523, 0.0])
 
 
 def _grid(x0: np.ndarray, horizon_s: float) -> feasibility.GridProblem:
@@ -48,7 +52,10 @@ def test_min_peak_thrust_scales_with_distance() -> None:
 
 
 def test_multiplier_costate_seeds_a_converging_newton() -> None:
-    """The SOCP multiplier is close to the fuel-optimal costate (SPEC §5 fallback step 4)."""
+    """The SOCP multiplier is close to the fuel-optimal costate.
+
+    The last step of the fallback chain (not in the paper: docs/solvers.md).
+    """
     guess = feasibility.min_fuel_costate(_grid(X0, 800.0), N)
     assert guess is not None
     problem = guidance.ShootingProblem(X0, 800.0, 0.0, N, U_MAX)

@@ -1,4 +1,4 @@
-"""The shooting re-solve (SPEC §1, §5): terminal map, Jacobian, switching times, solver.
+"""The shooting re-solve (paper Eqs. 8–10): terminal map, Jacobian, switching times, solver.
 
 The reference for the terminal state is a brute-force integration of the
 state and costate equations with ``scipy.integrate.solve_ivp`` (DOP853) and
@@ -14,8 +14,9 @@ with the control regime (off / ramp / full) of its midpoint: on every piece
 the right-hand side is analytic and DOP853 at rtol = 3e-14 (just above
 scipy's floor 100·ε_mach) is accurate to ~1e-11 km on the 31 km state.
 
-Paper problem (SPEC §6): x0 = [0.03031809, 0, 31.16639, −0.02963377, 0.04570523, 0],
-T = 800 s, x_f = 0, u_max = 8e-4 km/s², n = 0.00104218449 rad/s.
+Paper problem: x0 = [0.03031809, 0, 31.16639, −0.02963377, 0.04570523, 0],
+T = 800 s, x_f = 0 (paper Sec. "Numerical Results and Discussion"), u_max = 8e-4 km/s²
+(paper Table 1), n = 0.00104218449 rad/s (the authors' code's, not in the paper).
 """
 
 from __future__ import annotations
@@ -171,10 +172,11 @@ def test_terminal_state_when_lambda_v_passes_near_zero(eps: float, paper_problem
 def test_converged_solve_reaches_target_when_lambda_v_passes_near_zero(
     eps: float, paper_problem, ab
 ) -> None:
-    """A ``converged`` solve must reach x_f (SPEC §5) — checked by brute-force integration.
+    """A ``converged`` solve must reach x_f — checked by brute-force integration.
 
-    The target x_f is the brute-force terminal state of the costate above, so that
-    costate is an exact solution and is also the warm start.
+    The statuses of a re-solve are cwrend's, not in the paper (docs/solvers.md). The
+    target x_f is the brute-force terminal state of the costate above, so that costate
+    is an exact solution and is also the warm start.
     """
     lam = costate_with_lambda_v_near_zero(ab[0])
     base = paper_problem(eps, horizon_s=500.0)
@@ -316,7 +318,7 @@ def test_switching_times_match_dense_scan(
 
 
 def test_paper_fuel_plan_has_two_switches(paper_problem, paper_costates) -> None:
-    """The ε = 0 plan is burn–coast–burn: two switches; braking starts ≈ 741 s (SPEC §5)."""
+    """The ε = 0 plan is burn–coast–burn: two switches; braking starts ≈ 741 s (docs/method.md)."""
     ts = guidance.switching_times(paper_problem(0.0), paper_costates[0.0])
     assert ts.size == 2
     assert 700.0 < ts[1] < 760.0

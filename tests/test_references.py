@@ -1,4 +1,4 @@
-"""Open-loop energy- and fuel-optimal references (SPEC §2, §7).
+"""Open-loop energy- and fuel-optimal references (paper Sec. "Numerical Results and Discussion").
 
 Published values: Candan & Servadio, AAS 26-893, Sec. "Numerical Results and
 Discussion": Δv_energy = 1.502386e-1 km/s, Δv_fuel = 1.128000e-1 km/s, with
@@ -24,12 +24,15 @@ TOL_MISS_KM = 1e-6
 
 
 def test_energy_delta_v_matches_paper(paper_refs) -> None:
-    """Δv_energy = 1.502386e-1 km/s (SPEC §7) to the paper's printed precision."""
+    """Δv_energy = 1.502386e-1 km/s to the paper's printed precision.
+
+    Published in paper Sec. "Numerical Results and Discussion".
+    """
     assert paper_refs.energy.delta_v_km_s == pytest.approx(DV_ENERGY_PAPER, rel=REL_TOL_PRINTED)
 
 
 def test_fuel_delta_v_matches_paper(paper_refs) -> None:
-    """Δv_fuel = 1.128000e-1 km/s (SPEC §7).
+    """Δv_fuel = 1.128000e-1 km/s (paper Sec. "Numerical Results and Discussion").
 
     The bang-bang samples are 0 or u_max, so the trapezoid is an exact multiple of
     u_max·Δt: 141 × 8e-4 km/s (two arcs touching t = 0 and t = 800 lose half a sample
@@ -49,7 +52,7 @@ def test_fuel_plan_samples_are_bang_bang(paper_refs) -> None:
 
 @pytest.mark.parametrize("name", ["energy", "fuel"])
 def test_open_loop_miss_negligible(paper_refs, paper_cfg, name: str) -> None:
-    """Both references reach x_f = 0: miss < 1e-6 km (SPEC §7 "≈0")."""
+    """Both references reach x_f = 0: miss < 1e-6 km (the paper's "negligible terminal miss")."""
     ref = getattr(paper_refs, name)
     paper_x0 = np.array(paper_cfg.scenario.x0)
     assert ref.miss_km < TOL_MISS_KM
@@ -64,7 +67,10 @@ def test_fuel_reference_cheaper_than_energy(paper_refs) -> None:
 
 
 def test_fuel_continuation_sequence(paper_refs) -> None:
-    """SPEC §2: ε = 1.0, 0.9, …, 0.0, every solve converged."""
+    """ε = 1.0, 0.9, …, 0.0, every solve converged.
+
+    The continuation is the authors' code's, not in the paper (docs/method.md).
+    """
     assert references.FUEL_CONTINUATION == (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1, 0.0)
     solves = paper_refs.fuel.solves
     assert [s.eps for s in solves] == list(references.FUEL_CONTINUATION)
@@ -72,9 +78,10 @@ def test_fuel_continuation_sequence(paper_refs) -> None:
 
 
 def test_energy_costate_reaches_target_by_integration(paper_refs, paper_cfg, cw_matrices) -> None:
-    """Integrating ẋ = Ax − BBᵀλ, λ̇ = −Aᵀλ from the energy costate reaches x_f (SPEC §2).
+    """Integrating ẋ = Ax − BBᵀλ, λ̇ = −Aᵀλ from the energy costate reaches x_f.
 
-    DOP853 at rtol 3e-14 (near scipy's floor): the smooth 800 s integration is
+    The closed-form energy-optimal reference of docs/method.md (the paper gives its Δv
+    only). DOP853 at rtol 3e-14 (near scipy's floor): the smooth 800 s integration is
     accurate to ~1e-11 km on a 31 km state; 1e-9 km leaves ×100 margin.
     """
     a, b = cw_matrices(paper_cfg.scenario.mean_motion_rad_s)
@@ -109,7 +116,10 @@ def test_energy_delta_v_is_trapezoid_of_costate_norm(paper_refs, paper_cfg, cw_m
 
 
 def test_cumulative_delta_v_ends_at_the_delta_v(paper_refs) -> None:
-    """The running trapezoid starts at 0, never decreases and ends at ``delta_v`` (SPEC §2)."""
+    """The running trapezoid starts at 0, never decreases and ends at ``delta_v``.
+
+    Δv as the trapezoid of ‖u‖: a convention of cwrend, not in the paper (docs/method.md).
+    """
     for ref in (paper_refs.energy, paper_refs.fuel):
         dv = metrics.cumulative_delta_v(ref.t_s, np.linalg.norm(ref.u, axis=1))
         assert dv[0] == 0.0 and np.all(np.diff(dv) >= 0)

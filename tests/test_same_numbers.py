@@ -4,7 +4,7 @@ The fixture ``data/same_numbers.json`` was made on the code before the
 package was reorganised into layers (issue 14, a move that must change no
 number) by running this module as a script (below).
 
-It holds, for 3 seeds × 4 architectures of the paper scenario (SPEC §6) and
+It holds, for 3 seeds × 4 architectures of the paper scenario (docs/method.md) and
 of one swept (β = 0.5) and dispersed grid point, every value of
 ``runs.parquet`` except wall times, and for each column of each run's
 ``steps/`` and ``solves/`` rows (wall times excluded) a SHA-256 digest and a

@@ -1,4 +1,4 @@
-"""Innovation-adaptive homotopy schedule (SPEC §4; paper Eqs. 24–26).
+"""Innovation-adaptive homotopy schedule (paper Eqs. 24–26).
 
 Score ``s = min(max(NIS − m, 0) + κ ρ, score_max)``; low-pass
 ``s̄_k = ρ_s s̄_{k−1} + (1 − ρ_s) s_k`` (first step ``s̄ = s``); target
@@ -38,7 +38,7 @@ def test_score_adds_nis_excess_and_weighted_mtf_ratio() -> None:
 
 
 def test_score_is_capped_at_score_max() -> None:
-    """SPEC §4: the instantaneous score is capped at score_max = 50."""
+    """The instantaneous score of paper Eq. 24 is capped at score_max = 50 (paper Table 1)."""
     assert composite_score(1e6, 0.0, M, KAPPA, SCORE_MAX) == SCORE_MAX
     assert composite_score(40.0, 2.0, M, KAPPA, SCORE_MAX) == SCORE_MAX  # 37 + 24 > 50
 
@@ -57,7 +57,10 @@ def test_score_within_zero_and_cap(nis: float, rho: float) -> None:
 
 
 def test_lowpass_first_step_sets_score() -> None:
-    """SPEC §4: the first step sets s̄ = s (the previous value is ignored)."""
+    """The first step sets s̄ = s (the previous value is ignored).
+
+    The start of paper Eq. 25 is the authors' code's, not in the paper (docs/method.md).
+    """
     assert lowpass_score(123.0, 7.0, RHO_S, True) == 7.0
 
 
@@ -129,7 +132,10 @@ def test_eps_blend() -> None:
 
 
 def test_eps_blend_decays_geometrically_to_target() -> None:
-    """From ε_max = 1 with target 0 the applied ε is 0.9^k (adaptive start, SPEC §4)."""
+    """From ε_max = 1 with target 0 the applied ε is 0.9^k (α_ε = 0.1: paper Table 1).
+
+    The adaptive start at ε_max is the authors' code's, not in the paper (docs/method.md).
+    """
     eps = 1.0
     for k in range(1, 60):
         eps = eps_blend(eps, 0.0, ALPHA)

@@ -7,9 +7,9 @@ References:
   contaminated Gaussian, Huber 1964, "Robust estimation of a location
   parameter"; a bias random walk, Maybeck 1979, *Stochastic Models,
   Estimation and Control* vol. 1, §4.3). Row k + 1 (the measurement at
-  t_{k+1}) carries the window active at t_k (SPEC §5, the authors' code).
+  t_{k+1}) carries the window active at t_k (the authors' code; docs/method.md).
 * A dropout step has no measurement: the Kalman filter predicts only,
-  x̂ = Φ x̂ + Γ u (SPEC §3); NIS, MTF ratio and score are NaN, s̄ and ε held
+  x̂ = Φ x̂ + Γ u (paper Eq. 11); NIS, MTF ratio and score are NaN, s̄ and ε held
   (:mod:`cwrend_cli.physics._loop_kernels`).
 * Statistical tests: the number of outliers among N steps with probability p
   is Binomial(N, p); Σ z² of M independent N(0, 1) is χ²(M) (Bar-Shalom, Li &

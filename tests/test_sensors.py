@@ -1,8 +1,10 @@
 """Measurement noise: degradation windows, chol(R) scaling, noise streams and files.
 
-SPEC §6 (paper degradation): 250 ≤ t < 325 s → true R = 300 R_nominal, no bias;
-325 ≤ t ≤ 400 s → true R = 300 R_nominal and bias [10, −8, 12] m; otherwise
-R_nominal. The noise is one standard-normal realisation scaled by chol(true R).
+The degradation of the paper's study (the authors' code; the paper gives no values:
+docs/method.md, "The paper's scenario", degradation row): 250 ≤ t < 325 s → true
+R = 300 R_nominal, no bias; 325 ≤ t ≤ 400 s → true R = 300 R_nominal and bias
+[10, −8, 12] m; otherwise R_nominal. The noise is one standard-normal realisation
+scaled by chol(true R).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from cwrend_cli.physics import sensors
 from cwrend_cli.physics.params import Window
 
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1
-BIAS_KM = np.array([0.010, -0.008, 0.012])  # SPEC §6: [10, −8, 12] m
+BIAS_KM = np.array([0.010, -0.008, 0.012])  # [10, −8, 12] m: the authors' code (docs/method.md)
 N_STEPS = 800
 TIMES = np.arange(N_STEPS, dtype=float)  # step start times t_k, k = 0 … 799
 #: Noise agreement [km]: the scaling is a 3×3 product, rounding ~1e-16 relative.
@@ -32,7 +34,7 @@ def paper_windows():
 
 
 def spec_expected_noise(n: np.ndarray, t: float, r_nom: np.ndarray) -> np.ndarray:
-    """Noise of one step from the SPEC §6 table, written independently of the package."""
+    """Noise of one step from the docs/method.md table, written independently of the package."""
     if 250.0 <= t < 325.0:
         return np.linalg.cholesky(300.0 * r_nom) @ n
     if 325.0 <= t <= 400.0:
@@ -53,7 +55,7 @@ def test_active_window_boundaries(paper_windows, t: float, window: int) -> None:
 
 
 def test_paper_windows_noise_matches_spec_table(paper_windows) -> None:
-    """Every step's noise equals the SPEC §6 table: scale ×300 in both windows, bias in the 2nd."""
+    """Every step's noise equals the docs/method.md table: ×300 in both windows, bias in the 2nd."""
     rng = np.random.default_rng(42)
     std = rng.standard_normal((N_STEPS, 3))
     noise, active = sensors.measurement_noise(std, TIMES, R_NOM, paper_windows)

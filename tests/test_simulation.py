@@ -1,7 +1,9 @@
-"""Closed-loop receding-horizon simulation (SPEC §3–§6).
+"""Closed-loop receding-horizon simulation.
 
-One run is ~0.1 s once compiled. The paper scenario (SPEC §6) is used
-throughout; settings are varied with ``config_from_dict`` (validated).
+Paper Eqs. 11–26 and Sec. "Receding-Horizon Indirect Guidance". One run is ~0.1 s
+once compiled. The paper scenario (paper Table 1 plus the settings of the authors'
+code: docs/method.md) is used throughout; settings are varied with
+``config_from_dict`` (validated).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from cwrend_cli.physics.params import Degradation, Window
 
 U_MAX = 8e-4  # km/s², paper Table 1
 N_STEPS = 800
-#: Re-solve steps of the paper scenario (SPEC §5): every 10 s while T − t > 20 s.
+#: Re-solve steps of the paper scenario (paper Table 1): every 10 s while T − t > 20 s.
 #: "correct": T − (k+1) > 20 ⇔ k < 779; "reference": T − k > 20 ⇔ k < 780 ⇒ both k = 0 … 770.
 PAPER_RESOLVE_STEPS = list(range(0, 771, 10))
 #: One ulp of a 31 km coordinate is 3.6e-15 km; (x + v) − x recovers v to ~1e-14 km.
@@ -30,7 +32,7 @@ TOL_NOISE_KM = 1e-13
 
 
 def standard_normal(seed: int) -> np.ndarray:
-    """The seed's realisation of the paper config, shared by all architectures (SPEC §6)."""
+    """The seed's realisation of the paper config, shared by all architectures (cwrend's)."""
     return campaign.standard_normal_for(CwrendConfig(), seed)
 
 
@@ -73,9 +75,10 @@ def test_simulation_is_deterministic(slug: str, paper_cfg, paper_refs, runs_seed
 
 
 def test_architectures_share_the_noise(paper_cfg, runs_seed0) -> None:
-    """SPEC §6: y − H x_true is the same realisation for all four architectures.
+    """y − H x_true is the same realisation for all four architectures.
 
-    It is chol(true R) n + bias of the window at the step's start (SPEC §5).
+    A fair comparison: a convention of cwrend, not in the paper (docs/method.md). It is
+    chol(true R) n + bias of the window at the step's start (the authors' code).
     """
     problem = problem_of(paper_cfg)
     t = problem.scenario.time_grid()
@@ -101,7 +104,10 @@ def test_different_seeds_give_different_noise(paper_cfg, paper_refs, runs_seed0)
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_filter_starts_at_true_state(slug: str, paper_cfg, runs_seed0) -> None:
-    """SPEC §3: the filter starts at the true initial state (x̂₀ = x₀), trace P₀ logged."""
+    """The filter starts at the true initial state (x̂₀ = x₀), trace P₀ logged.
+
+    A convention of cwrend / the authors' code, not in the paper (docs/method.md).
+    """
     run = runs_seed0[slug]
     np.testing.assert_array_equal(run.x_hat[0], run.x_true[0])
     assert run.trace_p[0] == pytest.approx(3e-6 + 3e-10, rel=1e-15)  # Table 1 P0
@@ -109,7 +115,7 @@ def test_filter_starts_at_true_state(slug: str, paper_cfg, runs_seed0) -> None:
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_truth_is_zero_order_hold_propagation(slug: str, paper_cfg, runs_seed0) -> None:
-    """SPEC §1: x_{k+1} = Φ x_k + Γ u_k exactly (ZOH of the commanded control)."""
+    """Paper Eq. 11: x_{k+1} = Φ x_k + Γ u_k exactly (ZOH of the commanded control)."""
     run = runs_seed0[slug]
     phi, gam = discretize(paper_cfg.scenario.mean_motion_rad_s, paper_cfg.scenario.dt_s)
     pred = run.x_true[:-1] @ phi.T + run.u[:-1] @ gam.T
@@ -120,7 +126,10 @@ def test_truth_is_zero_order_hold_propagation(slug: str, paper_cfg, runs_seed0) 
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_delta_v_is_trapezoid_with_zero_final_control(slug: str, runs_seed0) -> None:
-    """SPEC §2: Δv = trapezoid of ‖u‖ on t = 0 … 800; no control at t = 800 (u[N] = 0)."""
+    """Δv = trapezoid of ‖u‖ on t = 0 … 800; no control at t = 800 (u[N] = 0).
+
+    A convention of cwrend / the authors' code, not in the paper (docs/method.md).
+    """
     run = runs_seed0[slug]
     np.testing.assert_array_equal(run.u[-1], 0.0)
     norms = np.linalg.norm(run.u, axis=1)
@@ -130,7 +139,7 @@ def test_delta_v_is_trapezoid_with_zero_final_control(slug: str, runs_seed0) -> 
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_miss_is_final_true_position_norm(slug: str, runs_seed0) -> None:
-    """SPEC §2: miss = ‖r_true(T)‖."""
+    """Miss = ‖r_true(T)‖ (the terminal miss of paper Sec. "Numerical Results and Discussion")."""
     run = runs_seed0[slug]
     assert run.miss_km == pytest.approx(np.linalg.norm(run.x_true[-1, :3]), rel=1e-15)
 
@@ -140,7 +149,7 @@ def test_miss_is_final_true_position_norm(slug: str, runs_seed0) -> None:
 
 @pytest.mark.parametrize("timing", ["correct", "reference"])
 def test_resolve_steps_paper(timing: str) -> None:
-    """78 re-solves for the paper scenario with either timing (SPEC §5)."""
+    """78 re-solves for the paper scenario with either timing (paper Table 1)."""
     cfg = config_from_dict({"guidance": {"resolve_timing": timing}})
     steps = simulation.resolve_steps(problem_of(cfg))
     assert len(steps) == 78
@@ -157,7 +166,10 @@ def test_correct_timing_horizons(slug: str, runs_seed0) -> None:
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_initial_solve_only_for_adaptive(slug: str, runs_seed0) -> None:
-    """SPEC §4: adaptive runs record an initial solve at ε_max from x0 over T; fixed ones none."""
+    """Adaptive runs record an initial solve at ε_max from x0 over T; fixed ones none.
+
+    The authors' code's, not in the paper (docs/method.md).
+    """
     run = runs_seed0[slug]
     initial = [s for s in run.solves if s.kind == "initial"]
     if ARCHITECTURES[slug].adaptive:
@@ -170,7 +182,7 @@ def test_initial_solve_only_for_adaptive(slug: str, runs_seed0) -> None:
     assert len(run.solves) == 78 + len(initial)
 
 
-# --- fixed ε = 0: every re-solve converged or infeasible (SPEC §5) ------------------------
+# --- fixed ε = 0: every re-solve converged or infeasible (docs/method.md) -----------------
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -178,7 +190,10 @@ def test_initial_solve_only_for_adaptive(slug: str, runs_seed0) -> None:
 def test_fixed_eps_resolves_converged_or_infeasible(
     slug: str, seed: int, paper_cfg, paper_refs
 ) -> None:
-    """SPEC §5: no re-solve fails; the infeasible ones are in the final braking burn (t ≥ 700 s)."""
+    """No re-solve fails; the infeasible ones are in the final braking burn (t ≥ 700 s).
+
+    Not in the paper: docs/method.md, "One step of the loop".
+    """
     run = simulation.simulate(
         problem_of(paper_cfg), ARCHITECTURES[slug], standard_normal(seed), paper_refs
     )
@@ -194,9 +209,10 @@ def test_fixed_eps_resolves_converged_or_infeasible(
 
 @pytest.mark.parametrize("slug", list(ARCHITECTURES))
 def test_hold_mean_keeps_control_bounded(slug: str, paper_refs) -> None:
-    """``guidance.hold = "mean"``: the step-averaged plan control has ‖u‖ ≤ u_max (SPEC §5).
+    """``guidance.hold = "mean"``: the step-averaged plan control has ‖u‖ ≤ u_max (paper Eq. 6).
 
-    Tolerance: a few ulp of the quadrature-weighted average (weights sum to 1 ± 1e-15).
+    The hold is a convention of cwrend, not in the paper (docs/method.md). Tolerance: a few
+    ulp of the quadrature-weighted average (weights sum to 1 ± 1e-15).
     """
     cfg = config_from_dict({"guidance": {"hold": "mean"}})
     run = simulation.simulate(problem_of(cfg), ARCHITECTURES[slug], standard_normal(0), paper_refs)

@@ -1,7 +1,7 @@
 """The switching-time Newton of the ε = 0 re-solve (issue 17; ``_switching_kernels``).
 
 The re-solves are those of one fixed-ε closed loop of the paper scenario
-(plain KF, seed 0, the paper's sample hold; SPEC §5–6), captured as the loop
+(plain KF, seed 0, the authors' sample hold; docs/method.md), captured as the loop
 meets them, with the loop's own warm starts. The reference answer is the
 damped dual ascent alone (``switching_max_iter = 0``, the solver before issue
 17), itself tested against brute-force integration in ``test_guidance.py``.
