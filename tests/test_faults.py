@@ -416,7 +416,7 @@ def test_a_processs_first_run_of_an_architecture_gets_the_allowance_for_its_kern
         return real(configured, problem, first=first)
 
     monkeypatch.setattr(guards, "run_timeout_s", recorded)
-    monkeypatch.setattr(worker_module, "_ARCHS_RUN", set())  # a fresh process
+    monkeypatch.setattr(worker_module, "_VARIANTS_RUN", set())  # a fresh process
     task = campaign.plan(CwrendConfig(), ["mtf_adaptive", "plain_adaptive"], [0, 1]).tasks[0]
     worker_module.execute_task(task, None, str(tmp_path), metadata={"config_hash": "c"})
     assert firsts == [True, True, False, False]  # seed 0's two architectures, then seed 1's

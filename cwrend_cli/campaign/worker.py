@@ -229,7 +229,7 @@ def run_case(
 #: Compiled variants this process has started a run of (:func:`kernel_variant`): the first
 #: run of each also loads (or compiles) its kernels, which its time limit allows for
 #: (:func:`guards.run_timeout_s`).
-_ARCHS_RUN: set[tuple[object, ...]] = set()
+_VARIANTS_RUN: set[tuple[object, ...]] = set()
 
 
 def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
@@ -439,8 +439,8 @@ def execute_task(
                         task.noise, spec.seed, n_steps
                     )
                 variant = kernel_variant(problem, spec.arch)
-                first = variant not in _ARCHS_RUN
-                _ARCHS_RUN.add(variant)
+                first = variant not in _VARIANTS_RUN
+                _VARIANTS_RUN.add(variant)
                 limit = guards.run_timeout_s(run_timeout_s, problem, first=first)
                 with guards.time_limit(limit):  # the references too, when computed here
                     run_refs = _references(problem, references)
