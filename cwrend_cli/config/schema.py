@@ -84,6 +84,8 @@ Int = Annotated[int, Strict()]
 Vec3 = tuple[Float, Float, Float]
 Vec6 = tuple[Float, Float, Float, Float, Float, Float]
 Angle = Annotated[float, Strict(), Field(ge=-180, le=180)]
+#: An angle of the chief's orbit [deg]: up to a turn either way.
+OrbitAngleDeg = Annotated[float, Strict(), Field(ge=-360, le=360)]
 
 # Bounds of the physical quantities (issue 36 item 7). Generous for any rendezvous
 # the CW model describes, finite so that no accepted value overflows the filter or
@@ -686,10 +688,8 @@ class TruthConfig(_FrozenModel):
     eccentricity: Float = Field(
         _PAPER.truth.eccentricity, ge=0, lt=1, description="chief eccentricity e, in [0, 1) [-]"
     )
-    true_anomaly_deg: Float = Field(
+    true_anomaly_deg: OrbitAngleDeg = Field(
         _PAPER.truth.true_anomaly_deg,
-        ge=-360,
-        le=360,
         description="chief true anomaly f at t = 0, in [-360, 360] [deg]",
     )
     inclination_deg: Float = Field(
@@ -698,16 +698,12 @@ class TruthConfig(_FrozenModel):
         le=180,
         description="chief inclination i, in [0, 180] [deg]",
     )
-    raan_deg: Float = Field(
+    raan_deg: OrbitAngleDeg = Field(
         _PAPER.truth.raan_deg,
-        ge=-360,
-        le=360,
         description="chief right ascension of the ascending node Ω, in [-360, 360] [deg]",
     )
-    arg_latitude_deg: Float = Field(
+    arg_latitude_deg: OrbitAngleDeg = Field(
         _PAPER.truth.arg_latitude_deg,
-        ge=-360,
-        le=360,
         description="chief argument of latitude u = ω + f at t = 0, in [-360, 360] [deg]",
     )
 
