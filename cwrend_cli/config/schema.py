@@ -110,6 +110,8 @@ TIME_MAX_S = 1e6
 EPS_MAX = 100.0
 #: Dimensionless weights, scales and gains of the schedule and sensor faults [-].
 GAIN_MAX = 1e6
+#: Control acceleration [km/s²]: about 10 g, bounds u_max and the minimum thrust.
+ACCEL_MAX_KM_S2 = 0.1
 
 #: Mean, spread and ends of a dispersion draw [the key's unit]: the largest bound of
 #: any value it may set.
@@ -197,7 +199,7 @@ class ScenarioConfig(_FrozenModel):
     u_max_km_s2: Float = Field(
         _PAPER.scenario.u_max_km_s2,
         ge=1e-9,
-        le=0.1,
+        le=ACCEL_MAX_KM_S2,
         description="maximum control acceleration, in [1e-9, 0.1] (about 10 g) [km/s²]",
     )
 
@@ -773,7 +775,7 @@ class ActuatorConfig(_FrozenModel):
     min_thrust_km_s2: Float = Field(
         _PAPER.actuator.min_thrust_km_s2,
         ge=0,
-        le=0.1,
+        le=ACCEL_MAX_KM_S2,
         description="commands below this magnitude produce no thrust, in [0, 0.1] and <= "
         "scenario.u_max_km_s2 [km/s²]",
     )
