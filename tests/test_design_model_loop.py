@@ -87,12 +87,12 @@ def test_the_filter_predicts_with_its_model(name: DesignModelName, tr: Truth) ->
     """model.filter: the loop's Φ_k, Γ_k are the model's steps; 'cw': Eq. 11 at every step."""
     problem = Problem(truth=tr, model=DesignModel(filter=name))
     cw_phi, cw_gam = discretize(N, SC.dt_s)
-    phi, gam = simulation._filter_tables(problem, cw_phi, cw_gam)
+    phi, gam = simulation._filter_tables(problem)
     tables = dm.step_tables(name, SC, tr)
     assert phi.shape == (SC.n_steps, 6, 6) and gam.shape == (SC.n_steps, 6, 3)
     assert np.array_equal(phi, tables.phi) and np.array_equal(gam, tables.gam)
     assert phi.flags.writeable and phi.flags.c_contiguous
-    phi, gam = simulation._filter_tables(Problem(truth=tr), cw_phi, cw_gam)
+    phi, gam = simulation._filter_tables(Problem(truth=tr))
     assert all(np.array_equal(p, cw_phi) for p in phi)
     assert all(np.array_equal(g, cw_gam) for g in gam)
 

@@ -286,7 +286,7 @@ def simulate(
     gl_x, gl_w = settings.quadrature()
     t = sc.time_grid()
     phi, gam = discretize(n, dt)
-    filter_phi, filter_gam = _filter_tables(problem, phi, gam)
+    filter_phi, filter_gam = _filter_tables(problem)
     r_nominal = est.r_nominal_matrix()
     meas = sensors.sensor_noise(
         standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
@@ -709,20 +709,14 @@ def _guidance_tables(problem: Problem) -> design_models.StepTables | None:
     return design_models.step_tables(name, problem.scenario, problem.truth)
 
 
-def _filter_tables(
-    problem: Problem, phi: FloatArray, gam: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
     """Φ_k (N, 6, 6) and Γ_k (N, 6, 3) the filter predicts with at each step (issue 33).
 
-    CW (``model.filter = "cw"``): every step is ``phi``, ``gam`` (Eq. 11), the
-    same numbers as before. Another model: its :func:`design_models.step_tables`
-    (writable copies, so that the compiled loop sees the arrays it always did).
+    The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
+    every step), as writable copies, so that the compiled loop sees the arrays
+    it always did.
     """
-    n_steps = problem.scenario.n_steps
-    name = problem.model.filter
-    if name == "cw":
-        return np.repeat(phi[None], n_steps, axis=0), np.repeat(gam[None], n_steps, axis=0)
-    tables = design_models.step_tables(name, problem.scenario, problem.truth)
+    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
     return np.array(tables.phi), np.array(tables.gam)
 
 
