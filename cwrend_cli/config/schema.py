@@ -116,6 +116,8 @@ ACCEL_MAX_KM_S2 = 0.1
 #: Mean, spread and ends of a dispersion draw [the key's unit]: the largest bound of
 #: any value it may set.
 DISPERSION_MAX = POSITION_VARIANCE_MAX_KM2
+#: A mean or end of a dispersion draw [the key's unit]: within ±DISPERSION_MAX.
+DispersionValue = Annotated[float, Strict(), Field(ge=-DISPERSION_MAX, le=DISPERSION_MAX)]
 
 PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
 VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
@@ -1047,10 +1049,8 @@ class Dispersion(_FrozenModel):
     dist: Literal["normal", "uniform"] = Field(description="distribution of the draw [-]")
     # each within ±DISPERSION_MAX, the largest bound of any value a draw may set (a
     # position variance); the dispersed run is then validated like any configuration
-    mean: Float = Field(
+    mean: DispersionValue = Field(
         0.0,
-        ge=-DISPERSION_MAX,
-        le=DISPERSION_MAX,
         description="normal: mean of the draw, within ±1e8 [the key's unit]",
     )
     std: Float | None = Field(
@@ -1059,16 +1059,12 @@ class Dispersion(_FrozenModel):
         le=DISPERSION_MAX,
         description="normal: standard deviation, in [0, 1e8] [the key's unit]",
     )
-    low: Float | None = Field(
+    low: DispersionValue | None = Field(
         None,
-        ge=-DISPERSION_MAX,
-        le=DISPERSION_MAX,
         description="uniform: lower bound, within ±1e8 [the key's unit]",
     )
-    high: Float | None = Field(
+    high: DispersionValue | None = Field(
         None,
-        ge=-DISPERSION_MAX,
-        le=DISPERSION_MAX,
         description="uniform: upper bound, within ±1e8 [the key's unit]",
     )
     mode: Literal["add", "set"] = Field("add", description="add the draw to the base or set it [-]")
