@@ -233,7 +233,7 @@ def linearise_keep_out(
     grad = 2.0 * r_bar / a**2
     size = float(np.linalg.norm(grad))
     normal = grad / size
-    g = float(np.sum((r_bar / a) ** 2))
+    g = float(ellipsoid_level(r_bar, a))
     return HalfSpace(normal, float(normal @ r_bar) + (1.0 - g) / size + margin_km)
 
 

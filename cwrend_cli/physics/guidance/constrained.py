@@ -164,7 +164,7 @@ def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
     perpendicular to it (a deterministic choice; the other side costs the same
     by symmetry).
     """
-    level = np.sum((r_bar / semi_axes) ** 2, axis=1)
+    level = cg.ellipsoid_level(r_bar, semi_axes)
     k = int(np.argmin(level))
     ahead, behind = r_bar[min(k + 1, len(r_bar) - 1)], r_bar[max(k - 1, 0)]
     direction = ahead - behind
@@ -181,11 +181,11 @@ def _tangent_point(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np
     """The point whose tangent plane bounds node r: r itself outside the zone; inside, the
     radial projection onto the surface of r moved by the largest semi-axis towards ``side``
     (so the nodes of a crossing iterate all go round on one side)."""
-    level = float(np.sum((r / semi_axes) ** 2))
+    level = float(cg.ellipsoid_level(r, semi_axes))
     if level >= 1.0:
         return r
     shifted = r + float(np.max(semi_axes)) * side
-    return shifted / math.sqrt(float(np.sum((shifted / semi_axes) ** 2)))
+    return shifted / math.sqrt(float(cg.ellipsoid_level(shifted, semi_axes)))
 
 
 def _half_spaces(
