@@ -29,7 +29,7 @@ from rich.text import Text
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
 from cwrend_cli.physics.simulation import RunResult
-from cwrend_cli.report.labels import setting_text, swept_values
+from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, setting_text, swept_values
 
 #: Metres per kilometre: the console shows misses in m (Δv in km/s), as report.md does.
 M_PER_KM = 1e3
@@ -365,9 +365,6 @@ def _duration(seconds: float) -> str:
     return f"{s // 3600} h {s % 3600 // 60:02d} min"
 
 
-#: Below this many seeds a percentile-bootstrap interval is too narrow to trust
-#: (with 1 seed it is a single point); the console marks such intervals.
-MIN_BOOTSTRAP_N = 10
 UNRELIABLE_MARK = "*"
 UNRELIABLE_NOTE = (
     f"{UNRELIABLE_MARK} fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable"

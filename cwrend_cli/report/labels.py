@@ -18,6 +18,10 @@ import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 
+#: Below this many seeds a percentile-bootstrap interval is too narrow to trust (with 1 seed
+#: it is a single point): the console, report.md and ``cwrend table`` mark such intervals.
+MIN_BOOTSTRAP_N = 10
+
 #: Symbol and unit of the configuration keys that have one in the paper.
 SYMBOLS: dict[str, tuple[str, str]] = {
     "scenario.mean_motion_rad_s": ("n", "rad/s"),

@@ -29,11 +29,9 @@ import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
-from cwrend_cli.report.labels import format_value, param_label
+from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, format_value, param_label
 from cwrend_cli.report.load import ReportData, arch_label, param_values
 
-#: Below this many seeds a bootstrap interval is flagged (as on the console).
-MIN_BOOTSTRAP_N = 10
 UNRELIABLE_MARK = "\\*"  # a literal * in markdown
 UNRELIABLE_NOTE = (
     f"{UNRELIABLE_MARK} fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable."

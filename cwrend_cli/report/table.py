@@ -56,7 +56,7 @@ from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
-from cwrend_cli.report.labels import format_value
+from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, format_value
 
 __all__ = [
     "FIELDS",
@@ -73,9 +73,7 @@ Format = Literal["md", "latex", "csv"]
 FORMATS: tuple[Format, ...] = ("md", "latex", "csv")
 #: Fields that are not configuration keys.
 FIELDS = ("campaign", "arch", "other", "point", "metric")
-#: Below this many seeds a bootstrap interval is flagged (as on the console and in report.md).
-MIN_BOOTSTRAP_N = 10
-UNRELIABLE_NOTE = "* fewer than 10 seeds: bootstrap interval unreliable"
+UNRELIABLE_NOTE = f"* fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable"
 _MISSING = "–"
 
 
