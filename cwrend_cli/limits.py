@@ -49,3 +49,18 @@ NOISE_FILE_SLACK_BYTES = 1 << 20
 def noise_file_max_bytes(n_steps: int) -> int:
     """Largest noise file accepted for a run of ``n_steps`` steps [bytes]."""
     return NOISE_FILE_SLACK_BYTES + NOISE_FILE_BYTES_PER_STEP * n_steps
+
+
+def noise_file_too_large(size: int, n_steps: int) -> str | None:
+    """Why a noise file of ``size`` bytes is too large for ``n_steps`` rows, or ``None``.
+
+    The one refusal of :func:`noise_file_max_bytes`: the configuration checks a
+    file's size before anything reads it, the reader what it read.
+    """
+    limit = noise_file_max_bytes(n_steps)
+    if size <= limit:
+        return None
+    return (
+        f"{size:,} bytes; a noise file of {n_steps:,} rows (one per step, horizon_s / dt_s) "
+        f"is at most {limit:,} bytes"
+    )

@@ -29,7 +29,12 @@ from cwrend_cli.config.messages import format_validation_error
 from cwrend_cli.config.overrides import apply, nesting_depth, parse_override
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError, InputDataError
-from cwrend_cli.limits import MAX_CONFIG_BYTES, MAX_NESTING, noise_file_max_bytes
+from cwrend_cli.limits import (
+    MAX_CONFIG_BYTES,
+    MAX_NESTING,
+    noise_file_max_bytes,
+    noise_file_too_large,
+)
 
 if TYPE_CHECKING:
     from cwrend_cli.physics.params import FloatArray
@@ -241,11 +246,9 @@ def _noise_bytes(path: Path, n_steps: int) -> bytes:
     with open(path, "rb") as file:
         size = os.fstat(file.fileno()).st_size
         data = file.read(limit + 1) if size <= limit else b""
-    if size > limit or len(data) > limit:
-        raise InputDataError(
-            f"noise.file = {str(path)!r}: {max(size, len(data)):,} bytes; a noise file of "
-            f"{n_steps:,} rows (one per step, horizon_s / dt_s) is at most {limit:,} bytes"
-        )
+    problem = noise_file_too_large(max(size, len(data)), n_steps)
+    if problem is not None:
+        raise InputDataError(f"noise.file = {str(path)!r}: {problem}")
     return data
 
 

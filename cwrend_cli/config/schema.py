@@ -50,7 +50,7 @@ from cwrend_cli.limits import (
     MAX_SWEPT_KEYS,
     NOISE_FILE_BYTES_PER_STEP,
     NOISE_FILE_SLACK_BYTES,
-    noise_file_max_bytes,
+    noise_file_too_large,
 )
 from cwrend_cli.physics import params
 from cwrend_cli.physics.params import covariance_matrix
@@ -1284,10 +1284,4 @@ def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
         size = Path(file).stat().st_size
     except OSError:
         return None  # reading it reports the problem
-    limit = noise_file_max_bytes(n_steps)
-    if size <= limit:
-        return None
-    return (
-        f"{size:,} bytes; a noise file of {n_steps:,} rows (one per step, horizon_s / dt_s) "
-        f"is at most {limit:,} bytes"
-    )
+    return noise_file_too_large(size, n_steps)
