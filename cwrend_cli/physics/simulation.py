@@ -571,11 +571,11 @@ def _cone_resolves(
         k_from = k + 1 if correct else k
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
-        warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
         scp = _constrained_plan(problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from)
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
+            warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
             grid = _grid(sc, state.x_hat, horizon, tables)
             result = convex.solve(grid, scalars.eps, n, warm=warm)
         rec = _record("resolve", k, (k + 1) * dt, result, threshold, scp and scp[1])
