@@ -63,9 +63,14 @@ def grid_problem_from_steps(
     for j in range(steps - 1, -1, -1):
         blocks[j] = acc @ gam[j]
         acc = acc @ phi[j]
-    t = steps * dt_s
-    row_scale = np.array([1.0, 1.0, 1.0, t, t, t]) / (u_max_km_s2 * t * t)
+    row_scale = _row_scale(steps * dt_s, u_max_km_s2)
     return GridProblem(blocks, xf - acc @ x0, row_scale, dt_s, u_max_km_s2, transition=acc)
+
+
+def _row_scale(t: float, u_max_km_s2: float) -> np.ndarray:
+    """The terminal rows' scale of a grid of length ``t`` [s]: position 1/(u_max t²), velocity
+    1/(u_max t)."""
+    return np.array([1.0, 1.0, 1.0, t, t, t]) / (u_max_km_s2 * t * t)
 
 
 def _transition(g: GridProblem, n: float) -> np.ndarray:
@@ -82,9 +87,7 @@ def grid_problem(
     steps = max(1, round(horizon_s / dt_s))
     blocks = _power_blocks(n, dt_s, steps)[-steps:]
     rhs = xf - stm(n, steps * dt_s) @ x0
-    t = steps * dt_s
-    row_scale = np.array([1.0, 1.0, 1.0, t, t, t]) / (u_max_km_s2 * t * t)
-    return GridProblem(blocks, rhs, row_scale, dt_s, u_max_km_s2)
+    return GridProblem(blocks, rhs, _row_scale(steps * dt_s, u_max_km_s2), dt_s, u_max_km_s2)
 
 
 _BLOCKS: dict[tuple[float, float], np.ndarray] = {}
