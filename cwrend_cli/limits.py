@@ -28,7 +28,7 @@ MAX_CONFIG_BYTES = 1_000_000
 MAX_NESTING = 16
 #: Seeds of one campaign task (``output.seeds_per_task``): a task's runs are held in a
 #: worker's memory until its files are written (about 0.2 MB of steps per run).
-MAX_SEEDS_PER_TASK = 10_000
+MAX_SEEDS_PER_TASK_SETTING = 10_000
 #: Wall-time limit of one run (``output.run_timeout_s``) [s]: a day.
 MAX_RUN_TIMEOUT_S = 86_400.0
 #: Problems an error lists (the rest are counted): a configuration of thousands of

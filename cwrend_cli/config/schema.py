@@ -45,7 +45,7 @@ from cwrend_cli.limits import (
     MAX_RUN_TIMEOUT_S,
     MAX_RUNS,
     MAX_SEED,
-    MAX_SEEDS_PER_TASK,
+    MAX_SEEDS_PER_TASK_SETTING,
     MAX_STEPS,
     MAX_SWEPT_KEYS,
     NOISE_FILE_BYTES_PER_STEP,
@@ -854,7 +854,7 @@ class OutputConfig(_FrozenModel):
     seeds_per_task: Int | None = Field(
         None,
         ge=1,
-        le=MAX_SEEDS_PER_TASK,
+        le=MAX_SEEDS_PER_TASK_SETTING,
         description="campaigns: seeds run together as one task (all architectures), written "
         "to one file per architecture and journaled at once; larger means fewer files and "
         "faster campaigns, smaller a finer resume and progress; unset = at least 4 tasks per "
