@@ -29,10 +29,7 @@ from rich.text import Text
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
 from cwrend_cli.physics.simulation import RunResult
-from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, setting_text, swept_values
-
-#: Metres per kilometre: the console shows misses in m (Δv in km/s), as report.md does.
-M_PER_KM = 1e3
+from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, setting_text, swept_values
 
 
 def _num(value: float, spec: str) -> str:

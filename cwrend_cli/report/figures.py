@@ -71,6 +71,7 @@ from cwrend_cli.physics.constraints import Geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.labels import (
+    M_PER_KM,
     difference_text,
     format_value,
     param_label,
@@ -94,7 +95,6 @@ STYLE: dict[RcKeyType, Any] = {
     "grid.alpha": 0.3,
     "lines.linewidth": 1.4,
 }
-M_PER_KM = 1e3  # misses are drawn in m (as on the console and in report.md)
 _MISS_FLOOR_M = 1e-6  # misses below this are drawn at this value on log axes
 _WINDOW_ALPHAS = (0.18, 0.32, 0.25, 0.4)  # shading of successive degradation windows
 

@@ -22,6 +22,9 @@ from cwrend_cli.output.tables import PARAM_PREFIX
 #: it is a single point): the console, report.md and ``cwrend table`` mark such intervals.
 MIN_BOOTSTRAP_N = 10
 
+#: Metres per kilometre: every cwrend table and figure shows misses in m (Δv in km/s).
+M_PER_KM = 1e3
+
 #: Symbol and unit of the configuration keys that have one in the paper.
 SYMBOLS: dict[str, tuple[str, str]] = {
     "scenario.mean_motion_rad_s": ("n", "rad/s"),

@@ -29,14 +29,13 @@ import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
-from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, format_value, param_label
+from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, param_label
 from cwrend_cli.report.load import ReportData, arch_label, param_values
 
 UNRELIABLE_MARK = "\\*"  # a literal * in markdown
 UNRELIABLE_NOTE = (
     f"{UNRELIABLE_MARK} fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable."
 )
-M_PER_KM = 1e3
 DV = ".4f"  # km/s
 MISS = ".2f"  # m (after M_PER_KM)
 FUEL = ".2f"  # %

@@ -56,7 +56,7 @@ from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
-from cwrend_cli.report.labels import MIN_BOOTSTRAP_N, format_value
+from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value
 
 __all__ = [
     "FIELDS",
@@ -89,7 +89,7 @@ class _Quantity:
 
 #: The metrics of the statistics files, as shown (the report's units and precision).
 QUANTITIES: Mapping[str, _Quantity] = {
-    "miss_km": _Quantity("miss", "m", 1e3, 2),
+    "miss_km": _Quantity("miss", "m", M_PER_KM, 2),
     "delta_v_km_s": _Quantity("Δv", "km/s", 1.0, 4),
     "fuel_penalty_pct": _Quantity("fuel penalty", "%", 1.0, 2),
     "solve_mean_ms": _Quantity("re-solve time", "ms", 1.0, 2),
