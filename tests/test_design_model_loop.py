@@ -145,3 +145,29 @@ def test_a_shooting_architecture_with_another_guidance_model_exits_2(
     assert "model.guidance = 'ss' with architecture plain_fixed" in result.output
     assert "Traceback" not in result.output
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("command", ["run", "ablate"])
+def test_a_constrained_cone_program_with_another_guidance_model_exits_2(
+    command: str, tmp_path: Path
+) -> None:
+    # the constrained cone program plans with CW: it must not silently fly 'ss' as CW
+    args = [
+        command,
+        str(REPO / "campaigns" / "safe_approach.toml"),
+        "--arch",
+        "mtf_adaptive_socp",
+        "--set",
+        "truth.model='j2'",
+        "--set",
+        "model.guidance='ss'",
+        "--set",
+        f"output.dir='{tmp_path}'",
+    ]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "model.guidance = 'ss' with [constraints] and architecture mtf_adaptive_socp" in (
+        result.output
+    )
+    assert "Traceback" not in result.output
+    assert not any(tmp_path.iterdir())

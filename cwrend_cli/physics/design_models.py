@@ -450,16 +450,29 @@ def step_tables(name: DesignModelName, scenario: Scenario, truth: Truth) -> Step
     return StepTables(phi=phi, gam=gam, time_invariant=name != "ya")
 
 
-def unsupported(model: DesignModel, arch: Architecture, guidance: Guidance) -> str | None:
+def unsupported(
+    model: DesignModel, arch: Architecture, guidance: Guidance, constrained: bool = False
+) -> str | None:
     """Why ``arch`` cannot fly ``model`` yet (a sentence naming the field), or None.
 
     The cone-program re-solve (``socp``) takes any model (it needs Φ_k, Γ_k
-    only); the shooting re-solve's compiled kernels are CW's (Eq. 11) so far.
+    only) when unconstrained; the constrained cone program
+    (:mod:`cwrend_cli.physics.guidance.constrained`, with ``[constraints]``) and the
+    shooting re-solve's compiled kernels plan with CW (Eq. 11) so far.
     """
-    if model.guidance != "cw" and arch.resolved_method(guidance) == "shooting":
+    if model.guidance == "cw":
+        return None
+    method = arch.resolved_method(guidance)
+    if method == "shooting":
         return (
             f"model.guidance = '{model.guidance}' with architecture {arch.slug}: its shooting "
             "re-solve supports only 'cw' so far; use the cone-program architectures "
             "(--arch all_socp, or guidance.method = 'socp')"
+        )
+    if constrained:
+        return (
+            f"model.guidance = '{model.guidance}' with [constraints] and architecture "
+            f"{arch.slug}: the constrained cone program plans with 'cw' only so far; set "
+            "model.guidance = 'cw' or drop [constraints]"
         )
     return None
