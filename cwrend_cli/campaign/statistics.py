@@ -501,9 +501,10 @@ def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame
     share_lo, share_hi = wilson_cis(counts, sizes)
     samples: list[FloatArray] = []
     fns: list[Statistic] = []
+    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m, _, _ in SAFETY_STATISTICS}
     for a, b in spans:
         for metric, _, fn in SAFETY_STATISTICS:
-            samples.append(ok[metric].to_numpy(dtype=float)[order][a:b])
+            samples.append(per_metric[metric][a:b])
             fns.append(fn)
     ci = bootstrap_cis(samples, fns, np.random.default_rng([seed, SAFETY_STREAM]))
     per_group = 1 + len(SAFETY_STATISTICS)
