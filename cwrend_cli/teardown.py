@@ -62,16 +62,13 @@ _RECEIVED: list[int] = []
 
 
 class StopSignal(KeyboardInterrupt):
-    """SIGTERM or SIGHUP, raised in the main thread as a Ctrl-C is (``signum``: which)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
+    """SIGTERM or SIGHUP, raised in the main thread as a Ctrl-C is (its message: which;
+    :func:`stop_exit_code` reads the signal from :data:`_RECEIVED`)."""
 
 
 def _stop(signum: int, frame: FrameType | None) -> None:
     _RECEIVED.append(signum)
-    raise StopSignal(signum)
+    raise StopSignal(signal.Signals(signum).name)
 
 
 def stop_on_signals() -> None:
