@@ -29,7 +29,13 @@ from rich.text import Text
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.output.tables import reference_row, summary_row
 from cwrend_cli.physics.simulation import RunResult
-from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, setting_text, swept_values
+from cwrend_cli.report.labels import (
+    M_PER_KM,
+    MIN_BOOTSTRAP_N,
+    markdown_table,
+    setting_text,
+    swept_values,
+)
 
 
 def _num(value: float, spec: str) -> str:
@@ -81,11 +87,8 @@ def script_table(frame: pd.DataFrame, fmt: str) -> str:
     if fmt == "json":
         return json.dumps(records, ensure_ascii=False) + "\n"
     header = [str(c) for c in frame.columns]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += [
-        "| " + " | ".join("" if v is None else str(v) for v in r.values()) + " |" for r in records
-    ]
-    return "\n".join(lines) + "\n"
+    rows = [["" if v is None else str(v) for v in r.values()] for r in records]
+    return markdown_table(header, rows) + "\n"
 
 
 def _plain(value: Any) -> Any:

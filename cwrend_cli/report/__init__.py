@@ -18,15 +18,15 @@ _LAZY = {
     "ReportData": "load",
     "ReportError": "load",
     "load_results": "load",
-    "markdown_table": "markdown",
+    "markdown_table": "labels",
     "ReportSummary": "write",
     "write_compare_figure": "write",
     "write_report": "write",
 }
 
 if TYPE_CHECKING:
+    from cwrend_cli.report.labels import markdown_table
     from cwrend_cli.report.load import ReportData, ReportError, load_results
-    from cwrend_cli.report.markdown import markdown_table
     from cwrend_cli.report.write import ReportSummary, write_compare_figure, write_report
 else:
     __getattr__ = lazy_attributes(__name__, _LAZY, globals())

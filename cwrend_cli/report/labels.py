@@ -10,7 +10,7 @@ digits, so ``0.0007999999999999999`` (floating-point noise of a grid) reads
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -129,3 +129,10 @@ def param_setting(key: str, value: Any) -> str:
     symbol, unit = param_symbol(key)
     shown = format_value(value)
     return f"{symbol} = {shown}" + (f" {unit}" if unit not in (None, "-") else "")
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A GitHub-flavoured markdown table (report.md, ``cwrend table``, ``--format md``)."""
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(out)

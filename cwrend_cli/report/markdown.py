@@ -29,7 +29,13 @@ import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
-from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, param_label
+from cwrend_cli.report.labels import (
+    M_PER_KM,
+    MIN_BOOTSTRAP_N,
+    format_value,
+    markdown_table,
+    param_label,
+)
 from cwrend_cli.report.load import ReportData, arch_label, param_values
 
 UNRELIABLE_MARK = "\\*"  # a literal * in markdown
@@ -83,13 +89,6 @@ def _ci(row: Any, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> s
 
 def _lookup(stats: pd.DataFrame) -> dict[tuple[str, str], Any]:
     return {(str(r["metric"]), str(r["statistic"])): r for _, r in stats.iterrows()}
-
-
-def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A GitHub-flavoured markdown table."""
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(out)
 
 
 def seed_table(data: ReportData) -> str:

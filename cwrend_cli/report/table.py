@@ -56,7 +56,7 @@ from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
-from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value
+from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, markdown_table
 
 __all__ = [
     "FIELDS",
@@ -764,8 +764,7 @@ def render(table: Table, fmt: Format) -> str:
     note = UNRELIABLE_NOTE if table.flagged else None
     if fmt == "md":
         lines = [f"{table.title}", ""] if table.title else []
-        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        lines += ["| " + " | ".join(row) + " |" for row in body]
+        lines.append(markdown_table(header, body))
         if note:
             lines += ["", "\\" + note]
         return "\n".join(lines)
