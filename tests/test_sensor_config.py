@@ -85,6 +85,11 @@ def _validate(*sets: str, file: str = "campaigns/paper.toml") -> tuple[int, str]
             "one value or 2",
         ),
         (
+            ("degradation.windows.0.outlier_probability=[0.05, 0.0]",),
+            "degradation.windows.0.outlier_probability",
+            "one value or 3",
+        ),
+        (
             ("sensor.model='angles'", "degradation.windows.1.bias_range_km=0.01"),
             "degradation.windows.1.bias_range_km",
             "measures no range",

@@ -122,6 +122,10 @@ DispersionValue = Annotated[float, Strict(), Field(ge=-DISPERSION_MAX, le=DISPER
 
 #: A factor on a true measurement variance [-] (a degradation window's r_scale).
 RScale = Annotated[float, Strict(), Field(ge=1e-6, le=GAIN_MAX)]
+#: A probability [-] (a degradation window's outlier_probability).
+Probability = Annotated[float, Strict(), Field(ge=0, le=1)]
+#: A factor on the Gaussian noise of an outlier [-].
+OutlierScale = Annotated[float, Strict(), Field(ge=0, le=1e3)]
 PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
 VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
 #: A relative state [x, y, z, ẋ, ẏ, ż] [km, km/s], each entry bounded.
@@ -617,14 +621,16 @@ class DegradationWindow(_FrozenModel):
     dropout_probability: Float = Field(
         0.0, ge=0, le=1, description="probability of no measurement on a step; 1 = blackout [-]"
     )
-    outlier_probability: Float = Field(
-        0.0, ge=0, le=1, description="probability that a step's noise is an outlier [-]"
+    outlier_probability: Probability | tuple[Probability, ...] = Field(
+        0.0,
+        description="probability that a step's noise is an outlier, in [0, 1]; one value "
+        "(every component an outlier together) or one per measurement component (each on "
+        "its own draw) [-]",
     )
-    outlier_scale: Float = Field(
+    outlier_scale: OutlierScale | tuple[OutlierScale, ...] = Field(
         1.0,
-        ge=0,
-        le=1e3,
-        description="factor on the Gaussian noise of an outlier step, in [0, 1e3] [-]",
+        description="factor on the Gaussian noise of an outlier, in [0, 1e3]; one value or "
+        "one per measurement component [-]",
     )
     bias_drift_km_per_sqrt_s: Float = Field(
         0.0,
@@ -1427,15 +1433,17 @@ def sensor_problems(cfg: CwrendConfig) -> list[tuple[str, Any, str]]:
     m = 2 if model == "angles" else 3
     for i, w in enumerate(cfg.degradation.windows):
         key = f"degradation.windows.{i}"
-        if isinstance(w.r_scale, tuple) and len(w.r_scale) != m:
-            problems.append(
-                (
-                    f"{key}.r_scale",
-                    list(w.r_scale),
-                    f"must be one value or {m} (one per component of the '{model}' "
-                    "sensor's measurement)",
+        for name in ("r_scale", "outlier_probability", "outlier_scale"):
+            value = getattr(w, name)
+            if isinstance(value, tuple) and len(value) != m:
+                problems.append(
+                    (
+                        f"{key}.{name}",
+                        list(value),
+                        f"must be one value or {m} (one per component of the '{model}' "
+                        "sensor's measurement)",
+                    )
                 )
-            )
         if model != "range_bearing" and w.bias_range_km != 0.0:
             problems.append(
                 (

@@ -173,7 +173,9 @@ class Window:
     * ``dropout_probability`` p_d: no measurement with probability p_d (the
       filter predicts only; 1.0 is a blackout);
     * ``outlier_probability`` p_o, ``outlier_scale`` c: with probability p_o
-      the Gaussian part of the noise is multiplied by c (a contaminated
+      the Gaussian part of the noise is multiplied by c (either may be given
+      per measurement component, issue 35 item 3: component i is then an
+      outlier on its own draw, with probability p_o,i, scaled by c_i) (a contaminated
       Gaussian, Huber 1964, "Robust estimation of a location parameter");
     * ``bias_drift_km_per_sqrt_s`` q: the bias is ``bias_km + d_k`` with
       ``d`` a random walk (Wiener process sampled at the steps,
@@ -188,11 +190,21 @@ class Window:
     r_scale: float | tuple[float, ...] = 1.0  # a scalar, or one per measurement component [-]
     bias_km: Vec3 = (0.0, 0.0, 0.0)
     dropout_probability: float = 0.0  # probability of no measurement on a step [-]
-    outlier_probability: float = 0.0  # probability of an outlier on a step [-]
-    outlier_scale: float = 1.0  # factor on the Gaussian noise of an outlier step [-]
+    #: probability of an outlier on a step, or one per measurement component [-]
+    outlier_probability: float | tuple[float, ...] = 0.0
+    #: factor on the Gaussian noise of an outlier, or one per measurement component [-]
+    outlier_scale: float | tuple[float, ...] = 1.0
     bias_drift_km_per_sqrt_s: float = 0.0  # random-walk intensity q of the bias [km/√s]
     bias_range_km: float = 0.0  # range_bearing sensor: bias of the range [km]
     bias_angles_deg: tuple[float, float] = (0.0, 0.0)  # nonlinear sensors: (azimuth, elevation)
+
+    @property
+    def has_outliers(self) -> bool:
+        """True when some component can be an outlier (its probability > 0, its scale ≠ 1)."""
+        p, c = self.outlier_probability, self.outlier_scale
+        ps = p if isinstance(p, tuple) else (p, p, p)
+        cs = c if isinstance(c, tuple) else (c, c, c)
+        return any(pi > 0.0 and ci != 1.0 for pi, ci in zip(ps, cs, strict=False))
 
     @property
     def label(self) -> str:

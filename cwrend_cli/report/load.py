@@ -288,8 +288,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _has_faults(w: Window) -> bool:
     """True when degradation window ``w`` switches a sensor fault on (issue 15, item 3)."""
-    outliers = w.outlier_probability > 0.0 and w.outlier_scale != 1.0
-    return w.dropout_probability > 0.0 or outliers or w.bias_drift_km_per_sqrt_s > 0.0
+    return w.dropout_probability > 0.0 or w.has_outliers or w.bias_drift_km_per_sqrt_s > 0.0
 
 
 def _read_parquet(path: Path, **kwargs: Any) -> pd.DataFrame:
