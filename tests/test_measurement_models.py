@@ -164,3 +164,13 @@ def test_a_position_bias_offsets_the_point_the_sensor_sees() -> None:
     x = np.array([1.0, 2.0, -3.0, 0.0, 0.0, 0.0])
     expected = mm.measure(mm.RANGE_BEARING, x[:3] + np.array([0.01, -0.02, 0.03]))
     np.testing.assert_allclose(mm.measure_truth(built, 1, x), expected, rtol=1e-15)
+
+
+@pytest.mark.parametrize("kind", [mm.RANGE_BEARING, mm.ANGLES])
+def test_the_line_of_sight_inverts_the_measurement(kind: int) -> None:
+    # y = h(r) gives back d = −r (range–bearing) or its direction −r/‖r‖ (angles)
+    r = np.array(POINTS)
+    y = np.array([mm.measure(kind, p) for p in r])
+    expected = -r if kind == mm.RANGE_BEARING else -r / np.linalg.norm(r, axis=1)[:, None]
+    # atol: cos(−π/2) is 6e-17 in floating point, times 31 km (the paper's start) is 2e-15 km
+    np.testing.assert_allclose(mm.line_of_sight(kind, y), expected, rtol=1e-12, atol=1e-14)

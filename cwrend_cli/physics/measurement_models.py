@@ -140,6 +140,20 @@ def jacobian(kind: int, r: np.ndarray) -> np.ndarray:
     return out
 
 
+def line_of_sight(kind: int, y: np.ndarray) -> np.ndarray:
+    """The line of sight of measurements ``y`` (n, ≥ m) of a nonlinear sensor: (n, 3).
+
+    ``ρ (sin δ, cos δ cos α, cos δ sin α)`` (the inverse of :func:`measure`:
+    ``d = −r``) with the measured range for ``RANGE_BEARING`` and a unit
+    vector for ``ANGLES`` (no range measured). NaN rows stay NaN. Plain
+    numpy, for drawing.
+    """
+    a = 1 if kind == RANGE_BEARING else 0
+    az, el = y[:, a], y[:, a + 1]
+    unit = np.stack([np.sin(el), np.cos(el) * np.cos(az), np.cos(el) * np.sin(az)], axis=1)
+    return unit * y[:, :1] if kind == RANGE_BEARING else unit
+
+
 @njit(cache=True)
 def is_angle(kind: int, i: int) -> bool:
     """True when component ``i`` of model ``kind`` is an angle (wrapped residual)."""
