@@ -795,6 +795,7 @@ def _report_campaign(
     from cwrend_cli.campaign import design
     from cwrend_cli.console import (
         ablation_console_table,
+        applied_console_table,
         paired_console_table,
         phase,
         script_table,
@@ -830,6 +831,9 @@ def _report_campaign(
     if not stats.empty:
         if command == "ablate":
             stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
+            applied = applied_console_table(stats)
+            if applied is not None:
+                stdout.print(applied)
             paired = paired_console_table(stats)
             if paired is not None:
                 stdout.print(paired)
@@ -842,6 +846,9 @@ def _report_campaign(
         else:
             title = f"cwrend sweep · {out.name}"
             stdout.print(sweep_console_table(stats, list(statistics.groups), title))
+            applied = applied_console_table(stats, list(statistics.groups))
+            if applied is not None:
+                stdout.print(applied)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
     elif (
@@ -1219,7 +1226,9 @@ def table(
             "--metric",
             "-m",
             help="Values, comma-separated, each [STATISTIC.]METRIC[@A-B][:bare][:DIGITS]: "
-            "mean|median|p95 of miss, dv, fuel (95 % bootstrap interval); solve_mean_ms, "
+            "mean|median|p95 of miss, dv, fuel (the paper's 1 s trapezoid), dv_applied, "
+            "fuel_applied (Σ‖u_k‖Δt, vs the exact fuel optimum) (95 % bootstrap interval); "
+            "solve_mean_ms, "
             "solve_max_ms, solve_success_pct; paired frac_less.miss (Wilson), median_diff.miss, "
             "mean_diff.dv, @A-B for one pair; n (ok runs; seed pairs beside paired values "
             "only); infeasible_pct, failed_pct (share of re-solves, from runs.parquet). :bare "

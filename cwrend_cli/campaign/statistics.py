@@ -434,31 +434,76 @@ def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFra
         return pd.DataFrame([])
     sizes = np.diff(bounds)
     spans = list(pairwise(bounds))
-    # (group, metric, statistic) in row order: the bootstrap draws in this order
-    samples: list[FloatArray] = []
-    fns: list[Statistic] = []
-    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m in METRICS}
-    for a, b in spans:
-        for metric in METRICS:
-            x = per_metric[metric][a:b]
-            samples += [x] * len(STATISTICS)
-            fns += STATISTICS.values()
-    ci = bootstrap_cis(samples, fns, np.random.default_rng(seed))
     n_stat = len(METRICS) * len(STATISTICS)
     value = np.empty((len(keys), n_stat + len(SOLVE_STATISTICS)))
-    for k, fn in enumerate(fns[:n_stat]):
-        value[:, k] = _point_values(samples[k::n_stat], fn)
+    low = np.full_like(value, np.nan)
+    high = np.full_like(value, np.nan)
+    value[:, :n_stat], low[:, :n_stat], high[:, :n_stat] = _bootstrapped(
+        ok, order, spans, METRICS, np.random.default_rng(seed)
+    )
     for k, (metric, _, fn) in enumerate(SOLVE_STATISTICS):
         x = ok[metric].to_numpy(dtype=float)[order]
         value[:, n_stat + k] = _point_values([x[a:b] for a, b in spans], fn)
-    low = np.full_like(value, np.nan)
-    high = np.full_like(value, np.nan)
-    low[:, :n_stat] = ci[:, 0].reshape(len(keys), n_stat)
-    high[:, :n_stat] = ci[:, 1].reshape(len(keys), n_stat)
     labels = [(m, s) for m in METRICS for s in STATISTICS] + [
         (m, s) for m, s, _ in SOLVE_STATISTICS
     ]
     return _marginal_frame(by, keys, sizes, labels, value, low, high)
+
+
+def _bootstrapped(
+    ok: pd.DataFrame,
+    order: npt.NDArray[np.intp],
+    spans: Sequence[tuple[int, int]],
+    metrics: Sequence[str],
+    rng: np.random.Generator,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each :data:`STATISTICS` of each of ``metrics`` per group, with bootstrap intervals.
+
+    Returns value, low and high, (groups × metrics·statistics); the draws are
+    made from ``rng`` in row order (group, metric, statistic).
+    """
+    samples: list[FloatArray] = []
+    fns: list[Statistic] = []
+    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m in metrics}
+    for a, b in spans:
+        for metric in metrics:
+            x = per_metric[metric][a:b]
+            samples += [x] * len(STATISTICS)
+            fns += STATISTICS.values()
+    ci = bootstrap_cis(samples, fns, rng)
+    n_stat = len(metrics) * len(STATISTICS)
+    value = np.empty((len(spans), n_stat))
+    for k, fn in enumerate(fns[:n_stat]):
+        value[:, k] = _point_values(samples[k::n_stat], fn)
+    return value, ci[:, 0].reshape(len(spans), n_stat), ci[:, 1].reshape(len(spans), n_stat)
+
+
+#: The applied Δv and its fuel penalty against the exact continuous fuel optimum (issue 33,
+#: item 3), beside the paper's :data:`METRICS`.
+APPLIED_METRICS = ("delta_v_applied_km_s", "fuel_penalty_applied_pct")
+#: Stream of their bootstrap: ``default_rng([seed, APPLIED_STREAM])``, their own, so that
+#: they change no row of :func:`describe` (as :data:`SAFETY_STREAM`).
+APPLIED_STREAM = 2**32 - 4
+
+
+def applied(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame:
+    """Per group: mean/median/p95 of :data:`APPLIED_METRICS` with bootstrap CIs.
+
+    Rows as those of :func:`describe` for its metrics (ok runs only), drawn
+    from a stream of their own (:data:`APPLIED_STREAM`). Empty when the runs
+    have no such columns (a campaign written before issue 33).
+    """
+    if any(m not in runs.columns for m in APPLIED_METRICS):
+        return pd.DataFrame([])
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    if not keys:
+        return pd.DataFrame([])
+    spans = list(pairwise(bounds))
+    rng = np.random.default_rng([seed, APPLIED_STREAM])
+    value, low, high = _bootstrapped(ok, order, spans, APPLIED_METRICS, rng)
+    labels = [(m, s) for m in APPLIED_METRICS for s in STATISTICS]
+    return _marginal_frame(by, keys, np.diff(bounds), labels, value, low, high)
 
 
 #: Stream of the safety rows' bootstrap: ``default_rng([seed, SAFETY_STREAM])``, its own, so

@@ -16,7 +16,10 @@ bootstrap or Wilson) and, for the two shares of re-solves, from its
 * **values** (``--metric``), each ``[STATISTIC.]METRIC[@A-B][:bare][:DIGITS]``
   (:func:`parse_value`): a statistic of the runs of an architecture
   (``mean.miss``, ``median.miss``, ``p95.miss``, ``mean.dv``, ``mean.fuel``
-  with their bootstrap intervals; ``solve_mean_ms``, ``solve_max_ms``,
+  with their bootstrap intervals, Δv the paper's 1 s trapezoid of ‖u‖ and the
+  fuel penalty against the fuel optimum's trapezoid; ``mean.dv_applied``,
+  ``mean.fuel_applied``: the applied impulse Σ‖u_k‖Δt and its penalty against
+  the exact continuous fuel optimum, issue 33; ``solve_mean_ms``, ``solve_max_ms``,
   ``solve_success_pct`` without), a paired comparison (``frac_less.miss``
   with its Wilson interval, ``median_diff.miss``, ``mean_diff.dv``; ``@A-B``
   fixes the pair, else ``arch`` and ``other`` are fields), the runs counted
@@ -92,18 +95,28 @@ QUANTITIES: Mapping[str, _Quantity] = {
     "miss_km": _Quantity("miss", "m", M_PER_KM, 2),
     "delta_v_km_s": _Quantity("Δv", "km/s", 1.0, 4),
     "fuel_penalty_pct": _Quantity("fuel penalty", "%", 1.0, 2),
+    "delta_v_applied_km_s": _Quantity("applied Δv", "km/s", 1.0, 4),
+    "fuel_penalty_applied_pct": _Quantity("applied fuel penalty", "%", 1.0, 2),
     "solve_mean_ms": _Quantity("re-solve time", "ms", 1.0, 2),
     "solve_max_ms": _Quantity("re-solve time", "ms", 1.0, 1),
     "solve_success_pct": _Quantity("re-solve success", "%", 1.0, 2),
     "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
 }
 #: Short names of ``--metric`` (those of ``cwrend compare --metric``).
-ALIASES: Mapping[str, str] = {"miss": "miss_km", "dv": "delta_v_km_s", "fuel": "fuel_penalty_pct"}
+ALIASES: Mapping[str, str] = {
+    "miss": "miss_km",
+    "dv": "delta_v_km_s",
+    "fuel": "fuel_penalty_pct",
+    "dv_applied": "delta_v_applied_km_s",
+    "fuel_applied": "fuel_penalty_applied_pct",
+}
 #: The statistics of each stored metric (the first is the default).
 MARGINAL: Mapping[str, tuple[str, ...]] = {
     "miss_km": ("mean", "median", "p95"),
     "delta_v_km_s": ("mean", "median", "p95"),
     "fuel_penalty_pct": ("mean", "median", "p95"),
+    "delta_v_applied_km_s": ("mean", "median", "p95"),
+    "fuel_penalty_applied_pct": ("mean", "median", "p95"),
     "solve_mean_ms": ("mean",),
     "solve_max_ms": ("max",),
     "solve_success_pct": ("mean",),
