@@ -1,24 +1,25 @@
 """The report's markdown: summary tables and the text of ``report.md``.
 
 Tables (GitHub-flavoured markdown) of the reported noise seed, of every seed
-of the reported grid point and of every grid point of a sweep; the figure
-list comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`)
-with its captions. One unit and precision per quantity, as on the console:
-Δv in km/s (4 decimals), misses in m (2 decimals), fuel penalty in % (2
-decimals); beside the paper's Δv (the 1 s trapezoid of ‖u‖) and fuel penalty
-the applied Δv Σ‖u_k‖Δt and its penalty against the exact continuous fuel
-optimum (issue 33; "–" for the open-loop references, whose exact Δv the
-stored samples do not hold, and for campaigns written before). Campaign
-tables carry the 95 % intervals and paired comparisons that the campaign
-stored in ``ablation.parquet`` / ``sweep.parquet`` (never recomputed here); an interval from fewer than :data:`MIN_BOOTSTRAP_N` seeds is
-marked with :data:`UNRELIABLE_MARK`. The filter-consistency means of the
-runs (``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
+of the reported grid point and of every grid point of a sweep; the figure list
+comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`) with its
+captions. One unit and precision per quantity, as on the console: Δv in km/s
+(4 decimals), misses in m (2 decimals), fuel penalty in % (2 decimals); beside
+the paper's Δv (the 1 s trapezoid of ‖u‖) and fuel penalty the applied Δv
+Σ‖u_k‖Δt and its penalty against the exact continuous fuel optimum (issue 33;
+"–" for the open-loop references, whose exact Δv the stored samples do not
+hold, and for campaigns written before). Campaign tables carry the 95 %
+intervals and paired comparisons that the campaign stored in
+``ablation.parquet`` / ``sweep.parquet`` (never recomputed here); an interval
+from fewer than :data:`MIN_BOOTSTRAP_N` seeds is marked with
+:data:`UNRELIABLE_MARK`. The filter-consistency means of the runs
+(``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
 averaged over the seeds (no interval is stored for them). A sampled design
 (``sweep --design``) gets the table of its Sobol indices
-(``sensitivity.parquet``) instead of a row per design point. A campaign
-whose configuration has path constraints (issue 32) gets a table of the
-safety of its true trajectories (:func:`safety_table`), from the safety rows
-of its statistics file.
+(``sensitivity.parquet``) instead of a row per design point. A campaign whose
+configuration has path constraints (issue 32) gets a table of the safety of
+its true trajectories (:func:`safety_table`), from the safety rows of its
+statistics file.
 """
 
 from __future__ import annotations
