@@ -231,3 +231,29 @@ def test_the_references_applied_rows(paper_refs: simulation.References) -> None:
     energy = metrics.reference_metrics(paper_refs.energy, paper_refs.fuel)
     assert energy.delta_v_applied_km_s == pytest.approx(paper_refs.energy.delta_v_km_s, rel=1e-6)
     assert energy.fuel_penalty_applied_pct > 0.0
+
+
+def test_applied_statistics_have_their_own_stream_and_change_no_paper_row() -> None:
+    """``statistics.applied`` adds mean/median/p95 rows of the two applied metrics; the
+    rows of ``describe`` (the paper's metrics) are the same with or without them."""
+    from cwrend_cli.campaign import statistics
+
+    rng = np.random.default_rng(7)
+    runs = pd.DataFrame(
+        {"arch": ["a", "b"] * 6, "seed": np.repeat(np.arange(6), 2), "status": "ok",
+         "delta_v_km_s": 0.14 + 1e-3 * rng.standard_normal(12),
+         "miss_km": 1e-3 * rng.random(12), "fuel_penalty_pct": rng.standard_normal(12),
+         "solve_success_pct": 100.0, "solve_mean_ms": 1.0, "solve_max_ms": 2.0,
+         "n_infeasible": 0}
+    )  # fmt: skip
+    before = statistics.describe(runs, ["arch"], seed=3)
+    assert statistics.applied(runs, ["arch"], seed=3).empty  # a campaign written before
+    runs["delta_v_applied_km_s"] = runs["delta_v_km_s"] + 4e-4
+    runs["fuel_penalty_applied_pct"] = runs["fuel_penalty_pct"] + 0.1
+    pd.testing.assert_frame_equal(statistics.describe(runs, ["arch"], seed=3), before)
+    rows = statistics.applied(runs, ["arch"], seed=3)
+    assert set(rows["metric"]) == set(statistics.APPLIED_METRICS)
+    mean = rows.query("arch == 'a' and metric == 'delta_v_applied_km_s' and statistic == 'mean'")
+    expected = runs.loc[runs["arch"] == "a", "delta_v_applied_km_s"].mean()
+    assert mean["value"].iloc[0] == pytest.approx(expected, rel=1e-15)
+    assert mean["ci_low"].iloc[0] <= expected <= mean["ci_high"].iloc[0]

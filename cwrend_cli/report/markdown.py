@@ -99,14 +99,14 @@ def seed_table(data: ReportData) -> str:
     """Open-loop references and each architecture's run of the reported seed."""
     runs = data.ok_runs()
     runs = runs[runs["seed"] == data.seed]
-    header = ["case", "Δv [km/s]", "applied Δv [km/s]", "miss [m]", "fuel penalty [%]",
+    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "applied Δv [km/s]",
               "applied fuel penalty [%]", "re-solves", "success [%]", "infeasible", "failed",
               "solve mean / max [ms]"]  # fmt: skip
     rows = []
     for _, r in data.ref_summary.iterrows():
         rows.append([f"open-loop {str(r['arch']).removeprefix('open_loop_')}",
-                     _fmt(r["delta_v_km_s"], DV), "–", _fmt(r["miss_km"] * M_PER_KM, MISS),
-                     _fmt(r.get("fuel_penalty_pct"), FUEL), "–", "", "", "", "",
+                     _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
+                     _fmt(r.get("fuel_penalty_pct"), FUEL), "–", "–", "", "", "", "",
                      ""])  # fmt: skip
     for a in data.archs:
         g = runs[runs["arch"] == a]
@@ -114,8 +114,8 @@ def seed_table(data: ReportData) -> str:
             continue
         r = g.iloc[0]
         rows.append([
-            arch_label(a), _fmt(r["delta_v_km_s"], DV), _fmt(r.get("delta_v_applied_km_s"), DV),
-            _fmt(r["miss_km"] * M_PER_KM, MISS), _fmt(r.get("fuel_penalty_pct"), FUEL),
+            arch_label(a), _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
+            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("delta_v_applied_km_s"), DV),
             _fmt(r.get("fuel_penalty_applied_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
             _fmt(r.get("solve_success_pct"), ".2f"), _fmt(r.get("n_infeasible"), "g"),
             _fmt(r.get("n_failed"), "g"),
@@ -134,10 +134,10 @@ def campaign_table(data: ReportData) -> str:
     if data.point is not None and "point" in all_runs.columns:
         all_runs = all_runs[all_runs["point"].astype(str) == data.point]
     stats = data.point_stats()
-    header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean applied Δv [km/s]",
-              "mean miss [m]", "median miss [m]", "p95 miss [m]", "max miss [m]",
-              "mean fuel penalty [%]", "mean applied fuel penalty [%]", "mean success [%]",
-              "mean NEES [-] (6)", "mean NIS [-] (3)"]  # fmt: skip
+    header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
+              "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
+              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)",
+              "mean applied Δv [km/s]", "mean applied fuel penalty [%]"]  # fmt: skip
     rows = []
     for a in data.archs:
         g = all_runs[all_runs["arch"] == a]
@@ -151,21 +151,21 @@ def campaign_table(data: ReportData) -> str:
             get = _lookup(stats[(stats["kind"] == "marginal") & (stats["arch"] == a)])
             rows.append([
                 arch_label(a), ok_label, _ci(get.get(("delta_v_km_s", "mean")), DV),
-                _ci(get.get(("delta_v_applied_km_s", "mean")), DV),
                 _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "median")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "p95")), MISS, M_PER_KM), _fmt(miss.max(), MISS),
-                _ci(get.get(("fuel_penalty_pct", "mean")), FUEL),
-                _ci(get.get(("fuel_penalty_applied_pct", "mean")), FUEL), success, *consistency,
+                _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success, *consistency,
+                _ci(get.get(("delta_v_applied_km_s", "mean")), DV),
+                _ci(get.get(("fuel_penalty_applied_pct", "mean")), FUEL),
             ])  # fmt: skip
             continue
         fuel = ok["fuel_penalty_pct"].mean() if "fuel_penalty_pct" in ok else None
         rows.append([
             arch_label(a), ok_label, _fmt(ok["delta_v_km_s"].mean(), DV),
-            _mean(ok, "delta_v_applied_km_s", DV),
             _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS),
             _fmt(miss.quantile(0.95) if len(miss) else None, MISS), _fmt(miss.max(), MISS),
-            _fmt(fuel, FUEL), _mean(ok, "fuel_penalty_applied_pct", FUEL), success, *consistency,
+            _fmt(fuel, FUEL), success, *consistency, _mean(ok, "delta_v_applied_km_s", DV),
+            _mean(ok, "fuel_penalty_applied_pct", FUEL),
         ])  # fmt: skip
     return markdown_table(header, rows)
 
@@ -286,8 +286,8 @@ def sweep_table(data: ReportData) -> str:
         keys.append(f"_{param}")
     stats = data.stats if data.stats is not None and "point" in data.stats.columns else None
     header = [param_label(p) for p in data.params] + [
-        "architecture", "runs", "mean Δv [km/s]", "mean applied Δv [km/s]", "mean miss [m]",
-        "median miss [m]", "max miss [m]",
+        "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
+        "max miss [m]", "mean applied Δv [km/s]",
     ]  # fmt: skip
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
@@ -295,20 +295,21 @@ def sweep_table(data: ReportData) -> str:
         values = values if isinstance(values, tuple) else (values,)
         for a, ga in sorted(g.groupby("arch"), key=lambda item: order.get(str(item[0]), 99)):
             miss = ga["miss_km"].astype(float) * M_PER_KM
-            cells = [_fmt(ga["delta_v_km_s"].mean(), DV), _mean(ga, "delta_v_applied_km_s", DV),
-                     _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS)]  # fmt: skip
+            cells = [_fmt(ga["delta_v_km_s"].mean(), DV), _fmt(miss.mean(), MISS),
+                     _fmt(miss.median(), MISS)]  # fmt: skip
+            applied = _mean(ga, "delta_v_applied_km_s", DV)
             if stats is not None:
                 point_ids = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
                 sel = stats[(stats["kind"] == "marginal") & (stats["arch"] == str(a))]
                 sel = sel[sel["point"].astype(str).isin(point_ids)]
                 if not sel.empty:
                     get = _lookup(sel)
+                    applied = _ci(get.get(("delta_v_applied_km_s", "mean")), DV)
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
-                             _ci(get.get(("delta_v_applied_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
             rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
-                         *cells, _fmt(miss.max(), MISS)])  # fmt: skip
+                         *cells, _fmt(miss.max(), MISS), applied])  # fmt: skip
     return markdown_table(header, rows)
 
 
