@@ -478,6 +478,20 @@ def _bootstrapped(
     return value, ci[:, 0].reshape(len(spans), n_stat), ci[:, 1].reshape(len(spans), n_stat)
 
 
+def _ok_groups(
+    runs: pd.DataFrame, by: Sequence[str], columns: Sequence[str]
+) -> (
+    tuple[pd.DataFrame, list[tuple[Hashable, ...]], npt.NDArray[np.intp], npt.NDArray[np.intp]]
+    | None
+):
+    """The ok runs and their groups (:func:`_segments`); None without ``columns`` or groups."""
+    if any(c not in runs.columns for c in columns):
+        return None
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    return (ok, keys, order, bounds) if keys else None
+
+
 #: The applied Δv and its fuel penalty against the exact continuous fuel optimum (issue 33,
 #: item 3), beside the paper's :data:`METRICS`.
 APPLIED_METRICS = ("delta_v_applied_km_s", "fuel_penalty_applied_pct")
@@ -493,12 +507,10 @@ def applied(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFram
     from a stream of their own (:data:`APPLIED_STREAM`). Empty when the runs
     have no such columns (a campaign written before issue 33).
     """
-    if any(m not in runs.columns for m in APPLIED_METRICS):
+    groups = _ok_groups(runs, by, APPLIED_METRICS)
+    if groups is None:
         return pd.DataFrame([])
-    ok = runs[runs["status"] == "ok"]
-    keys, order, bounds = _segments(ok, by)
-    if not keys:
-        return pd.DataFrame([])
+    ok, keys, order, bounds = groups
     spans = list(pairwise(bounds))
     rng = np.random.default_rng([seed, APPLIED_STREAM])
     value, low, high = _bootstrapped(ok, order, spans, APPLIED_METRICS, rng)
@@ -533,12 +545,10 @@ def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame
     bootstrap intervals from a stream of their own (:data:`SAFETY_STREAM`).
     Empty when the runs have no safety columns (a campaign without constraints).
     """
-    if "safety_violated" not in runs.columns:
+    groups = _ok_groups(runs, by, ("safety_violated",))
+    if groups is None:
         return pd.DataFrame([])
-    ok = runs[runs["status"] == "ok"]
-    keys, order, bounds = _segments(ok, by)
-    if not keys:
-        return pd.DataFrame([])
+    ok, keys, order, bounds = groups
     spans = list(pairwise(bounds))
     sizes = np.diff(bounds)
     violated = ok["safety_violated"].to_numpy(dtype=float)[order]
