@@ -159,7 +159,7 @@ def _applied_run_table(rows: Sequence[Mapping[str, Any]], fuel: OpenLoopResult) 
         float("nan") if exact is None else float(np.sum(exact.burns_s[:, 1] - exact.burns_s[:, 0]))
     )
     table.caption = (
-        "applied: Σ‖u_k‖Δt of the held steps (open loop: ∫‖u‖dt of the plan); "
+        "applied: Σ‖u_k‖Δt of the held steps (open loop: ∫‖u‖dt of the plan)\n"
         f"exact fuel optimum {fuel.delta_v_continuous_km_s:.7f} km/s ({burn:.3f} s of burn)"
     )
     return table
