@@ -257,3 +257,17 @@ def test_applied_statistics_have_their_own_stream_and_change_no_paper_row() -> N
     expected = runs.loc[runs["arch"] == "a", "delta_v_applied_km_s"].mean()
     assert mean["value"].iloc[0] == pytest.approx(expected, rel=1e-15)
     assert mean["ci_low"].iloc[0] <= expected <= mean["ci_high"].iloc[0]
+
+
+def test_a_costate_that_is_no_plan_is_refused(paper_cfg) -> None:
+    """λ₀ = 0 has no burn: the switching-time system is singular, ExactPlanError (the fuel
+    reference then has a NaN continuous Δv instead of a wrong one)."""
+    from cwrend_cli.physics import guidance
+    from cwrend_cli.physics.guidance.fuel_optimum import ExactPlanError, exact_bang_bang
+
+    sc = paper_cfg.scenario
+    problem = guidance.ShootingProblem(
+        np.array(sc.x0), HORIZON, 0.0, sc.mean_motion_rad_s, U_MAX, np.zeros(6)
+    )
+    with pytest.raises(ExactPlanError):
+        exact_bang_bang(problem, np.zeros(6))
