@@ -1084,6 +1084,6 @@ def _csv(table: Table) -> str:
                 if not math.isfinite(x):
                     row.append("")
                 else:
-                    row.append(str(int(x)) if v.kind == "count" else repr(x))
+                    row.append(str(int(x)) if v.integer else repr(x))
         writer.writerow(row)
     return out.getvalue().rstrip("\n")
