@@ -2,8 +2,9 @@
 
 A table is read, never recomputed, from the statistics each campaign stored
 (``ablation.parquet`` / ``sweep.parquet``: values with their 95 % intervals,
-bootstrap or Wilson) and, for the two shares of re-solves, from its
-``runs.parquet``. What a table shows is said by:
+bootstrap or Wilson); counts, shares and worst cases of the runs are computed
+from its ``runs.parquet`` (and ``solves/``), and ``--versus`` pairs the runs
+of two campaigns (:func:`_across`). What a table shows is said by:
 
 * **fields**, the dimensions of its rows (``--rows``) and columns
   (``--cols``): ``campaign`` (each results directory, named by its directory
@@ -21,11 +22,18 @@ bootstrap or Wilson) and, for the two shares of re-solves, from its
   with its Wilson interval, ``median_diff.miss``, ``mean_diff.dv``; ``@A-B``
   fixes the pair, else ``arch`` and ``other`` are fields), the runs counted
   (``n``: the ok runs; the seed pairs in a table of paired values only), or
-  the share of re-solves certified infeasible or failed
-  (``infeasible_pct``, ``failed_pct``: sums over the cell's ok runs);
+  a value computed from the cell's ok runs: the share of re-solves certified
+  infeasible or failed (``infeasible_pct``, ``failed_pct``), their number
+  (``infeasible_solves``, ``failed_solves``), the worst run (``max.miss``),
+  each with ``:with=STEP`` / ``:without=STEP`` for the runs whose re-solves
+  used / never used a fallback step (``n:with=socp_plan`` counts them);
 * **filters** (``--where [CAMPAIGN:]FIELD=V1,V2``): keep the entries whose
   field has one of the values, shown in that order (only those of one
-  campaign when prefixed).
+  campaign when prefixed, and its runs before a pair across campaigns);
+* **pairs across campaigns** (``--versus CAMPAIGN``): paired values with A
+  from another campaign and B from CAMPAIGN, paired by seed on matching grid
+  points, with the intervals of a pair within a campaign (field
+  ``other_campaign``: B's campaign).
 
 Each cell must be one stored value: two matching entries (two campaigns,
 grid points or pairs in one cell) are refused naming a field that tells
