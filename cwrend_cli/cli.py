@@ -795,6 +795,7 @@ def _report_campaign(
     from cwrend_cli.campaign import design
     from cwrend_cli.console import (
         ablation_console_table,
+        consistency_console_table,
         paired_console_table,
         phase,
         script_table,
@@ -842,6 +843,12 @@ def _report_campaign(
         else:
             title = f"cwrend sweep · {out.name}"
             stdout.print(sweep_console_table(stats, list(statistics.groups), title))
+        if plan.design is None:  # filter consistency against its χ² bands (issue 33)
+            table = consistency_console_table(
+                stats, list(statistics.groups), f"filter consistency · {out.name}"
+            )
+            if table is not None:
+                stdout.print(table)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
     elif (

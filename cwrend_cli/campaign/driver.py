@@ -831,6 +831,9 @@ def _statistics(
     safety = statistics.safety(runs, by, seed=root_seed)  # issue 32: constrained campaigns
     if not safety.empty:
         frames.append(safety)
+    consistency = statistics.consistency(runs, by)  # issue 33: against the χ² bands
+    if not consistency.empty:
+        frames.append(consistency)
     frame = pd.concat(frames, ignore_index=True)
     return frame, groups
 
