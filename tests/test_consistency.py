@@ -19,6 +19,8 @@ from scipy.stats import chi2
 
 from cwrend_cli.campaign import statistics
 from cwrend_cli.console import consistency_console_table
+from cwrend_cli.physics import metrics
+from cwrend_cli.report import consistency
 
 RUNS = 20
 STEPS = 2000
@@ -44,18 +46,18 @@ def _nees(rng: np.random.Generator, scale: float, runs: int = RUNS, steps: int =
     )
 
 
-@pytest.mark.parametrize("dof", [statistics.NEES_DOF, statistics.NIS_DOF])
+@pytest.mark.parametrize("dof", [metrics.NEES_DOF, metrics.NIS_DOF])
 def test_the_band_is_the_chi2_quantiles_over_n(dof: int) -> None:
     """[χ²⁻¹(0.025; dof N) / N, χ²⁻¹(0.975; dof N) / N], scipy.stats.chi2 to 1e-12 relative
     (both are the same special function; the tolerance leaves room for its rounding)."""
     n = np.array([1, 2, 3, 20, 100, 1000])
-    low, high = statistics.chi2_band(n, dof)
+    low, high = metrics.chi2_band(n, dof)
     assert low == pytest.approx(chi2.ppf(0.025, dof * n) / n, rel=1e-12)
     assert high == pytest.approx(chi2.ppf(0.975, dof * n) / n, rel=1e-12)
 
 
 def test_the_band_of_no_run_is_nan() -> None:
-    low, high = statistics.chi2_band(np.array([0, 1]), 6)
+    low, high = metrics.chi2_band(np.array([0, 1]), 6)
     assert np.isnan(low[0]) and np.isnan(high[0])
     assert (low[1], high[1]) == pytest.approx((1.2373442, 14.449375), rel=1e-7)  # χ²₆ table
 
@@ -64,11 +66,11 @@ def test_a_consistent_filter_is_inside_at_about_95_percent_of_the_steps() -> Non
     """Each step's ensemble mean is inside with probability 0.95 exactly; over 2,000
     independent steps the share is 0.95 ± 0.0049 (1 σ, binomial): the bounds 0.93–0.97
     are ±4.1 σ, a false alarm of about 4e-5 (the draw is seeded: the test is repeatable)."""
-    ensemble = statistics.ensemble_consistency(
-        _nees(np.random.default_rng(1), 1.0), ["arch"], "nees", statistics.NEES_DOF
+    ensemble = consistency.ensemble_consistency(
+        _nees(np.random.default_rng(1), 1.0), ["arch"], "nees", metrics.NEES_DOF
     )
     assert len(ensemble) == STEPS and set(ensemble["n"]) == {RUNS}
-    (row,) = statistics.share_inside(ensemble, ["arch"]).itertuples()
+    (row,) = consistency.share_inside(ensemble, ["arch"]).itertuples()
     assert row.steps == STEPS and row.runs == RUNS
     assert 0.93 <= row.inside <= 0.97
 
@@ -77,10 +79,10 @@ def test_a_consistent_filter_is_inside_at_about_95_percent_of_the_steps() -> Non
 def test_a_filter_whose_covariance_is_off_by_two_is_outside(scale: float) -> None:
     """Errors of twice (half) the stated covariance: the ensemble mean of 20 runs is about
     12 (3) against the band [4.58, 7.61]; inside at a step with probability below 1e-4."""
-    ensemble = statistics.ensemble_consistency(
-        _nees(np.random.default_rng(2), scale), ["arch"], "nees", statistics.NEES_DOF
+    ensemble = consistency.ensemble_consistency(
+        _nees(np.random.default_rng(2), scale), ["arch"], "nees", metrics.NEES_DOF
     )
-    (row,) = statistics.share_inside(ensemble, [])[["inside"]].itertuples()
+    (row,) = consistency.share_inside(ensemble, [])[["inside"]].itertuples()
     assert row.inside < 0.01
 
 
@@ -90,10 +92,10 @@ def test_a_step_counts_only_the_runs_with_a_value() -> None:
         {"arch": "a", "seed": [0, 1, 2, 0, 1, 2], "t_s": [1.0, 1.0, 1.0, 2.0, 2.0, 2.0],
          "nis": [1.0, np.nan, 5.0, np.nan, np.nan, np.nan]}
     )  # fmt: skip
-    ensemble = statistics.ensemble_consistency(frame, ["arch"], "nis", statistics.NIS_DOF)
+    ensemble = consistency.ensemble_consistency(frame, ["arch"], "nis", metrics.NIS_DOF)
     (row,) = ensemble.itertuples()  # t = 2 s: no measurement, no step
     assert (row.t_s, row.n, row.mean) == (1.0, 2, 3.0)
-    low, high = statistics.chi2_band(2, statistics.NIS_DOF)
+    low, high = metrics.chi2_band(2, metrics.NIS_DOF)
     assert (row.band_low, row.band_high) == (low, high) and row.inside
 
 
@@ -112,8 +114,8 @@ def test_the_campaign_rows_are_the_mean_of_the_runs_and_its_band() -> None:
     assert set(rows["kind"]) == {"consistency"} and set(rows["statistic"]) == {"mean"}
     nees, nis = rows.loc["mean_nees"], rows.loc["mean_nis_nominal"]
     assert (nees["value"], nees["n"], nis["value"], nis["n"]) == (6.0, 3, 3.0, 4)
-    assert (nees["ci_low"], nees["ci_high"]) == tuple(x[()] for x in statistics.chi2_band(3, 6))
-    assert (nis["ci_low"], nis["ci_high"]) == tuple(x[()] for x in statistics.chi2_band(4, 3))
+    assert (nees["ci_low"], nees["ci_high"]) == tuple(x[()] for x in metrics.chi2_band(3, 6))
+    assert (nis["ci_low"], nis["ci_high"]) == tuple(x[()] for x in metrics.chi2_band(4, 3))
 
 
 def test_no_campaign_rows_without_the_columns() -> None:
@@ -128,7 +130,7 @@ def test_the_campaign_band_holds_the_mean_of_time_averages_at_95_percent_or_more
     (1 σ) in the first case, bounds ±4.4 σ (false alarm about 1e-5); above 0.99 in the
     second (its exact coverage is 1 − 2e-15 at 50 steps per run)."""
     rng = np.random.default_rng(3)
-    low, high = statistics.chi2_band(RUNS, statistics.NEES_DOF)
+    low, high = metrics.chi2_band(RUNS, metrics.NEES_DOF)
     constant = rng.chisquare(6, (4000, RUNS)).mean(axis=1)
     covered = np.mean((constant >= low) & (constant <= high))
     assert 0.935 <= covered <= 0.965
@@ -161,7 +163,7 @@ def test_the_console_table_shows_the_means_bands_and_verdicts_at_80_columns() ->
     assert max(len(line) for line in text.splitlines()) <= 80 and "…" not in text
     cells = set(text.split())
     assert {"0.125", "0.25", "0.375", *SLUGS, "yes", "no"} <= cells
-    low, high = statistics.chi2_band(12, 6)
+    low, high = metrics.chi2_band(12, 6)
     assert f"{low[()]:.2f}–{high[()]:.2f}" in cells
     for row in stats.itertuples():
         assert f"{row.value:.3g}" in cells

@@ -45,6 +45,7 @@ import pandas as pd
 from cwrend_cli.campaign.executors import default_workers
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
@@ -640,9 +641,6 @@ def _paired_rows(
 # Filter consistency against χ² bands (issue 33, item 4)
 # ---------------------------------------------------------------------------
 
-#: Degrees of freedom of the NEES (the state's dimension) and of the NIS (the measurement's).
-NEES_DOF = 6
-NIS_DOF = 3
 #: The runs columns of filter consistency (:mod:`cwrend_cli.physics.metrics`) and their
 #: degrees of freedom: each run's time-averaged NEES (rows 1 … N) and NIS (nominal rows).
 CONSISTENCY_METRICS: tuple[tuple[str, int], ...] = (
@@ -651,85 +649,20 @@ CONSISTENCY_METRICS: tuple[tuple[str, int], ...] = (
 )
 
 
-def chi2_band(
-    n_runs: npt.ArrayLike, dof: int, probability: float = CONFIDENCE
-) -> tuple[FloatArray, FloatArray]:
-    """The two-sided ``probability`` band of the mean of ``n_runs`` independent χ²_dof values.
-
-    The ensemble test of Bar-Shalom, Li & Kirubarajan 2001, *Estimation with
-    Applications to Tracking and Navigation*, §5.4.2: for a consistent filter
-    the NEES of each of N independent runs at one step is χ² with n = 6
-    degrees of freedom (the NIS with m = 3), so N times their average is
-    χ²(N n), and the average lies in
-    ``[χ²⁻¹(α/2; N n) / N, χ²⁻¹(1 − α/2; N n) / N]`` with probability
-    1 − α. Element-wise over ``n_runs``; NaN where it is below 1. E.g. N = 1,
-    n = 6: [1.24, 14.45]; N = 20: [4.58, 7.61] at 95 %.
-    """
-    from scipy.special import chdtri  # on first use: 0.4 s, not for the statistics alone
-
-    n = np.asarray(n_runs, dtype=float)
-    tail = (1.0 - probability) / 2.0
-    valid = n >= 1
-    size = np.where(valid, n, 1.0)
-    low = np.where(valid, chdtri(dof * size, 1.0 - tail) / size, np.nan)
-    high = np.where(valid, chdtri(dof * size, tail) / size, np.nan)
-    return low, high
-
-
-def ensemble_consistency(
-    frame: pd.DataFrame, by: Sequence[str], column: str, dof: int
-) -> pd.DataFrame:
-    """Per group of ``by`` and time ``t_s``: the ensemble mean of ``column`` against its band.
-
-    ``frame`` holds one row per run and step (``by``, ``t_s`` and ``column``,
-    e.g. ``nees`` with ``dof`` 6 or ``nis`` with 3). At each step the runs with
-    a finite value count (a NIS is NaN on a dropout): ``n``, their ``mean``,
-    the band of :func:`chi2_band` for ``n`` runs (``band_low``,
-    ``band_high``) and whether the mean is ``inside`` it (bounds included).
-    A step without a finite value is left out. Sorted by ``by`` and ``t_s``.
-    """
-    keys = [*by, "t_s"]
-    values = frame[[*keys, column]]
-    values = values[np.isfinite(values[column].to_numpy(dtype=float))]
-    grouped = values.groupby(keys, sort=True, observed=True)[column]
-    out = pd.DataFrame({"n": grouped.size(), "mean": grouped.mean()}).reset_index()
-    low, high = chi2_band(out["n"].to_numpy(), dof)
-    out["band_low"], out["band_high"] = low, high
-    mean = out["mean"].to_numpy(dtype=float)
-    out["inside"] = (mean >= low) & (mean <= high)
-    return out
-
-
-def share_inside(ensemble: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
-    """Per group of ``by``: the share of the steps of :func:`ensemble_consistency` inside the band.
-
-    Columns ``steps`` (the steps counted), ``inside`` (the share of them
-    whose ensemble mean lies in its band, 0 … 1) and ``runs`` (the most runs
-    at a step: the seeds the steps come from). A consistent filter has the
-    mean inside at about 95 % of its steps (each step alone: exactly 95 %).
-    """
-    if not by:
-        ensemble = ensemble.assign(_all=0)
-        by = ["_all"]
-    grouped = ensemble.groupby(list(by), sort=True, observed=True)
-    out = pd.DataFrame(
-        {"steps": grouped.size(), "inside": grouped["inside"].mean(), "runs": grouped["n"].max()}
-    ).reset_index()
-    return out.drop(columns="_all", errors="ignore")
-
-
 def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     """Per group: the campaign mean of each run's time-averaged NEES and NIS, and its band.
 
     Rows ``kind = "consistency"`` for each metric of :data:`CONSISTENCY_METRICS`
     (statistic ``mean``): ``value`` the mean over the ok runs with a finite
     value, ``n`` their number, and ``ci_low`` / ``ci_high`` the χ² 95 % band
-    of :func:`chi2_band` for ``n`` runs, where the mean lies for a consistent
-    filter (a band of the hypothesis, not an interval of the estimate). The
-    band treats each run's time average as one χ² value: the steps of a run
-    are correlated (the NEES strongly), and an average of correlated χ²_n
-    values has the mean n and at most the variance 2n of one: the sum over
-    the runs has the mean of χ²(N n) and at most its variance, so the band is
+    for ``n`` runs (:func:`~cwrend_cli.physics.metrics.mean_in_band`), where the
+    mean lies for a consistent filter (a band of the hypothesis, not an
+    interval of the estimate).
+
+    The band treats each run's time average as one χ² value: the steps of a
+    run are correlated (the NEES strongly), and an average of correlated χ²_n
+    values has the mean n and at most the variance 2n of one, so the sum over
+    the runs has the mean of χ²(N n) and at most its variance: the band is
     conservative (exact when a run's errors do not change over time). Empty
     without the columns (runs written before cwrend stored them).
     """
@@ -739,18 +672,14 @@ def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     keys, order, bounds = _segments(ok, by)
     if not keys:
         return pd.DataFrame([])
-    value = np.full((len(keys), len(CONSISTENCY_METRICS)), np.nan)
-    low, high = np.full_like(value, np.nan), np.full_like(value, np.nan)
-    counts = np.zeros_like(value)
-    for k, (metric, dof) in enumerate(CONSISTENCY_METRICS):
-        x = ok[metric].to_numpy(dtype=float)[order]
-        for g, (a, b) in enumerate(pairwise(bounds)):
-            finite = x[a:b][np.isfinite(x[a:b])]
-            counts[g, k] = finite.size
-            if finite.size:
-                value[g, k] = finite.mean()
-        low[:, k], high[:, k] = chi2_band(counts[:, k], dof)
     per_group = len(CONSISTENCY_METRICS)
+    rows = np.array(
+        [
+            mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+            for a, b in pairwise(bounds)
+            for metric, dof in CONSISTENCY_METRICS
+        ]
+    )  # (group × metric, [mean, low, high, n])
     return _frame(
         by,
         keys,
@@ -759,9 +688,9 @@ def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
             "kind": "consistency",
             "metric": [m for _ in keys for m, _ in CONSISTENCY_METRICS],
             "statistic": "mean",
-            "value": value.ravel(),
-            "ci_low": low.ravel(),
-            "ci_high": high.ravel(),
-            "n": counts.ravel().astype(np.int64),
+            "value": rows[:, 0],
+            "ci_low": rows[:, 1],
+            "ci_high": rows[:, 2],
+            "n": rows[:, 3].astype(np.int64),
         },
     )
