@@ -280,6 +280,12 @@ def _band_cell(row: Any) -> tuple[str, str]:
     return f"{value:.3g} [{low:{BAND}}, {high:{BAND}}]", "yes" if low <= value <= high else "no"
 
 
+def _stored_consistency(stats: pd.DataFrame, arch: Any) -> dict[str, Any]:
+    """The consistency rows of ``arch`` in statistics ``stats``, by metric (empty: none)."""
+    rows = stats[(stats["kind"] == "consistency") & (stats["arch"] == str(arch))]
+    return {str(r["metric"]): r for _, r in rows.iterrows()}
+
+
 def _consistency_rows(data: ReportData, arch: str) -> dict[str, Any]:
     """The stored consistency rows of ``arch`` at the reported point, else computed from the runs.
 
@@ -288,10 +294,9 @@ def _consistency_rows(data: ReportData, arch: str) -> dict[str, Any]:
     and its band (:func:`~cwrend_cli.physics.metrics.mean_in_band`).
     """
     stats = data.point_stats()
-    if stats is not None:
-        rows = stats[(stats["kind"] == "consistency") & (stats["arch"] == arch)]
-        if not rows.empty:
-            return {str(r["metric"]): r for _, r in rows.iterrows()}
+    stored = _stored_consistency(stats, arch) if stats is not None else {}
+    if stored:
+        return stored
     runs = data.ok_runs()
     runs = runs[runs["arch"] == arch]
     out: dict[str, Any] = {}
@@ -373,7 +378,9 @@ def _consistency_lines(data: ReportData) -> list[str]:
 def sweep_table(data: ReportData) -> str:
     """One row per grid point (all swept values) and architecture.
 
-    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored.
+    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored;
+    then, where it stores them, the mean NEES and NIS of the runs with their
+    χ² 95 % bands and whether each is in its band (issue 33).
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     keys: list[str] = []
@@ -385,6 +392,9 @@ def sweep_table(data: ReportData) -> str:
         "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
         "max miss [m]",
     ]  # fmt: skip
+    consistent = stats is not None and bool((stats["kind"] == "consistency").any())
+    if consistent:
+        header += ["mean NEES [95 % χ² band]", "in band", "mean NIS [95 % χ² band]", "in band"]
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
     for values, g in runs.groupby(keys, sort=True):
@@ -402,8 +412,14 @@ def sweep_table(data: ReportData) -> str:
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
-            rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
-                         *cells, _fmt(miss.max(), MISS)])  # fmt: skip
+            row = [*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
+                   *cells, _fmt(miss.max(), MISS)]  # fmt: skip
+            if stats is not None and consistent:
+                points = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
+                stored = _stored_consistency(stats[stats["point"].astype(str).isin(points)], a)
+                for metric, _, _ in _CONSISTENCY:
+                    row += _band_cell(stored.get(metric))
+            rows.append(row)
     return markdown_table(header, rows)
 
 
