@@ -171,3 +171,39 @@ def test_the_console_table_shows_the_means_bands_and_verdicts_at_80_columns() ->
 
 def test_no_console_table_without_consistency_rows() -> None:
     assert consistency_console_table(pd.DataFrame({"kind": ["marginal"]}), [], "x") is None
+
+
+# --- cwrend table (mean.nees, mean.nis) ---------------------------------------------------
+
+
+def test_cwrend_table_gives_the_consistency_means_with_their_bands(tmp_path) -> None:
+    """``mean.nees`` / ``mean.nis``: the stored consistency rows, the χ² band as the interval,
+    never marked unreliable (5 runs: the bootstrap interval of the miss is)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from cwrend_cli.cli import app
+
+    rng = np.random.default_rng(5)
+    runs = _runs(rng.chisquare(6, 5), rng.chisquare(3, 5))
+    runs["miss_km"], runs["delta_v_km_s"], runs["fuel_penalty_pct"] = 1e-3, 0.14, 1.0
+    for column in ("solve_success_pct", "solve_mean_ms", "solve_max_ms", "n_infeasible"):
+        runs[column] = 1.0
+    stats = pd.concat([statistics.describe(runs, ["arch"]), statistics.consistency(runs, ["arch"])])
+    stats.to_parquet(tmp_path / "ablation.parquet")
+    (tmp_path / "manifest.json").write_text(json.dumps({"config": {}}))
+    result = CliRunner().invoke(
+        app, ["table", str(tmp_path), "--metric", "mean.nees,mean.nis,mean.miss"]
+    )
+    assert result.exit_code == 0, result.output
+    header, _, row = result.stdout.splitlines()[:3]
+    assert header == (
+        "| architecture | mean of the runs' mean NEES [-] (95 % χ² band) | mean of the runs' "
+        "nominal mean NIS [-] (95 % χ² band) | mean miss [m] (95 % CI) |"
+    )
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    for cell, column, dof in ((cells[1], "mean_nees", 6), (cells[2], "mean_nis_nominal", 3)):
+        low, high = chi2.ppf([0.025, 0.975], dof * 5) / 5
+        assert cell == f"{runs[column].mean():.2f} [{low:.2f}, {high:.2f}]"
+    assert cells[3].endswith("\\*")
