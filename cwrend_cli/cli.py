@@ -1230,7 +1230,8 @@ def table(
             "solve_max_ms, solve_success_pct; paired frac_less.miss (Wilson), median_diff.miss, "
             "mean_diff.dv, @A-B for one pair; n (ok runs; seed pairs beside paired values "
             "only); infeasible_pct, failed_pct (share of re-solves, from runs.parquet). :bare "
-            "drops the interval, :3 shows 3 decimals.",
+            "drops the interval, :3 shows 3 decimals. mean.nees, mean.nis: the runs' mean NEES "
+            "and NIS with the χ² 95 % band of a consistent filter.",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",

@@ -32,6 +32,7 @@ from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     markdown_table,
     setting_text,
     swept_values,
@@ -536,7 +537,7 @@ def consistency_console_table(
                 if math.isfinite(float(r["ci_low"]))
                 else ""
             )
-            cells += [f"{r['value']:.3g}{band}", _in_band(r)]
+            cells += [f"{consistency_text(float(r['value']))}{band}", _in_band(r)]
         nees = get.get("mean_nees")
         table.add_row(
             *(f"{first[p]:g}" if isinstance(first[p], float) else str(first[p]) for p in params),

@@ -21,6 +21,7 @@ from cwrend_cli.campaign import statistics
 from cwrend_cli.console import consistency_console_table
 from cwrend_cli.physics import metrics
 from cwrend_cli.report import consistency
+from cwrend_cli.report.labels import consistency_text
 
 RUNS = 20
 STEPS = 2000
@@ -166,7 +167,13 @@ def test_the_console_table_shows_the_means_bands_and_verdicts_at_80_columns() ->
     low, high = metrics.chi2_band(12, 6)
     assert f"{low[()]:.2f}–{high[()]:.2f}" in cells
     for row in stats.itertuples():
-        assert f"{row.value:.3g}" in cells
+        assert consistency_text(row.value) in cells
+
+
+def test_a_mean_is_printed_with_2_decimals_below_1000_else_3_digits() -> None:
+    assert [consistency_text(v) for v in (3.0, 5.344426, 999.994, 2065.087, 1.2e6)] == [
+        "3.00", "5.34", "999.99", "2.07e+03", "1.2e+06"
+    ]  # fmt: skip
 
 
 def test_no_console_table_without_consistency_rows() -> None:

@@ -29,7 +29,7 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
 from cwrend_cli.report import load_results, write_compare_figure, write_report
-from cwrend_cli.report.labels import format_value, param_label, param_setting
+from cwrend_cli.report.labels import consistency_text, format_value, param_label, param_setting
 from cwrend_cli.report.load import references_file
 from cwrend_cli.report.markdown import report_md
 
@@ -502,7 +502,7 @@ def test_sweep_table_gives_each_points_consistency_against_its_band(sweep_dir: P
     for k, (metric, dof) in enumerate((("mean_nees", 6), ("mean_nis_nominal", 3))):
         low, high = chi2.ppf([0.025, 0.975], dof * 2) / 2
         mean = mine[metric].mean()
-        assert cells[7 + 2 * k] == f"{mean:.3g} [{low:.2f}, {high:.2f}]"
+        assert cells[7 + 2 * k] == f"{consistency_text(mean)} [{low:.2f}, {high:.2f}]"
         assert cells[8 + 2 * k] == ("yes" if low <= mean <= high else "no")
 
 
@@ -743,7 +743,10 @@ def test_report_md_gives_the_consistency_table_against_the_bands(ablation_dir: P
                                       ("mean_nis_nominal", "nis", "NIS", 3)):  # fmt: skip
         low, high = chi2.ppf([0.025, 0.975], dof * 3) / 3
         mean = mine[metric].mean()
-        assert cells[f"mean {name} [95 % χ² band]"] == f"{mean:.3g} [{low:.2f}, {high:.2f}]"
+        assert (
+            cells[f"mean {name} [95 % χ² band]"]
+            == f"{consistency_text(mean)} [{low:.2f}, {high:.2f}]"
+        )
         verdict = "yes" if low <= mean <= high else "no"
         assert cells[f"mean {name} [95 % χ² band] in band"] == verdict
         per_step = steps.groupby("t_s")[column].agg(["mean", "count"]).dropna()

@@ -132,7 +132,6 @@ def chi2_band(
     return low, high
 
 
-
 def mean_in_band(values: npt.ArrayLike, dof: int) -> tuple[float, float, float, int]:
     """Mean of the finite ``values`` (one χ²_dof statistic per run), its band and their count.
 
@@ -145,6 +144,7 @@ def mean_in_band(values: npt.ArrayLike, dof: int) -> tuple[float, float, float, 
     low, high = chi2_band(finite.size, dof)
     mean = float(finite.mean()) if finite.size else float("nan")
     return mean, float(low), float(high), int(finite.size)
+
 
 def _times(times_ms: Sequence[float]) -> tuple[float, float]:
     """Mean and max of solve wall times [ms] (NaN when there is none)."""

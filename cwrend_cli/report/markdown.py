@@ -34,6 +34,7 @@ from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     format_value,
     markdown_table,
     param_label,
@@ -276,8 +277,9 @@ def _band_cell(row: Any) -> tuple[str, str]:
         return "–", "–"
     value, low, high = float(row["value"]), float(row["ci_low"]), float(row["ci_high"])
     if not (_finite(low) and _finite(high)):
-        return _fmt(value, ".3g"), "–"
-    return f"{value:.3g} [{low:{BAND}}, {high:{BAND}}]", "yes" if low <= value <= high else "no"
+        return consistency_text(value), "–"
+    text = f"{consistency_text(value)} [{low:{BAND}}, {high:{BAND}}]"
+    return text, "yes" if low <= value <= high else "no"
 
 
 def _stored_consistency(stats: pd.DataFrame, arch: Any) -> dict[str, Any]:
