@@ -145,7 +145,7 @@ def test_report_is_rewritten_in_place(run_dir: Path, run_report, unrendered: Non
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output
     names = sorted(p.name for p in (run_dir / "report").iterdir())
-    expected = [*PER_SEED, NEES, "report.md", "report.html"]
+    expected = [*PER_SEED, NEES, CONSISTENCY, "report.md", "report.html"]
     assert names == sorted(expected)  # no temp files left behind
 
 
@@ -594,7 +594,7 @@ def test_fig1_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
 def test_report_html_is_self_contained(ablation_report: Path) -> None:
     page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
     pngs = list((ablation_report / "report").glob("*.png"))
-    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 1
+    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 2
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
     assert "<code>abc</code>" in page  # the config hash

@@ -398,25 +398,27 @@ def _marginal_frame(
     value: FloatArray,
     low: FloatArray,
     high: FloatArray,
+    kind: str = "marginal",
 ) -> pd.DataFrame:
     """Marginal rows: per group key, one row per ``(metric, statistic)`` of ``labels``.
 
     ``value``, ``low`` and ``high`` are (groups × labels); ``sizes`` the ok runs per group
-    (column ``n``).
+    (column ``n``), or per group and label (groups × labels). ``kind``: the rows' kind.
     """
     per_group = len(labels)
+    n = sizes.astype(np.int64)
     return _frame(
         by,
         keys,
         per_group,
         {
-            "kind": "marginal",
+            "kind": kind,
             "metric": [m for _ in keys for m, _ in labels],
             "statistic": [s for _ in keys for _, s in labels],
             "value": value.ravel(),
             "ci_low": low.ravel(),
             "ci_high": high.ravel(),
-            "n": np.repeat(sizes.astype(np.int64), per_group),
+            "n": n.ravel() if n.ndim == 2 else np.repeat(n, per_group),
         },
     )
 
@@ -672,25 +674,15 @@ def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     keys, order, bounds = _segments(ok, by)
     if not keys:
         return pd.DataFrame([])
-    per_group = len(CONSISTENCY_METRICS)
     rows = np.array(
         [
-            mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+            [
+                mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+                for metric, dof in CONSISTENCY_METRICS
+            ]
             for a, b in pairwise(bounds)
-            for metric, dof in CONSISTENCY_METRICS
         ]
-    )  # (group × metric, [mean, low, high, n])
-    return _frame(
-        by,
-        keys,
-        per_group,
-        {
-            "kind": "consistency",
-            "metric": [m for _ in keys for m, _ in CONSISTENCY_METRICS],
-            "statistic": "mean",
-            "value": rows[:, 0],
-            "ci_low": rows[:, 1],
-            "ci_high": rows[:, 2],
-            "n": rows[:, 3].astype(np.int64),
-        },
-    )
+    )  # (group, metric, [mean, low, high, n])
+    labels = [(metric, "mean") for metric, _ in CONSISTENCY_METRICS]
+    value, low, high, n = (rows[..., k] for k in range(4))
+    return _marginal_frame(by, keys, n, labels, value, low, high, kind="consistency")
