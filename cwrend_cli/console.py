@@ -523,7 +523,8 @@ def consistency_console_table(
     for name in ("architecture", "n", "NEES", "in\nband", "NIS", "in\nband"):
         table.add_column(name, justify="right", no_wrap=True)
     keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]
-    for _, g in rows.groupby(keys, sort=True, observed=True):
+    # as the table above it: a sweep's by its swept values, an ablation's in its rows' order
+    for _, g in rows.groupby(keys, sort=bool(params), observed=True):
         get = {r.metric: r for _, r in g.iterrows()}
         first = g.iloc[0]
         cells: list[str] = []
