@@ -1082,15 +1082,10 @@ class TargetConfig(_FrozenModel):
         "as ratios; each in (0, 1e6], no one above the sum of the other two [-]",
     )
 
-    @field_validator("initial_quaternion", mode="before")
+    @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
     @classmethod
-    def _four_entries(cls, value: Any) -> Any:
-        return _check_length(value, 4)
-
-    @field_validator("body_rates_deg_s", "inertia", mode="before")
-    @classmethod
-    def _three_entries(cls, value: Any) -> Any:
-        return _check_length(value, 3)
+    def _lengths(cls, value: Any, info: ValidationInfo) -> Any:
+        return _check_length(value, 4 if info.field_name == "initial_quaternion" else 3)
 
     @field_validator("initial_quaternion")
     @classmethod
