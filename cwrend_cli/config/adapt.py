@@ -52,6 +52,7 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
         constraints=constraints_of(cfg),
         model=_mirror(params.DesignModel, cfg.model),
         target=_mirror(params.Target, cfg.target),
+        sensor=_mirror(params.Sensor, cfg.sensor),
     )
 
 
