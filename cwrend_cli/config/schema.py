@@ -1147,8 +1147,8 @@ class TargetConfig(_FrozenModel):
     body_rates_deg_s: tuple[BodyRateDegS, BodyRateDegS, BodyRateDegS] = Field(
         (0.0, 0.0, 0.0),
         description="tumbling: angular velocity at t = 0 relative to inertial space, in body "
-        "axes (a target at rest in the relative frame has [0, 0, n]); each in [-60, 60] "
-        "[deg/s]",
+        "axes (with its z axis along the orbit normal, a target at rest in the relative frame "
+        "has [0, 0, n]); each in [-60, 60] [deg/s]",
     )
     inertia: tuple[InertiaRatio, InertiaRatio, InertiaRatio] = Field(
         (1.0, 1.0, 1.0),

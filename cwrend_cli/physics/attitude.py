@@ -10,10 +10,9 @@ Hill axes are the inertial ones turned by the angle nt about z.
 **Quaternions** are scalar-first, ``q = (q0, q1, q2, q3) = (cos ½α, ê sin ½α)``,
 Hamilton's product ``p ⊗ q = (p0 q0 − p·q, p0 q + q0 p + p × q)``, and a
 quaternion of frame F "body to F" maps body coordinates to F coordinates,
-``v_F = q ⊗ (0, v_B) ⊗ q*`` (Markley & Crassidis, *Fundamentals of Spacecraft
-Attitude Determination and Control*, 2014, ch. 2, whose product they write
-in the opposite order; Diebel 2006, "Representing attitude", Eq. 125 ff.).
-``q_ib`` is the attitude body→inertial, ``q_hb`` body→Hill:
+``v_F = q ⊗ (0, v_B) ⊗ q*`` (Diebel, "Representing attitude: Euler angles, unit
+quaternions, and rotation vectors", 2006, whose quaternions are scalar-first
+too). ``q_ib`` is the attitude body→inertial, ``q_hb`` body→Hill:
 
     q_hb(t) = q_z(−nt) ⊗ q_ib(t),     q_z(θ) = (cos ½θ, 0, 0, sin ½θ).
 
@@ -38,15 +37,15 @@ inertial angular momentum L = R_ib I ω are constant.
 
 **Integration**: the 3-stage Gauss–Legendre collocation method (order 6;
 Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. 2006,
-Sec. II.1.3, Table 1.3, and Sec. IV.2: it conserves every quadratic first
+Sec. II.1.3; by their Theorem IV.2.1 it conserves every quadratic first
 integral exactly, here the energy, ‖I ω‖ and ‖q‖, so the quaternion stays a
 unit quaternion with no renormalisation). Fixed step: every output interval
 is split into equal steps of at most :data:`MAX_ANGLE_PER_STEP_RAD` of
 rotation, from the largest rate the body can reach, ``√(ωᵀIω / min I)`` (the
 energy bounds it). The implicit stage equations are solved by
 :data:`FIXED_POINT_ITERATIONS` fixed-point sweeps; each contracts by about
-½ h‖ω‖ ≤ 0.01 (by the triangle inequality of the moments the Jacobian of
-Euler's equations is at most ‖ω‖ in norm), so they converge to rounding. The
+½ h‖ω‖ ≤ 0.01 (by the triangle inequality of the moments, no entry of the
+Jacobian of Euler's equations exceeds a component of ω), so they converge to rounding. The
 local error, about 5e-7 (h‖ω‖)⁷ (the method's error constant
 (3!)⁴/(7·(6!)³)), is below 1e-18 rad a step: what is left is rounding.
 
@@ -92,7 +91,7 @@ MAX_ANGLE_PER_STEP_RAD = 0.02
 #: Fixed-point sweeps of the Gauss–Legendre stage equations per step [-].
 FIXED_POINT_ITERATIONS = 10
 
-# The 3-stage Gauss–Legendre Butcher tableau (Hairer, Lubich & Wanner 2006, Table II.1.3).
+# The 3-stage Gauss–Legendre Butcher tableau (Hairer, Lubich & Wanner 2006, Sec. II.1.3).
 _R15 = math.sqrt(15.0)
 _GL_A = np.array(
     [
