@@ -47,6 +47,7 @@ from numba import njit
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import costate_stm, zoh_step
+from cwrend_cli.physics.ekf import EkfModel, ekf_predict
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
     EPS_BANG_BANG,
@@ -225,6 +226,7 @@ def advance(
     state: LoopState,
     scalars: LoopScalars,
     log: StepLog,
+    ekf: EkfModel | None = None,
 ) -> LoopScalars:
     """Run steps ``k_start … k_stop``; the last one stops before its costate propagation.
 
@@ -237,11 +239,12 @@ def advance(
     again inside (:func:`_advance`): numba resolves a NamedTuple argument
     about seven times slower than a plain tuple (measured: 4.0 against 0.6 µs
     per call with two small tuples), and this is called once per re-solve.
-    The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`).
+    The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`), and
+    so does a linear filter (``ekf`` None: :func:`_optional_ekf`).
     """
     out = _advance(
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
-        tuple(state), tuple(scalars), tuple(log),
+        tuple(state), tuple(scalars), tuple(log), _optional_ekf(ekf),
     )  # fmt: skip
     return LoopScalars(*out)
 
@@ -265,6 +268,13 @@ def _optional(
     )
 
 
+def _optional_ekf(ekf: EkfModel | None) -> tuple[tuple[Any, ...], np.ndarray] | None:
+    """The extended Kalman filter as the compiled loop takes it: ``None`` for a linear
+    filter (the branch is pruned, as :func:`_optional`'s: the default loop compiles as
+    before), else its dynamics' plain tuple and its chief table."""
+    return None if ekf is None else (tuple(ekf.tm), ekf.chief)
+
+
 @njit(cache=True)
 def _advance(
     k_start: int,
@@ -277,14 +287,17 @@ def _advance(
     state_t: tuple[Any, ...],
     scalars_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
     scalars = LoopScalars(*scalars_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     return _steps(
         k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
         LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
+        ekf,
     )  # fmt: skip
 
 
@@ -302,11 +315,13 @@ def _steps(
     sbar: float,
     first: bool,
     log: StepLog,
+    ekf: EkfModel | None,
 ) -> tuple[float, float, bool]:
     """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
 
     ``truth`` ``None``: the CW truth; ``act`` ``None``: the ideal actuator
-    (:func:`_optional`).
+    (:func:`_optional`); ``ekf`` ``None``: the linear filter of ``m.filter_phi``
+    (:func:`_optional_ekf`).
     """
     m = model
     ws = workspace()
@@ -344,8 +359,12 @@ def _steps(
         # measurement of the new position with the noise of the window at t_k
         y = x_next[:3] + m.noise[k]
         # Kalman filter predict (with the commanded control: the filter does not
-        # know the actuator errors) and update (Eqs. 11–23)
-        x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        # know the actuator errors) and update (Eqs. 11–23); or the extended Kalman
+        # filter's predict through the nonlinear dynamics (physics.ekf)
+        if ekf is None:
+            x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        else:
+            x_pred, p_pred = ekf_predict(ekf, k, x_hat, p, u, m.q)
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
             x_hat[:] = x_pred
@@ -470,6 +489,7 @@ def resolve_loop(
     carry: ResolveCarry,
     log: StepLog,
     solves: SolveLog,
+    ekf: EkfModel | None = None,
 ) -> tuple[int, LoopScalars]:
     """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
 
@@ -494,6 +514,7 @@ def resolve_loop(
     i, eps, sbar, first = _resolve_loop(
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
+        _optional_ekf(ekf),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
 
@@ -513,6 +534,7 @@ def _resolve_loop(
     carry_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
     solves_t: tuple[Any, ...],
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments."""
     m = LoopModel(*model_t)
@@ -525,6 +547,7 @@ def _resolve_loop(
     carry = ResolveCarry(*carry_t)
     log = StepLog(*log_t)
     solves = SolveLog(*solves_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     lam = state.lam
     k_next = k_start
@@ -532,7 +555,7 @@ def _resolve_loop(
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
         eps, sbar, first = _steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log, ekf
         )
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -573,6 +596,6 @@ def _resolve_loop(
             lam[:] = np.dot(m.lam_step, carry.warm)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log, ekf
     )
     return n_resolves, eps, sbar, first

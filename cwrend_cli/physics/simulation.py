@@ -51,7 +51,15 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
+from cwrend_cli.physics import (
+    actuator,
+    design_models,
+    ekf,
+    guidance,
+    references,
+    sensors,
+    truth,
+)
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
@@ -366,7 +374,8 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    loop = _Loop(model, truth_model, act, sched, state, log, filter_ekf)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -422,6 +431,7 @@ class _Loop:
     sched: sk.ScheduleParams
     state: sk.LoopState
     log: sk.StepLog
+    ekf: ekf.EkfModel | None  # the extended Kalman filter's dynamics; None: a linear filter
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -429,7 +439,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log,
+            scalars, self.log, self.ekf,
         )  # fmt: skip
 
 
@@ -492,7 +502,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows,
+            scalars, carry, loop.log, rows, loop.ekf,
         )  # fmt: skip
         if i == count:
             break
@@ -714,9 +724,13 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
 
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
-    it always did.
+    it always did. An extended Kalman filter predicts through the nonlinear
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
     """
-    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
+    name = problem.model.filter
+    tables = design_models.step_tables(
+        name if name == "ss" or name == "ya" else "cw", problem.scenario, problem.truth
+    )
     return np.array(tables.phi), np.array(tables.gam)
 
 
