@@ -52,6 +52,7 @@ from cwrend_cli.physics.truth import (
     TruthModel,
     inertial_to_lvlh,
     initial_chief,
+    lvlh_frame,
     lvlh_to_inertial,
     rk8_step,
     truth_model,
@@ -110,6 +111,30 @@ def ekf_model(name: FilterModelName, scenario: Scenario, truth: Truth) -> EkfMod
 
 
 @njit(cache=True)
+def _frame_map(tm: TruthModel, chief: np.ndarray, to_inertial: bool, out: np.ndarray) -> None:
+    """``out`` (6, 6) ← the matrix of :func:`~cwrend_cli.physics.truth.lvlh_to_inertial`
+    (``to_inertial``) or of :func:`~cwrend_cli.physics.truth.inertial_to_lvlh` at ``chief``.
+
+    With R the frame's axes and Ω = [ω×] its rate: L = [[R, 0], [RΩ, R]] (δr = Rρ,
+    δv = R(ρ̇ + ω×ρ)), inverse L⁻¹ = [[Rᵀ, 0], [−ΩRᵀ, Rᵀ]].
+    """
+    rot = np.empty((3, 3))
+    w = np.empty(3)
+    lvlh_frame(tm, chief, rot, w)
+    cross = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    out[:, :] = 0.0
+    for i in range(3):
+        for j in range(3):
+            r_ij = rot[i, j] if to_inertial else rot[j, i]
+            out[i, j] = r_ij
+            out[3 + i, 3 + j] = r_ij
+            acc = 0.0
+            for m in range(3):
+                acc += rot[i, m] * cross[m, j] if to_inertial else -cross[i, m] * rot[j, m]
+            out[3 + i, j] = acc
+
+
+@njit(cache=True)
 def ekf_step(
     tm: TruthModel, chief: np.ndarray, x: np.ndarray, u: np.ndarray, phi: np.ndarray
 ) -> np.ndarray:
@@ -144,26 +169,24 @@ def ekf_step(
             for j in range(6):
                 phi[i, j] = y[at + 6 * i + j]
         return out
-    unit = np.zeros(6)
-    col = np.empty(6)
+    lmap = np.empty((6, 6))
+    _frame_map(tm, chief, True, lmap)
     y[:6] = chief
     lvlh_to_inertial(tm, chief, x, y[6:12])
-    for j in range(6):
-        unit[:] = 0.0
-        unit[j] = 1.0
-        lvlh_to_inertial(tm, chief, unit, col)
-        for i in range(6):
-            y[at + 6 * i + j] = col[i]
+    for i in range(6):
+        for j in range(6):
+            y[at + 6 * i + j] = lmap[i, j]
     for _ in range(tm.substeps):
         rk8_step(tm, y, u, h, k, ys)
     chief_end = y[:6].copy()
     inertial_to_lvlh(tm, chief_end, y[6:12], out)
-    for j in range(6):
-        for i in range(6):
-            unit[i] = y[at + 6 * i + j]
-        inertial_to_lvlh(tm, chief_end, unit, col)
-        for i in range(6):
-            phi[i, j] = col[i]
+    _frame_map(tm, chief_end, False, lmap)
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for m in range(6):
+                acc += lmap[i, m] * y[at + 6 * m + j]
+            phi[i, j] = acc
     return out
 
 

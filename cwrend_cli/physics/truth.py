@@ -400,11 +400,15 @@ def rk8_step(
     n = y.shape[0]
     stages = tm.rk_b.shape[0]
     for s in range(stages):
+        # Σ_j a_sj k_j accumulated in ys in the order j = 0, 1, …, component by component
+        # (the loop over the components innermost, so that it vectorises)
+        ys[:] = 0.0
+        for j in range(s):
+            a_sj = tm.rk_a[s, j]
+            for i in range(n):
+                ys[i] += a_sj * k[j, i]
         for i in range(n):
-            acc = 0.0
-            for j in range(s):
-                acc += tm.rk_a[s, j] * k[j, i]
-            ys[i] = y[i] + h * acc
+            ys[i] = y[i] + h * ys[i]
         _rhs(tm, ys, u, k[s])
     for i in range(n):
         acc = 0.0

@@ -60,20 +60,33 @@ def j2_gradient(
     mu: float, r_e: float, j2: float, x: float, y: float, z: float, out: np.ndarray
 ) -> None:
     """``out`` (3, 3) ← ∂a_J2/∂r at the inertial position (x, y, z) [1/s²] (module docstring)."""
+    out[:, :] = 0.0
+    _add_j2_gradient(mu, r_e, j2, x, y, z, out)
+
+
+@njit(cache=True)
+def _add_j2_gradient(
+    mu: float, r_e: float, j2: float, x: float, y: float, z: float, out: np.ndarray
+) -> None:
+    """``out`` (3, 3) += ∂a_J2/∂r at (x, y, z) (module docstring)."""
     r2 = x * x + y * y + z * z
     c = -1.5 * j2 * mu * r_e * r_e / (r2 * r2 * math.sqrt(r2))  # k/r⁵
-    zz = z * z / r2
+    inv_r2 = 1.0 / r2
+    zz = z * z * inv_r2
+    diag = 1.0 - 5.0 * zz
+    outer = -5.0 * inv_r2 * (1.0 - 7.0 * zz)
+    z10 = 10.0 * z * inv_r2
     p = (x, y, z)
     for i in range(3):
         for j in range(3):
-            v = -5.0 * p[i] * p[j] / r2 * (1.0 - 7.0 * zz)
+            v = outer * p[i] * p[j]
             if j == 2:
-                v -= 10.0 * z * p[i] / r2
+                v -= z10 * p[i]
             if i == 2:
-                v -= 10.0 * z * p[j] / r2
+                v -= z10 * p[j]
             if i == j:
-                v += 1.0 - 5.0 * zz + (2.0 if i == 2 else 0.0)
-            out[i, j] = c * v
+                v += diag + (2.0 if i == 2 else 0.0)
+            out[i, j] += c * v
 
 
 @njit(cache=True)
@@ -107,8 +120,4 @@ def j2_relative_gradient(
     """``out`` (3, 3) ← ∂(δr̈)/∂δr of the ``j2`` truth: ∂g/∂r + ∂a_J2/∂r at r_c + δr [1/s²]."""
     x, y, z = chief[0] + dr[0], chief[1] + dr[1], chief[2] + dr[2]
     gravity_gradient(mu, x, y, z, out)
-    g = np.empty((3, 3))
-    j2_gradient(mu, r_e, j2, x, y, z, g)
-    for i in range(3):
-        for j in range(3):
-            out[i, j] += g[i, j]
+    _add_j2_gradient(mu, r_e, j2, x, y, z, out)
