@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import zlib
 from collections import deque
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from itertools import pairwise
 from typing import Any
@@ -544,27 +544,86 @@ def paired(
     ok = runs[runs["status"] == "ok"]
     if ok.empty:
         return pd.DataFrame([])
-    # one table (group, seed) × (metric, arch), as each group's own pivot would give
-    wide = ok.pivot_table(index=[*by, "seed"], columns="arch", values=["miss_km", "delta_v_km_s"])
-    if by:  # the index is sorted: a group is a run of equal keys
-        per_row = list(zip(*(wide.index.get_level_values(c) for c in by), strict=True))
-        starts = [i for i, k in enumerate(per_row) if i == 0 or k != per_row[i - 1]]
-        keys = [per_row[i] for i in starts]
-        bounds = np.array([*starts, len(per_row)])
-    else:
-        keys, bounds = [()], np.array([0, len(wide)])
+    wide = _wide(ok, by)
+    keys, bounds = _groups(wide.index, by)
     columns: set[Any] = set(wide.columns)
     present = [
         (a, b)
         for a, b in dict.fromkeys(pairs)
         if ("miss_km", a) in columns and ("miss_km", b) in columns
     ]
+    blocks = {p: _block(wide, wide, p) for p in present}
     shared = [p for p in present if p in PAIRS]
     streams = [(shared, np.random.default_rng(seed + 1))] if shared else []
     streams += [([p], _pair_generator(seed, p)) for p in present if p not in PAIRS]
-    frames = [_paired_rows(wide, keys, bounds, chosen, by, rng) for chosen, rng in streams]
+    frames = [_paired_rows(blocks, keys, bounds, chosen, by, rng) for chosen, rng in streams]
     frames = [f for f in frames if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+def paired_across(
+    a: pd.DataFrame,
+    b: pd.DataFrame,
+    pairs: Sequence[tuple[str, str]],
+    by: Sequence[str] = (),
+    seed: int = 0,
+) -> pd.DataFrame:
+    """:func:`paired` across two campaigns on the same noise: A of each pair from the runs
+    ``a``, B from the runs ``b``, seed by seed within each group of ``by`` (columns of both).
+
+    The rows of :func:`paired` (``frac_less`` with its Wilson interval, ``median_diff``
+    and ``mean_diff`` with bootstrap intervals), each pair drawn, its groups in order,
+    from the stream of an *added* pair (:func:`_pair_generator`, keyed by its names):
+    the rows :func:`paired` gives that pair added to one campaign that holds both
+    runs. A pair may name one architecture twice (the same architecture in the two
+    campaigns).
+    """
+    ok_a, ok_b = (r[r["status"] == "ok"] for r in (a, b))
+    if ok_a.empty or ok_b.empty:
+        return pd.DataFrame([])
+    wide_a, wide_b = _wide(ok_a, by), _wide(ok_b, by)
+    index = wide_a.index.union(wide_b.index)  # sorted: a group is a run of equal keys
+    wide_a, wide_b = wide_a.reindex(index), wide_b.reindex(index)
+    keys, bounds = _groups(index, by)
+    present = [
+        (x, y)
+        for x, y in dict.fromkeys(pairs)
+        if ("miss_km", x) in wide_a.columns and ("miss_km", y) in wide_b.columns
+    ]
+    blocks = {p: _block(wide_a, wide_b, p) for p in present}
+    frames = [
+        _paired_rows(blocks, keys, bounds, [p], by, _pair_generator(seed, p)) for p in present
+    ]
+    frames = [f for f in frames if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+def _wide(ok: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+    """One table (group, seed) × (metric, arch) of the ok runs, sorted by group and seed."""
+    return ok.pivot_table(index=[*by, "seed"], columns="arch", values=["miss_km", "delta_v_km_s"])
+
+
+def _groups(
+    index: pd.Index, by: Sequence[str]
+) -> tuple[list[tuple[Hashable, ...]], npt.NDArray[np.intp]]:
+    """The group keys of a sorted (group, seed) index and each group's first row (then the end)."""
+    if not by:
+        return [()], np.array([0, len(index)])
+    per_row = list(zip(*(index.get_level_values(c) for c in by), strict=True))
+    starts = [i for i, k in enumerate(per_row) if i == 0 or k != per_row[i - 1]]
+    return [per_row[i] for i in starts], np.array([*starts, len(per_row)])
+
+
+def _block(wide_a: pd.DataFrame, wide_b: pd.DataFrame, pair: tuple[str, str]) -> FloatArray:
+    """Miss of A, miss of B, Δv of A, Δv of B per row (NaN where one did not run ok)."""
+    a, b = pair
+    columns = [
+        wide_a[("miss_km", a)],
+        wide_b[("miss_km", b)],
+        wide_a[("delta_v_km_s", a)],
+        wide_b[("delta_v_km_s", b)],
+    ]
+    return np.column_stack([c.to_numpy(dtype=float) for c in columns])
 
 
 def _pair_generator(seed: int, pair: tuple[str, str]) -> np.random.Generator:
@@ -573,20 +632,17 @@ def _pair_generator(seed: int, pair: tuple[str, str]) -> np.random.Generator:
 
 
 def _paired_rows(
-    wide: pd.DataFrame,
+    blocks: Mapping[tuple[str, str], FloatArray],
     keys: Sequence[tuple[Hashable, ...]],
     bounds: npt.NDArray[np.intp],
     pairs: Sequence[tuple[str, str]],
     by: Sequence[str],
     rng: np.random.Generator,
 ) -> pd.DataFrame:
-    """The rows of :func:`paired` for ``pairs`` (each group, then each pair), drawn from ``rng``."""
-    blocks = {
-        (a, b): wide[
-            [("miss_km", a), ("miss_km", b), ("delta_v_km_s", a), ("delta_v_km_s", b)]
-        ].to_numpy(dtype=float)
-        for a, b in pairs
-    }
+    """The rows of :func:`paired` for ``pairs`` (each group, then each pair), drawn from ``rng``.
+
+    ``blocks``: per pair, the rows of :func:`_block` (groups delimited by ``bounds``).
+    """
     idents: list[tuple[Hashable, ...]] = []
     head: list[tuple[str, str, int]] = []  # (arch, other, n) per group and pair
     less_rows: list[tuple[float, float, float]] = []

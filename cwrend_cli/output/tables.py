@@ -82,6 +82,20 @@ def suffix_unit(name: str) -> str | None:
     return None
 
 
+#: The values of the solves' ``fallback_step``: the step of the shooting chain that ended a
+#: re-solve (:mod:`cwrend_cli.physics.guidance.shooting`, in the chain's order), the plan of
+#: last resort, or the cone-program method's own re-solve.
+FALLBACK_STEPS = (
+    "warm",
+    "socp_plan",
+    "continuation_warm",
+    "continuation_energy",
+    "socp_multiplier",
+    "dual_bound",
+    "socp",
+)
+
+
 def _col(description: str, unit: str | None = None) -> tuple[str, str]:
     return (unit if unit is not None else "", description)
 
