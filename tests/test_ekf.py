@@ -21,8 +21,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from cwrend_cli.campaign import run_case
 from cwrend_cli.cli import app
-from cwrend_cli.physics import ekf, simulation, truth, variational
+from cwrend_cli.config import config_from_dict
+from cwrend_cli.physics import _loop_kernels, ekf, simulation, truth, variational
 from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     Degradation,
@@ -234,3 +236,11 @@ def test_an_ekf_under_the_cw_truth_exits_2_naming_the_field(name: str, tmp_path:
     assert "model.filter" in result.output and "truth.model = 'two_body' or 'j2'" in result.output
     assert "Traceback" not in result.output
     assert not any(tmp_path.iterdir())
+
+
+def test_the_paper_loop_passes_no_ekf_to_compile() -> None:
+    """The default filter crosses as None (pruned): the paper's loop compiles no EKF code."""
+    archs = (ALL_ARCHITECTURES["plain_adaptive"], ALL_ARCHITECTURES["plain_fixed_socp"])
+    run_case(config_from_dict({}), archs, 0)
+    for kernel in (_loop_kernels._resolve_loop, _loop_kernels._advance):
+        assert "none" in [str(sig[-1]) for sig in kernel.signatures]
