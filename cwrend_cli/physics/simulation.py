@@ -15,10 +15,13 @@ Nothing here writes files: the result is a plain :class:`RunResult` that
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model. The truth receives the control the
-actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
-scale error, noise, misalignment, minimum thrust, delay); the filter predicts
-with the commanded control, which it knows, not the errors. The per-step
+guidance use the design models of ``problem.model`` (CW by default;
+:mod:`cwrend_cli.physics.design_models`), or for the filter an extended
+Kalman filter on the nonlinear dynamics (:mod:`cwrend_cli.physics.ekf`).
+The truth receives the control the actuator applies (``problem.actuator``,
+:mod:`cwrend_cli.physics.actuator`: scale error, noise, misalignment, minimum
+thrust, delay); the filter predicts with the commanded control, which it
+knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
 So are the draws of the sensor faults of the degradation windows
