@@ -125,7 +125,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         f"meas_{a}_km": _col(f"position measurement of row k (taken at t_k), {d}; NaN: none")
         for a, d in _A.items()
     },
-    "nis": _col("normalised innovation squared of the row's measurement (chi2_3)", "-"),
+    "meas_range_km": _col(
+        "range of the target measured at t_k (sensor.model = 'range_bearing'); NaN: none"
+    ),
+    "meas_azimuth_deg": _col(
+        "azimuth of the target measured at t_k, in (-180, 180] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "meas_elevation_deg": _col(
+        "elevation of the target measured at t_k, in [-90, 90] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "nis": _col(
+        "normalised innovation squared of the row's measurement (chi2_m, m = 3, or 2 for "
+        "sensor.model = 'angles')",
+        "-",
+    ),
     "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
     "score": _col("composite innovation score s", "-"),
     "score_filtered": _col("low-pass filtered score s-bar", "-"),
@@ -169,9 +184,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "wall_time_ms": _col("wall time of the solve"),
     "success": _col("converged with residual below solver.success_residual", "-"),
     # summary / runs
-    "delta_v_km_s": _col("trapezoid of ||u|| (applied) over the grid"),
+    "delta_v_km_s": _col(
+        "trapezoid of ||u|| (applied) over the grid, the paper's convention: it drops "
+        "||u_0|| dt/2 of a closed-loop run"
+    ),
+    "delta_v_applied_km_s": _col(
+        "applied impulse sum_k ||u_k|| dt over the zero-order-hold steps k = 0..N-1 (what the "
+        "thruster did); open-loop references: integral of ||u|| dt of the continuous plan"
+    ),
     "miss_km": _col("terminal miss ||r(T) - r_f||"),
-    "fuel_penalty_pct": _col("delta-v above the open-loop fuel optimum"),
+    "fuel_penalty_pct": _col(
+        "delta-v above the open-loop fuel optimum's, both trapezoids (the paper's; can be < 0)"
+    ),
+    "fuel_penalty_applied_pct": _col(
+        "applied delta-v above the exact continuous fuel optimum (u_max x its burn time); "
+        ">= 0 for a run that reaches the target"
+    ),
     "n_solves": _col("receding-horizon re-solves", "-"),
     "n_converged": _col("re-solves that converged", "-"),
     "n_infeasible": _col("re-solves found infeasible", "-"),
@@ -452,6 +480,17 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["u_norm_km_s2"] = row_norm(*u)
     for i, a in enumerate(_AXES):
         cols[f"ucmd_{a}_km_s2"] = u_cmd[i]
+    if _has_angles(results):
+        # a nonlinear sensor (issue 35): its components in their own columns, the
+        # position measurement NaN (none was taken)
+        parts = [_sensor_components(r) for r in results]
+        y = np.concatenate([p[0] for p in parts], axis=1)
+        for name, values in zip(
+            ("meas_range_km", "meas_azimuth_deg", "meas_elevation_deg"),
+            np.concatenate([p[1] for p in parts], axis=1),
+            strict=True,
+        ):
+            cols[name] = values
     for i, a in enumerate(_AXES):
         cols[f"meas_{a}_km"] = y[i]
     for name in ("nis", "mtf_ratio", "score", "score_filtered", "eps"):
@@ -470,6 +509,33 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     return cols
 
 
+def _has_angles(results: Sequence[RunResult]) -> bool:
+    """True when a run measures range and angles or angles (issue 35): their columns are written."""
+    return any(r.sensor != "position" for r in results)
+
+
+def _sensor_components(result: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """(position measurement (3, N) [km], (range [km], azimuth, elevation [deg]) (3, N)) of a run.
+
+    Whichever the run's sensor did not measure is NaN.
+    """
+    y = np.asarray(result.y).T
+    nan = np.full_like(y, np.nan)
+    if result.sensor == "position":
+        return y, nan
+    if result.sensor == "range_bearing":
+        return nan, np.vstack([y[:1], np.rad2deg(y[1:])])
+    return nan, np.vstack([nan[:1], np.rad2deg(y[:2])])
+
+
+#: The steps' columns of a nonlinear sensor (issue 35), only when a run has one.
+SENSOR_STEP_FIELDS = [
+    pa.field("meas_range_km", pa.float64()),
+    pa.field("meas_azimuth_deg", pa.float64()),
+    pa.field("meas_elevation_deg", pa.float64()),
+]
+
+
 def _has_safety(results: Sequence[RunResult]) -> bool:
     """True when the runs carry safety measurements (all or none of them: one problem)."""
     flags = {r.safety is not None for r in results}
@@ -482,6 +548,7 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
     schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -543,8 +610,10 @@ SUMMARY_SCHEMA = pa.schema(
         ("arch", pa.string()),
         ("seed", pa.int64()),
         ("delta_v_km_s", pa.float64()),
+        ("delta_v_applied_km_s", pa.float64()),
         ("miss_km", pa.float64()),
         ("fuel_penalty_pct", pa.float64()),
+        ("fuel_penalty_applied_pct", pa.float64()),
         ("n_solves", pa.int64()),
         ("n_converged", pa.int64()),
         ("n_infeasible", pa.int64()),
@@ -573,15 +642,16 @@ SAFETY_STEP_FIELDS = [
 ]
 
 
-def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """A ``summary.parquet`` / ``runs.parquet`` row of one run.
 
     Among its metrics those of paper Sec. "Numerical Results and Discussion" (Δv, miss,
     fuel penalty, solve times and success).
 
     With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
+    ``fuel`` is the scenario's open-loop fuel-optimal reference (the fuel penalties).
     """
-    metrics = run_metrics(result, fuel_delta_v_km_s)
+    metrics = run_metrics(result, fuel)
     # its fields are numbers: no deep copy (dataclasses.asdict) needed
     fields = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
     row = {"arch": result.arch, "seed": result.seed, **fields}
@@ -607,9 +677,9 @@ def _with_safety(
     return pa.schema([*columns[:at], *fields, *columns[at:]])
 
 
-def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def reference_row(ref: OpenLoopResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """Summary row of an open-loop reference (``arch`` = ``open_loop_<name>``)."""
-    metrics = reference_metrics(ref, fuel_delta_v_km_s)
+    metrics = reference_metrics(ref, fuel)
     return {"arch": f"open_loop_{ref.name}", "seed": -1, **dataclasses.asdict(metrics)}
 
 
@@ -689,6 +759,7 @@ def campaign_steps_table(
     schema = _with_safety(
         CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
     )
+    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
