@@ -1,6 +1,8 @@
 """Truth dynamics: the world the closed loop flies in, separate from the CW design model.
 
-The guidance and the filter always use the Clohessy–Wiltshire model (paper Eqs. 3–4);
+The guidance and the filter use the Clohessy–Wiltshire model (paper Eqs. 3–4) unless
+``[model]`` gives them another (:mod:`cwrend_cli.physics.design_models`; the EKF filters
+of :mod:`cwrend_cli.physics.ekf` predict with this module's own step);
 ``truth.model`` chooses what the true relative state obeys (issue 15, item 1):
 
 * ``"cw"``: the same CW model, stepped exactly by ``x⁺ = Φx + Γu`` (Eq. 11);
