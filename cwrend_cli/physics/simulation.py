@@ -53,6 +53,7 @@ import numpy.typing as npt
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
 from cwrend_cli.physics import constraints as safety_geometry
+from cwrend_cli.physics import process_noise
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
@@ -111,6 +112,7 @@ class RunResult:
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
     dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
+    trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
 
@@ -254,6 +256,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         eps=np.full(rows, np.nan),
         trace_p=np.full(rows, np.nan),
         nees=np.full(rows, np.nan),
+        trace_q=np.full(rows, np.nan),
     )
 
 
@@ -366,7 +369,9 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log)
+    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
+    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
+    loop = _Loop(model, truth_model, act, sched, state, log, pn)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -401,6 +406,7 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        trace_q=log.trace_q,
     )
 
 
@@ -422,6 +428,7 @@ class _Loop:
     sched: sk.ScheduleParams
     state: sk.LoopState
     log: sk.StepLog
+    pn: process_noise.ProcessNoiseModel | None  # None: estimator.q_process at every step
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -429,7 +436,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log,
+            scalars, self.log, self.pn,
         )  # fmt: skip
 
 
@@ -492,7 +499,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows,
+            scalars, carry, loop.log, rows, loop.pn,
         )  # fmt: skip
         if i == count:
             break
