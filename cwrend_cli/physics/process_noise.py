@@ -215,9 +215,7 @@ def applied_moments(act: ActuatorModel, command: np.ndarray) -> tuple[np.ndarray
 
 
 @njit(cache=True)
-def actuator_error_moment(
-    act: ActuatorModel, k: int, commands: np.ndarray
-) -> np.ndarray:
+def actuator_error_moment(act: ActuatorModel, k: int, commands: np.ndarray) -> np.ndarray:
     """``Σ_e = E[(u_a − u_k)(u_a − u_k)ᵀ]`` (3, 3) of step ``k`` [km²/s⁴].
 
     ``commands`` (N, 3): the commanded controls of the run so far (row k:

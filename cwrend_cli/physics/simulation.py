@@ -51,9 +51,16 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
+from cwrend_cli.physics import (
+    actuator,
+    design_models,
+    guidance,
+    process_noise,
+    references,
+    sensors,
+    truth,
+)
 from cwrend_cli.physics import constraints as safety_geometry
-from cwrend_cli.physics import process_noise
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
