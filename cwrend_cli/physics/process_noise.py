@@ -57,7 +57,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.actuator import ActuatorModel
+from cwrend_cli.physics.actuator import ActuatorModel, misaligned
 from cwrend_cli.physics.estimation import _sandwich
 from cwrend_cli.physics.params import Estimator
 
@@ -191,16 +191,7 @@ def applied_moments(act: ActuatorModel, command: np.ndarray) -> tuple[np.ndarray
     m = math.sqrt(command[0] ** 2 + command[1] ** 2 + command[2] ** 2)
     if m == 0.0 or m < act.u_min:
         return mean, second
-    v = np.empty(3)
-    for i in range(3):
-        if act.rotate:
-            v[i] = (
-                act.rotation[i, 0] * command[0]
-                + act.rotation[i, 1] * command[1]
-                + act.rotation[i, 2] * command[2]
-            )
-        else:
-            v[i] = command[i]
+    v = misaligned(act, command)
     c1, c2 = 1.0, 1.0
     if act.sigma_pointing > 0.0:
         c1 = rayleigh_mean_cos(act.sigma_pointing)
