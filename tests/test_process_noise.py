@@ -261,3 +261,21 @@ def test_a_bad_process_noise_setting_exits_2_naming_the_field(setting: str, fiel
     assert result.exit_code == 2, result.output
     assert field in result.output
     assert "Traceback" not in result.output
+
+
+def test_a_process_noise_loop_gets_its_own_first_run_allowance() -> None:
+    # from_actuator (with actuator errors) and adaptive compile their own loop: the first run
+    # of each in a process is a first run (found when a sweep over the three modes timed out
+    # compiling in its second mode); fixed and from_actuator without errors share the fixed one
+    from cwrend_cli.campaign import worker
+
+    noisy = {"actuator": {"magnitude_sigma": 0.01}}
+
+    def variant(estimator: dict[str, object], act: dict[str, object]) -> tuple[object, ...]:
+        cfg = config_from_dict({"estimator": estimator, "actuator": act})
+        return worker.kernel_variant(problem_of(cfg), "mtf_adaptive")
+
+    fixed = variant({}, noisy["actuator"])
+    assert variant({"process_noise": "from_actuator"}, noisy["actuator"]) != fixed
+    assert variant({"process_noise": "adaptive"}, {}) != variant({}, {})
+    assert variant({"process_noise": "from_actuator"}, {}) == variant({}, {})

@@ -77,6 +77,13 @@ class ProcessNoiseModel(NamedTuple):
     sigma_max: float  # ceiling of Σ̂_a's eigenvalues: u_max² [km²/s⁴]
 
 
+def varies(est: Estimator, ideal_actuator: bool) -> bool:
+    """True when Q_k is not ``q_process`` at every step (the loop then compiles its own variant)."""
+    return not (
+        est.process_noise == "fixed" or (est.process_noise == "from_actuator" and ideal_actuator)
+    )
+
+
 def process_noise_model(
     est: Estimator, ideal_actuator: bool, u_max_km_s2: float
 ) -> ProcessNoiseModel | None:
@@ -85,7 +92,7 @@ def process_noise_model(
     None for ``"fixed"``, and for ``"from_actuator"`` with an ideal actuator
     (no error: ``Σ_e = 0``), so that those runs are the fixed runs bit for bit.
     """
-    if est.process_noise == "fixed" or (est.process_noise == "from_actuator" and ideal_actuator):
+    if not varies(est, ideal_actuator):
         return None
     q = est.q_matrix()
     return ProcessNoiseModel(
