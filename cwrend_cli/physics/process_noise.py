@@ -31,11 +31,12 @@
   of Mohamed & Schwarz 1999, "Adaptive Kalman filtering for INS/GPS",
   J. Geodesy 73, 193–203; its expectation is Q at the filter's steady state,
   since ``P⁻ − P⁺ = K S Kᵀ`` and ``E[ν νᵀ] = S``), is mapped to the
-  acceleration by ``Γ⁺ = (ΓᵀΓ)⁻¹Γᵀ``:
-  ``Σ̂_k = b Σ̂_{k−1} + (1 − b) Γ⁺ Q̃_k Γ⁺ᵀ``, ``Σ̂_0 = 0``; the filter predicts
-  with ``Q_k = Q + Γ_k Π₊(Σ̂_{k−1}) Γ_kᵀ``, ``Π₊`` the nearest
-  positive-semidefinite matrix (:func:`psd_part`), so ``Q_k ⪰ Q``
-  (``estimator.q_process``, the floor) and is symmetric positive definite.
+  acceleration in excess of the floor Q by ``Γ⁺ = (ΓᵀΓ)⁻¹Γᵀ``:
+  ``Σ̂_k = b Σ̂_{k−1} + (1 − b) Γ⁺ (Q̃_k − Q) Γ⁺ᵀ``, ``Σ̂_0 = 0``; the filter predicts
+  with ``Q_k = Q + Γ_k Π(Σ̂_{k−1}) Γ_kᵀ``, ``Π`` clipping the eigenvalues to
+  ``[0, u_max²]`` (:func:`psd_part`), so ``Q_k ⪰ Q`` (``estimator.q_process``,
+  the floor), is symmetric positive definite, and asks for no acceleration
+  noise beyond the thruster's authority.
   ``Φ P⁺_{k−1} Φᵀ = P⁻_k − Q_k``, so nothing beyond the step's own prior and
   posterior is kept. The restriction is needed: with position-only
   measurements the unrestricted 6×6 estimate is not identified by the
@@ -292,10 +293,10 @@ def adapt(
     """One Sage–Husa update of ``pn.sigma_hat`` after a measurement update (adaptive only).
 
     The sample ``Q̃ = Δx Δxᵀ + P⁺_k − Φ P⁺_{k−1} Φᵀ = Δx Δxᵀ + P⁺ − P⁻ + Q_k``
-    (Δx = x⁺ − x⁻; ``Φ P⁺_{k−1} Φᵀ = P⁻ − Q_k``) mapped to the acceleration
-    by the pseudo-inverse ``Γ⁺ = (ΓᵀΓ)⁻¹Γᵀ`` of the step's Γ:
-    ``Σ̂_a ← b Σ̂_a + (1 − b) Γ⁺ Q̃ Γ⁺ᵀ`` (exact for a sample of the form
-    ``Γ Σ Γᵀ``).
+    (Δx = x⁺ − x⁻; ``Φ P⁺_{k−1} Φᵀ = P⁻ − Q_k``), less the floor Q, mapped to
+    the acceleration by the pseudo-inverse ``Γ⁺ = (ΓᵀΓ)⁻¹Γᵀ`` of the step's Γ:
+    ``Σ̂_a ← b Σ̂_a + (1 − b) Γ⁺ (Q̃ − Q) Γ⁺ᵀ`` (exact for a sample of the form
+    ``Q + Γ Σ Γᵀ``): Σ̂_a estimates the noise in excess of the floor.
     """
     if pn.kind != ADAPTIVE:
         return
@@ -303,7 +304,8 @@ def adapt(
     for i in range(6):
         di = x_post[i] - x_pred[i]
         for j in range(6):
-            q_tilde[i, j] = di * (x_post[j] - x_pred[j]) + p_post[i, j] - p_pred[i, j] + q_k[i, j]
+            excess = q_k[i, j] - pn.q_floor[i, j]
+            q_tilde[i, j] = di * (x_post[j] - x_pred[j]) + p_post[i, j] - p_pred[i, j] + excess
     gtg = np.zeros((3, 3))
     for i in range(3):
         for j in range(3):
