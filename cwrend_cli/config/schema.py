@@ -73,6 +73,7 @@ __all__ = [
     "OutputConfig",
     "ScenarioConfig",
     "ScheduleConfig",
+    "SensorConfig",
     "SolverConfig",
     "TruthConfig",
 ]
@@ -119,6 +120,12 @@ DISPERSION_MAX = POSITION_VARIANCE_MAX_KM2
 #: A mean or end of a dispersion draw [the key's unit]: within ±DISPERSION_MAX.
 DispersionValue = Annotated[float, Strict(), Field(ge=-DISPERSION_MAX, le=DISPERSION_MAX)]
 
+#: A factor on a true measurement variance [-] (a degradation window's r_scale).
+RScale = Annotated[float, Strict(), Field(ge=1e-6, le=GAIN_MAX)]
+#: A probability [-] (a degradation window's outlier_probability).
+Probability = Annotated[float, Strict(), Field(ge=0, le=1)]
+#: A factor on the Gaussian noise of an outlier [-].
+OutlierScale = Annotated[float, Strict(), Field(ge=0, le=1e3)]
 PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
 VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
 #: A relative state [x, y, z, ẋ, ẏ, ż] [km, km/s], each entry bounded.
@@ -626,12 +633,11 @@ class DegradationWindow(_FrozenModel):
         le=TIME_MAX_S,
         description="window end time (inclusive), >= start_s, <= scenario.horizon_s [s]",
     )
-    r_scale: Float = Field(
+    r_scale: RScale | tuple[RScale, ...] = Field(
         1.0,
-        ge=1e-6,
-        le=GAIN_MAX,
-        description="true measurement covariance = r_scale * R_nominal, in [1e-6, 1e6] [-] "
-        "(paper 300)",
+        description="true measurement covariance = r_scale * R_nominal, in [1e-6, 1e6]; one "
+        "value for every component or one per measurement component (3; 2 for "
+        "sensor.model = 'angles') [-] (paper 300)",
     )
     bias_km: tuple[PositionKm, PositionKm, PositionKm] = Field(
         (0.0, 0.0, 0.0),
@@ -640,14 +646,16 @@ class DegradationWindow(_FrozenModel):
     dropout_probability: Float = Field(
         0.0, ge=0, le=1, description="probability of no measurement on a step; 1 = blackout [-]"
     )
-    outlier_probability: Float = Field(
-        0.0, ge=0, le=1, description="probability that a step's noise is an outlier [-]"
+    outlier_probability: Probability | tuple[Probability, ...] = Field(
+        0.0,
+        description="probability that a step's noise is an outlier, in [0, 1]; one value "
+        "(every component an outlier together) or one per measurement component (each on "
+        "its own draw) [-]",
     )
-    outlier_scale: Float = Field(
+    outlier_scale: OutlierScale | tuple[OutlierScale, ...] = Field(
         1.0,
-        ge=0,
-        le=1e3,
-        description="factor on the Gaussian noise of an outlier step, in [0, 1e3] [-]",
+        description="factor on the Gaussian noise of an outlier, in [0, 1e3]; one value or "
+        "one per measurement component [-]",
     )
     bias_drift_km_per_sqrt_s: Float = Field(
         0.0,
@@ -656,6 +664,32 @@ class DegradationWindow(_FrozenModel):
         description="random-walk intensity q of the bias: N(0, q² Δt) per step and axis, in "
         "[0, 10] [km/√s] (10 drifts 10 km in a second of window)",
     )
+    bias_range_km: PositionKm = Field(
+        0.0,
+        description="sensor.model = 'range_bearing': bias of the measured range, within "
+        "±1e4 km [km]",
+    )
+    bias_angles_deg: tuple[Angle, Angle] = Field(
+        (0.0, 0.0),
+        description="sensor.model = 'range_bearing' or 'angles': bias of the measured "
+        "(azimuth, elevation), each in [-180, 180] [deg]",
+    )
+
+    @field_validator("bias_angles_deg", mode="before")
+    @classmethod
+    def _two_entries(cls, value: Any) -> Any:
+        return _check_length(value, 2)
+
+    @model_serializer(mode="wrap")
+    def _without_sensor_fields_when_off(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # the nonlinear sensors' biases (issue 35) left out at zero: hashes unchanged
+        out = handler(self)
+        if isinstance(out, dict):
+            if out.get("bias_range_km") == 0.0:
+                out.pop("bias_range_km")
+            if tuple(out.get("bias_angles_deg", ())) == (0.0, 0.0):
+                out.pop("bias_angles_deg")
+        return out
 
     @field_validator("bias_km", mode="before")
     @classmethod
@@ -681,6 +715,8 @@ _PAPER_WINDOWS = tuple(
         outlier_probability=w.outlier_probability,
         outlier_scale=w.outlier_scale,
         bias_drift_km_per_sqrt_s=w.bias_drift_km_per_sqrt_s,
+        bias_range_km=w.bias_range_km,
+        bias_angles_deg=w.bias_angles_deg,
     )
     for w in _PAPER.degradation.windows
 )
@@ -757,6 +793,44 @@ class ModelConfig(_FrozenModel):
     filter: Literal["cw", "ss", "ya"] = Field(
         _PAPER.model.filter,
         description="design model of the Kalman filter's prediction: 'cw', 'ss' or 'ya' [-]",
+    )
+
+
+class SensorConfig(_FrozenModel):
+    """What the chaser measures (issue 35; ``[sensor]``); the paper's relative position by default.
+
+    ``"position"``: the relative position [km], noise ``estimator.r_nominal_km2``
+    (paper Eq. 13). ``"range_bearing"``: range [km], azimuth and elevation of the
+    target seen from the chaser; ``"angles"``: azimuth and elevation only (a
+    camera); both updated by an extended Kalman filter, with σ_range =
+    ``sigma_range_km`` + ``sigma_range_fraction`` × range and σ_angle =
+    ``sigma_angle_deg`` (:mod:`cwrend_cli.physics.measurement_models`). With the
+    default the section is left out of the resolved config, so every number and
+    hash is as before.
+    """
+
+    model: Literal["position", "range_bearing", "angles"] = Field(
+        _PAPER.sensor.model,
+        description="measurement: 'position', 'range_bearing' or 'angles' [-]",
+    )
+    sigma_range_km: Float = Field(
+        _PAPER.sensor.sigma_range_km,
+        gt=0,
+        le=POSITION_MAX_KM,
+        description="range_bearing: constant part of the range σ, in (0, 1e4] [km]",
+    )
+    sigma_range_fraction: Float = Field(
+        _PAPER.sensor.sigma_range_fraction,
+        ge=0,
+        le=1,
+        description="range_bearing: the range σ grows by this fraction of the range, in [0, 1] [-]",
+    )
+    sigma_angle_deg: Float = Field(
+        _PAPER.sensor.sigma_angle_deg,
+        gt=0,
+        le=10,
+        description="range_bearing and angles: σ of the azimuth and of the elevation, in "
+        "(0, 10] [deg]",
     )
 
 
@@ -1140,6 +1214,10 @@ class CwrendConfig(_FrozenModel):
         default_factory=ModelConfig,
         description="design models of the guidance and the filter (default CW)",
     )
+    sensor: SensorConfig = Field(
+        default_factory=SensorConfig,
+        description="what the chaser measures: position (default), range_bearing or angles",
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str | dict[str, Any]] = Field(
@@ -1193,7 +1271,36 @@ class CwrendConfig(_FrozenModel):
             out.pop("constraints", None)
         if isinstance(out, dict) and self.model == ModelConfig():
             out.pop("model", None)  # no [model]: CW, hashes unchanged (issue 33)
+        if isinstance(out, dict) and self.sensor == SensorConfig():
+            out.pop("sensor", None)  # no [sensor]: position, hashes unchanged (issue 35)
         return out
+
+    @model_validator(mode="before")
+    @classmethod
+    def _nis_offset_of_the_sensor(cls, data: Any) -> Any:
+        # schedule.nis_offset is the measurement dimension m of paper Eq. 24: unless given,
+        # 2 for the angles sensor (issue 35); 3 (the default) for the others
+        if not isinstance(data, dict):
+            return data
+        sensor = data.get("sensor")
+        model = sensor.get("model") if isinstance(sensor, dict) else getattr(sensor, "model", None)
+        if model != "angles":
+            return data
+        schedule = data.get("schedule", {})
+        if isinstance(schedule, ScheduleConfig):
+            if "nis_offset" in schedule.model_fields_set:
+                return data
+            return {**data, "schedule": schedule.model_copy(update={"nis_offset": 2.0})}
+        if isinstance(schedule, dict) and "nis_offset" not in schedule:
+            return {**data, "schedule": {**schedule, "nis_offset": 2.0}}
+        return data
+
+    @model_validator(mode="after")
+    def _sensor_rules(self) -> Self:
+        problems = sensor_problems(self)
+        if problems:
+            raise rules_error(problems)
+        return self
 
     @model_validator(mode="after")
     def _design_model_rules(self) -> Self:
@@ -1310,3 +1417,75 @@ def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
     except OSError:
         return None  # reading it reports the problem
     return noise_file_too_large(size, n_steps)
+
+
+def sensor_problems(cfg: CwrendConfig) -> list[tuple[str, Any, str]]:
+    """The fields of ``cfg`` that make no sense with its sensor model (issue 35), with the fix."""
+    model = cfg.sensor.model
+    default = SensorConfig()
+    problems: list[tuple[str, Any, str]] = []
+    unused: list[str] = []
+    if model == "position":
+        unused = ["sigma_range_km", "sigma_range_fraction", "sigma_angle_deg"]
+    elif model == "angles":
+        unused = ["sigma_range_km", "sigma_range_fraction"]
+    for name in unused:
+        value = getattr(cfg.sensor, name)
+        if value != getattr(default, name):
+            problems.append(
+                (
+                    f"sensor.{name}",
+                    value,
+                    f"the '{model}' sensor measures no "
+                    + ("angle" if name == "sigma_angle_deg" else "range")
+                    + ": leave it unset or set sensor.model to one that does"
+                    + (
+                        " (estimator.r_nominal_km2 is the position sensor's noise)"
+                        if model == "position"
+                        else ""
+                    ),
+                )
+            )
+    if model != "position" and cfg.estimator.r_nominal_km2 != EstimatorConfig().r_nominal_km2:
+        problems.append(
+            (
+                "estimator.r_nominal_km2",
+                cfg.estimator.r_nominal_km2,
+                f"the '{model}' sensor's noise is set by sensor.sigma_range_km, "
+                "sigma_range_fraction and sigma_angle_deg: leave r_nominal_km2 at the default",
+            )
+        )
+    m = 2 if model == "angles" else 3
+    for i, w in enumerate(cfg.degradation.windows):
+        key = f"degradation.windows.{i}"
+        for name in ("r_scale", "outlier_probability", "outlier_scale"):
+            value = getattr(w, name)
+            if isinstance(value, tuple) and len(value) != m:
+                problems.append(
+                    (
+                        f"{key}.{name}",
+                        list(value),
+                        f"must be one value or {m} (one per component of the '{model}' "
+                        "sensor's measurement)",
+                    )
+                )
+        if model != "range_bearing" and w.bias_range_km != 0.0:
+            problems.append(
+                (
+                    f"{key}.bias_range_km",
+                    w.bias_range_km,
+                    f"the '{model}' sensor measures no range: use "
+                    + ("bias_km" if model == "position" else "bias_angles_deg")
+                    + " or sensor.model = 'range_bearing'",
+                )
+            )
+        if model == "position" and tuple(w.bias_angles_deg) != (0.0, 0.0):
+            problems.append(
+                (
+                    f"{key}.bias_angles_deg",
+                    list(w.bias_angles_deg),
+                    "the 'position' sensor measures no angle: use bias_km, or "
+                    "sensor.model = 'range_bearing' or 'angles'",
+                )
+            )
+    return problems

@@ -13,6 +13,8 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
                                        + Points3D (current position, over time)
     /arch/<slug>/trajectory/estimate   the same for the filter estimate
     /arch/<slug>/thrust                Arrows3D from the current position along u (scaled)
+    /arch/<slug>/line_of_sight         Arrows3D from the true position along the measured
+                                       line of sight (a nonlinear [sensor], issue 35)
     /arch/<slug>/{u_norm, dv_cum, eps, score, score_filtered, nis, mtf_ratio,
                   pos_err_km, est_err_km}   Scalars over sim_time
     /arch/<slug>/resolve_success       Scalars at the re-solve times (1 success, 0 not)
@@ -48,6 +50,7 @@ import numpy as np
 
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
+from cwrend_cli.physics import measurement_models as mm
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.physics.sensors import in_window
@@ -348,6 +351,30 @@ def _send_path(
     )
 
 
+def _send_line_of_sight(
+    rec: rr.RecordingStream, path: str, run: RunResult, colour: str, radius: float
+) -> None:
+    """The measured line of sight over time: from the true position towards the target.
+
+    Its length is the measured range (``range_bearing``) or the range the filter
+    estimates, ‖x̂‖ (``angles``: no range measured). Rows without a measurement
+    (t = 0, dropouts) are left out.
+    """
+    import rerun as rr
+
+    kind = mm.KINDS[run.sensor]
+    sight = mm.line_of_sight(kind, np.asarray(run.y, dtype=float))
+    if kind == mm.ANGLES:
+        sight = sight * np.linalg.norm(run.x_hat[:, :3], axis=1)[:, None]
+    ok = np.isfinite(sight).all(axis=1)
+    rec.log(path, rr.Arrows3D.from_fields(colors=[rgb(colour)], radii=[radius]), static=True)
+    rec.send_columns(
+        path,
+        indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(run.t_s, dtype=float)[ok])],
+        columns=rr.Arrows3D.columns(origins=run.x_true[ok, :3], vectors=sight[ok]),
+    )
+
+
 #: The about panel at the default 1600×1000 window (:func:`build_blueprint`): height of a
 #: line of its markdown and of its title bar and margins [px], the height of the left
 #: column it shares with the 3D view [px], and the characters a line holds at its width
@@ -470,6 +497,8 @@ def _log_case(
             indexes=[rr.TimeColumn(TIMELINE, duration=t)],
             columns=rr.Arrows3D.columns(origins=run.x_true[:, :3], vectors=arrow_scale * run.u),
         )
+        if run.sensor != "position":
+            _send_line_of_sight(rec, f"{base}/line_of_sight", run, colour, 0.3 * line_r)
         u_norm = np.linalg.norm(run.u, axis=1)
         series = {
             "u_norm": u_norm,

@@ -125,7 +125,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         f"meas_{a}_km": _col(f"position measurement of row k (taken at t_k), {d}; NaN: none")
         for a, d in _A.items()
     },
-    "nis": _col("normalised innovation squared of the row's measurement (chi2_3)", "-"),
+    "meas_range_km": _col(
+        "range of the target measured at t_k (sensor.model = 'range_bearing'); NaN: none"
+    ),
+    "meas_azimuth_deg": _col(
+        "azimuth of the target measured at t_k, in (-180, 180] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "meas_elevation_deg": _col(
+        "elevation of the target measured at t_k, in [-90, 90] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "nis": _col(
+        "normalised innovation squared of the row's measurement (chi2_m, m = 3, or 2 for "
+        "sensor.model = 'angles')",
+        "-",
+    ),
     "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
     "score": _col("composite innovation score s", "-"),
     "score_filtered": _col("low-pass filtered score s-bar", "-"),
@@ -471,6 +486,17 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["u_norm_km_s2"] = row_norm(*u)
     for i, a in enumerate(_AXES):
         cols[f"ucmd_{a}_km_s2"] = u_cmd[i]
+    if _has_angles(results):
+        # a nonlinear sensor (issue 35): its components in their own columns, the
+        # position measurement NaN (none was taken)
+        parts = [_sensor_components(r) for r in results]
+        y = np.concatenate([p[0] for p in parts], axis=1)
+        for name, values in zip(
+            ("meas_range_km", "meas_azimuth_deg", "meas_elevation_deg"),
+            np.concatenate([p[1] for p in parts], axis=1),
+            strict=True,
+        ):
+            cols[name] = values
     for i, a in enumerate(_AXES):
         cols[f"meas_{a}_km"] = y[i]
     for name in ("nis", "mtf_ratio", "score", "score_filtered", "eps"):
@@ -490,6 +516,33 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     return cols
 
 
+def _has_angles(results: Sequence[RunResult]) -> bool:
+    """True when a run measures range and angles or angles (issue 35): their columns are written."""
+    return any(r.sensor != "position" for r in results)
+
+
+def _sensor_components(result: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """(position measurement (3, N) [km], (range [km], azimuth, elevation [deg]) (3, N)) of a run.
+
+    Whichever the run's sensor did not measure is NaN.
+    """
+    y = np.asarray(result.y).T
+    nan = np.full_like(y, np.nan)
+    if result.sensor == "position":
+        return y, nan
+    if result.sensor == "range_bearing":
+        return nan, np.vstack([y[:1], np.rad2deg(y[1:])])
+    return nan, np.vstack([nan[:1], np.rad2deg(y[:2])])
+
+
+#: The steps' columns of a nonlinear sensor (issue 35), only when a run has one.
+SENSOR_STEP_FIELDS = [
+    pa.field("meas_range_km", pa.float64()),
+    pa.field("meas_azimuth_deg", pa.float64()),
+    pa.field("meas_elevation_deg", pa.float64()),
+]
+
+
 def _has_safety(results: Sequence[RunResult]) -> bool:
     """True when the runs carry safety measurements (all or none of them: one problem)."""
     flags = {r.safety is not None for r in results}
@@ -502,6 +555,7 @@ def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) ->
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
     schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -712,6 +766,7 @@ def campaign_steps_table(
     schema = _with_safety(
         CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
     )
+    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 

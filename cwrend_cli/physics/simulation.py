@@ -55,6 +55,7 @@ from cwrend_cli.physics import (
     actuator,
     design_models,
     guidance,
+    measurement_models,
     process_noise,
     references,
     sensors,
@@ -122,6 +123,9 @@ class RunResult:
     trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
+    #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
+    #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
+    sensor: str = "position"
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -298,10 +302,20 @@ def simulate(
     phi, gam = discretize(n, dt)
     filter_phi, filter_gam = _filter_tables(problem)
     r_nominal = est.r_nominal_matrix()
-    meas = sensors.sensor_noise(
-        standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
-    )
-    noise, active = meas.noise, meas.active
+    windows = problem.degradation.windows
+    sensor: measurement_models.SensorModel | None = None
+    if problem.sensor.model == "position":
+        meas = sensors.sensor_noise(standard_normal, t[:-1], r_nominal, windows, fault_draws, dt)
+        noise, active, dropout_steps, outlier_steps = (
+            meas.noise, meas.active, meas.dropout, meas.outlier
+        )  # fmt: skip
+    else:  # a nonlinear sensor (issue 35): measured and updated in the compiled loop
+        sensor, parts = sensors.sensor_model(
+            problem.sensor, standard_normal, t[:-1], windows, fault_draws, dt
+        )
+        noise, active, dropout_steps, outlier_steps = (
+            np.zeros((n_steps, 3)), parts.active, parts.dropout, parts.outlier
+        )  # fmt: skip
 
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
@@ -337,7 +351,7 @@ def simulate(
         hold_mean=gd.hold == "mean",
         u_override=np.zeros((n_steps, 3)),
         override=np.zeros(n_steps, dtype=np.bool_),
-        dropout=meas.dropout,
+        dropout=dropout_steps,
         filter_phi=filter_phi,
         filter_gam=filter_gam,
     )
@@ -378,7 +392,7 @@ def simulate(
     schedule = resolve_steps(problem)
     # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
     pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
-    loop = _Loop(model, truth_model, act, sched, state, log, pn)
+    loop = _Loop(model, truth_model, act, sched, state, log, sensor, pn)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -387,8 +401,8 @@ def simulate(
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
-    dropout = np.concatenate(([False], meas.dropout))
-    outlier = np.concatenate(([False], meas.outlier))
+    dropout = np.concatenate(([False], dropout_steps))
+    outlier = np.concatenate(([False], outlier_steps))
     log.nees[0] = sk.nees(est.p0_matrix(), x_hat0, x0, np.empty((6, 7)))
     return RunResult(
         arch=arch.slug,
@@ -414,6 +428,7 @@ def simulate(
         outlier=outlier,
         safety=_safety(problem, log.x),
         trace_q=log.trace_q,
+        sensor=problem.sensor.model,
     )
 
 
@@ -435,7 +450,8 @@ class _Loop:
     sched: sk.ScheduleParams
     state: sk.LoopState
     log: sk.StepLog
-    pn: process_noise.ProcessNoiseModel | None  # None: estimator.q_process at every step
+    sensor: measurement_models.SensorModel | None = None  # None: the position sensor
+    pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -443,7 +459,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log, self.pn,
+            scalars, self.log, self.sensor, self.pn,
         )  # fmt: skip
 
 
@@ -506,7 +522,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.pn,
+            scalars, carry, loop.log, rows, loop.sensor, loop.pn,
         )  # fmt: skip
         if i == count:
             break
