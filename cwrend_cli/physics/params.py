@@ -405,6 +405,29 @@ class Constraints:
 
 
 @dataclass(frozen=True)
+class Target:
+    """The target's attitude (issue 34; :mod:`.attitude`); ``fixed`` by default.
+
+    ``fixed``: body axes along the relative (Hill) frame at all times, today's
+    geometry. ``tumbling``: a torque-free rigid body from the initial attitude
+    ``initial_quaternion`` (body→Hill at t = 0, scalar-first, normalised at use),
+    the initial ``body_rates_deg_s`` (angular velocity relative to inertial
+    space, in body axes) and the principal moments of inertia ``inertia``
+    (ratios).
+    """
+
+    attitude: Literal["fixed", "tumbling"] = "fixed"
+    initial_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # [-]
+    body_rates_deg_s: Vec3 = (0.0, 0.0, 0.0)  # ω(0), inertial, body axes [deg/s]
+    inertia: Vec3 = (1.0, 1.0, 1.0)  # principal moments (I₁, I₂, I₃), ratios [-]
+
+    @property
+    def tumbling(self) -> bool:
+        """True for a torque-free tumbling target."""
+        return self.attitude == "tumbling"
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -420,6 +443,8 @@ class Problem:
     constraints: Constraints | None = None
     #: design models of the guidance and the filter (issue 33); CW by default
     model: DesignModel = field(default_factory=DesignModel)
+    #: the target's attitude (issue 34); fixed in the relative frame by default
+    target: Target = field(default_factory=Target)
     #: what the chaser measures (issue 35); the relative position by default
     sensor: Sensor = field(default_factory=Sensor)
 

@@ -53,6 +53,7 @@ import numpy.typing as npt
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import (
     actuator,
+    attitude,
     design_models,
     guidance,
     measurement_models,
@@ -123,6 +124,9 @@ class RunResult:
     trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
+    #: the tumbling target's attitude over the run (issue 34), only with target.attitude
+    #: = "tumbling"; at every step and sub-step (:func:`_target_attitude`)
+    target_attitude: attitude.TargetAttitude | None = None
     #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
     #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
     sensor: str = "position"
@@ -317,6 +321,8 @@ def simulate(
             np.zeros((n_steps, 3)), parts.active, parts.dropout, parts.outlier
         )  # fmt: skip
 
+    # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
+    target_attitude = _target_attitude(problem)
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -428,8 +434,24 @@ def simulate(
         outlier=outlier,
         safety=_safety(problem, log.x),
         trace_q=log.trace_q,
+        target_attitude=target_attitude,
         sensor=problem.sensor.model,
     )
+
+
+def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
+    """The tumbling target's attitude at every step and safety sub-sample (issue 34 item 1).
+
+    None for a fixed target (its axes are the relative frame's). Computed once
+    before the loop: torque-free motion depends on nothing the chaser does, so
+    these are the numbers a propagation inside the step loop would give
+    (:mod:`cwrend_cli.physics.attitude`).
+    """
+    if not problem.target.tumbling:
+        return None
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
 def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
