@@ -93,6 +93,11 @@ class Estimator:
     q_process: Covariance = (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14)  # Q [km², km²/s²]
     p0: Covariance = (1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10)  # P0 [km², km²/s²]
     initial_error: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x̂0 − x0 [km, km/s]
+    #: Q of each step (issue 33, :mod:`cwrend_cli.physics.process_noise`): ``q_process``
+    #: ("fixed", the paper's), plus the actuator errors' ("from_actuator"), or the
+    #: Sage–Husa estimate floored at ``q_process`` ("adaptive")
+    process_noise: Literal["fixed", "from_actuator", "adaptive"] = "fixed"
+    q_forgetting: float = 0.99  # forgetting factor b of the adaptive estimate, in (0, 1) [-]
 
     def r_nominal_matrix(self) -> FloatArray:
         """R_nominal as a new 3×3 float64 array [km²]."""

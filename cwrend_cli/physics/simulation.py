@@ -61,6 +61,7 @@ from cwrend_cli.physics import (
     ekf,
     guidance,
     measurement_models,
+    process_noise,
     references,
     sensors,
     truth,
@@ -124,6 +125,7 @@ class RunResult:
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
     dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
+    trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
     #: the tumbling target's attitude over the run (issue 34), only with target.attitude
@@ -273,6 +275,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         eps=np.full(rows, np.nan),
         trace_p=np.full(rows, np.nan),
         nees=np.full(rows, np.nan),
+        trace_q=np.full(rows, np.nan),
     )
 
 
@@ -397,8 +400,10 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
+    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
+    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
     filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
-    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf)
+    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf, pn)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -433,6 +438,7 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
     )
@@ -473,6 +479,7 @@ class _Loop:
     log: sk.StepLog
     sensor: measurement_models.SensorModel | None = None  # None: the position sensor
     ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
+    pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -480,7 +487,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log, self.sensor, self.ekf,
+            scalars, self.log, self.sensor, self.ekf, self.pn,
         )  # fmt: skip
 
 
@@ -543,7 +550,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor, loop.ekf,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
         )  # fmt: skip
         if i == count:
             break
