@@ -193,17 +193,17 @@ def test_the_single_factor_runs_on_the_noise_of_the_others(
 
 
 def test_an_ablation_with_the_single_factor_runs_end_to_end(tmp_path: Path) -> None:
-    """``--arch stf_fixed,stf_adaptive,mtf_adaptive``: every run ok, and P(MTF beats STF) paired."""
+    """``--arch with_stf``: six architectures, every run ok, P(MTF beats STF) paired."""
     cfg = tmp_path / "c.toml"
     cfg.write_text(f'[output]\ndir = "{tmp_path / "results"}"\nname = "c"\n')
-    archs = "stf_fixed,stf_adaptive,mtf_adaptive"
     result = runner.invoke(
-        app, ["ablate", str(cfg), "--arch", archs, "--seeds", "2", "-w", "1", "--no-rrd", "-q"]
+        app, ["ablate", str(cfg), "--arch", "with_stf", "--seeds", "2", "-w", "1", "--no-rrd", "-q"]
     )
     assert result.exit_code == 0, result.output
     stats = pd.read_parquet(tmp_path / "results" / "c" / "ablation.parquet")
+    marginal = stats[stats["kind"] == "marginal"]
+    assert set(marginal["arch"]) == {*ARCHITECTURES, "stf_fixed", "stf_adaptive"}
+    assert set(marginal["n"]) == {2}  # every run ok
     paired = stats[stats["kind"] == "paired"]
-    assert set(zip(paired["arch"], paired["other"], strict=True)) == {
-        ("mtf_adaptive", "stf_adaptive"),
-        ("stf_adaptive", "stf_fixed"),
-    }
+    pairs = list(dict.fromkeys(zip(paired["arch"], paired["other"], strict=True)))
+    assert pairs[4:6] == [("mtf_adaptive", "stf_adaptive"), ("mtf_fixed", "stf_fixed")]
