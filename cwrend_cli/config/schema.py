@@ -75,6 +75,7 @@ __all__ = [
     "ScheduleConfig",
     "SensorConfig",
     "SolverConfig",
+    "TargetConfig",
     "TruthConfig",
 ]
 
@@ -758,16 +759,20 @@ class ModelConfig(_FrozenModel):
     of ``[truth]``: eccentricity ``truth.eccentricity``, true anomaly
     ``truth.true_anomaly_deg`` at t = 0. Both read the chief from ``[truth]``,
     so they need a truth that flies one (``truth.model`` ``"two_body"`` or
-    ``"j2"``). Without the section every number and hash is as before.
+    ``"j2"``). The filter also takes ``"ekf_two_body"`` and ``"ekf_j2"``: an
+    extended Kalman filter on the nonlinear two-body (two-body + J2) relative
+    dynamics about the same chief, with the same need. Without the section
+    every number and hash is as before.
     """
 
     guidance: Literal["cw", "ss", "ya"] = Field(
         _PAPER.model.guidance,
         description="design model of the re-solves: 'cw', 'ss' (J2) or 'ya' (eccentric) [-]",
     )
-    filter: Literal["cw", "ss", "ya"] = Field(
+    filter: Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"] = Field(
         _PAPER.model.filter,
-        description="design model of the Kalman filter's prediction: 'cw', 'ss' or 'ya' [-]",
+        description="model of the Kalman filter's prediction: 'cw', 'ss', 'ya', or an "
+        "extended Kalman filter on the nonlinear dynamics 'ekf_two_body' or 'ekf_j2' [-]",
     )
 
 
@@ -1107,6 +1112,104 @@ class ConstraintsConfig(_FrozenModel):
 PORT_SURFACE_TOL = 1e-12
 
 
+#: A component of the initial attitude quaternion [-] (normalised at use; bounded so its
+#: norm is finite).
+QuaternionEntry = Annotated[float, Strict(), Field(ge=-GAIN_MAX, le=GAIN_MAX)]
+#: Largest body rate about one axis [deg/s]: 10 rpm, six times the fastest tumble of the
+#: public reference study of issue 34 (10 °/s, Sow et al. 2024).
+BODY_RATE_MAX_DEG_S = 60.0
+BodyRateDegS = Annotated[float, Strict(), Field(ge=-BODY_RATE_MAX_DEG_S, le=BODY_RATE_MAX_DEG_S)]
+#: A principal moment of inertia as a ratio [-]: positive, at most 1e6 (only ratios matter).
+InertiaRatio = Annotated[float, Strict(), Field(gt=0, le=GAIN_MAX)]
+
+
+class TargetConfig(_FrozenModel):
+    """The target's attitude (issue 34; ``[target]``); ``fixed`` by default.
+
+    ``fixed``: the target's body axes stay along the relative frame (x radial,
+    y along-track, z cross-track), today's geometry. ``tumbling``: a torque-free
+    rigid body (:mod:`cwrend_cli.physics.attitude`). The tumbling fields are
+    refused with ``fixed`` (they would do nothing). Fixed, the section is left out
+    of the resolved config, so the config hash and every number are as without
+    it. Path constraints do not rotate with a tumbling target yet: ``tumbling``
+    with ``[constraints]`` is refused.
+    """
+
+    attitude: Literal["fixed", "tumbling"] = Field(
+        "fixed",
+        description="'fixed' (body axes along the relative frame) or 'tumbling' (torque-free "
+        "rigid body) [-]",
+    )
+    initial_quaternion: tuple[
+        QuaternionEntry, QuaternionEntry, QuaternionEntry, QuaternionEntry
+    ] = Field(
+        (1.0, 0.0, 0.0, 0.0),
+        description="tumbling: attitude at t = 0, body to relative frame, scalar-first "
+        "(q0, q1, q2, q3), any non-zero length (normalised by the tool); each entry in "
+        "[-1e6, 1e6] [-]",
+    )
+    body_rates_deg_s: tuple[BodyRateDegS, BodyRateDegS, BodyRateDegS] = Field(
+        (0.0, 0.0, 0.0),
+        description="tumbling: angular velocity at t = 0 relative to inertial space, in body "
+        "axes (with its z axis along the orbit normal, a target at rest in the relative frame "
+        "has [0, 0, n]); each in [-60, 60] [deg/s]",
+    )
+    inertia: tuple[InertiaRatio, InertiaRatio, InertiaRatio] = Field(
+        (1.0, 1.0, 1.0),
+        description="tumbling: principal moments of inertia (I1, I2, I3) about the body axes, "
+        "as ratios; each in (0, 1e6], no one above the sum of the other two [-]",
+    )
+
+    @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
+    @classmethod
+    def _lengths(cls, value: Any, info: ValidationInfo) -> Any:
+        return _check_length(value, 4 if info.field_name == "initial_quaternion" else 3)
+
+    @field_validator("initial_quaternion")
+    @classmethod
+    def _non_zero(cls, value: tuple[float, ...]) -> tuple[float, ...]:
+        if not any(value):
+            raise ValueError("must be a non-zero quaternion (e.g. [1, 0, 0, 0])")
+        return value
+
+    @field_validator("inertia")
+    @classmethod
+    def _triangle(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        # a rigid body's principal moments obey I_i <= I_j + I_k (each is a sum of two of
+        # the three second moments of its mass distribution)
+        for i in range(3):
+            others = value[(i + 1) % 3] + value[(i + 2) % 3]
+            if value[i] > others:
+                raise ValueError(
+                    f"no rigid body has these moments: I{i + 1} = {fmt_num(value[i])} exceeds "
+                    f"the sum of the other two ({fmt_num(others)}): each must be at most the "
+                    "sum of the other two"
+                )
+        return value
+
+    @model_validator(mode="after")
+    def _tumbling_fields_only_when_tumbling(self) -> Self:
+        if self.attitude == "fixed":
+            unused = [
+                (name, getattr(self, name))
+                for name in ("initial_quaternion", "body_rates_deg_s", "inertia")
+                if getattr(self, name) != type(self).model_fields[name].default
+            ]
+            if unused:
+                name, value = unused[0]
+                raise rules_error(
+                    [
+                        (
+                            name,
+                            list(value),
+                            "applies to a tumbling target only: set target.attitude = "
+                            "'tumbling', or leave it out",
+                        )
+                    ]
+                )
+        return self
+
+
 SweepValue = Float | Int | bool | str | tuple[Float, ...]
 
 
@@ -1193,6 +1296,10 @@ class CwrendConfig(_FrozenModel):
         default_factory=SensorConfig,
         description="what the chaser measures: position (default), range_bearing or angles",
     )
+    target: TargetConfig = Field(
+        default_factory=TargetConfig,
+        description="the target's attitude: fixed (default) or tumbling",
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str | dict[str, Any]] = Field(
@@ -1246,6 +1353,8 @@ class CwrendConfig(_FrozenModel):
             out.pop("constraints", None)
         if isinstance(out, dict) and self.model == ModelConfig():
             out.pop("model", None)  # no [model]: CW, hashes unchanged (issue 33)
+        if isinstance(out, dict) and self.target == TargetConfig():
+            out.pop("target", None)  # a fixed target: hashes unchanged (issue 34)
         if isinstance(out, dict) and self.sensor == SensorConfig():
             out.pop("sensor", None)  # no [sensor]: position, hashes unchanged (issue 35)
         return out
@@ -1349,6 +1458,16 @@ class CwrendConfig(_FrozenModel):
                     "actuator.min_thrust_km_s2",
                     act.min_thrust_km_s2,
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
+                )
+            )
+        if self.target.attitude == "tumbling" and self.constraints.active:
+            problems.append(
+                (
+                    "target.attitude",
+                    self.target.attitude,
+                    "rotating constraints are not supported yet: [constraints] are given in "
+                    "the relative frame and would not turn with a tumbling target; use "
+                    "target.attitude = 'fixed' or leave out [constraints]",
                 )
             )
         corridor = self.constraints.corridor

@@ -21,6 +21,10 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
     /reference/{energy,fuel}/trajectory  LineStrips3D + Points3D of the open-loop plan
     /reference/{energy,fuel}/{u_norm, dv_cum, pos_err_km}
     /target                            Points3D at the origin (static)
+    /target/body                       Transform3D: a tumbling target's attitude over time
+                                       (body to relative frame; with target.attitude =
+                                       "tumbling", issue 34)
+    /target/body/axes                  Arrows3D: the body's x, y, z axes (red, green, blue)
     /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
     /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static)
     /arch/<slug>/safety_distance_km    Scalars: φ to the unsafe set (with [constraints])
@@ -215,6 +219,7 @@ def build_blueprint(
     *,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
     safety: bool = False,
+    tumbling: bool = False,
 ) -> rrb.Blueprint:
     """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors).
 
@@ -241,6 +246,7 @@ def build_blueprint(
             *[f"/arch/{s}/thrust" for s in slugs],
             *[f"/reference/{r}/trajectory" for r in reference_names],
             "/target",
+            *(["/target/body/**"] if tumbling else []),
             "/constraints/**",
         ],
         eye_controls=_eye(rrb, bounds) if bounds is not None else None,
@@ -467,6 +473,9 @@ def _log_case(
     geo = next((r.safety.geometry for r in runs if r.safety is not None), None)
     if geo is not None:  # issue 32: the keep-out zone and the corridor
         _log_constraints(rec, geo, line_r)
+    tumble = next((r for r in runs if r.target_attitude is not None), None)
+    if tumble is not None:  # issue 34: the same for every architecture of the case
+        _log_target_attitude(rec, tumble, TARGET_AXES_SHARE * extent, line_r)
     rec.log(
         "/about",
         rr.TextDocument(
@@ -617,6 +626,42 @@ def _log_constraints(rec: rr.RecordingStream, geo: Geometry, line_radius: float)
     )
 
 
+#: Length of the drawn body axes of a tumbling target, a share of the scene's extent [-].
+TARGET_AXES_SHARE = 0.05
+#: Colours of the body's x, y and z axes (RGB).
+BODY_AXIS_COLOURS = ((214, 39, 40), (44, 160, 44), (31, 119, 180))
+
+
+def _log_target_attitude(
+    rec: rr.RecordingStream, run: RunResult, length_km: float, line_radius: float
+) -> None:
+    """A tumbling target's attitude (issue 34): ``/target/body`` turns over time (its
+    body-to-relative-frame quaternion at every step, as a Transform3D) and carries the
+    body's axes (``/target/body/axes``, static in the body frame). Anything logged
+    under ``/target/body`` turns with the body."""
+    import rerun as rr
+
+    assert run.target_attitude is not None
+    q_hb, _ = run.target_attitude.at_steps()
+    xyzw = np.ascontiguousarray(q_hb[:, [1, 2, 3, 0]])  # Rerun's quaternions are scalar-last
+    rec.send_columns(
+        "/target/body",
+        indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(run.t_s, dtype=float))],
+        columns=rr.Transform3D.columns(quaternion=xyzw),
+    )
+    rec.log(
+        "/target/body/axes",
+        rr.Arrows3D(
+            origins=np.zeros((3, 3)),
+            vectors=length_km * np.eye(3),
+            colors=list(BODY_AXIS_COLOURS),
+            radii=[line_radius],
+            labels=["x_b", "y_b", "z_b"],
+        ),
+        static=True,
+    )
+
+
 #: Values of the ``RERUN`` environment variable that turn Rerun's logging off, in any case
 #: and unstripped ("SDK logging controls" of Rerun's documentation; checked against
 #: ``rr.is_enabled`` by a test). Rerun reads it for every new recording stream.
@@ -721,6 +766,7 @@ def encode_case(
         len(windows),
         bounds=scene_bounds(runs, refs),
         safety=any(r.safety is not None for r in runs),
+        tumbling=any(r.target_attitude is not None for r in runs),
     )
     memory = rec.memory_recording()
     rec.send_blueprint(blueprint, make_active=False, make_default=True)

@@ -62,6 +62,7 @@ SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
     ("_km_s2", "km/s^2"),
     ("_km_s", "km/s"),
     ("_rad_s", "rad/s"),
+    ("_deg_s", "deg/s"),
     ("_km2", "km^2"),
     ("_km", "km"),
     ("_deg", "deg"),
@@ -242,6 +243,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
+    # the tumbling target's attitude (issue 34; only with target.attitude = "tumbling")
+    **{
+        f"target_q{i}": _col(
+            f"component {i} of the target's attitude quaternion, body to relative frame, "
+            "scalar-first (q0 the scalar part)",
+            "-",
+        )
+        for i in range(4)
+    },
+    **{
+        f"target_w{a}_deg_s": _col(
+            f"target body rate about its {a} axis: angular velocity relative to inertial "
+            "space, in body axes"
+        )
+        for a in ("x", "y", "z")
+    },
     "duration_s": _col("wall time of the run"),
     # references
     "reference": _col("open-loop reference: energy or fuel", "-"),
@@ -278,6 +295,7 @@ _DIMENSIONLESS_KEYS = (
     "solver.quadrature_nodes",
     "constraints.sigma_margin",
     "constraints.corridor.axis",
+    "target.",
 )
 #: Configuration keys without a unit suffix that are not dimensionless.
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
@@ -506,7 +524,23 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     if _has_safety(results):
         safety = [r.safety for r in results if r.safety is not None]
         cols["safety_distance_km"] = np.concatenate([sf.step_distance_km for sf in safety])
+    if _has_attitude(results):
+        steps = [r.target_attitude.at_steps() for r in results if r.target_attitude is not None]
+        q = np.concatenate([q for q, _ in steps])
+        w = np.degrees(np.concatenate([w for _, w in steps]))
+        for i in range(4):
+            cols[f"target_q{i}"] = q[:, i]
+        for i, a in enumerate(_AXES):
+            cols[f"target_w{a}_deg_s"] = w[:, i]
     return cols
+
+
+def _has_attitude(results: Sequence[RunResult]) -> bool:
+    """True when the runs carry a tumbling target's attitude (all or none of them)."""
+    flags = {r.target_attitude is not None for r in results}
+    if len(flags) > 1:
+        raise ValueError("runs with a tumbling and a fixed target in one steps table")
+    return flags == {True}
 
 
 def _has_angles(results: Sequence[RunResult]) -> bool:
@@ -547,8 +581,9 @@ def _has_safety(results: Sequence[RunResult]) -> bool:
 def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
-    schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
-    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
+    schema = _with_fields(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, result.target_attitude is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -601,7 +636,7 @@ SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km",
 def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per solve (the initial one of adaptive runs, then every re-solve)."""
     cols = {"arch": [result.arch] * len(result.solves), **_solves_columns([result])}
-    schema = _with_safety(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
+    schema = _with_fields(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -640,6 +675,11 @@ SAFETY_RUN_FIELDS = [
 SAFETY_STEP_FIELDS = [
     pa.field("safety_distance_km", pa.float64()),
 ]
+#: The steps' target-attitude columns (issue 34), written only for a tumbling target.
+ATTITUDE_STEP_FIELDS = [
+    *[pa.field(f"target_q{i}", pa.float64()) for i in range(4)],
+    *[pa.field(f"target_w{a}_deg_s", pa.float64()) for a in _AXES],
+]
 
 
 def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
@@ -666,10 +706,10 @@ def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     return row
 
 
-def _with_safety(
+def _with_fields(
     schema: pa.Schema, fields: Sequence[pa.Field], present: bool, before: str | None = None
 ) -> pa.Schema:
-    """``schema`` with the safety ``fields`` (before column ``before``, else last) if present."""
+    """``schema`` with the optional ``fields`` (before column ``before``, else last) if present."""
     if not present:
         return schema
     columns = list(schema)
@@ -688,7 +728,7 @@ def summary_table(
 ) -> pa.Table:
     """Table of summary rows (see :func:`summary_row`)."""
     safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
-    schema = _with_safety(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    schema = _with_fields(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
     table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
@@ -756,10 +796,11 @@ def campaign_steps_table(
     """
     cols = _steps_columns(results)
     cols.update(_run_columns(extra, [r.t_s.size for r in results]))
-    schema = _with_safety(
+    schema = _with_fields(
         CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
     )
-    schema = _with_safety(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, _has_attitude(results), "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -772,7 +813,7 @@ def campaign_solves_table(
     cols = _solves_columns(results)
     cols.update(_run_columns(extra, [len(r.solves) for r in results]))
     safety = _has_safety(results)
-    schema = _with_safety(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
+    schema = _with_fields(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 

@@ -289,6 +289,9 @@ class Truth:
 #: The design models a consumer (guidance, filter) can use (issue 33;
 #: :mod:`cwrend_cli.physics.design_models`).
 DesignModelName = Literal["cw", "ss", "ya"]
+#: The filter's models: a design model, or an extended Kalman filter on the truth's
+#: nonlinear dynamics (issue 33; :mod:`cwrend_cli.physics.ekf`).
+FilterModelName = Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"]
 
 
 @dataclass(frozen=True)
@@ -300,10 +303,13 @@ class DesignModel:
     chief's (a from ``scenario.mean_motion_rad_s``, i = ``truth.inclination_deg``).
     ``"ya"``: Yamanaka–Ankersen, the exact transition about the eccentric chief
     of ``[truth]`` (e = ``truth.eccentricity``, f₀ = ``truth.true_anomaly_deg``).
+    The filter also takes ``"ekf_two_body"`` or ``"ekf_j2"``: an extended
+    Kalman filter on the nonlinear two-body (or two-body + J2) relative
+    dynamics about the same chief (:mod:`cwrend_cli.physics.ekf`).
     """
 
     guidance: DesignModelName = "cw"  # model of the re-solves [-]
-    filter: DesignModelName = "cw"  # model of the filter's prediction [-]
+    filter: FilterModelName = "cw"  # model of the filter's prediction [-]
 
 
 @dataclass(frozen=True)
@@ -400,6 +406,29 @@ class Constraints:
 
 
 @dataclass(frozen=True)
+class Target:
+    """The target's attitude (issue 34; :mod:`.attitude`); ``fixed`` by default.
+
+    ``fixed``: body axes along the relative (Hill) frame at all times, today's
+    geometry. ``tumbling``: a torque-free rigid body from the initial attitude
+    ``initial_quaternion`` (body→Hill at t = 0, scalar-first, normalised at use),
+    the initial ``body_rates_deg_s`` (angular velocity relative to inertial
+    space, in body axes) and the principal moments of inertia ``inertia``
+    (ratios).
+    """
+
+    attitude: Literal["fixed", "tumbling"] = "fixed"
+    initial_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # [-]
+    body_rates_deg_s: Vec3 = (0.0, 0.0, 0.0)  # ω(0), inertial, body axes [deg/s]
+    inertia: Vec3 = (1.0, 1.0, 1.0)  # principal moments (I₁, I₂, I₃), ratios [-]
+
+    @property
+    def tumbling(self) -> bool:
+        """True for a torque-free tumbling target."""
+        return self.attitude == "tumbling"
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -415,6 +444,8 @@ class Problem:
     constraints: Constraints | None = None
     #: design models of the guidance and the filter (issue 33); CW by default
     model: DesignModel = field(default_factory=DesignModel)
+    #: the target's attitude (issue 34); fixed in the relative frame by default
+    target: Target = field(default_factory=Target)
     #: what the chaser measures (issue 35); the relative position by default
     sensor: Sensor = field(default_factory=Sensor)
 

@@ -15,10 +15,13 @@ Nothing here writes files: the result is a plain :class:`RunResult` that
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model. The truth receives the control the
-actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
-scale error, noise, misalignment, minimum thrust, delay); the filter predicts
-with the commanded control, which it knows, not the errors. The per-step
+guidance use the design models of ``problem.model`` (CW by default;
+:mod:`cwrend_cli.physics.design_models`), or for the filter an extended
+Kalman filter on the nonlinear dynamics (:mod:`cwrend_cli.physics.ekf`).
+The truth receives the control the actuator applies (``problem.actuator``,
+:mod:`cwrend_cli.physics.actuator`: scale error, noise, misalignment, minimum
+thrust, delay); the filter predicts with the commanded control, which it
+knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
 So are the draws of the sensor faults of the degradation windows
@@ -53,7 +56,9 @@ import numpy.typing as npt
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import (
     actuator,
+    attitude,
     design_models,
+    ekf,
     guidance,
     measurement_models,
     references,
@@ -122,6 +127,9 @@ class RunResult:
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
+    #: the tumbling target's attitude over the run (issue 34), only with target.attitude
+    #: = "tumbling"; at every step and sub-step (:func:`_target_attitude`)
+    target_attitude: attitude.TargetAttitude | None = None
     #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
     #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
     sensor: str = "position"
@@ -315,6 +323,8 @@ def simulate(
             np.zeros((n_steps, 3)), parts.active, parts.dropout, parts.outlier
         )  # fmt: skip
 
+    # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
+    target_attitude = _target_attitude(problem)
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -388,7 +398,8 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log, sensor)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -423,8 +434,24 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        target_attitude=target_attitude,
         sensor=problem.sensor.model,
     )
+
+
+def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
+    """The tumbling target's attitude at every step and safety sub-sample (issue 34 item 1).
+
+    None for a fixed target (its axes are the relative frame's). Computed once
+    before the loop: torque-free motion depends on nothing the chaser does, so
+    these are the numbers a propagation inside the step loop would give
+    (:mod:`cwrend_cli.physics.attitude`).
+    """
+    if not problem.target.tumbling:
+        return None
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
 def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
@@ -446,6 +473,7 @@ class _Loop:
     state: sk.LoopState
     log: sk.StepLog
     sensor: measurement_models.SensorModel | None = None  # None: the position sensor
+    ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -453,7 +481,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log, self.sensor,
+            scalars, self.log, self.sensor, self.ekf,
         )  # fmt: skip
 
 
@@ -516,7 +544,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf,
         )  # fmt: skip
         if i == count:
             break
@@ -738,9 +766,13 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
 
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
-    it always did.
+    it always did. An extended Kalman filter predicts through the nonlinear
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
     """
-    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
+    name = problem.model.filter
+    tables = design_models.step_tables(
+        name if name == "ss" or name == "ya" else "cw", problem.scenario, problem.truth
+    )
     return np.array(tables.phi), np.array(tables.gam)
 
 
