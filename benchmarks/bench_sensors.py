@@ -12,42 +12,40 @@ different re-solves, so the ratio is the whole run's, not the update's alone).
 from __future__ import annotations
 
 import argparse
-import time
+from collections.abc import Sequence
 
+from benchmarks.bench_campaign import simulate_time_per_run
 from benchmarks.common import Row
 
 MODELS = ("position", "range_bearing", "angles")
 SLUGS = ("plain_adaptive", "mtf_adaptive", "stf_adaptive")
 
 
-def time_per_run(model: str, seeds: int) -> float:
+#: Rounds the seeds are split into, the models interleaved in each (a loaded machine's
+#: drift then falls on every model alike).
+ROUNDS = 4
+
+
+def time_per_run(model: str, seeds: Sequence[int]) -> float:
     """Mean in-process ``simulate`` time per run [s] of :data:`SLUGS` under ``model``."""
-    from cwrend_cli import campaign
-    from cwrend_cli.config import ALL_ARCHITECTURES, config_from_dict
-    from cwrend_cli.config.adapt import problem_of
-    from cwrend_cli.physics import simulation
+    from cwrend_cli.config import config_from_dict
 
     cfg = config_from_dict({"sensor": {"model": model}})
-    problem = problem_of(cfg)
-    refs = simulation.open_loop_references(problem)
-    archs = [ALL_ARCHITECTURES[s] for s in SLUGS]
-    for arch in archs:  # warm-up: compile (or load) the kernels of this sensor
-        simulation.simulate(problem, arch, campaign.standard_normal_for(cfg, 0), refs, seed=0)
-    total, n = 0.0, 0
-    for seed in range(seeds):
-        noise = campaign.standard_normal_for(cfg, seed)
-        for arch in archs:
-            start = time.perf_counter()
-            simulation.simulate(problem, arch, noise, refs, seed=seed)
-            total += time.perf_counter() - start
-            n += 1
-    return total / n
+    return simulate_time_per_run(SLUGS, seeds, cfg)
 
 
-def run(seeds: int = 5) -> list[Row]:
-    """One row per sensor model, the position sensor's time as the baseline."""
-    times = {model: time_per_run(model, seeds) for model in MODELS}
-    note = f"{', '.join(SLUGS)}; {seeds} seeds each, in-process, warm"
+def run(seeds: int = 20) -> list[Row]:
+    """One row per sensor model, the position sensor's time as the baseline.
+
+    The seeds in :data:`ROUNDS` rounds, each timing every model on its share of them.
+    """
+    per_round = max(seeds // ROUNDS, 1)
+    times = dict.fromkeys(MODELS, 0.0)
+    for r in range(ROUNDS):
+        for model in MODELS:
+            share = range(r * per_round, (r + 1) * per_round)
+            times[model] += time_per_run(model, share) / ROUNDS
+    note = f"{', '.join(SLUGS)}; {ROUNDS * per_round} seeds each, interleaved, in-process, warm"
     return [
         Row(
             "sensors",
@@ -63,7 +61,7 @@ def run(seeds: int = 5) -> list[Row]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=20)
     args = parser.parse_args()
     from benchmarks.__main__ import print_rows
 
