@@ -14,13 +14,12 @@ Run alone: ``python -m benchmarks.bench_constrained [--seeds S]``.
 
 from __future__ import annotations
 
-import argparse
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import Row
+from benchmarks.common import Row, seeds_main
 from cwrend_cli import campaign
 from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig, config_from_dict
 from cwrend_cli.config.adapt import problem_of
@@ -99,12 +98,7 @@ def run(seeds: int = 20) -> list[Row]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=20)
-    args = parser.parse_args()
-    from benchmarks.__main__ import print_rows
-
-    print_rows(run(args.seeds))
+    seeds_main(__doc__, run)
 
 
 if __name__ == "__main__":
