@@ -56,11 +56,12 @@ def _loops(cfg: CwrendConfig, slug: str, seeds: int) -> tuple[np.ndarray, np.nda
     return np.array(times), np.array(scp), softened
 
 
-def run(seeds: int = 20) -> list[Row]:
-    """Per ``*_socp`` architecture: constrained re-solve time and SCP iterations."""
+def run(seeds: int = 20, bases: tuple[str, ...] = tuple(ARCHITECTURES)) -> list[Row]:
+    """Per ``*_socp`` architecture (of ``bases``, the shooting slugs): constrained re-solve
+    time and SCP iterations."""
     constrained, free = configs()
     rows = []
-    for base in ARCHITECTURES:
+    for base in bases:
         slug = f"{base}_socp"
         t, scp, softened = _loops(constrained, slug, seeds)
         t0, _, _ = _loops(free, slug, seeds)
