@@ -201,7 +201,7 @@ def _write_campaign(
                 key = f"{point}.{run.arch}.s{seed:06d}"
                 row = {"run_key": key, "point": point, "arch": run.arch, "seed": seed}
                 row |= {"status": "ok", "error": "", "duration_s": 0.01}
-                row |= summary_row(run, refs.fuel.delta_v_km_s)
+                row |= summary_row(run, refs.fuel)
                 row |= {f"param.{k}": v for k, v in params.items()}
                 rows.append(row)
                 table = steps_table(run).drop_columns(["arch"])

@@ -82,6 +82,20 @@ def suffix_unit(name: str) -> str | None:
     return None
 
 
+#: The values of the solves' ``fallback_step``: the step of the shooting chain that ended a
+#: re-solve (:mod:`cwrend_cli.physics.guidance.shooting`, in the chain's order), the plan of
+#: last resort, or the cone-program method's own re-solve.
+FALLBACK_STEPS = (
+    "warm",
+    "socp_plan",
+    "continuation_warm",
+    "continuation_energy",
+    "socp_multiplier",
+    "dual_bound",
+    "socp",
+)
+
+
 def _col(description: str, unit: str | None = None) -> tuple[str, str]:
     return (unit if unit is not None else "", description)
 
@@ -155,9 +169,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "wall_time_ms": _col("wall time of the solve"),
     "success": _col("converged with residual below solver.success_residual", "-"),
     # summary / runs
-    "delta_v_km_s": _col("trapezoid of ||u|| (applied) over the grid"),
+    "delta_v_km_s": _col(
+        "trapezoid of ||u|| (applied) over the grid, the paper's convention: it drops "
+        "||u_0|| dt/2 of a closed-loop run"
+    ),
+    "delta_v_applied_km_s": _col(
+        "applied impulse sum_k ||u_k|| dt over the zero-order-hold steps k = 0..N-1 (what the "
+        "thruster did); open-loop references: integral of ||u|| dt of the continuous plan"
+    ),
     "miss_km": _col("terminal miss ||r(T) - r_f||"),
-    "fuel_penalty_pct": _col("delta-v above the open-loop fuel optimum"),
+    "fuel_penalty_pct": _col(
+        "delta-v above the open-loop fuel optimum's, both trapezoids (the paper's; can be < 0)"
+    ),
+    "fuel_penalty_applied_pct": _col(
+        "applied delta-v above the exact continuous fuel optimum (u_max x its burn time); "
+        ">= 0 for a run that reaches the target"
+    ),
     "n_solves": _col("receding-horizon re-solves", "-"),
     "n_converged": _col("re-solves that converged", "-"),
     "n_infeasible": _col("re-solves found infeasible", "-"),
@@ -529,8 +556,10 @@ SUMMARY_SCHEMA = pa.schema(
         ("arch", pa.string()),
         ("seed", pa.int64()),
         ("delta_v_km_s", pa.float64()),
+        ("delta_v_applied_km_s", pa.float64()),
         ("miss_km", pa.float64()),
         ("fuel_penalty_pct", pa.float64()),
+        ("fuel_penalty_applied_pct", pa.float64()),
         ("n_solves", pa.int64()),
         ("n_converged", pa.int64()),
         ("n_infeasible", pa.int64()),
@@ -559,15 +588,16 @@ SAFETY_STEP_FIELDS = [
 ]
 
 
-def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """A ``summary.parquet`` / ``runs.parquet`` row of one run.
 
     Among its metrics those of paper Sec. "Numerical Results and Discussion" (Δv, miss,
     fuel penalty, solve times and success).
 
     With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
+    ``fuel`` is the scenario's open-loop fuel-optimal reference (the fuel penalties).
     """
-    metrics = run_metrics(result, fuel_delta_v_km_s)
+    metrics = run_metrics(result, fuel)
     # its fields are numbers: no deep copy (dataclasses.asdict) needed
     fields = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
     row = {"arch": result.arch, "seed": result.seed, **fields}
@@ -593,9 +623,9 @@ def _with_safety(
     return pa.schema([*columns[:at], *fields, *columns[at:]])
 
 
-def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def reference_row(ref: OpenLoopResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """Summary row of an open-loop reference (``arch`` = ``open_loop_<name>``)."""
-    metrics = reference_metrics(ref, fuel_delta_v_km_s)
+    metrics = reference_metrics(ref, fuel)
     return {"arch": f"open_loop_{ref.name}", "seed": -1, **dataclasses.asdict(metrics)}
 
 

@@ -1,21 +1,25 @@
 """The report's markdown: summary tables and the text of ``report.md``.
 
 Tables (GitHub-flavoured markdown) of the reported noise seed, of every seed
-of the reported grid point and of every grid point of a sweep; the figure
-list comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`)
-with its captions. One unit and precision per quantity, as on the console:
-Δv in km/s (4 decimals), misses in m (2 decimals), fuel penalty in % (2
-decimals). Campaign tables carry the 95 % intervals and paired comparisons
-that the campaign stored in ``ablation.parquet`` / ``sweep.parquet`` (never
-recomputed here); an interval from fewer than :data:`MIN_BOOTSTRAP_N` seeds is
-marked with :data:`UNRELIABLE_MARK`. The filter-consistency means of the
-runs (``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
+of the reported grid point and of every grid point of a sweep; the figure list
+comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`) with its
+captions. One unit and precision per quantity, as on the console: Δv in km/s
+(4 decimals), misses in m (2 decimals), fuel penalty in % (2 decimals); beside
+the paper's Δv (the 1 s trapezoid of ‖u‖) and fuel penalty the applied Δv
+Σ‖u_k‖Δt and its penalty against the exact continuous fuel optimum (issue 33;
+"–" for the open-loop references, whose exact Δv the stored samples do not
+hold, and for campaigns written before). Campaign tables carry the 95 %
+intervals and paired comparisons that the campaign stored in
+``ablation.parquet`` / ``sweep.parquet`` (never recomputed here); an interval
+from fewer than :data:`MIN_BOOTSTRAP_N` seeds is marked with
+:data:`UNRELIABLE_MARK`. The filter-consistency means of the runs
+(``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
 averaged over the seeds (no interval is stored for them). A sampled design
 (``sweep --design``) gets the table of its Sobol indices
-(``sensitivity.parquet``) instead of a row per design point. A campaign
-whose configuration has path constraints (issue 32) gets a table of the
-safety of its true trajectories (:func:`safety_table`), from the safety rows
-of its statistics file.
+(``sensitivity.parquet``) instead of a row per design point. A campaign whose
+configuration has path constraints (issue 32) gets a table of the safety of
+its true trajectories (:func:`safety_table`), from the safety rows of its
+statistics file.
 """
 
 from __future__ import annotations
@@ -95,13 +99,15 @@ def seed_table(data: ReportData) -> str:
     """Open-loop references and each architecture's run of the reported seed."""
     runs = data.ok_runs()
     runs = runs[runs["seed"] == data.seed]
-    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "re-solves",
-              "success [%]", "infeasible", "failed", "solve mean / max [ms]"]  # fmt: skip
+    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "applied Δv [km/s]",
+              "applied fuel penalty [%]", "re-solves", "success [%]", "infeasible", "failed",
+              "solve mean / max [ms]"]  # fmt: skip
     rows = []
     for _, r in data.ref_summary.iterrows():
         rows.append([f"open-loop {str(r['arch']).removeprefix('open_loop_')}",
                      _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
-                     _fmt(r.get("fuel_penalty_pct"), FUEL), "", "", "", "", ""])  # fmt: skip
+                     _fmt(r.get("fuel_penalty_pct"), FUEL), "–", "–", "", "", "", "",
+                     ""])  # fmt: skip
     for a in data.archs:
         g = runs[runs["arch"] == a]
         if g.empty:
@@ -109,7 +115,8 @@ def seed_table(data: ReportData) -> str:
         r = g.iloc[0]
         rows.append([
             arch_label(a), _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
-            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
+            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("delta_v_applied_km_s"), DV),
+            _fmt(r.get("fuel_penalty_applied_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
             _fmt(r.get("solve_success_pct"), ".2f"), _fmt(r.get("n_infeasible"), "g"),
             _fmt(r.get("n_failed"), "g"),
             f"{_fmt(r.get('solve_mean_ms'), '.3g')} / {_fmt(r.get('solve_max_ms'), '.3g')}",
@@ -129,7 +136,8 @@ def campaign_table(data: ReportData) -> str:
     stats = data.point_stats()
     header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
               "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
-              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)"]  # fmt: skip
+              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)",
+              "mean applied Δv [km/s]", "mean applied fuel penalty [%]"]  # fmt: skip
     rows = []
     for a in data.archs:
         g = all_runs[all_runs["arch"] == a]
@@ -147,6 +155,8 @@ def campaign_table(data: ReportData) -> str:
                 _ci(get.get(("miss_km", "median")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "p95")), MISS, M_PER_KM), _fmt(miss.max(), MISS),
                 _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success, *consistency,
+                _ci(get.get(("delta_v_applied_km_s", "mean")), DV),
+                _ci(get.get(("fuel_penalty_applied_pct", "mean")), FUEL),
             ])  # fmt: skip
             continue
         fuel = ok["fuel_penalty_pct"].mean() if "fuel_penalty_pct" in ok else None
@@ -154,7 +164,8 @@ def campaign_table(data: ReportData) -> str:
             arch_label(a), ok_label, _fmt(ok["delta_v_km_s"].mean(), DV),
             _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS),
             _fmt(miss.quantile(0.95) if len(miss) else None, MISS), _fmt(miss.max(), MISS),
-            _fmt(fuel, FUEL), success, *consistency,
+            _fmt(fuel, FUEL), success, *consistency, _mean(ok, "delta_v_applied_km_s", DV),
+            _mean(ok, "fuel_penalty_applied_pct", FUEL),
         ])  # fmt: skip
     return markdown_table(header, rows)
 
@@ -276,7 +287,7 @@ def sweep_table(data: ReportData) -> str:
     stats = data.stats if data.stats is not None and "point" in data.stats.columns else None
     header = [param_label(p) for p in data.params] + [
         "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
-        "max miss [m]",
+        "max miss [m]", "mean applied Δv [km/s]",
     ]  # fmt: skip
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
@@ -286,17 +297,19 @@ def sweep_table(data: ReportData) -> str:
             miss = ga["miss_km"].astype(float) * M_PER_KM
             cells = [_fmt(ga["delta_v_km_s"].mean(), DV), _fmt(miss.mean(), MISS),
                      _fmt(miss.median(), MISS)]  # fmt: skip
+            applied = _mean(ga, "delta_v_applied_km_s", DV)
             if stats is not None:
                 point_ids = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
                 sel = stats[(stats["kind"] == "marginal") & (stats["arch"] == str(a))]
                 sel = sel[sel["point"].astype(str).isin(point_ids)]
                 if not sel.empty:
                     get = _lookup(sel)
+                    applied = _ci(get.get(("delta_v_applied_km_s", "mean")), DV)
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
             rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
-                         *cells, _fmt(miss.max(), MISS)])  # fmt: skip
+                         *cells, _fmt(miss.max(), MISS), applied])  # fmt: skip
     return markdown_table(header, rows)
 
 
