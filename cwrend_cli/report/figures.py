@@ -1461,8 +1461,10 @@ _COMPARE_AXES: dict[str, tuple[str, float]] = {
     "miss_km": ("miss, A − B [m]", 1e3),
     "delta_v_km_s": ("Δv, A − B [km/s]", 1.0),
     "fuel_penalty_pct": ("fuel penalty, A − B [points of %]", 1.0),
+    "delta_v_applied_km_s": ("applied Δv, A − B [km/s]", 1.0),
+    "fuel_penalty_applied_pct": ("applied fuel penalty, A − B [points of %]", 1.0),
 }
-_SHARE_MARKERS = ("s", "^", "v")
+_SHARE_MARKERS = ("s", "^", "v", "<", ">")
 
 
 def _error_bars(value: Any, low: Any, high: Any) -> np.ndarray:
@@ -1529,7 +1531,7 @@ def fig_compare(
             err = _error_bars(r["value"], r["ci_low"], r["ci_high"])
             dy = 0.2 * (i - (len(metrics) - 1) / 2)
             axes[-1].errorbar(r["value"], y - dy, xerr=err, color=colour,
-                              fmt=_SHARE_MARKERS[i % 3], ms=6, capsize=3, lw=1.6)  # fmt: skip
+                              fmt=_SHARE_MARKERS[i], ms=6, capsize=3, lw=1.6)  # fmt: skip
     for ax, metric in zip(axes, metrics, strict=False):
         ax.axvline(0.0, color="black", lw=1)
         ax.set_xlabel(_COMPARE_AXES[metric][0])
@@ -1546,7 +1548,7 @@ def fig_compare(
     ]
     for i, m in enumerate(metrics):
         what = _COMPARE_AXES[m][0].split(",")[0]
-        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i % 3], ls="", color="black",
+        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i], ls="", color="black",
                               label=f"share A lower, {what} (95 % Wilson)"))  # fmt: skip
     _legend_below(fig, handles, ncol=2 if len(handles) == 4 else 3)
     title = f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})"
