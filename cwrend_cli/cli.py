@@ -1108,8 +1108,9 @@ def compare(
         typer.Option(
             "--metric",
             "-m",
-            help="Metrics, comma-separated: miss, dv, fuel (or miss_km, delta_v_km_s, "
-            "fuel_penalty_pct).",
+            help="Metrics, comma-separated: miss, dv, fuel (the paper's trapezoid Δv and its "
+            "penalty), dv_applied, fuel_applied (the applied impulse and its penalty against "
+            "the exact fuel optimum), or their column names.",
             metavar="LIST",
         ),
     ] = "miss,dv",
