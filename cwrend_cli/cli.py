@@ -798,6 +798,7 @@ def _report_campaign(
     from cwrend_cli.console import (
         ablation_console_table,
         applied_console_table,
+        consistency_console_table,
         paired_console_table,
         phase,
         script_table,
@@ -853,6 +854,12 @@ def _report_campaign(
             applied = applied_console_table(stats, list(statistics.groups))
             if applied is not None:
                 stdout.print(applied)
+        if plan.design is None:  # filter consistency against its χ² bands (issue 33)
+            table = consistency_console_table(
+                stats, list(statistics.groups), f"filter consistency · {out.name}"
+            )
+            if table is not None:
+                stdout.print(table)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
     elif (
@@ -1240,7 +1247,8 @@ def table(
             "infeasible_solves, failed_solves (their number), max.miss|dv|fuel; "
             ":with=STEP / :without=STEP keep the runs whose re-solves used / never used that "
             "fallback step (n:with=socp_plan counts them). :bare drops the interval, :3 shows "
-            "3 decimals.",
+            "3 decimals. mean.nees, mean.nis: the runs' mean NEES and NIS with the χ² 95 % band "
+            "of a consistent filter.",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",

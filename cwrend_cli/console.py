@@ -34,6 +34,7 @@ from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     markdown_table,
     setting_text,
     swept_values,
@@ -559,6 +560,66 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
         "means, 95 % bootstrap interval below; all statistics in sweep.parquet",
         marginal,
         f"means; {ONE_REALISATION}; all statistics in sweep.parquet",
+    )
+    return table
+
+
+def _in_band(row: pd.Series) -> str:
+    """Whether a consistency row's value lies in its χ² band: ``yes``, ``no``, ``–`` (no band)."""
+    value, low, high = float(row["value"]), float(row["ci_low"]), float(row["ci_high"])
+    if not (math.isfinite(value) and math.isfinite(low)):
+        return "–"
+    return "yes" if low <= value <= high else "no"
+
+
+def consistency_console_table(
+    stats: pd.DataFrame, point_cols: Sequence[str], title: str
+) -> Table | None:
+    """Per (grid point and) architecture: mean NEES and NIS of the runs against their χ² bands.
+
+    From the ``consistency`` rows of the statistics
+    (:func:`cwrend_cli.campaign.statistics.consistency`): the mean over the
+    runs of each run's mean NEES (6 if consistent) and mean NIS (nominal
+    periods, 3), the 95 % band of a consistent filter below, and whether the
+    mean is in it. ``None`` without such rows (an older campaign).
+    """
+    rows = stats[stats["kind"] == "consistency"] if "kind" in stats else stats.iloc[:0]
+    if rows.empty:
+        return None
+    table = _table(title, **_NARROW)
+    params = [c for c in point_cols if c != "point"]
+    for p in params:
+        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    for name in ("architecture", "n", "NEES", "in\nband", "NIS", "in\nband"):
+        table.add_column(name, justify="right", no_wrap=True)
+    keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]
+    # as the table above it: a sweep's by its swept values, an ablation's in its rows' order
+    for _, g in rows.groupby(keys, sort=bool(params), observed=True):
+        get = {r.metric: r for _, r in g.iterrows()}
+        first = g.iloc[0]
+        cells: list[str] = []
+        for metric in ("mean_nees", "mean_nis_nominal"):
+            r = get.get(metric)
+            if r is None or not math.isfinite(float(r["value"])):
+                cells += ["–", "–"]
+                continue
+            band = (
+                f"\n[dim]{r['ci_low']:.2f}–{r['ci_high']:.2f}[/dim]"
+                if math.isfinite(float(r["ci_low"]))
+                else ""
+            )
+            cells += [f"{consistency_text(float(r['value']))}{band}", _in_band(r)]
+        nees = get.get("mean_nees")
+        table.add_row(
+            *(f"{first[p]:g}" if isinstance(first[p], float) else str(first[p]) for p in params),
+            str(first["arch"]),
+            str(int(nees["n"])) if nees is not None else "–",
+            *cells,
+        )
+    table.caption = (
+        "filter consistency: mean over the runs of each run's mean NEES (6 if consistent) "
+        "and mean NIS outside the degradation windows (3); below, the χ² 95 % band of a "
+        "consistent filter for n runs"
     )
     return table
 

@@ -87,6 +87,8 @@ __all__ = [
 #: (:data:`~cwrend_cli.output.tables.METRIC_NAMES`): the paper's metrics, then the applied
 #: Δv and its penalty against the exact fuel optimum (issue 33 item 3).
 COMPARED = (*METRICS, *APPLIED_METRICS)
+#: The short names of :data:`COMPARED` (``miss``, ``dv``, …).
+_SHORT = tuple(k for k, v in METRIC_NAMES.items() if v in COMPARED)
 DEFAULT_METRICS = ("miss_km", "delta_v_km_s")
 #: Relative tolerance of equal swept numbers across campaigns.
 _RTOL = 1e-9
@@ -105,12 +107,12 @@ def parse_metrics(text: str) -> tuple[str, ...]:
             continue
         name = METRIC_NAMES.get(part, part)
         if name not in COMPARED:
-            allowed = ", ".join([*METRIC_NAMES, *COMPARED])
+            allowed = ", ".join([*_SHORT, *COMPARED])
             raise ConfigError(f"--metric {part!r}: unknown metric (allowed: {allowed})")
         if name not in out:
             out.append(name)
     if not out:
-        raise ConfigError(f"--metric {text!r}: name at least one of {', '.join(METRIC_NAMES)}")
+        raise ConfigError(f"--metric {text!r}: name at least one of {', '.join(_SHORT)}")
     return tuple(out)
 
 

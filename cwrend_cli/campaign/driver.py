@@ -847,6 +847,9 @@ def _statistics(
     applied = statistics.applied(runs, by, seed=root_seed)  # issue 33: the applied Δv
     if not applied.empty:
         frames.append(applied)
+    consistency = statistics.consistency(runs, by)  # issue 33: against the χ² bands
+    if not consistency.empty:
+        frames.append(consistency)
     frame = pd.concat(frames, ignore_index=True)
     return frame, groups
 

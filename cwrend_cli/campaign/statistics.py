@@ -45,6 +45,7 @@ import pandas as pd
 from cwrend_cli.campaign.executors import default_workers
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
@@ -397,25 +398,27 @@ def _marginal_frame(
     value: FloatArray,
     low: FloatArray,
     high: FloatArray,
+    kind: str = "marginal",
 ) -> pd.DataFrame:
     """Marginal rows: per group key, one row per ``(metric, statistic)`` of ``labels``.
 
     ``value``, ``low`` and ``high`` are (groups × labels); ``sizes`` the ok runs per group
-    (column ``n``).
+    (column ``n``), or per group and label (groups × labels). ``kind``: the rows' kind.
     """
     per_group = len(labels)
+    n = sizes.astype(np.int64)
     return _frame(
         by,
         keys,
         per_group,
         {
-            "kind": "marginal",
+            "kind": kind,
             "metric": [m for _ in keys for m, _ in labels],
             "statistic": [s for _ in keys for _, s in labels],
             "value": value.ravel(),
             "ci_low": low.ravel(),
             "ci_high": high.ravel(),
-            "n": np.repeat(sizes.astype(np.int64), per_group),
+            "n": n.ravel() if n.ndim == 2 else np.repeat(n, per_group),
         },
     )
 
@@ -745,3 +748,52 @@ def _paired_rows(
             "ci_high": high.ravel(),
         },
     )
+
+
+# ---------------------------------------------------------------------------
+# Filter consistency against χ² bands (issue 33, item 4)
+# ---------------------------------------------------------------------------
+
+#: The runs columns of filter consistency (:mod:`cwrend_cli.physics.metrics`) and their
+#: degrees of freedom: each run's time-averaged NEES (rows 1 … N) and NIS (nominal rows).
+CONSISTENCY_METRICS: tuple[tuple[str, int], ...] = (
+    ("mean_nees", NEES_DOF),
+    ("mean_nis_nominal", NIS_DOF),
+)
+
+
+def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+    """Per group: the campaign mean of each run's time-averaged NEES and NIS, and its band.
+
+    Rows ``kind = "consistency"`` for each metric of :data:`CONSISTENCY_METRICS`
+    (statistic ``mean``): ``value`` the mean over the ok runs with a finite
+    value, ``n`` their number, and ``ci_low`` / ``ci_high`` the χ² 95 % band
+    for ``n`` runs (:func:`~cwrend_cli.physics.metrics.mean_in_band`), where the
+    mean lies for a consistent filter (a band of the hypothesis, not an
+    interval of the estimate).
+
+    The band treats each run's time average as one χ² value: the steps of a
+    run are correlated (the NEES strongly), and an average of correlated χ²_n
+    values has the mean n and at most the variance 2n of one, so the sum over
+    the runs has the mean of χ²(N n) and at most its variance: the band is
+    conservative (exact when a run's errors do not change over time). Empty
+    without the columns (runs written before cwrend stored them).
+    """
+    if not all(m in runs.columns for m, _ in CONSISTENCY_METRICS):
+        return pd.DataFrame([])
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    if not keys:
+        return pd.DataFrame([])
+    rows = np.array(
+        [
+            [
+                mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+                for metric, dof in CONSISTENCY_METRICS
+            ]
+            for a, b in pairwise(bounds)
+        ]
+    )  # (group, metric, [mean, low, high, n])
+    labels = [(metric, "mean") for metric, _ in CONSISTENCY_METRICS]
+    value, low, high, n = (rows[..., k] for k in range(4))
+    return _marginal_frame(by, keys, n, labels, value, low, high, kind="consistency")

@@ -61,13 +61,16 @@ def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
 #: ``cwrend table``; one table for both), → their ``runs.parquet`` / statistics column:
 #: the paper's trapezoid Δv and its fuel penalty (``dv``, ``fuel``), the applied impulse
 #: and its penalty against the exact continuous fuel optimum (``dv_applied``,
-#: ``fuel_applied``, issue 33 item 3).
+#: ``fuel_applied``, issue 33 item 3), the filter-consistency means (``nees``, ``nis``:
+#: ``cwrend table`` only, as a consistent filter's is a value, not "lower is better").
 METRIC_NAMES: Mapping[str, str] = {
     "miss": "miss_km",
     "dv": "delta_v_km_s",
     "fuel": "fuel_penalty_pct",
     "dv_applied": "delta_v_applied_km_s",
     "fuel_applied": "fuel_penalty_applied_pct",
+    "nees": "mean_nees",
+    "nis": "mean_nis_nominal",
 }
 
 
@@ -81,6 +84,7 @@ SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
     ("_km_s2", "km/s^2"),
     ("_km_s", "km/s"),
     ("_rad_s", "rad/s"),
+    ("_deg_s", "deg/s"),
     ("_km2", "km^2"),
     ("_km", "km"),
     ("_deg", "deg"),
@@ -144,7 +148,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         f"meas_{a}_km": _col(f"position measurement of row k (taken at t_k), {d}; NaN: none")
         for a, d in _A.items()
     },
-    "nis": _col("normalised innovation squared of the row's measurement (chi2_3)", "-"),
+    "meas_range_km": _col(
+        "range of the target measured at t_k (sensor.model = 'range_bearing'); NaN: none"
+    ),
+    "meas_azimuth_deg": _col(
+        "azimuth of the target measured at t_k, in (-180, 180] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "meas_elevation_deg": _col(
+        "elevation of the target measured at t_k, in [-90, 90] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "nis": _col(
+        "normalised innovation squared of the row's measurement (chi2_m, m = 3, or 2 for "
+        "sensor.model = 'angles')",
+        "-",
+    ),
     "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
     "score": _col("composite innovation score s", "-"),
     "score_filtered": _col("low-pass filtered score s-bar", "-"),
@@ -153,6 +172,11 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "est_err_km": _col("position estimation error ||r-hat - r||"),
     "est_vel_err_km_s": _col("velocity estimation error ||v-hat - v||"),
     "trace_p": _col("trace of the estimate covariance P (sums km^2 and km^2/s^2)", "mixed"),
+    "trace_q": _col(
+        "trace of the process noise Q_k of the prediction into the row (sums km^2 and "
+        "km^2/s^2; estimator.process_noise); NaN in row 0",
+        "mixed",
+    ),
     "nees": _col(
         "normalised estimation error squared (x-hat - x)' P^-1 (x-hat - x) (chi2_6); "
         "row 0: initial error against P0; posterior, prior on a dropout row",
@@ -246,6 +270,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
+    # the tumbling target's attitude (issue 34; only with target.attitude = "tumbling")
+    **{
+        f"target_q{i}": _col(
+            f"component {i} of the target's attitude quaternion, body to relative frame, "
+            "scalar-first (q0 the scalar part)",
+            "-",
+        )
+        for i in range(4)
+    },
+    **{
+        f"target_w{a}_deg_s": _col(
+            f"target body rate about its {a} axis: angular velocity relative to inertial "
+            "space, in body axes"
+        )
+        for a in ("x", "y", "z")
+    },
     "duration_s": _col("wall time of the run"),
     # references
     "reference": _col("open-loop reference: energy or fuel", "-"),
@@ -282,6 +322,7 @@ _DIMENSIONLESS_KEYS = (
     "solver.quadrature_nodes",
     "constraints.sigma_margin",
     "constraints.corridor.axis",
+    "target.",
 )
 #: Configuration keys without a unit suffix that are not dimensionless.
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
@@ -416,6 +457,7 @@ STEPS_SCHEMA = pa.schema(
         ("est_err_km", pa.float64()),
         ("est_vel_err_km_s", pa.float64()),
         ("trace_p", pa.float64()),
+        ("trace_q", pa.float64()),
         ("nees", pa.float64()),
         ("degradation_window", pa.int64()),
         ("dropout", pa.bool_()),
@@ -484,6 +526,17 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["u_norm_km_s2"] = row_norm(*u)
     for i, a in enumerate(_AXES):
         cols[f"ucmd_{a}_km_s2"] = u_cmd[i]
+    if _has_angles(results):
+        # a nonlinear sensor (issue 35): its components in their own columns, the
+        # position measurement NaN (none was taken)
+        parts = [_sensor_components(r) for r in results]
+        y = np.concatenate([p[0] for p in parts], axis=1)
+        for name, values in zip(
+            ("meas_range_km", "meas_azimuth_deg", "meas_elevation_deg"),
+            np.concatenate([p[1] for p in parts], axis=1),
+            strict=True,
+        ):
+            cols[name] = values
     for i, a in enumerate(_AXES):
         cols[f"meas_{a}_km"] = y[i]
     for name in ("nis", "mtf_ratio", "score", "score_filtered", "eps"):
@@ -492,6 +545,7 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["est_err_km"] = row_norm(*(x_hat[:3] - x_true[:3]))
     cols["est_vel_err_km_s"] = row_norm(*(x_hat[3:] - x_true[3:]))
     cols["trace_p"] = _stacked(results, "trace_p")
+    cols["trace_q"] = _stacked(results, "trace_q")
     cols["nees"] = _stacked(results, "nees")
     cols["degradation_window"] = _stacked(results, "window").astype(np.int64)
     cols["dropout"] = _stacked(results, "dropout").astype(np.bool_)
@@ -499,7 +553,50 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     if _has_safety(results):
         safety = [r.safety for r in results if r.safety is not None]
         cols["safety_distance_km"] = np.concatenate([sf.step_distance_km for sf in safety])
+    if _has_attitude(results):
+        steps = [r.target_attitude.at_steps() for r in results if r.target_attitude is not None]
+        q = np.concatenate([q for q, _ in steps])
+        w = np.degrees(np.concatenate([w for _, w in steps]))
+        for i in range(4):
+            cols[f"target_q{i}"] = q[:, i]
+        for i, a in enumerate(_AXES):
+            cols[f"target_w{a}_deg_s"] = w[:, i]
     return cols
+
+
+def _has_attitude(results: Sequence[RunResult]) -> bool:
+    """True when the runs carry a tumbling target's attitude (all or none of them)."""
+    flags = {r.target_attitude is not None for r in results}
+    if len(flags) > 1:
+        raise ValueError("runs with a tumbling and a fixed target in one steps table")
+    return flags == {True}
+
+
+def _has_angles(results: Sequence[RunResult]) -> bool:
+    """True when a run measures range and angles or angles (issue 35): their columns are written."""
+    return any(r.sensor != "position" for r in results)
+
+
+def _sensor_components(result: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """(position measurement (3, N) [km], (range [km], azimuth, elevation [deg]) (3, N)) of a run.
+
+    Whichever the run's sensor did not measure is NaN.
+    """
+    y = np.asarray(result.y).T
+    nan = np.full_like(y, np.nan)
+    if result.sensor == "position":
+        return y, nan
+    if result.sensor == "range_bearing":
+        return nan, np.vstack([y[:1], np.rad2deg(y[1:])])
+    return nan, np.vstack([nan[:1], np.rad2deg(y[:2])])
+
+
+#: The steps' columns of a nonlinear sensor (issue 35), only when a run has one.
+SENSOR_STEP_FIELDS = [
+    pa.field("meas_range_km", pa.float64()),
+    pa.field("meas_azimuth_deg", pa.float64()),
+    pa.field("meas_elevation_deg", pa.float64()),
+]
 
 
 def _has_safety(results: Sequence[RunResult]) -> bool:
@@ -513,7 +610,9 @@ def _has_safety(results: Sequence[RunResult]) -> bool:
 def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
-    schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_fields(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, result.target_attitude is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -566,7 +665,7 @@ SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km",
 def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per solve (the initial one of adaptive runs, then every re-solve)."""
     cols = {"arch": [result.arch] * len(result.solves), **_solves_columns([result])}
-    schema = _with_safety(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
+    schema = _with_fields(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -605,6 +704,11 @@ SAFETY_RUN_FIELDS = [
 SAFETY_STEP_FIELDS = [
     pa.field("safety_distance_km", pa.float64()),
 ]
+#: The steps' target-attitude columns (issue 34), written only for a tumbling target.
+ATTITUDE_STEP_FIELDS = [
+    *[pa.field(f"target_q{i}", pa.float64()) for i in range(4)],
+    *[pa.field(f"target_w{a}_deg_s", pa.float64()) for a in _AXES],
+]
 
 
 def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
@@ -631,10 +735,10 @@ def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     return row
 
 
-def _with_safety(
+def _with_fields(
     schema: pa.Schema, fields: Sequence[pa.Field], present: bool, before: str | None = None
 ) -> pa.Schema:
-    """``schema`` with the safety ``fields`` (before column ``before``, else last) if present."""
+    """``schema`` with the optional ``fields`` (before column ``before``, else last) if present."""
     if not present:
         return schema
     columns = list(schema)
@@ -653,7 +757,7 @@ def summary_table(
 ) -> pa.Table:
     """Table of summary rows (see :func:`summary_row`)."""
     safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
-    schema = _with_safety(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    schema = _with_fields(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
     table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
@@ -721,9 +825,11 @@ def campaign_steps_table(
     """
     cols = _steps_columns(results)
     cols.update(_run_columns(extra, [r.t_s.size for r in results]))
-    schema = _with_safety(
+    schema = _with_fields(
         CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
     )
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, _has_attitude(results), "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -736,7 +842,7 @@ def campaign_solves_table(
     cols = _solves_columns(results)
     cols.update(_run_columns(extra, [len(r.solves) for r in results]))
     safety = _has_safety(results)
-    schema = _with_safety(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
+    schema = _with_fields(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 

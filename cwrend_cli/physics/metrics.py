@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from cwrend_cli.physics.params import FloatArray
 
@@ -134,6 +135,51 @@ def mean_nees(nees: FloatArray) -> float:
     """
     values = np.asarray(nees, dtype=float)[1:]
     return float(values.mean()) if values.size else float("nan")
+
+
+#: Degrees of freedom of the NEES (the state's dimension) and of the NIS (the measurement's).
+NEES_DOF = 6
+NIS_DOF = 3
+#: Two-sided probability of the χ² consistency bands.
+BAND_PROBABILITY = 0.95
+
+
+def chi2_band(
+    n_runs: npt.ArrayLike, dof: int, probability: float = BAND_PROBABILITY
+) -> tuple[FloatArray, FloatArray]:
+    """The two-sided ``probability`` band of the mean of ``n_runs`` independent χ²_dof values.
+
+    The ensemble test of Bar-Shalom, Li & Kirubarajan 2001, §5.4.2: for a
+    consistent filter the NEES of each of N independent runs at one step is
+    χ² with n = 6 degrees of freedom (the NIS with m = 3), so N times their
+    average is χ²(N n), and the average lies in
+    ``[χ²⁻¹(α/2; N n) / N, χ²⁻¹(1 − α/2; N n) / N]`` with probability
+    1 − α = ``probability``. Element-wise over ``n_runs``; NaN where it is
+    below 1. E.g. N = 1, n = 6: [1.24, 14.45]; N = 20: [4.58, 7.61] at 95 %.
+    """
+    from scipy.special import chdtri  # on first use (0.4 s): not for every import of metrics
+
+    n = np.asarray(n_runs, dtype=float)
+    tail = (1.0 - probability) / 2.0
+    valid = n >= 1
+    size = np.where(valid, n, 1.0)
+    low: FloatArray = np.where(valid, chdtri(dof * size, 1.0 - tail) / size, np.nan)
+    high: FloatArray = np.where(valid, chdtri(dof * size, tail) / size, np.nan)
+    return low, high
+
+
+def mean_in_band(values: npt.ArrayLike, dof: int) -> tuple[float, float, float, int]:
+    """Mean of the finite ``values`` (one χ²_dof statistic per run), its band and their count.
+
+    ``(mean, low, high, n)``: the band of :func:`chi2_band` for the ``n``
+    runs with a finite value (a NaN mean NIS: no nominal measurement); NaN
+    throughout for none.
+    """
+    x = np.asarray(values, dtype=float)
+    finite = x[np.isfinite(x)]
+    low, high = chi2_band(finite.size, dof)
+    mean = float(finite.mean()) if finite.size else float("nan")
+    return mean, float(low), float(high), int(finite.size)
 
 
 def _times(times_ms: Sequence[float]) -> tuple[float, float]:

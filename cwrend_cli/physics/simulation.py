@@ -15,10 +15,13 @@ Nothing here writes files: the result is a plain :class:`RunResult` that
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model. The truth receives the control the
-actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
-scale error, noise, misalignment, minimum thrust, delay); the filter predicts
-with the commanded control, which it knows, not the errors. The per-step
+guidance use the design models of ``problem.model`` (CW by default;
+:mod:`cwrend_cli.physics.design_models`), or for the filter an extended
+Kalman filter on the nonlinear dynamics (:mod:`cwrend_cli.physics.ekf`).
+The truth receives the control the actuator applies (``problem.actuator``,
+:mod:`cwrend_cli.physics.actuator`: scale error, noise, misalignment, minimum
+thrust, delay); the filter predicts with the commanded control, which it
+knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
 So are the draws of the sensor faults of the degradation windows
@@ -51,7 +54,18 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
+from cwrend_cli.physics import (
+    actuator,
+    attitude,
+    design_models,
+    ekf,
+    guidance,
+    measurement_models,
+    process_noise,
+    references,
+    sensors,
+    truth,
+)
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
@@ -111,8 +125,15 @@ class RunResult:
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
     dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
+    trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
+    #: the tumbling target's attitude over the run (issue 34), only with target.attitude
+    #: = "tumbling"; at every step and sub-step (:func:`_target_attitude`)
+    target_attitude: attitude.TargetAttitude | None = None
+    #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
+    #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
+    sensor: str = "position"
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -254,6 +275,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         eps=np.full(rows, np.nan),
         trace_p=np.full(rows, np.nan),
         nees=np.full(rows, np.nan),
+        trace_q=np.full(rows, np.nan),
     )
 
 
@@ -288,11 +310,23 @@ def simulate(
     phi, gam = discretize(n, dt)
     filter_phi, filter_gam = _filter_tables(problem)
     r_nominal = est.r_nominal_matrix()
-    meas = sensors.sensor_noise(
-        standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
-    )
-    noise, active = meas.noise, meas.active
+    windows = problem.degradation.windows
+    sensor: measurement_models.SensorModel | None = None
+    if problem.sensor.model == "position":
+        meas = sensors.sensor_noise(standard_normal, t[:-1], r_nominal, windows, fault_draws, dt)
+        noise, active, dropout_steps, outlier_steps = (
+            meas.noise, meas.active, meas.dropout, meas.outlier
+        )  # fmt: skip
+    else:  # a nonlinear sensor (issue 35): measured and updated in the compiled loop
+        sensor, parts = sensors.sensor_model(
+            problem.sensor, standard_normal, t[:-1], windows, fault_draws, dt
+        )
+        noise, active, dropout_steps, outlier_steps = (
+            np.zeros((n_steps, 3)), parts.active, parts.dropout, parts.outlier
+        )  # fmt: skip
 
+    # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
+    target_attitude = _target_attitude(problem)
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -327,7 +361,7 @@ def simulate(
         hold_mean=gd.hold == "mean",
         u_override=np.zeros((n_steps, 3)),
         override=np.zeros(n_steps, dtype=np.bool_),
-        dropout=meas.dropout,
+        dropout=dropout_steps,
         filter_phi=filter_phi,
         filter_gam=filter_gam,
     )
@@ -366,7 +400,10 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log)
+    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
+    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf, pn)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -375,8 +412,8 @@ def simulate(
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
-    dropout = np.concatenate(([False], meas.dropout))
-    outlier = np.concatenate(([False], meas.outlier))
+    dropout = np.concatenate(([False], dropout_steps))
+    outlier = np.concatenate(([False], outlier_steps))
     log.nees[0] = sk.nees(est.p0_matrix(), x_hat0, x0, np.empty((6, 7)))
     return RunResult(
         arch=arch.slug,
@@ -401,7 +438,25 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        trace_q=log.trace_q,
+        target_attitude=target_attitude,
+        sensor=problem.sensor.model,
     )
+
+
+def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
+    """The tumbling target's attitude at every step and safety sub-sample (issue 34 item 1).
+
+    None for a fixed target (its axes are the relative frame's). Computed once
+    before the loop: torque-free motion depends on nothing the chaser does, so
+    these are the numbers a propagation inside the step loop would give
+    (:mod:`cwrend_cli.physics.attitude`).
+    """
+    if not problem.target.tumbling:
+        return None
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
 def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
@@ -422,6 +477,9 @@ class _Loop:
     sched: sk.ScheduleParams
     state: sk.LoopState
     log: sk.StepLog
+    sensor: measurement_models.SensorModel | None = None  # None: the position sensor
+    ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
+    pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -429,7 +487,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log,
+            scalars, self.log, self.sensor, self.ekf, self.pn,
         )  # fmt: skip
 
 
@@ -492,7 +550,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
         )  # fmt: skip
         if i == count:
             break
@@ -714,9 +772,13 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
 
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
-    it always did.
+    it always did. An extended Kalman filter predicts through the nonlinear
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
     """
-    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
+    name = problem.model.filter
+    tables = design_models.step_tables(
+        name if name == "ss" or name == "ya" else "cw", problem.scenario, problem.truth
+    )
     return np.array(tables.phi), np.array(tables.gam)
 
 

@@ -32,10 +32,13 @@ import numpy as np
 import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
+from cwrend_cli.report.consistency import judged, share_inside, step_ensembles
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     format_value,
     markdown_table,
     param_label,
@@ -274,10 +277,123 @@ def _flagged(stats: pd.DataFrame | None) -> bool:
     return bool(boot.apply(_unreliable, axis=1).any()) if not boot.empty else False
 
 
+#: The runs columns of filter consistency, their steps column and degrees of freedom.
+_CONSISTENCY = (("mean_nees", "nees", NEES_DOF), ("mean_nis_nominal", "nis", NIS_DOF))
+BAND = ".2f"  # a χ² band's ends (dimensionless)
+
+
+def _band_cell(row: Any) -> tuple[str, str]:
+    """``mean [low, high]`` of a consistency row and whether the mean is in its band."""
+    if row is None or not _finite(row["value"]):
+        return "–", "–"
+    value, low, high = float(row["value"]), float(row["ci_low"]), float(row["ci_high"])
+    if not (_finite(low) and _finite(high)):
+        return consistency_text(value), "–"
+    text = f"{consistency_text(value)} [{low:{BAND}}, {high:{BAND}}]"
+    return text, "yes" if low <= value <= high else "no"
+
+
+def _stored_consistency(stats: pd.DataFrame, arch: Any) -> dict[str, Any]:
+    """The consistency rows of ``arch`` in statistics ``stats``, by metric (empty: none)."""
+    rows = stats[(stats["kind"] == "consistency") & (stats["arch"] == str(arch))]
+    return {str(r["metric"]): r for _, r in rows.iterrows()}
+
+
+def _consistency_rows(data: ReportData, arch: str) -> dict[str, Any]:
+    """The stored consistency rows of ``arch`` at the reported point, else computed from the runs.
+
+    From the statistics file (``campaign.statistics.consistency``); a run
+    directory or an older campaign has none: the mean of the runs' columns
+    and its band (:func:`~cwrend_cli.physics.metrics.mean_in_band`).
+    """
+    stats = data.point_stats()
+    stored = _stored_consistency(stats, arch) if stats is not None else {}
+    if stored:
+        return stored
+    runs = data.ok_runs()
+    runs = runs[runs["arch"] == arch]
+    out: dict[str, Any] = {}
+    for metric, _, dof in _CONSISTENCY:
+        if metric in runs.columns:
+            value, low, high, n = mean_in_band(pd.to_numeric(runs[metric], errors="coerce"), dof)
+            out[metric] = {"value": value, "ci_low": low, "ci_high": high, "n": n}
+    return out
+
+
+def consistency_table(data: ReportData) -> tuple[str, int] | None:
+    """Filter consistency per architecture against the χ² bands, and the seeds of the steps.
+
+    Per architecture: the mean over the ok runs of each run's mean NEES and
+    NIS with the 95 % band of a consistent filter's mean for that many runs
+    and whether it is in it; the share of the steps whose ensemble mean over
+    the seeds lies in that step's band (:mod:`~cwrend_cli.report.consistency`;
+    the NIS over the steps outside the degradation windows). Returns the
+    table and the number of seeds whose steps are stored; ``None`` when the
+    runs hold no consistency column.
+    """
+    if not any(m in data.runs.columns for m, _, _ in _CONSISTENCY):
+        return None
+    ensembles = step_ensembles(data.nees) if data.nees is not None and not data.nees.empty else {}
+    shares: dict[str, dict[str, float]] = {}
+    for column, ensemble in ensembles.items():
+        frame = share_inside(judged(ensemble, column), ["arch"])
+        names, values = frame["arch"].astype(str), frame["inside"].astype(float)
+        shares[column] = dict(zip(names, values, strict=True))
+    header = ["architecture", "runs", "mean NEES [95 % χ² band]", "in band",
+              "steps in NEES band [%]", "mean NIS [95 % χ² band]", "in band",
+              "steps in NIS band [%]"]  # fmt: skip
+    rows = []
+    for a in data.archs:
+        stored = _consistency_rows(data, a)
+        if not stored:
+            continue
+        cells: list[str] = []
+        for metric, column, _ in _CONSISTENCY:
+            cells += _band_cell(stored.get(metric))
+            inside = shares.get(column, {}).get(a)
+            cells.append(_fmt(100.0 * inside if inside is not None else None, ".1f"))
+        first = stored.get("mean_nees", stored.get("mean_nis_nominal"))
+        runs = str(int(first["n"])) if first is not None else "–"
+        rows.append([arch_label(a), runs, *cells])
+    if not rows:
+        return None
+    seeds = int(data.nees["seed"].nunique()) if ensembles and data.nees is not None else 0
+    return markdown_table(header, rows), seeds
+
+
+def _consistency_lines(data: ReportData) -> list[str]:
+    """The filter-consistency section (none without consistency columns in the runs)."""
+    found = consistency_table(data)
+    if found is None:
+        return []
+    table, seeds = found
+    n_runs = int(data.ok_runs()["seed"].nunique())
+    about = (
+        "Mean over the runs of each run's time-averaged NEES (6 for a consistent filter) and "
+        "NIS (outside the degradation windows; 3), against the 95 % χ² band of a consistent "
+        "filter's mean over that many runs (Bar-Shalom et al. 2001, §5.4.2; conservative for "
+        "time averages). Steps in band: the share of the steps at which the mean over the "
+        "seeds lies in that step's band (about 95 % for a consistent filter; the NIS over the "
+        "steps outside the degradation windows); the figure `consistency.png` draws them."
+    )
+    if seeds == 0:
+        where = "No per-step NEES is stored: no step shares."
+    elif seeds < n_runs:
+        where = (
+            f"The step shares are over the {seeds} seed(s) whose steps are stored "
+            f"(`output.steps_seeds`), the means over all {n_runs}."
+        )
+    else:
+        where = f"The step shares are over the {seeds} seed(s)."
+    return ["## Filter consistency", "", f"{about} {where}", "", table, ""]
+
+
 def sweep_table(data: ReportData) -> str:
     """One row per grid point (all swept values) and architecture.
 
-    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored.
+    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored;
+    then, where it stores them, the mean NEES and NIS of the runs with their
+    χ² 95 % bands and whether each is in its band (issue 33).
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     keys: list[str] = []
@@ -289,6 +405,9 @@ def sweep_table(data: ReportData) -> str:
         "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
         "max miss [m]", "mean applied Δv [km/s]",
     ]  # fmt: skip
+    consistent = stats is not None and bool((stats["kind"] == "consistency").any())
+    if consistent:
+        header += ["mean NEES [95 % χ² band]", "in band", "mean NIS [95 % χ² band]", "in band"]
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
     for values, g in runs.groupby(keys, sort=True):
@@ -308,8 +427,14 @@ def sweep_table(data: ReportData) -> str:
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
-            rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
-                         *cells, _fmt(miss.max(), MISS), applied])  # fmt: skip
+            row = [*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
+                   *cells, _fmt(miss.max(), MISS), applied]  # fmt: skip
+            if stats is not None and consistent:
+                points = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
+                stored = _stored_consistency(stats[stats["point"].astype(str).isin(points)], a)
+                for metric, _, _ in _CONSISTENCY:
+                    row += _band_cell(stored.get(metric))
+            rows.append(row)
     return markdown_table(header, rows)
 
 
@@ -462,6 +587,7 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
         if _flagged(stats):
             lines += [UNRELIABLE_NOTE, ""]
     lines += _safety_lines(data)
+    lines += _consistency_lines(data)
     lines += [f"## Noise seed {data.seed}", "", seed_table(data), ""]
     if data.design:
         lines += _design_lines(data)

@@ -43,6 +43,10 @@ grid points or pairs in one cell) are refused naming a field that tells
 them apart. Units and precision per quantity as in the report: misses in m
 (2 decimals), Δv in km/s (4; differences 5), fuel penalty in % (2), shares
 3 decimals. A bootstrap interval from fewer than 10 seeds is marked ``*``.
+
+``mean.nees`` and ``mean.nis`` (issue 33) are the mean over the runs of each
+run's mean NEES and nominal mean NIS; their interval is the χ² 95 % band a
+consistent filter's mean lies in (the ``consistency`` rows), never marked.
 """
 
 from __future__ import annotations
@@ -109,6 +113,8 @@ QUANTITIES: Mapping[str, _Quantity] = {
     "solve_max_ms": _Quantity("re-solve time", "ms", 1.0, 1),
     "solve_success_pct": _Quantity("re-solve success", "%", 1.0, 2),
     "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
+    "mean_nees": _Quantity("of the runs' mean NEES", "-", 1.0, 2),
+    "mean_nis_nominal": _Quantity("of the runs' nominal mean NIS", "-", 1.0, 2),
 }
 #: The statistics of each stored metric (the first is the default).
 MARGINAL: Mapping[str, tuple[str, ...]] = {
@@ -121,7 +127,12 @@ MARGINAL: Mapping[str, tuple[str, ...]] = {
     "solve_max_ms": ("max",),
     "solve_success_pct": ("mean",),
     "n_infeasible": ("mean",),
+    "mean_nees": ("mean",),
+    "mean_nis_nominal": ("mean",),
 }
+#: Filter consistency (issue 33): stored as ``consistency`` rows whose interval is the χ²
+#: 95 % band of a consistent filter's mean over the runs, not a confidence interval.
+CONSISTENCY = ("mean_nees", "mean_nis_nominal")
 #: The paired statistics of each metric (the first is the default).
 PAIRED: Mapping[str, tuple[str, ...]] = {
     "miss_km": ("median_diff", "frac_less"),
@@ -175,6 +186,8 @@ class Value:
             return self._runs_header()
         q = QUANTITIES[self.metric]
         ci = " (95 % CI)" if self.interval else ""
+        if self.metric in CONSISTENCY:
+            ci = " (95 % χ² band)" if self.interval else ""
         if self.statistic == "frac_less":
             a, b = self.pair or ("A", "B")
             ci = " (95 % Wilson)" if self.interval else ""
@@ -530,8 +543,9 @@ def _entries(
         metric, statistic = (
             ("miss_km", "mean") if value.kind == "count" else (value.metric, value.statistic)
         )
+        stored = "consistency" if metric in CONSISTENCY else "marginal"
         sel = stats[
-            (stats["kind"] == "marginal")
+            (stats["kind"] == stored)
             & (stats["metric"] == metric)
             & (stats["statistic"] == statistic)
         ].copy()
@@ -786,6 +800,8 @@ class Table:
 
 def _unreliable(cell: pd.Series | None, value: Value) -> bool:
     if cell is None or value.statistic == "frac_less" or not value.interval:
+        return False
+    if value.metric in CONSISTENCY:  # a χ² band, not a bootstrap interval
         return False
     return math.isfinite(float(cell["ci_low"])) and float(cell["n"]) < MIN_BOOTSTRAP_N
 
