@@ -84,7 +84,7 @@ class LoopModel(NamedTuple):
     dt: float  # step Δt [s]
     gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
     gl_w: np.ndarray  # and weights
-    use_mtf: bool  # MTF inflation of the filter (paper Eqs. 16–19)
+    estimator: int  # estimation.PLAIN, MTF (paper Eqs. 16–19) or STF (single factor)
     adaptive: bool  # ε from the innovation score (paper Eqs. 24–26), else held
     hold_mean: bool  # control averaged over the step, else sampled at its start
     u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
@@ -426,9 +426,9 @@ def _steps(
             _propagate_costate(m.lam_step, lam, lam_next)
             continue
         if sensor is None:
-            x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
+            x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.estimator)
         else:
-            x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.use_mtf)
+            x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.estimator)
         x_hat[:] = x_post
         p[:, :] = p_post
         if pn is not None:

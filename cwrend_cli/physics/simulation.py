@@ -2,8 +2,8 @@
 
 Paper Eqs. 11–26 and Sec. "Receding-Horizon Indirect Guidance".
 
-An architecture is estimator {plain, MTF} × schedule {fixed, adaptive}: the
-same loop with two switches. The loop runs compiled
+An architecture is estimator {plain, MTF, single-factor STF} × schedule
+{fixed, adaptive}: the same loop with two switches. The loop runs compiled
 (:mod:`cwrend_cli.physics._loop_kernels`): with the shooting method, its
 re-solves too, each the warm attempt of
 :func:`cwrend_cli.physics.guidance.solve_state`; only a re-solve whose warm
@@ -68,6 +68,7 @@ from cwrend_cli.physics import (
 )
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
+from cwrend_cli.physics.estimation import ESTIMATOR_KINDS
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
@@ -356,7 +357,7 @@ def simulate(
         dt=dt,
         gl_x=gl_x,
         gl_w=gl_w,
-        use_mtf=arch.mtf,
+        estimator=ESTIMATOR_KINDS[arch.estimator],
         adaptive=arch.adaptive,
         hold_mean=gd.hold == "mean",
         u_override=np.zeros((n_steps, 3)),
