@@ -9,6 +9,7 @@ bit: an added pair draws its bootstrap from a stream of its own.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -169,3 +170,63 @@ def test_a_pair_is_stored_and_shown(tmp_path: Path) -> None:
     paired = stats[stats["kind"] == "paired"]
     assert _pairs_of(paired) == {("plain_adaptive", "mtf_fixed")} and len(paired) == 3
     assert "plain_adaptive" in result.stdout and "vs mtf_fixed" in result.stdout
+
+
+def _paired_in(directory: Path, stats: str = "ablation.parquet") -> set[tuple[str, str]]:
+    frame = pd.read_parquet(directory / stats)
+    paired = frame[frame["kind"] == "paired"]
+    return _pairs_of(paired) if "other" in paired else set()  # no pair: no column
+
+
+@pytest.mark.parametrize("command", ["ablate", "sweep"])
+def test_a_pair_is_remembered_by_a_later_command_that_rewrites_the_statistics(
+    tmp_path: Path, command: str
+) -> None:
+    """A resume naming no --pair (here: one more seed) keeps the pairs added before: the
+    manifest records them and every rewrite of the statistics compares them again."""
+    cfg = _config(tmp_path)
+    base = [command, str(cfg), "--name", "p", "--arch", "mtf_fixed,plain_adaptive",
+            "-w", "1", "--no-rrd", "-q"]  # fmt: skip
+    if command == "sweep":
+        base += ["--param", "schedule.beta=0.25,0.5"]
+    stats = "ablation.parquet" if command == "ablate" else "sweep.parquet"
+    out = tmp_path / "results" / "p"
+    first = runner.invoke(app, [*base, "--seeds", "2", "--pair", "plain_adaptive:mtf_fixed"])
+    assert first.exit_code == 0, first.output
+    assert _paired_in(out, stats) == {("plain_adaptive", "mtf_fixed")}
+    resumed = runner.invoke(app, [*base, "--seeds", "3"])
+    assert resumed.exit_code == 0, resumed.output
+    assert _paired_in(out, stats) == {("plain_adaptive", "mtf_fixed")}
+    frame = pd.read_parquet(out / stats)
+    assert set(frame.loc[frame["kind"] == "paired", "n"]) == {3}  # recomputed on 3 seeds
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["pairs"] == ["plain_adaptive:mtf_fixed"]
+
+
+def test_a_remembered_pair_is_kept_by_a_rerun_naming_one_of_its_architectures(
+    tmp_path: Path,
+) -> None:
+    """A re-run of one architecture of the pair is not refused for the pair it recorded."""
+    cfg = _config(tmp_path)
+    base = ["ablate", str(cfg), "--name", "p", "-w", "1", "--no-rrd", "-q", "--seeds", "2"]
+    archs = ["--arch", "mtf_fixed,plain_adaptive"]
+    first = runner.invoke(app, [*base, *archs, "--pair", "plain_adaptive:mtf_fixed"])
+    assert first.exit_code == 0, first.output
+    again = runner.invoke(app, [*base, "--arch", "mtf_fixed"])
+    assert again.exit_code == 0, again.output
+    out = tmp_path / "results" / "p"
+    assert _paired_in(out) == {("plain_adaptive", "mtf_fixed")}
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["pairs"] == ["plain_adaptive:mtf_fixed"]
+
+
+def test_the_recorded_pairs_of_a_manifest_are_read_back_and_checked(tmp_path: Path) -> None:
+    from cwrend_cli.output.manifest import ManifestError, read_manifest, recorded_pairs
+
+    path = tmp_path / "manifest.json"
+    path.write_text(json.dumps({"root_seed": 0, "pairs": ["a:b", "c:d"]}), encoding="utf-8")
+    assert recorded_pairs(read_manifest(path, "fix")) == (("a", "b"), ("c", "d"))
+    assert recorded_pairs({"root_seed": 0}) == ()
+    path.write_text(json.dumps({"root_seed": 0, "pairs": ["a:b", "cd"]}), encoding="utf-8")
+    with pytest.raises(ManifestError, match='"pairs"'):
+        read_manifest(path, "fix")

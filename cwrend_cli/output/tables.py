@@ -57,6 +57,28 @@ def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
 # Units and descriptions of every column (issue 18, item 5)
 # ---------------------------------------------------------------------------
 
+#: Short names of the run metrics, as ``--metric`` takes them (``cwrend compare`` and
+#: ``cwrend table``; one table for both), → their ``runs.parquet`` / statistics column:
+#: the paper's trapezoid Δv and its fuel penalty (``dv``, ``fuel``), the applied impulse
+#: and its penalty against the exact continuous fuel optimum (``dv_applied``,
+#: ``fuel_applied``, issue 33 item 3), the filter-consistency means (``nees``, ``nis``:
+#: ``cwrend table`` only, as a consistent filter's is a value, not "lower is better").
+METRIC_NAMES: Mapping[str, str] = {
+    "miss": "miss_km",
+    "dv": "delta_v_km_s",
+    "fuel": "fuel_penalty_pct",
+    "dv_applied": "delta_v_applied_km_s",
+    "fuel_applied": "fuel_penalty_applied_pct",
+    "nees": "mean_nees",
+    "nis": "mean_nis_nominal",
+}
+
+
+def metric_name(column: str) -> str:
+    """The short name of a metric column (``delta_v_applied_km_s`` → ``dv_applied``), else it."""
+    return next((k for k, v in METRIC_NAMES.items() if v == column), column)
+
+
 #: Unit of a column (or configuration key) from its name's suffix, longest first.
 SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
     ("_km_s2", "km/s^2"),

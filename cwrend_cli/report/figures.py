@@ -398,7 +398,7 @@ def fig_control(data: ReportData) -> Figure:
         ax_dv.plot(r["t_s"], _cumulative_dv(r), **_ref_style(name))
     _shade(ax_dv, data.windows)
     ax_dv.set_xlabel("time [s]")
-    ax_dv.set_ylabel("cumulative Δv [km/s]")
+    ax_dv.set_ylabel(f"cumulative Δv [km/s] ({DV_TRAPEZOID})")
     ax_dv.set_title("cumulative Δv")
     handles = _arch_handles(archs) + _ref_handles(data) + _window_handles(data.windows)
     _legend_below(fig, handles, ncol=4)
@@ -536,8 +536,45 @@ def fig_errors(data: ReportData) -> Figure:
     return _finished(fig)
 
 
+#: Which Δv the report's figures plot: the paper's (``delta_v_km_s``), as its Figs 2 and 6 do.
+#: The applied impulse Σ‖u_k‖Δt of a run (``delta_v_applied_km_s``) is ‖u₀‖Δt/2 more, at
+#: most u_max Δt / 2 (0.4 m/s on the paper scenario, 0.3 % of its Δv): the same picture
+#: shifted by less than a marker; the applied Δv and its penalty are in the report's tables.
+DV_TRAPEZOID = "trapezoid of ‖u‖, the paper's"
+#: The caption's sentence on it (figures that plot Δv).
+DV_CAPTION = (
+    "Δv: the paper's trapezoid of ‖u‖ over the time steps (delta_v_km_s), not the applied "
+    "impulse Σ‖u_k‖Δt (delta_v_applied_km_s, half the first step's impulse more; in the tables)."
+)
+
+
+def _exact_fuel_optimum(data: ReportData) -> float | None:
+    """The exact continuous fuel optimum [km/s] (u_max times its burn time), from stored
+    values: the fuel reference's ``delta_v_applied_km_s`` (a run directory), else what
+    every ok run's applied Δv and penalty give, Δv_applied / (1 + penalty / 100), when they
+    agree to 1e-9 (a campaign of one scenario); ``None`` for results written before them."""
+    ref = data.ref_summary
+    if "delta_v_applied_km_s" in ref.columns:
+        row = ref.loc[ref["arch"] == "open_loop_fuel", "delta_v_applied_km_s"]
+        if not row.empty and np.isfinite(float(row.iloc[0])):
+            return float(row.iloc[0])
+    runs = data.ok_runs()
+    if runs.empty or not {"delta_v_applied_km_s", "fuel_penalty_applied_pct"} <= set(runs):
+        return None
+    dv = runs["delta_v_applied_km_s"].to_numpy(dtype=float)
+    optimum = dv / (1.0 + runs["fuel_penalty_applied_pct"].to_numpy(dtype=float) / 100.0)
+    optimum = optimum[np.isfinite(optimum)]
+    if optimum.size == 0 or np.ptp(optimum) > 1e-9 * np.max(np.abs(optimum)):
+        return None
+    return float(np.median(optimum))
+
+
 def fig_dv_vs_miss(data: ReportData) -> Figure:
-    """Fig. 6: Δv against terminal miss, every run (log miss), references as vertical lines."""
+    """Fig. 6: Δv against terminal miss, every run (log miss), references as vertical lines.
+
+    Δv is the paper's trapezoid (:data:`DV_TRAPEZOID`); the fuel-optimal line also
+    gives the exact continuous optimum, which a run left of the line does not beat.
+    """
     fig = _figure(13, 6.8)
     ax = fig.subplots()
     runs = data.ok_runs()
@@ -555,14 +592,16 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
             ax.scatter(g["delta_v_km_s"].median(), np.median(miss), s=190, marker="D",
                        facecolor="none", edgecolor=c, lw=2.2, zorder=5,
                        gid=f"median:{a}")  # fmt: skip
+    exact = _exact_fuel_optimum(data)
     for _, row in data.ref_summary.iterrows():
         name = str(row["arch"]).removeprefix("open_loop_")
         st = _ref_style(name)
+        beside = f" (trapezoid; exact {exact:.4g})" if name == "fuel" and exact else ""
         ax.axvline(float(row["delta_v_km_s"]), color=st["color"], ls=st["ls"], lw=1.6,
-                   label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s")  # fmt: skip
+                   label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s{beside}")  # fmt: skip
     ax.set_yscale("log")
     ax.margins(x=0.04, y=0.08)  # no run on the frame (margins of the log axis in decades)
-    ax.set_xlabel("Δv [km/s]")
+    ax.set_xlabel(f"Δv [km/s] ({DV_TRAPEZOID})")
     ax.set_ylabel("terminal miss ‖r(T)‖ [m]")
     what = f"{len(runs)} runs; hollow diamonds: per-architecture median" if multi else _title(data)
     ax.set_title(f"Fig. 6 · Fuel against accuracy ({what})")
@@ -1361,7 +1400,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "fig2_control.png",
-        "Thrust magnitude per architecture and cumulative Δv (paper Fig. 2, top).",
+        f"Thrust magnitude per architecture and cumulative Δv (paper Fig. 2, top). {DV_CAPTION}",
         fig_control,
     ),
     FigureEntry(
@@ -1382,7 +1421,9 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "fig6_dv_vs_miss.png",
-        "Δv against terminal miss for every run; vertical lines: open-loop Δv.",
+        "Δv against terminal miss for every run; vertical lines: open-loop Δv (the fuel "
+        "plan's trapezoid, with the exact continuous optimum beside it: a run left of the line "
+        f"is the trapezoid's artefact, not a saving). {DV_CAPTION}",
         fig_dv_vs_miss,
     ),
     FigureEntry(
@@ -1393,7 +1434,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "dv_distribution.png",
-        "Δv per architecture over the seeds.",
+        f"Δv per architecture over the seeds. {DV_CAPTION}",
         fig_dv_distribution,
         ReportData.multi_seed,
     ),
@@ -1405,13 +1446,13 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     SweepFigureEntry(
         "sweep_{key}.png",
-        "Median miss and mean Δv against `{key}`.",
+        f"Median miss and mean Δv against `{{key}}`. {DV_CAPTION}",
         fig_sweep,
     ),
     SweepFigureEntry(
         "design_{key}.png",
         "Mean miss and mean Δv of every design point against `{key}` (dots), with a binned "
-        "mean (geometric for the miss) and its 95 % band per architecture.",
+        f"mean (geometric for the miss) and its 95 % band per architecture. {DV_CAPTION}",
         fig_design,
         design=True,
     ),
@@ -1420,7 +1461,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "Sensitivity of the sampled design: first-order (S1) and total (ST) Sobol indices of "
         "the mean miss and mean Δv over the seeds of each design point (S1 alone, by RBD-FAST, "
         "for an lhs or random design), per parameter and architecture; error bars: 95 % "
-        "intervals (sensitivity.parquet).",
+        f"intervals (sensitivity.parquet). {DV_CAPTION}",
         fig_sensitivity,
         _has_sensitivity,
     ),
@@ -1526,8 +1567,10 @@ _COMPARE_AXES: dict[str, tuple[str, float]] = {
     "miss_km": ("miss, A − B [m]", 1e3),
     "delta_v_km_s": ("Δv, A − B [km/s]", 1.0),
     "fuel_penalty_pct": ("fuel penalty, A − B [points of %]", 1.0),
+    "delta_v_applied_km_s": ("applied Δv, A − B [km/s]", 1.0),
+    "fuel_penalty_applied_pct": ("applied fuel penalty, A − B [points of %]", 1.0),
 }
-_SHARE_MARKERS = ("s", "^", "v")
+_SHARE_MARKERS = ("s", "^", "v", "<", ">")
 
 
 def _error_bars(value: Any, low: Any, high: Any) -> np.ndarray:
@@ -1594,7 +1637,7 @@ def fig_compare(
             err = _error_bars(r["value"], r["ci_low"], r["ci_high"])
             dy = 0.2 * (i - (len(metrics) - 1) / 2)
             axes[-1].errorbar(r["value"], y - dy, xerr=err, color=colour,
-                              fmt=_SHARE_MARKERS[i % 3], ms=6, capsize=3, lw=1.6)  # fmt: skip
+                              fmt=_SHARE_MARKERS[i], ms=6, capsize=3, lw=1.6)  # fmt: skip
     for ax, metric in zip(axes, metrics, strict=False):
         ax.axvline(0.0, color="black", lw=1)
         ax.set_xlabel(_COMPARE_AXES[metric][0])
@@ -1611,7 +1654,7 @@ def fig_compare(
     ]
     for i, m in enumerate(metrics):
         what = _COMPARE_AXES[m][0].split(",")[0]
-        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i % 3], ls="", color="black",
+        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i], ls="", color="black",
                               label=f"share A lower, {what} (95 % Wilson)"))  # fmt: skip
     _legend_below(fig, handles, ncol=2 if len(handles) == 4 else 3)
     title = f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})"
