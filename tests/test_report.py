@@ -806,6 +806,41 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
         assert world in f.draw().get_suptitle(), f.file
 
 
+@pytest.fixture(scope="module")
+def truth_sweep_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2-seed sweep over ``truth.model`` (base config: CW), as ``--param truth.model=cw,two_body``."""
+    root = tmp_path_factory.mktemp("truth_sweep")
+    points = [("p_cw", {"truth.model": "cw"}), ("p_2b", {"truth.model": "two_body"})]
+    return _write_campaign(root, points, seeds=(0, 1), with_refs=True)
+
+
+@pytest.mark.parametrize(
+    ("point", "world"), [("p_cw", "truth: cw (the design model)"), ("p_2b", "truth: two_body")]
+)
+def test_figures_of_a_point_name_its_world(truth_sweep_dir: Path, point: str, world: str) -> None:
+    """Issue 37: the reported point's figures name its truth model, not the base config's."""
+    from cwrend_cli.report import figures
+
+    data = load_results(truth_sweep_dir, point=point)
+    assert data.world == world
+    per_point = [f for f in figures.planned_figures(data) if not f.file.startswith("sweep_")]
+    assert {*PER_SEED, *MULTI_SEED} <= {f.file for f in per_point}
+    for f in per_point:
+        assert f.caption.endswith(f"Simulated world: {world}."), f.file
+        assert f.draw().get_suptitle().split("\n")[-1] == world, f.file
+
+
+def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
+    """Issue 37: a figure over the grid names the world of each point it shows."""
+    from cwrend_cli.report import figures
+
+    data = load_results(truth_sweep_dir)
+    (sweep,) = [f for f in figures.planned_figures(data) if f.file.startswith("sweep_")]
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert sweep.caption.endswith(f"Simulated world: {worlds}."), sweep.caption
+    assert sweep.draw().get_suptitle().split("\n")[-1] == worlds
+
+
 # ---------------------------------------------------------------------------
 # Sampled designs and their sensitivity (issue 19, item 4)
 # ---------------------------------------------------------------------------
