@@ -808,7 +808,7 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
 
 @pytest.fixture(scope="module")
 def truth_sweep_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 2-seed sweep over ``truth.model`` (base config: CW), as ``--param truth.model=cw,two_body``."""
+    """A 2-seed sweep over ``truth.model`` (base: CW), as ``--param truth.model=cw,two_body``."""
     root = tmp_path_factory.mktemp("truth_sweep")
     points = [("p_cw", {"truth.model": "cw"}), ("p_2b", {"truth.model": "two_body"})]
     return _write_campaign(root, points, seeds=(0, 1), with_refs=True)

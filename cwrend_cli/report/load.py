@@ -47,6 +47,7 @@ import pyarrow.dataset as ds
 from cwrend_cli.config import (
     ALL_ARCHITECTURES,
     CwrendConfig,
+    apply,
     config_from_dict,
     get_dotted,
     resolved_dict,
@@ -138,13 +139,32 @@ class ReportData:
 
     @property
     def world(self) -> str:
-        """The simulated world the figures show: truth model, actuator errors, sensor faults.
+        """The simulated world of the reported point: truth model, actuator errors, sensor faults.
 
         E.g. ``truth: cw (the design model)`` or ``truth: j2 · actuator errors
         on · sensor faults on`` (issue 15: the guidance and the filter always
-        assume CW; this names what the truth was).
+        assume CW; this names what the truth was). In a sweep, the world of the
+        point the per-seed figures show, with its swept values set
+        (:func:`point_config`; issue 37: a sweep over ``truth.model``).
         """
-        return world_of(self.config)
+        return world_of(point_config(self.config, self.ok_runs()))
+
+    @property
+    def worlds(self) -> str:
+        """The simulated worlds of every point, for the figures that show them all.
+
+        The world of each point (:attr:`world`); when they differ (a sweep over
+        ``truth.model``, say), ``one per point:`` and each distinct world once,
+        sorted, separated by ``;``.
+        """
+        ok = self.runs[self.runs["status"] == "ok"]
+        if "point" not in ok.columns or ok["point"].nunique() <= 1:
+            return self.world
+        found = {
+            world_of(point_config(self.config, runs))
+            for _, runs in ok.groupby(ok["point"].astype(str), sort=False)
+        }
+        return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -212,6 +232,29 @@ def world_of(config: CwrendConfig | None) -> str:
     if any(_has_faults(w) for w in windows_of(config)):
         parts.append("sensor faults on")
     return " · ".join(parts)
+
+
+def point_config(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
+    """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
+
+    ``runs`` are one point's rows of ``runs.parquet``; every ``param.<key>``
+    column with a single value over them is set at ``key``, as the campaign set
+    it on the base configuration. ``config`` itself when nothing was swept;
+    ``None`` without a configuration or when the result does not validate.
+    """
+    if config is None:
+        return None
+    assignment = []
+    for column in param_columns(runs.columns):
+        values = runs[column].dropna().unique()
+        if len(values) == 1:
+            assignment.append((column.removeprefix(PARAM_PREFIX), param_value(values[0])))
+    if not assignment:
+        return config
+    try:
+        return config_from_dict(apply(resolved_dict(config), assignment))
+    except ConfigError:
+        return None
 
 
 def results_world(results_dir: Path) -> str:
