@@ -759,16 +759,20 @@ class ModelConfig(_FrozenModel):
     of ``[truth]``: eccentricity ``truth.eccentricity``, true anomaly
     ``truth.true_anomaly_deg`` at t = 0. Both read the chief from ``[truth]``,
     so they need a truth that flies one (``truth.model`` ``"two_body"`` or
-    ``"j2"``). Without the section every number and hash is as before.
+    ``"j2"``). The filter also takes ``"ekf_two_body"`` and ``"ekf_j2"``: an
+    extended Kalman filter on the nonlinear two-body (two-body + J2) relative
+    dynamics about the same chief, with the same need. Without the section
+    every number and hash is as before.
     """
 
     guidance: Literal["cw", "ss", "ya"] = Field(
         _PAPER.model.guidance,
         description="design model of the re-solves: 'cw', 'ss' (J2) or 'ya' (eccentric) [-]",
     )
-    filter: Literal["cw", "ss", "ya"] = Field(
+    filter: Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"] = Field(
         _PAPER.model.filter,
-        description="design model of the Kalman filter's prediction: 'cw', 'ss' or 'ya' [-]",
+        description="model of the Kalman filter's prediction: 'cw', 'ss', 'ya', or an "
+        "extended Kalman filter on the nonlinear dynamics 'ekf_two_body' or 'ekf_j2' [-]",
     )
 
 

@@ -47,6 +47,7 @@ from numba import njit
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import costate_stm, zoh_step
+from cwrend_cli.physics.ekf import EkfModel, ekf_predict
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
     EPS_BANG_BANG,
@@ -227,6 +228,7 @@ def advance(
     scalars: LoopScalars,
     log: StepLog,
     sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
 ) -> LoopScalars:
     """Run steps ``k_start … k_stop``; the last one stops before its costate propagation.
 
@@ -242,11 +244,13 @@ def advance(
     The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`),
     and so does the position sensor (``sensor`` None: the paper's measurement,
     compiled without the extended update; a nonlinear sensor of issue 35 is a
-    :class:`~cwrend_cli.physics.measurement_models.SensorModel`).
+    :class:`~cwrend_cli.physics.measurement_models.SensorModel`), and so does a
+    linear filter (``ekf`` None: :func:`_optional_ekf`).
     """
     out = _advance(
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(state), tuple(scalars), tuple(log), None if sensor is None else tuple(sensor),
+        _optional_ekf(ekf),
     )  # fmt: skip
     return LoopScalars(*out)
 
@@ -270,6 +274,13 @@ def _optional(
     )
 
 
+def _optional_ekf(ekf: EkfModel | None) -> tuple[tuple[Any, ...], np.ndarray] | None:
+    """The extended Kalman filter as the compiled loop takes it: ``None`` for a linear
+    filter (the branch is pruned, as :func:`_optional`'s: the default loop compiles as
+    before), else its dynamics' plain tuple and its chief table."""
+    return None if ekf is None else (tuple(ekf.tm), ekf.chief)
+
+
 @njit(cache=True)
 def _advance(
     k_start: int,
@@ -283,16 +294,18 @@ def _advance(
     scalars_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
     sensor_t: tuple[Any, ...] | None,
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
     scalars = LoopScalars(*scalars_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
     sensor = None if sensor_t is None else SensorModel(*sensor_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     return _steps(
         k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
         LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
-        sensor,
+        sensor, ekf,
     )  # fmt: skip
 
 
@@ -311,6 +324,7 @@ def _steps(
     first: bool,
     log: StepLog,
     sensor: SensorModel | None,
+    ekf: EkfModel | None,
 ) -> tuple[float, float, bool]:
     """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
 
@@ -318,7 +332,8 @@ def _steps(
     (:func:`_optional`); ``sensor`` ``None``: the position sensor (paper
     Eq. 13), else a nonlinear sensor measured and updated by the extended
     filter (:mod:`cwrend_cli.physics.measurement_models`; ``log.y`` then holds
-    its m components in its own units, NaN after them).
+    its m components in its own units, NaN after them); ``ekf`` ``None``: the
+    linear filter of ``m.filter_phi`` (:func:`_optional_ekf`).
     """
     m = model
     ws = workspace()
@@ -359,8 +374,12 @@ def _steps(
         else:
             y = measure_truth(sensor, k, x_next)
         # Kalman filter predict (with the commanded control: the filter does not
-        # know the actuator errors) and update (Eqs. 11–23)
-        x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        # know the actuator errors) and update (Eqs. 11–23); or the extended Kalman
+        # filter's predict through the nonlinear dynamics (physics.ekf)
+        if ekf is None:
+            x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        else:
+            x_pred, p_pred = ekf_predict(ekf, k, x_hat, p, u, m.q)
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
             x_hat[:] = x_pred
@@ -489,6 +508,7 @@ def resolve_loop(
     log: StepLog,
     solves: SolveLog,
     sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
 ) -> tuple[int, LoopScalars]:
     """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
 
@@ -514,6 +534,7 @@ def resolve_loop(
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
         None if sensor is None else tuple(sensor),
+        _optional_ekf(ekf),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
 
@@ -534,6 +555,7 @@ def _resolve_loop(
     log_t: tuple[Any, ...],
     solves_t: tuple[Any, ...],
     sensor_t: tuple[Any, ...] | None,
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments."""
     m = LoopModel(*model_t)
@@ -547,6 +569,7 @@ def _resolve_loop(
     log = StepLog(*log_t)
     solves = SolveLog(*solves_t)
     sensor = None if sensor_t is None else SensorModel(*sensor_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     lam = state.lam
     k_next = k_start
@@ -554,7 +577,7 @@ def _resolve_loop(
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
         eps, sbar, first = _steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor
+            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
         )
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -595,6 +618,6 @@ def _resolve_loop(
             lam[:] = np.dot(m.lam_step, carry.warm)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor
+        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
     )
     return n_resolves, eps, sbar, first

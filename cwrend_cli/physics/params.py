@@ -289,6 +289,9 @@ class Truth:
 #: The design models a consumer (guidance, filter) can use (issue 33;
 #: :mod:`cwrend_cli.physics.design_models`).
 DesignModelName = Literal["cw", "ss", "ya"]
+#: The filter's models: a design model, or an extended Kalman filter on the truth's
+#: nonlinear dynamics (issue 33; :mod:`cwrend_cli.physics.ekf`).
+FilterModelName = Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"]
 
 
 @dataclass(frozen=True)
@@ -300,10 +303,13 @@ class DesignModel:
     chief's (a from ``scenario.mean_motion_rad_s``, i = ``truth.inclination_deg``).
     ``"ya"``: Yamanaka–Ankersen, the exact transition about the eccentric chief
     of ``[truth]`` (e = ``truth.eccentricity``, f₀ = ``truth.true_anomaly_deg``).
+    The filter also takes ``"ekf_two_body"`` or ``"ekf_j2"``: an extended
+    Kalman filter on the nonlinear two-body (or two-body + J2) relative
+    dynamics about the same chief (:mod:`cwrend_cli.physics.ekf`).
     """
 
     guidance: DesignModelName = "cw"  # model of the re-solves [-]
-    filter: DesignModelName = "cw"  # model of the filter's prediction [-]
+    filter: FilterModelName = "cw"  # model of the filter's prediction [-]
 
 
 @dataclass(frozen=True)

@@ -15,10 +15,13 @@ Nothing here writes files: the result is a plain :class:`RunResult` that
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model. The truth receives the control the
-actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
-scale error, noise, misalignment, minimum thrust, delay); the filter predicts
-with the commanded control, which it knows, not the errors. The per-step
+guidance use the design models of ``problem.model`` (CW by default;
+:mod:`cwrend_cli.physics.design_models`), or for the filter an extended
+Kalman filter on the nonlinear dynamics (:mod:`cwrend_cli.physics.ekf`).
+The truth receives the control the actuator applies (``problem.actuator``,
+:mod:`cwrend_cli.physics.actuator`: scale error, noise, misalignment, minimum
+thrust, delay); the filter predicts with the commanded control, which it
+knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
 So are the draws of the sensor faults of the degradation windows
@@ -55,6 +58,7 @@ from cwrend_cli.physics import (
     actuator,
     attitude,
     design_models,
+    ekf,
     guidance,
     measurement_models,
     references,
@@ -393,7 +397,8 @@ def simulate(
     log.trace_p[0] = np.trace(state.p)
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log, sensor)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -467,6 +472,7 @@ class _Loop:
     state: sk.LoopState
     log: sk.StepLog
     sensor: measurement_models.SensorModel | None = None  # None: the position sensor
+    ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -474,7 +480,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log, self.sensor,
+            scalars, self.log, self.sensor, self.ekf,
         )  # fmt: skip
 
 
@@ -537,7 +543,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf,
         )  # fmt: skip
         if i == count:
             break
@@ -759,9 +765,13 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
 
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
-    it always did.
+    it always did. An extended Kalman filter predicts through the nonlinear
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
     """
-    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
+    name = problem.model.filter
+    tables = design_models.step_tables(
+        name if name == "ss" or name == "ya" else "cw", problem.scenario, problem.truth
+    )
     return np.array(tables.phi), np.array(tables.gam)
 
 
