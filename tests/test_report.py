@@ -830,6 +830,15 @@ def test_figures_of_a_point_name_its_world(truth_sweep_dir: Path, point: str, wo
         assert f.draw().get_suptitle().split("\n")[-1] == world, f.file
 
 
+def test_thrust_limit_is_the_reported_points(tmp_path: Path) -> None:
+    """Issue 37: what the per-seed figures draw from the configuration is the point's (fig. 2's
+    thrust limit), not the base config's 8e-4 km/s²."""
+    points = [("p_lo", {"scenario.u_max_km_s2": 6e-4}), ("p_hi", {"scenario.u_max_km_s2": 1e-3})]
+    root = _write_campaign(tmp_path, points, seeds=(0,), with_refs=False, with_stats=False)
+    assert load_results(root, point="p_lo").u_max_km_s2 == 6e-4
+    assert load_results(root, point="p_hi").u_max_km_s2 == 1e-3
+
+
 def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
     """Issue 37: a figure over the grid names the world of each point it shows."""
     from cwrend_cli.report import figures

@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
 
@@ -145,9 +146,18 @@ class ReportData:
         on · sensor faults on`` (issue 15: the guidance and the filter always
         assume CW; this names what the truth was). In a sweep, the world of the
         point the per-seed figures show, with its swept values set
-        (:func:`point_config`; issue 37: a sweep over ``truth.model``).
+        (:attr:`point_config`; issue 37: a sweep over ``truth.model``).
         """
-        return world_of(point_config(self.config, self.ok_runs()))
+        return world_of(self.point_config)
+
+    @cached_property
+    def point_config(self) -> CwrendConfig | None:
+        """The configuration of the reported point: :attr:`config` with its swept values set.
+
+        What the per-seed figures were simulated with (:func:`with_swept_values`);
+        :attr:`config` itself for a run or an ablation.
+        """
+        return with_swept_values(self.config, self.ok_runs())
 
     @property
     def worlds(self) -> str:
@@ -161,7 +171,7 @@ class ReportData:
         if "point" not in ok.columns or ok["point"].nunique() <= 1:
             return self.world
         found = {
-            world_of(point_config(self.config, runs))
+            world_of(with_swept_values(self.config, runs))
             for _, runs in ok.groupby(ok["point"].astype(str), sort=False)
         }
         return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
@@ -179,29 +189,32 @@ class ReportData:
 
     @property
     def windows(self) -> tuple[Window, ...]:
-        """The degradation windows of the configuration (none without one)."""
-        return windows_of(self.config) if self.config is not None else ()
+        """The degradation windows of the reported point (none without a configuration)."""
+        return windows_of(self.point_config) if self.point_config is not None else ()
 
     @property
     def constraints(self) -> Geometry | None:
-        """The path constraints of the configuration as arrays (issue 32; ``None`` without).
+        """The path constraints of the reported point as arrays (issue 32; ``None`` without).
 
         The keep-out ellipsoid and the corridor cone the safety columns were measured
         against (:func:`~cwrend_cli.physics.constraints.geometry`); ``None`` without a
         stored configuration or when it has neither a keep-out zone nor a corridor.
         """
-        found = constraints_of(self.config) if self.config is not None else None
+        config = self.point_config
+        found = constraints_of(config) if config is not None else None
         return geometry(found) if found is not None else None
 
     @property
     def u_max_km_s2(self) -> float | None:
-        """Thrust limit of the scenario [km/s²] (``None`` without a configuration)."""
-        return self.config.scenario.u_max_km_s2 if self.config is not None else None
+        """Thrust limit of the reported point [km/s²] (``None`` without a configuration)."""
+        config = self.point_config
+        return config.scenario.u_max_km_s2 if config is not None else None
 
     @property
     def nis_offset(self) -> float | None:
-        """NIS offset ``m`` of the score (``None`` without a configuration)."""
-        return self.config.schedule.nis_offset if self.config is not None else None
+        """NIS offset ``m`` of the reported point's score (``None`` without a configuration)."""
+        config = self.point_config
+        return config.schedule.nis_offset if config is not None else None
 
     def ok_runs(self) -> pd.DataFrame:
         """The successful runs of the reported grid point (every run of a single point)."""
@@ -234,7 +247,7 @@ def world_of(config: CwrendConfig | None) -> str:
     return " · ".join(parts)
 
 
-def point_config(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
+def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
     """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
 
     ``runs`` are one point's rows of ``runs.parquet``; every ``param.<key>``
