@@ -54,10 +54,12 @@ if TYPE_CHECKING:  # annotations only; the commands import these when they run
     from cwrend_cli.config import Architecture, CwrendConfig
     from cwrend_cli.report.table import Source
 
-#: The architectures of ``--arch all`` and ``all_socp`` (the keys of
-#: ``physics.params.ARCHITECTURES`` and ``SOCP_ARCHITECTURES``, checked by a test).
+#: The architectures of ``--arch all`` and ``all_socp`` and the single-factor ones
+#: (the keys of ``physics.params.ARCHITECTURES``, ``SOCP_ARCHITECTURES`` and
+#: ``STF_ARCHITECTURES``, checked by a test).
 ARCH_SLUGS = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
 SOCP_ARCH_SLUGS = tuple(f"{a}_socp" for a in ARCH_SLUGS)
+STF_ARCH_SLUGS = ("stf_fixed", "stf_adaptive", "stf_fixed_socp", "stf_adaptive_socp")
 
 
 def _help_flag_off(option: typer.core.TyperOption | None) -> typer.core.TyperOption | None:
@@ -281,7 +283,10 @@ ARCH_HELP = (
     + ", ".join(ARCH_SLUGS)
     + "), 'all_socp' (the same with the cone-program re-solve: "
     + ", ".join(SOCP_ARCH_SLUGS)
-    + ") or 'everything' (both)."
+    + "), 'everything' (both); the single-factor baseline ("
+    + ", ".join(STF_ARCH_SLUGS)
+    + ") only by name or in 'with_stf', 'with_stf_socp', 'everything_with_stf' (each group "
+    "with the single-factor ones appended)."
 )
 
 
@@ -417,7 +422,8 @@ PairOption = Annotated[
         "--pair",
         help="Also compare A with B seed by seed (A:B, two architectures of the campaign; "
         "repeatable). By default: MTF vs plain and adaptive vs fixed within each re-solve "
-        "method, and cone program vs shooting.",
+        "method, and cone program vs shooting (with the single-factor baseline: MTF vs STF "
+        "and STF vs plain too).",
         metavar="A:B",
     ),
 ]

@@ -19,7 +19,12 @@ from typer.testing import CliRunner
 from cwrend_cli.campaign import sequential, statistics
 from cwrend_cli.cli import app
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.physics.params import ALL_ARCHITECTURES, SOCP_ARCHITECTURES
+from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
+    ARCHITECTURES,
+    SOCP_ARCHITECTURES,
+    STF_ARCHITECTURES,
+)
 
 runner = CliRunner()
 SOCP_WITHIN = [
@@ -28,6 +33,8 @@ SOCP_WITHIN = [
     ("mtf_adaptive_socp", "mtf_fixed_socp"),
     ("plain_adaptive_socp", "plain_fixed_socp"),
 ]
+#: The paper's eight architectures (shooting and cone program), without the single factor.
+PAPER_EIGHT = [*ARCHITECTURES, *SOCP_ARCHITECTURES]
 
 
 def _runs(archs: list[str], points: int = 1) -> pd.DataFrame:
@@ -52,14 +59,36 @@ def _pairs_of(frame: pd.DataFrame) -> set[tuple[str, str]]:
 
 
 def test_default_pairs_differ_in_one_choice_each() -> None:
-    """12 pairs: 4 within each method (2 estimator, 2 schedule) and 4 across methods."""
+    """12 pairs of the paper's eight: 4 within each method (2 estimator, 2 schedule) and 4
+    across methods; then 12 of the single factor (issue 35): within each method MTF vs STF
+    and STF vs plain at each schedule (4) and STF adaptive vs fixed (1), and 2 across."""
     pairs = statistics.DEFAULT_PAIRS
-    assert pairs[: len(statistics.PAIRS)] == statistics.PAIRS and len(set(pairs)) == 12
+    assert pairs[: len(statistics.PAIRS)] == statistics.PAIRS and len(set(pairs)) == 24
+    assert all(a in PAPER_EIGHT and b in PAPER_EIGHT for a, b in pairs[:12])
+    assert all(a in STF_ARCHITECTURES or b in STF_ARCHITECTURES for a, b in pairs[12:])
     for a, b in pairs:
         x, y = ALL_ARCHITECTURES[a], ALL_ARCHITECTURES[b]
-        differ = [x.mtf != y.mtf, x.adaptive != y.adaptive, x.method != y.method]
+        differ = [x.estimator != y.estimator, x.adaptive != y.adaptive, x.method != y.method]
         assert sum(differ) == 1
     assert set(SOCP_WITHIN) <= set(pairs)
+
+
+def test_a_campaign_with_the_single_factor_compares_mtf_with_it_first() -> None:
+    """``--arch with_stf``: the paper's pairs, then MTF vs STF at each schedule (P(MTF beats
+    STF)), STF adaptive vs fixed and STF vs plain; the paper's rows as without the STF."""
+    archs = [*ARCHITECTURES, "stf_fixed", "stf_adaptive"]
+    runs = _runs(archs)
+    frame = statistics.paired(runs, seed=7)
+    paper = statistics.paired(runs[runs["arch"].isin(list(ARCHITECTURES))], seed=7)
+    pd.testing.assert_frame_equal(frame.iloc[: len(paper)].reset_index(drop=True), paper)
+    added = list(dict.fromkeys(zip(frame["arch"], frame["other"], strict=True)))[4:]
+    assert added == [
+        ("mtf_adaptive", "stf_adaptive"),
+        ("mtf_fixed", "stf_fixed"),
+        ("stf_adaptive", "stf_fixed"),
+        ("stf_adaptive", "plain_adaptive"),
+        ("stf_fixed", "plain_fixed"),
+    ]
 
 
 def test_an_all_socp_campaign_compares_its_estimators_and_schedules() -> None:
@@ -71,7 +100,7 @@ def test_an_all_socp_campaign_compares_its_estimators_and_schedules() -> None:
 @pytest.mark.parametrize("by", [[], ["point", "param.schedule.beta"]])
 def test_the_added_pairs_append_rows_and_change_none(by: list[str]) -> None:
     """Every architecture, three grid points: the rows of PAIRS first, bit for bit as before."""
-    runs = _runs(list(ALL_ARCHITECTURES), points=3 if by else 1)
+    runs = _runs(PAPER_EIGHT, points=3 if by else 1)
     before = statistics.paired(runs, by, seed=7, pairs=statistics.PAIRS)
     now = statistics.paired(runs, by, seed=7)
     assert len(now) > len(before)

@@ -1145,3 +1145,15 @@ def test_the_paired_miss_figure_pairs_the_cone_program_architectures_too() -> No
         ("plain_fixed", "mtf_fixed"),
         ("mtf_fixed", "mtf_adaptive"),
     ]
+
+
+def test_the_paired_miss_figure_pairs_the_single_factor_with_mtf() -> None:
+    """A campaign of the single factor and MTF only (issue 35) gets its panels."""
+    from cwrend_cli.report.figures import _pairs
+
+    archs = ["stf_fixed", "stf_adaptive", "mtf_fixed", "mtf_adaptive"]
+    assert _pairs(pd.DataFrame(columns=archs)) == [
+        ("mtf_fixed", "mtf_adaptive"),
+        ("stf_adaptive", "mtf_adaptive"),
+        ("stf_fixed", "mtf_fixed"),
+    ]

@@ -150,6 +150,11 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "est_err_km": _col("position estimation error ||r-hat - r||"),
     "est_vel_err_km_s": _col("velocity estimation error ||v-hat - v||"),
     "trace_p": _col("trace of the estimate covariance P (sums km^2 and km^2/s^2)", "mixed"),
+    "trace_q": _col(
+        "trace of the process noise Q_k of the prediction into the row (sums km^2 and "
+        "km^2/s^2; estimator.process_noise); NaN in row 0",
+        "mixed",
+    ),
     "nees": _col(
         "normalised estimation error squared (x-hat - x)' P^-1 (x-hat - x) (chi2_6); "
         "row 0: initial error against P0; posterior, prior on a dropout row",
@@ -430,6 +435,7 @@ STEPS_SCHEMA = pa.schema(
         ("est_err_km", pa.float64()),
         ("est_vel_err_km_s", pa.float64()),
         ("trace_p", pa.float64()),
+        ("trace_q", pa.float64()),
         ("nees", pa.float64()),
         ("degradation_window", pa.int64()),
         ("dropout", pa.bool_()),
@@ -517,6 +523,7 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["est_err_km"] = row_norm(*(x_hat[:3] - x_true[:3]))
     cols["est_vel_err_km_s"] = row_norm(*(x_hat[3:] - x_true[3:]))
     cols["trace_p"] = _stacked(results, "trace_p")
+    cols["trace_q"] = _stacked(results, "trace_q")
     cols["nees"] = _stacked(results, "nees")
     cols["degradation_window"] = _stacked(results, "window").astype(np.int64)
     cols["dropout"] = _stacked(results, "dropout").astype(np.bool_)

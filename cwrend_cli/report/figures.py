@@ -974,8 +974,9 @@ def fig_dv_distribution(data: ReportData) -> Figure:
 
 
 #: The pairs of the paired-miss figure (x-axis, y-axis): the paper's three, then the same
-#: three of the cone-program architectures; at most :data:`_MAX_PAIR_PANELS` are drawn,
-#: the first present, so a cone-program campaign gets its own panels.
+#: three of the cone-program architectures, then single factor vs MTF (issue 35); at most
+#: :data:`_MAX_PAIR_PANELS` are drawn, the first present, so a cone-program campaign gets
+#: its own panels, and one of the single factor against MTF too.
 _PAIRS = (
     ("plain_adaptive", "mtf_adaptive"),
     ("plain_fixed", "mtf_fixed"),
@@ -983,6 +984,10 @@ _PAIRS = (
     ("plain_adaptive_socp", "mtf_adaptive_socp"),
     ("plain_fixed_socp", "mtf_fixed_socp"),
     ("mtf_fixed_socp", "mtf_adaptive_socp"),
+    ("stf_adaptive", "mtf_adaptive"),
+    ("stf_fixed", "mtf_fixed"),
+    ("stf_adaptive_socp", "mtf_adaptive_socp"),
+    ("stf_fixed_socp", "mtf_fixed_socp"),
 )
 _MAX_PAIR_PANELS = 3
 
