@@ -32,7 +32,9 @@ both the drawing and the figure list of ``report.md``:
 Every figure names the simulated world it shows (:attr:`ReportData.world`:
 the truth model, and actuator errors and sensor faults when configured) in
 its title and caption (issue 15, item 6): the guidance and the filter always
-assume CW, the truth need not.
+assume CW, the truth need not. In a sweep that is the reported point's world
+(its swept values set), and the figures of every point name each point's
+world (:attr:`ReportData.worlds`; issue 37).
 
 Units: km, s, km/s, km/s² (as in the Parquet files); ‖u‖ is drawn in m/s².
 """
@@ -1375,6 +1377,8 @@ class FigureEntry:
     caption: str
     draw: Callable[[ReportData], Figure]
     applies: Callable[[ReportData], bool] = _always
+    #: shows every grid or design point (named by :attr:`ReportData.worlds`), not the reported one
+    every_point: bool = False
 
 
 @dataclass(frozen=True)
@@ -1464,6 +1468,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         f"intervals (sensitivity.parquet). {DV_CAPTION}",
         fig_sensitivity,
         _has_sensitivity,
+        every_point=True,
     ),
     FigureEntry(
         "nees.png",
@@ -1532,10 +1537,13 @@ def _captioned(caption: str, world: str) -> str:
 def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
     """The figures of :data:`FIGURES` that apply to ``data``, in report order.
 
-    Each one's title and caption name the simulated world (:attr:`ReportData.world`).
+    Each one's title and caption name the simulated world of the point it
+    shows (:attr:`ReportData.world`), or of every point
+    (:attr:`ReportData.worlds`) for the sweep, design and sensitivity figures.
     """
     out: list[PlannedFigure] = []
     world = data.world
+    worlds = data.worlds if data.params else world
     for entry in FIGURES:
         if isinstance(entry, SweepFigureEntry):
             for param in data.params if entry.design == data.design else ():
@@ -1543,16 +1551,17 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
                 out.append(
                     PlannedFigure(
                         entry.file.format(key=key),
-                        _captioned(entry.caption.format(key=key), world),
-                        partial(_with_world, partial(entry.draw, data, param), world),
+                        _captioned(entry.caption.format(key=key), worlds),
+                        partial(_with_world, partial(entry.draw, data, param), worlds),
                     )
                 )
         elif entry.applies(data):
+            shown = worlds if entry.every_point else world
             out.append(
                 PlannedFigure(
                     entry.file,
-                    _captioned(entry.caption, world),
-                    partial(_with_world, partial(entry.draw, data), world),
+                    _captioned(entry.caption, shown),
+                    partial(_with_world, partial(entry.draw, data), shown),
                 )
             )
     return tuple(out)
