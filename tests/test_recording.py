@@ -13,7 +13,7 @@ from rerun.chunk import RrdReader
 
 from cwrend_cli import campaign
 from cwrend_cli.campaign import CaseResult
-from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig
 from cwrend_cli.config.adapt import windows_of
 from cwrend_cli.output import recording
 
@@ -287,10 +287,19 @@ def test_the_early_check_reads_rerun_as_rerun_does(
     assert refused == (not rerun_enabled)
 
 
-def test_palette_covers_every_architecture() -> None:
-    assert set(recording.ARCH_COLOURS) == set(ARCHITECTURES)
-    assert len(set(recording.ARCH_COLOURS.values())) == len(ARCHITECTURES)
+def test_rgb_of_hex() -> None:
     assert recording.rgb("#1f77b4") == (31, 119, 180)
+
+
+def test_every_architecture_has_its_own_fixed_colour() -> None:
+    """All twelve slugs (the paper's eight and the single-factor four, issue 35) get a fixed,
+    named colour, none shared with another architecture, a reference or the windows."""
+    colours = [recording.ARCH_COLOURS.get(slug) for slug in ALL_ARCHITECTURES]
+    assert None not in colours
+    assert set(recording.ARCH_COLOURS) == set(ALL_ARCHITECTURES)
+    others = {*recording.REFERENCE_COLOURS.values(), recording.DEGRADATION_COLOUR}
+    assert len(set(colours) | others) == len(colours) + len(others)
+    assert all(c in recording.COLOUR_NAMES for c in colours)
 
 
 def test_no_viewer_without_display(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -72,12 +72,23 @@ class RecordingError(CwrendError):
     """A recording cannot be written (e.g. Rerun disabled by ``RERUN=off``)."""
 
 
-#: Colour of each architecture (hex), shared by the recordings and the report figures.
+#: Colour of each architecture (hex), shared by the recordings and the report figures:
+#: every slug of ``ALL_ARCHITECTURES`` has its own. A cone-program architecture takes the
+#: light shade of its shooting counterpart (matplotlib's tab20 pairs); the single-factor
+#: baseline is pink and cyan, away from the references and the degradation windows.
 ARCH_COLOURS: Mapping[str, str] = {
     "plain_fixed": "#d62728",  # red
     "mtf_fixed": "#ff7f0e",  # orange
     "plain_adaptive": "#1f77b4",  # blue
     "mtf_adaptive": "#2ca02c",  # green
+    "plain_fixed_socp": "#ff9896",  # light red
+    "mtf_fixed_socp": "#ffbb78",  # light orange
+    "plain_adaptive_socp": "#aec7e8",  # light blue
+    "mtf_adaptive_socp": "#98df8a",  # light green
+    "stf_fixed": "#e377c2",  # pink
+    "stf_adaptive": "#17becf",  # cyan
+    "stf_fixed_socp": "#f7b6d2",  # light pink
+    "stf_adaptive_socp": "#9edae5",  # light cyan
 }
 #: Colour of each open-loop reference (hex).
 REFERENCE_COLOURS: Mapping[str, str] = {
@@ -86,13 +97,19 @@ REFERENCE_COLOURS: Mapping[str, str] = {
 }
 #: Colour of the degradation-window series and shading (hex).
 DEGRADATION_COLOUR = "#bcbd22"
-_FALLBACK = ("#17becf", "#e377c2", "#8c564b", "#7f7f7f")
+_FALLBACK = ("#8c564b", "#7f7f7f")
 #: Names of the colours above, for the colour key of the about panel.
 COLOUR_NAMES: Mapping[str, str] = {
     "#d62728": "red",
     "#ff7f0e": "orange",
     "#1f77b4": "blue",
     "#2ca02c": "green",
+    "#ff9896": "light red",
+    "#ffbb78": "light orange",
+    "#aec7e8": "light blue",
+    "#98df8a": "light green",
+    "#f7b6d2": "light pink",
+    "#9edae5": "light cyan",
     "#9467bd": "purple",
     "#8c8c8c": "grey",
     "#bcbd22": "olive",
