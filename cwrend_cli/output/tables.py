@@ -164,7 +164,9 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "sensor.model = 'angles')",
         "-",
     ),
-    "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
+    "mtf_ratio": _col(
+        "inflation ratio ρ: MTF tr(S_MTF)/tr(S), stf (λ − 1) tr(R)/tr(S); 0 for the plain KF", "-"
+    ),
     "score": _col("composite innovation score s", "-"),
     "score_filtered": _col("low-pass filtered score s-bar", "-"),
     "eps": _col("homotopy parameter epsilon after the row's update", "-"),

@@ -59,7 +59,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
 from scipy.spatial import ConvexHull
 
-from cwrend_cli.config import ARCHITECTURES
+from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES
 from cwrend_cli.output.recording import (
     CORRIDOR_COLOUR,
     DEGRADATION_COLOUR,
@@ -437,8 +437,24 @@ def fig_eps_score(data: ReportData) -> Figure:
     return _finished(fig)
 
 
+def _ratio_names(slugs: Sequence[str]) -> tuple[str, str]:
+    """Name and definition of the inflation ratio ρ that the ``mtf_ratio`` column holds.
+
+    For MTF it is the MTF ratio tr(S_MTF)/tr(S) (paper Eq. 23); for a single-factor
+    (``stf``) run it is (λ − 1) tr(R)/tr(S), the same definition applied to the single
+    factor (docs/method.md, "The single-factor baseline"); both when both are plotted.
+    """
+    estimators = {ALL_ARCHITECTURES[s].estimator for s in slugs if s in ALL_ARCHITECTURES}
+    if "stf" not in estimators:
+        return "MTF ratio", "tr(S_MTF)/tr(S)"
+    if "mtf" not in estimators:
+        return "single-factor ratio", "(λ − 1) tr(R)/tr(S)"
+    return "inflation ratio", "MTF tr(S_MTF)/tr(S), single factor (λ − 1) tr(R)/tr(S)"
+
+
 def fig_nis_mtf(data: ReportData) -> Figure:
-    """Fig. 4: NIS and MTF ratio, degradation windows shaded; close-up of the windows.
+    """Fig. 4: NIS and the inflation ratio ρ, degradation windows shaded; close-up of the
+    windows (ρ named for the estimators plotted: :func:`_ratio_names`).
 
     The dotted line is the NIS offset ``m`` of the score (not drawn without a
     stored configuration).
@@ -454,6 +470,7 @@ def fig_nis_mtf(data: ReportData) -> Figure:
         for members, g in _groups(data.steps, data.archs, ["mtf_ratio"])
         if g["mtf_ratio"].fillna(0.0).abs().max() > 0
     ]
+    ratio, definition = _ratio_names([a for members, _ in mtf_groups for a in members])
     for col in range(2):
         ax_n, ax_r = axes[0, col], axes[1, col]
         for members, g in nis_groups:
@@ -468,7 +485,7 @@ def fig_nis_mtf(data: ReportData) -> Figure:
         ax_r.set_yscale("symlog", linthresh=1.0)
         ax_r.set_ylim(bottom=0.0)
         ax_n.set_ylabel("NIS [-]")
-        ax_r.set_ylabel("MTF ratio ρ [-]")
+        ax_r.set_ylabel(f"{ratio} ρ [-]")
         ax_r.set_xlabel("time [s]")
         if col == 1 and lo is not None and hi is not None:
             span = hi - lo
@@ -478,14 +495,14 @@ def fig_nis_mtf(data: ReportData) -> Figure:
             ax_r.set_title("close-up: degradation and recovery")
         elif col == 0:
             ax_n.set_title("normalised innovation squared (dotted: offset m)")
-            ax_r.set_title("MTF ratio tr(S_MTF)/tr(S), linear below 1, log above")
+            ax_r.set_title(f"{ratio} {definition}, linear below 1, log above")
     handles: list[Any] = _group_handles(nis_groups, data.archs)
     if m is not None:
         handles.append(
             Line2D([], [], color="black", ls=":", label=f"m = {m:g} (NIS offset of the score)")
         )
     _legend_below(fig, handles + _window_handles(data.windows), ncol=3)
-    fig.suptitle(f"Fig. 4 · Scheduler inputs: NIS and MTF ratio ({_title(data)})")
+    fig.suptitle(f"Fig. 4 · Scheduler inputs: NIS and {ratio} ({_title(data)})")
     return _finished(fig)
 
 
@@ -1414,7 +1431,9 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "fig4_nis_mtf.png",
-        "NIS and MTF ratio with the degradation windows shaded (paper Fig. 4).",
+        "NIS and the inflation ratio ρ with the degradation windows shaded (paper Fig. 4): "
+        "for MTF the MTF ratio tr(S_MTF)/tr(S) (paper Eq. 23), for the single-factor "
+        "baseline (stf) (λ − 1) tr(R)/tr(S).",
         fig_nis_mtf,
     ),
     FigureEntry(
