@@ -44,6 +44,7 @@ from cwrend_cli.output.layout import (
     compare_dir,
     run_dir,
 )
+from cwrend_cli.output.manifest import pairs_recorded_at
 
 if TYPE_CHECKING:  # annotations only; the commands import these when they run
     import pandas as pd
@@ -675,7 +676,12 @@ def _campaign(
         else:
             if opts.seeds is not None or opts.seed_list is not None:
                 raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
-            target = sequential.parse_until(opts.until, pairs)
+            # a pair added by an earlier command (--pair A:B, in the manifest) is compared
+            # again by this one (when both its architectures run, without --force, which
+            # forgets it): it may be the target
+            recorded = () if opts.force else pairs_recorded_at(out / MANIFEST)
+            remembered = [p for p in recorded if p not in pairs and set(p) <= set(archs)]
+            target = sequential.parse_until(opts.until, [*pairs, *remembered])
             if opts.max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []

@@ -220,6 +220,34 @@ def test_a_remembered_pair_is_kept_by_a_rerun_naming_one_of_its_architectures(
     assert manifest["pairs"] == ["plain_adaptive:mtf_fixed"]
 
 
+def _with_a_remembered_pair(tmp_path: Path) -> tuple[list[str], Path]:
+    """A campaign whose first command added ``--pair plain_adaptive:mtf_fixed``: the
+    arguments of a later command on it (naming no pair) and its directory."""
+    base = ["ablate", str(_config(tmp_path)), "--name", "p", "--arch", "mtf_fixed,plain_adaptive",
+            "-w", "1", "--no-rrd", "-q"]  # fmt: skip
+    first = runner.invoke(app, [*base, "--seeds", "2", "--pair", "plain_adaptive:mtf_fixed"])
+    assert first.exit_code == 0, first.output
+    until = ["--until", "miss_km@plain_adaptive-mtf_fixed:1e9", "--batch", "2", "--max-seeds", "2"]
+    return [*base, *until], tmp_path / "results" / "p"
+
+
+def test_an_until_target_may_name_a_pair_remembered_from_an_earlier_command(
+    tmp_path: Path,
+) -> None:
+    """``--until`` on a pair that an earlier ``--pair A:B`` added (the manifest records it,
+    the statistics compare it again) is accepted without naming ``--pair`` again."""
+    args, out = _with_a_remembered_pair(tmp_path)
+    again = runner.invoke(app, args)
+    assert again.exit_code == 0, again.output
+    assert _paired_in(out) == {("plain_adaptive", "mtf_fixed")}
+
+
+def test_until_with_force_does_not_target_the_pair_force_forgets(tmp_path: Path) -> None:
+    args, _ = _with_a_remembered_pair(tmp_path)
+    forced = runner.invoke(app, [*args, "--force"])
+    assert forced.exit_code == 2 and "pairs compared are" in forced.stderr
+
+
 def test_the_recorded_pairs_of_a_manifest_are_read_back_and_checked(tmp_path: Path) -> None:
     from cwrend_cli.output.manifest import ManifestError, read_manifest, recorded_pairs
 

@@ -152,3 +152,10 @@ def recorded_pairs(manifest: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
     """
     pairs = manifest.get("pairs", [])
     return tuple((a, b) for a, b in (str(p).split(":") for p in pairs))
+
+
+def pairs_recorded_at(path: Path) -> tuple[tuple[str, str], ...]:
+    """:func:`recorded_pairs` of the manifest at ``path``; none when it is absent or
+    damaged (the command that reads it next says what is wrong and how to repair it)."""
+    value, _ = _problem(path)
+    return recorded_pairs(value) if value is not None else ()
