@@ -258,3 +258,41 @@ def test_the_recorded_pairs_of_a_manifest_are_read_back_and_checked(tmp_path: Pa
     path.write_text(json.dumps({"root_seed": 0, "pairs": ["a:b", "cd"]}), encoding="utf-8")
     with pytest.raises(ManifestError, match='"pairs"'):
         read_manifest(path, "fix")
+
+
+def _with_applied(runs: pd.DataFrame, shift: float) -> pd.DataFrame:
+    """``runs`` with an applied Δv: the trapezoid Δv plus ``shift`` [km/s]."""
+    return runs.assign(delta_v_applied_km_s=runs["delta_v_km_s"] + shift)
+
+
+def test_a_pair_across_campaigns_compares_the_applied_delta_v_too() -> None:
+    """``mean_diff`` of the applied Δv (issue 33 item 3), per group, over the seeds where
+    both ran ok: here A's applied Δv is B's trapezoid one + 1e-3 km/s on the same runs."""
+    runs = _runs(["mtf_adaptive", "plain_adaptive"], points=2)
+    rows = statistics.paired_across(
+        _with_applied(runs, 1e-3), _with_applied(runs, 0.0), [("mtf_adaptive", "mtf_adaptive")],
+        by=["point"], seed=7,
+    )  # fmt: skip
+    applied = rows[rows["metric"] == "delta_v_applied_km_s"]
+    assert list(applied["statistic"]) == ["mean_diff", "mean_diff"]
+    ok = runs[(runs["status"] == "ok") & (runs["arch"] == "mtf_adaptive")]
+    assert list(applied["n"]) == list(ok.groupby("point").size())
+    # the same runs on both sides: every difference is the shift (to
+    # rounding: relative 1e-9 is far above the 1e-16 of a double's subtraction)
+    np.testing.assert_allclose(applied["value"], 1e-3, rtol=1e-9)
+    low_high = applied[["ci_low", "ci_high"]].to_numpy()
+    np.testing.assert_allclose(low_high[0], 1e-3, rtol=1e-9)
+    assert np.isnan(low_high[1]).all()  # point p1: one seed, no interval
+
+
+def test_the_applied_delta_v_changes_no_row_of_a_pair_across_campaigns() -> None:
+    """Its rows draw from a stream of their own: the paper's metrics' rows stay bit for bit."""
+    runs = _runs(["mtf_adaptive", "plain_adaptive"], points=2)
+    pairs = [("mtf_adaptive", "plain_adaptive"), ("plain_adaptive", "plain_adaptive")]
+    before = statistics.paired_across(runs, runs, pairs, by=["point"], seed=7)
+    gen = np.random.default_rng(5)
+    noisy = runs.assign(delta_v_applied_km_s=gen.normal(0.14, 1e-3, len(runs)))
+    after = statistics.paired_across(noisy, noisy, pairs, by=["point"], seed=7)
+    kept = after[after["metric"] != "delta_v_applied_km_s"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept, before, check_exact=True)
+    assert (after["metric"] == "delta_v_applied_km_s").sum() == 4  # 2 pairs × 2 points

@@ -415,6 +415,28 @@ def test_a_pair_across_campaigns_takes_b_at_the_points_its_filters_keep(
     assert rows[1][5].startswith(f"{d.median() * 1e3:.2f} [")
 
 
+def test_a_pair_across_campaigns_gives_the_applied_delta_v_difference(
+    studies: dict[str, Path],
+) -> None:
+    """``mean_diff.dv_applied`` of a pair across campaigns (issue 33 item 3): the mean of
+    A − B over the seeds, as the runs hold them [km/s]."""
+    pair = "plain_adaptive-mtf_adaptive"
+    result = _table(
+        studies["methods"], studies["sweep"], "--versus", "methods",
+        "--where", "hold:guidance.hold=sample", "--rows", "campaign,other_campaign",
+        "--metric", f"n,mean_diff.dv_applied@{pair}",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    across = next(r.split(" | ") for r in _lines(result) if r.startswith("| hold"))
+    sweep = pd.read_parquet(studies["sweep"] / "runs.parquet")
+    a = sweep.query("arch == 'plain_adaptive' and `param.guidance.hold` == 'sample'")
+    b = pd.read_parquet(studies["methods"] / "runs.parquet").query("arch == 'mtf_adaptive'")
+    col = "delta_v_applied_km_s"
+    d = a.set_index("seed")[col] - b.set_index("seed")[col]
+    assert across[2] == "3"
+    assert across[3].startswith(f"{d.mean():.5f} [")
+
+
 @pytest.mark.parametrize(
     ("versus", "message"),
     [

@@ -446,6 +446,9 @@ def paired_across(
     if not point_pairs or not chosen:
         return pd.DataFrame([])
     columns = ["arch", "seed", "status", "miss_km", "delta_v_km_s"]
+    # the applied Δv where both campaigns hold it (written since issue 33, item 3)
+    applied = statistics.APPLIED
+    columns += [applied] if applied in a.runs.columns and applied in b.runs.columns else []
     sides: tuple[list[pd.DataFrame], list[pd.DataFrame]] = ([], [])
     for group, (pa_, pb) in enumerate(point_pairs):
         for side, c, point in ((0, a, pa_), (1, b, pb)):

@@ -672,8 +672,73 @@ def paired_across(
     frames = [
         _paired_rows(blocks, keys, bounds, [p], by, _pair_generator(seed, p)) for p in present
     ]
+    if APPLIED in ok_a.columns and APPLIED in ok_b.columns:
+        frames += [_applied_across(ok_a, ok_b, index, keys, bounds, present, by, seed)]
     frames = [f for f in frames if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+#: The applied Δv (issue 33, item 3) that :func:`paired_across` compares too, when both
+#: campaigns hold it.
+APPLIED = APPLIED_METRICS[0]
+
+
+def _applied_across(
+    ok_a: pd.DataFrame,
+    ok_b: pd.DataFrame,
+    index: pd.Index,
+    keys: Sequence[tuple[Hashable, ...]],
+    bounds: npt.NDArray[np.intp],
+    pairs: Sequence[tuple[str, str]],
+    by: Sequence[str],
+    seed: int,
+) -> pd.DataFrame:
+    """``mean_diff`` rows of the applied Δv of each pair (A − B per seed, bootstrap CI) over
+    the seeds where both have one, per group; from a stream of their own
+    (``default_rng([seed, APPLIED_STREAM, crc32("A:B")])``), so that they change no row of
+    the paper's metrics."""
+    wide_a, wide_b = (
+        ok.pivot_table(index=[*by, "seed"], columns="arch", values=APPLIED).reindex(index)
+        for ok in (ok_a, ok_b)
+    )
+    idents: list[tuple[Hashable, ...]] = []
+    head: list[tuple[str, str, int]] = []
+    samples: list[FloatArray] = []
+    cis: list[FloatArray] = []
+    for x, y in pairs:  # each pair its stream, its groups in order (as an added pair's)
+        if x not in wide_a.columns or y not in wide_b.columns:
+            continue
+        diff = wide_a[x].to_numpy(dtype=float) - wide_b[y].to_numpy(dtype=float)
+        mine: list[FloatArray] = []
+        for key, (lo, hi) in zip(keys, pairwise(bounds), strict=True):
+            d = diff[lo:hi][~np.isnan(diff[lo:hi])]
+            if len(d):
+                idents.append(key)
+                head.append((x, y, len(d)))
+                mine.append(d)
+        if mine:
+            rng = np.random.default_rng([seed, APPLIED_STREAM, zlib.crc32(f"{x}:{y}".encode())])
+            cis.append(bootstrap_cis(mine, [np.mean] * len(mine), rng))
+            samples += mine
+    if not head:
+        return pd.DataFrame([])
+    ci = np.vstack(cis)
+    return _frame(
+        by,
+        idents,
+        1,
+        {
+            "kind": "paired",
+            "arch": [x for x, _, _ in head],
+            "other": [y for _, y, _ in head],
+            "n": [n for _, _, n in head],
+            "metric": APPLIED,
+            "statistic": "mean_diff",
+            "value": _point_values(samples, np.mean),
+            "ci_low": ci[:, 0],
+            "ci_high": ci[:, 1],
+        },
+    )
 
 
 def _wide(ok: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:

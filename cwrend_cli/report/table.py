@@ -137,7 +137,11 @@ CONSISTENCY = ("mean_nees", "mean_nis_nominal")
 PAIRED: Mapping[str, tuple[str, ...]] = {
     "miss_km": ("median_diff", "frac_less"),
     "delta_v_km_s": ("mean_diff",),
+    # pairs across campaigns only (--versus: campaign.compare.paired_across)
+    "delta_v_applied_km_s": ("mean_diff",),
 }
+#: The Δv metrics: a paired difference of theirs is shown with 5 decimals [km/s].
+_DV = ("delta_v_km_s", "delta_v_applied_km_s")
 #: Values computed from ``runs.parquet`` over the cell's ok runs: name → (column,
 #: statistic, header). ``share``: 100 × Σ(column) / Σ(n_solves) [%]; ``sum``: Σ(column).
 RUN_VALUES: Mapping[str, tuple[str, Literal["share", "sum"], str]] = {
@@ -225,7 +229,7 @@ class Value:
             return 2
         if self.statistic == "frac_less":
             return 3
-        if self.statistic == "mean_diff" and self.metric == "delta_v_km_s":
+        if self.statistic == "mean_diff" and self.metric in _DV:
             return 5
         return QUANTITIES[self.metric].digits
 
