@@ -81,22 +81,25 @@ def run(seeds: int = 20) -> list[Row]:
                 baseline=mean["cw"],
                 note=f"{len(resolves[guided])} re-solves; baseline: cw; {where}; {NOT_YET}",
             ),
-            Row(
-                SECTION,
-                f"{guided} ({world}): {SOCP[0]} run",
-                1e3 * times[f"{guided}|{SOCP[0]}"],
-                "ms",
-                baseline=1e3 * times[f"cw|{SOCP[0]}"],
-                note="baseline: cw guidance and filter",
-            ),
-            Row(
-                SECTION,
-                f"{ekf} ({world}): {SHOOTING[0]} run",
-                1e3 * times[f"{ekf}|{SHOOTING[0]}"],
-                "ms",
-                baseline=1e3 * times[f"cw|{SHOOTING[0]}"],
-                target=f"<= {2e3 * times[f'cw|{SHOOTING[0]}']:.3g}",
-                note="baseline: the cw Kalman filter, target 2× it",
+            *(
+                Row(
+                    SECTION,
+                    f"{model} ({world}): {slugs[0]} run",
+                    1e3 * times[f"{model}|{slugs[0]}"],
+                    "ms",
+                    baseline=1e3 * times[f"cw|{slugs[0]}"],
+                    target=target,
+                    note=note,
+                )
+                for model, slugs, target, note in (
+                    (guided, SOCP, "", "baseline: cw guidance and filter"),
+                    (
+                        ekf,
+                        SHOOTING,
+                        f"<= {2e3 * times[f'cw|{SHOOTING[0]}']:.3g}",
+                        "baseline: the cw Kalman filter, target 2× it",
+                    ),
+                )
             ),
         ]
     return rows
