@@ -26,6 +26,7 @@ from benchmarks import (
     bench_campaign,
     bench_constrained,
     bench_convex,
+    bench_design,
     bench_sensors,
     bench_solver,
     bench_startup,
@@ -103,6 +104,7 @@ def main() -> None:
         + bench_solver.run(seeds=seeds, naive=3)
         + bench_convex.run(seeds=seeds)
         + bench_sensors.run(seeds=seeds)
+        + bench_design.run(seeds=seeds)
         + bench_constrained.run(seeds=seeds)
         + bench_campaign.run(runs=runs, big=big)
     )

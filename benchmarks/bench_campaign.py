@@ -352,11 +352,15 @@ def _timed(
 
 
 def simulate_time_per_run(
-    slugs: Sequence[str] | None, seeds: Sequence[int], cfg: CwrendConfig | None = None
+    slugs: Sequence[str] | None,
+    seeds: Sequence[int],
+    cfg: CwrendConfig | None = None,
+    resolves_ms: list[float] | None = None,
 ) -> float:
     """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four) on ``seeds``.
 
-    ``cfg``: the configuration (None: the paper's defaults).
+    ``cfg``: the configuration (None: the paper's defaults). ``resolves_ms``: when
+    given, every timed run's re-solve wall times [ms] are appended to it.
 
     The compute bound of a campaign: what a worker cannot avoid (one closed
     loop per run), timed in this process after a warm-up run per
@@ -374,9 +378,11 @@ def simulate_time_per_run(
         noise = noise_of(seed)
         for arch in archs:
             start = time.perf_counter()
-            simulation.simulate(problem, arch, noise, refs, seed=seed)
+            result = simulation.simulate(problem, arch, noise, refs, seed=seed)
             total += time.perf_counter() - start
             n += 1
+            if resolves_ms is not None:
+                resolves_ms.extend(s.wall_time_ms for s in result.resolves)
     return total / n
 
 

@@ -15,7 +15,7 @@ import argparse
 from collections.abc import Sequence
 
 from benchmarks.bench_campaign import simulate_time_per_run
-from benchmarks.common import Row
+from benchmarks.common import Row, interleaved
 
 MODELS = ("position", "range_bearing", "angles")
 SLUGS = ("plain_adaptive", "mtf_adaptive", "stf_adaptive")
@@ -40,11 +40,9 @@ def run(seeds: int = 20) -> list[Row]:
     The seeds in :data:`ROUNDS` rounds, each timing every model on its share of them.
     """
     per_round = max(seeds // ROUNDS, 1)
-    times = dict.fromkeys(MODELS, 0.0)
-    for r in range(ROUNDS):
-        for model in MODELS:
-            share = range(r * per_round, (r + 1) * per_round)
-            times[model] += time_per_run(model, share) / ROUNDS
+    times = interleaved(
+        {m: (lambda share, m=m: time_per_run(m, share)) for m in MODELS}, seeds, ROUNDS
+    )
     note = f"{', '.join(SLUGS)}; {ROUNDS * per_round} seeds each, interleaved, in-process, warm"
     return [
         Row(

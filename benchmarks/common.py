@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -66,6 +66,24 @@ def seeds_main(doc: str | None, run: Callable[[int], list[Row]]) -> None:
     from benchmarks.__main__ import print_rows
 
     print_rows(run(args.seeds))
+
+
+def interleaved(
+    measure: Mapping[str, Callable[[range], float]], seeds: int, rounds: int
+) -> dict[str, float]:
+    """Mean of each ``measure[key](seeds share)`` over ``rounds`` rounds of the seeds 0…S−1.
+
+    The seeds are split into ``rounds`` equal shares; each round times every
+    variant on its share in turn (A B A B …), so a loaded machine's drift falls
+    on every variant alike. Returns {key: mean over the rounds}.
+    """
+    per_round = max(seeds // rounds, 1)
+    means = dict.fromkeys(measure, 0.0)
+    for r in range(rounds):
+        share = range(r * per_round, (r + 1) * per_round)
+        for key, fn in measure.items():
+            means[key] += fn(share) / rounds
+    return means
 
 
 #: A re-solve met in a closed loop, with its warm start (and the loop's second one).

@@ -1,0 +1,113 @@
+"""Re-solve and run time per design model beside CW (issue 33, ``[model]``).
+
+``python -m benchmarks.bench_design [--seeds S]``, or within ``python -m benchmarks``.
+
+Each design model flies in the world it is made for, and CW (the baseline) in
+the same world, timed in the same run with the variants interleaved (A B A B,
+:func:`benchmarks.common.interleaved`), in-process after a warm-up run
+(compilation excluded):
+
+* the J2 world of campaigns/paper_j2.toml (i = 51.6°): guidance and filter
+  ``ss`` on ``mtf_adaptive_socp`` beside CW on it, and the filter ``ekf_j2`` on
+  the shooting ``mtf_adaptive`` beside the CW Kalman filter on it;
+* a two-body world with an eccentric chief (e = 0.05): ``ya`` on
+  ``mtf_adaptive_socp``, and ``ekf_two_body`` on ``mtf_adaptive``.
+
+Figures: the cone program's mean re-solve wall time and the mean closed-loop
+run time (ratio = CW / model: below 1 means the model is slower). The shooting
+re-solve with ``ss`` or ``ya`` is refused at validation (its compiled kernels
+are CW's, docs/guide/design-models.md), so it has no figure yet. Target (issue
+33): an EKF run within 2× the Kalman filter's run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from benchmarks.bench_campaign import simulate_time_per_run
+from benchmarks.common import Row, config_with, interleaved, seeds_main
+from cwrend_cli.config import CwrendConfig
+
+SECTION = "design models"
+#: Rounds the seeds are split into, the variants interleaved in each.
+ROUNDS = 2
+SOCP = ("mtf_adaptive_socp",)
+SHOOTING = ("mtf_adaptive",)
+#: World name → (its ``[truth]`` overrides, guidance model on SOCP, filter model on SHOOTING).
+WORLDS = {
+    "J2, i = 51.6°": ({"model": "j2", "inclination_deg": 51.6}, "ss", "ekf_j2"),
+    "two-body, e = 0.05": ({"model": "two_body", "eccentricity": 0.05}, "ya", "ekf_two_body"),
+}
+NOT_YET = "shooting re-solve with this model: refused at validation (CW kernels only) so far"
+
+
+def _timer(
+    slugs: tuple[str, ...], cfg: CwrendConfig, sink: list[float] | None
+) -> Callable[[range], float]:
+    """Mean run time [s] of ``slugs`` under ``cfg`` on a seed share; re-solves [ms] to ``sink``.
+
+    (A function, so that each timer binds its own configuration and sink.)
+    """
+    return lambda share: simulate_time_per_run(slugs, share, cfg, sink)
+
+
+def run(seeds: int = 20) -> list[Row]:
+    """Per world: the guidance model's re-solve and run time, the EKF's run time, CW beside."""
+    rows = []
+    for world, (truth, guided, ekf) in WORLDS.items():
+        dotted = {f"truth__{k}": v for k, v in truth.items()}
+        variants = {
+            ("cw", SOCP): config_with(**dotted),
+            (guided, SOCP): config_with(**dotted, model__guidance=guided, model__filter=guided),
+            ("cw", SHOOTING): config_with(**dotted),
+            (ekf, SHOOTING): config_with(**dotted, model__filter=ekf),
+        }
+        resolves: dict[str, list[float]] = {key[0]: [] for key in variants if key[1] == SOCP}
+
+        timers = {
+            f"{m}|{slugs[0]}": _timer(slugs, cfg, resolves[m] if slugs == SOCP else None)
+            for (m, slugs), cfg in variants.items()
+        }
+        times = interleaved(timers, seeds, ROUNDS)
+        n = ROUNDS * max(seeds // ROUNDS, 1)
+        where = f"{world}; {n} seeds, interleaved, in-process, warm"
+        mean = {m: sum(t) / len(t) for m, t in resolves.items()}
+        rows += [
+            Row(
+                SECTION,
+                f"{guided} ({world}): {SOCP[0]} re-solve, mean",
+                mean[guided],
+                "ms",
+                baseline=mean["cw"],
+                note=f"{len(resolves[guided])} re-solves; baseline: cw; {where}; {NOT_YET}",
+            ),
+            *(
+                Row(
+                    SECTION,
+                    f"{model} ({world}): {slugs[0]} run",
+                    1e3 * times[f"{model}|{slugs[0]}"],
+                    "ms",
+                    baseline=1e3 * times[f"cw|{slugs[0]}"],
+                    target=target,
+                    note=note,
+                )
+                for model, slugs, target, note in (
+                    (guided, SOCP, "", "baseline: cw guidance and filter"),
+                    (
+                        ekf,
+                        SHOOTING,
+                        f"<= {2e3 * times[f'cw|{SHOOTING[0]}']:.3g}",
+                        "baseline: the cw Kalman filter, target 2× it",
+                    ),
+                )
+            ),
+        ]
+    return rows
+
+
+def main() -> None:
+    seeds_main(__doc__, run)
+
+
+if __name__ == "__main__":
+    main()
