@@ -17,13 +17,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
 from cwrend_cli.cli import app
-from cwrend_cli.config import ARCHITECTURES, config_from_dict
+from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, config_from_dict
 from cwrend_cli.console import RichProgress
 from cwrend_cli.physics import compiled
 
@@ -60,7 +61,7 @@ def test_a_campaign_prints_the_notice_before_its_runs(
 ) -> None:
     # every architecture, the cone-program ones too (a lookup among the paper's four alone
     # ended `ablate --arch all_socp` with a KeyError)
-    monkeypatch.setattr(compiled, "compile_seconds", lambda methods: 24.0)
+    monkeypatch.setattr(compiled, "compile_seconds", lambda methods, fan_out=False: 24.0)
     out = f"output.dir={json.dumps(str(tmp_path))}"
     args = ["ablate", str(PAPER), "--arch", arch, "-w", "1", "--no-rrd", "--set", out]
     result = runner.invoke(app, args)
@@ -112,3 +113,127 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
     # arguments 4 and 5: the CW truth and the ideal actuator cross as None (pruned)
     paper = [(str(sig[4]), str(sig[5])) for sig in _loop_kernels._resolve_loop.signatures]
     assert ("none", "none") in paper
+
+
+# ---------------------------------------------------------------------------
+# The first run's compile fanned out over the campaign process and two workers
+# ---------------------------------------------------------------------------
+
+
+def _signatures(dispatcher: object) -> list[str]:
+    return sorted(str(sig) for sig in dispatcher.signatures)  # type: ignore[attr-defined]
+
+
+def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use() -> None:
+    from cwrend_cli.campaign import worker
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import _loop_kernels, simulation
+
+    cfg = config_from_dict({})
+    campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)  # the compiled loop's own call
+    before = _signatures(_loop_kernels._steps)
+    noise = worker.standard_normal_for(cfg, 0)
+    simulation.compile_loop(problem_of(cfg), ARCHITECTURES["mtf_adaptive"], noise)
+    assert _signatures(_loop_kernels._steps) == before  # ahead of time: the same one, no other
+
+
+def test_compile_switching_gives_the_switching_newton_the_signature_the_solver_uses() -> None:
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    problem = problem_of(config_from_dict({}))
+    simulation.open_loop_references(problem)  # the solver's own call (its ε = 0 steps)
+    before = _signatures(_switching_kernels.switching_newton)
+    compiled.compile_switching(*simulation.solver_settings(problem).quadrature())
+    assert _signatures(_switching_kernels.switching_newton) == before
+
+
+class _Submitted:
+    """An executor that records what is submitted and runs nothing."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[object, ...]] = []
+
+    def submit(self, fn: object, *args: object) -> object:
+        from concurrent.futures import Future
+
+        self.calls.append((fn, *args))
+        future: Future[None] = Future()
+        future.set_result(None)
+        return future
+
+
+class _References:
+    def __init__(self, calls: list[tuple[object, ...]]) -> None:
+        self.calls = calls
+
+    def of(self, task: object) -> None:
+        self.calls.append(("references", task))
+
+
+@pytest.mark.parametrize("cold", [True, False])
+def test_a_first_campaign_compiles_in_two_workers_while_it_computes_the_references(
+    cold: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cwrend_cli.campaign import driver, worker
+
+    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
+    pool = _Submitted()
+    task = object()
+    driver._compile_first_run(pool, [task], _References(pool.calls))  # type: ignore[arg-type]
+    ahead = [(worker.compile_ahead, task, "switching"), (worker.compile_ahead, task, "loop")]
+    # cold: both parts go to the workers first, then this process computes the references
+    assert pool.calls == ([*ahead, ("references", task)] if cold else [])
+
+
+def test_a_cone_program_campaign_compiles_no_shooting_loop_ahead(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+
+    made: list[str] = []
+    monkeypatch.setattr(
+        simulation, "compile_loop", lambda problem, arch, *draws: made.append(arch.slug)
+    )
+    problem = problem_of(config_from_dict({}))
+    archs = [ALL_ARCHITECTURES[a] for a in ("mtf_adaptive_socp", "plain_fixed_socp")]
+    compiled.compile_ahead("loop", problem, archs, np.zeros((problem.scenario.n_steps, 3)))
+    assert made == ["mtf_adaptive_socp"]  # one step loop per method: the cone program's
+
+
+def test_sort_prefix_orders_as_numpy_sorts() -> None:
+    from cwrend_cli.physics.guidance import _kernels
+
+    rng = np.random.default_rng(7)
+    for count in (0, 1, 2, 5, 17, 40):
+        a = rng.uniform(0.0, 800.0, 48)
+        a[3:6] = a[10]  # ties
+        a[[1, 20]] = np.nan  # NaN last, as np.sort puts it
+        want = np.concatenate((np.sort(a[:count]), a[count:]))
+        _kernels.sort_prefix(a, count)
+        assert np.array_equal(a, want, equal_nan=True)  # the prefix sorted, the rest untouched
+
+
+#: Compiles the solver's start selection (and the dual evaluation and breakpoints below it)
+#: in an empty cache and prints whether its code holds numba's quicksort or the
+#: shape-mismatch message of an array-to-array slice assignment, and its code's size.
+_SHRUNK = """
+import numpy as np
+from cwrend_cli.physics.guidance import _kernels as k
+x, w = np.polynomial.legendre.leggauss(12)
+starts = np.array([[1e-3, 2e-4, 0.0, 0.9, 0.4, 0.1]])
+k.best_start(1e-3, starts, np.full(6, 1e-2), 800.0, 0.0, 8e-4, x, w, 20, True,
+             np.empty(6), np.empty((6, 6)), k.workspace())
+ir = "".join(k.best_start.inspect_llvm().values())
+print("quicksort" in ir, "raise_with_shape_context" in ir, len(ir) > 10_000)
+"""
+
+
+def test_the_solver_compiles_no_sort_or_slice_error_message(tmp_path: Path) -> None:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run(
+        [sys.executable, "-c", _SHRUNK], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["False", "False", "True"]

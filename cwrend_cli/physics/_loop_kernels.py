@@ -42,7 +42,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, typeof
 
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
@@ -263,6 +263,30 @@ def _optional(
         None if truth.kind == TRUTH_CW else tuple(truth),
         None if act.ideal else tuple(act),
     )
+
+
+def compile_steps(
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    log: StepLog,
+) -> None:
+    """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
+
+    Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
+    tuples; the CW truth and the ideal actuator as ``None``, :func:`_optional`).
+    A campaign's first run compiles this in a pool worker while the campaign
+    process compiles the re-solves (issue 37 item 12); the compiled loop then
+    loads it from numba's cache instead of compiling it again.
+    """
+    truth_t, act_t = _optional(truth, act)
+    args = (
+        0, 0, 0, model, None if truth_t is None else truth, None if act_t is None else act,
+        sched, state, 0.0, 0.0, True, log,
+    )  # fmt: skip
+    _steps.compile(tuple(typeof(a) for a in args))  # type: ignore[no-untyped-call]
 
 
 @njit(cache=True)

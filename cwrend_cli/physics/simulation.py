@@ -283,14 +283,11 @@ def simulate(
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
     n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
     settings = solver_settings(problem)
-    gl_x, gl_w = settings.quadrature()
     t = sc.time_grid()
-    phi, gam = discretize(n, dt)
-    filter_phi, filter_gam = _filter_tables(problem)
-    r_nominal = est.r_nominal_matrix()
     meas = sensors.sensor_noise(
-        standard_normal, t[:-1], r_nominal, problem.degradation.windows, fault_draws, dt
-    )
+        standard_normal, t[:-1], est.r_nominal_matrix(), problem.degradation.windows,
+        fault_draws, dt,
+    )  # fmt: skip
     noise, active = meas.noise, meas.active
 
     x0 = np.asarray(sc.x0, dtype=float)
@@ -299,38 +296,18 @@ def simulate(
     x_hat0 = x0 + np.asarray(est.initial_error, dtype=float)
     solves: list[SolveRecord] = []
     socp = arch.resolved_method(gd) == "socp"
+    eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
     if arch.adaptive and not socp:
-        eps0 = sch.eps_max
         # initial solve at ε_max from the energy costate; on failure keep it (not in the paper)
         first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
         result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
     else:
-        eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
         lam = refs.fuel.costate.copy()
 
-    model = sk.LoopModel(
-        phi=phi,
-        gam=gam,
-        lam_step=costate_stm(n, dt),
-        q=est.q_matrix(),
-        r_nominal=r_nominal,
-        noise=noise,
-        n=n,
-        u_max=sc.u_max_km_s2,
-        dt=dt,
-        gl_x=gl_x,
-        gl_w=gl_w,
-        use_mtf=arch.mtf,
-        adaptive=arch.adaptive,
-        hold_mean=gd.hold == "mean",
-        u_override=np.zeros((n_steps, 3)),
-        override=np.zeros(n_steps, dtype=np.bool_),
-        dropout=meas.dropout,
-        filter_phi=filter_phi,
-        filter_gam=filter_gam,
-    )
+    loop = _loop_parts(problem, arch, noise, meas.dropout, x_hat0, lam, eps0, actuator_draws)
+    model = loop.model
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
@@ -347,26 +324,10 @@ def simulate(
         _hold_plan(result, 0, model)
         if solves[-1].success:
             plan_costate = result.costate
-    sched = schedule_params(sch)
-    # the true relative state obeys problem.truth; guidance and filter their [model] (issue 33)
-    truth_model = truth.truth_model(problem.truth, sc)
-    act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
-    state = sk.LoopState(
-        x_true=x0.copy(),
-        x_hat=x_hat0.copy(),
-        p=est.p0_matrix(),
-        lam=lam,
-        chief=truth.initial_chief(problem.truth, sc),
-    )
     scalars = sk.LoopScalars(eps=eps0, score_filtered=0.0, first=True)
-    log = _empty_log(n_steps + 1)
-    log.x[0] = state.x_true
-    log.x_hat[0] = state.x_hat
-    log.eps[0] = eps0
-    log.trace_p[0] = np.trace(state.p)
+    log = loop.log
 
     schedule = resolve_steps(problem)
-    loop = _Loop(model, truth_model, act, sched, state, log)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -402,6 +363,101 @@ def simulate(
         outlier=outlier,
         safety=_safety(problem, log.x),
     )
+
+
+def _loop_parts(
+    problem: Problem,
+    arch: Architecture,
+    noise: FloatArray,
+    dropout: npt.NDArray[np.bool_],
+    x_hat0: FloatArray,
+    lam: FloatArray,
+    eps0: float,
+    actuator_draws: actuator.ActuatorDraws | None,
+) -> _Loop:
+    """The compiled loop's parts of a run of ``arch`` before its first step.
+
+    ``noise`` and ``dropout``: the measurement noise and sensor dropouts of each
+    step (:func:`cwrend_cli.physics.sensors.sensor_noise`); ``x_hat0``: the
+    filter's initial estimate; ``lam``: the first plan's costate; ``eps0``:
+    the first ε. Row 0 of the log holds the initial state, estimate and ε.
+    """
+    sc, est, gd = problem.scenario, problem.estimator, problem.guidance
+    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    gl_x, gl_w = solver_settings(problem).quadrature()
+    phi, gam = discretize(n, dt)
+    filter_phi, filter_gam = _filter_tables(problem)
+    model = sk.LoopModel(
+        phi=phi,
+        gam=gam,
+        lam_step=costate_stm(n, dt),
+        q=est.q_matrix(),
+        r_nominal=est.r_nominal_matrix(),
+        noise=noise,
+        n=n,
+        u_max=sc.u_max_km_s2,
+        dt=dt,
+        gl_x=gl_x,
+        gl_w=gl_w,
+        use_mtf=arch.mtf,
+        adaptive=arch.adaptive,
+        hold_mean=gd.hold == "mean",
+        u_override=np.zeros((n_steps, 3)),
+        override=np.zeros(n_steps, dtype=np.bool_),
+        dropout=dropout,
+        filter_phi=filter_phi,
+        filter_gam=filter_gam,
+    )
+    sched = schedule_params(problem.schedule)
+    # the true relative state obeys problem.truth; guidance and filter their [model] (issue 33)
+    truth_model = truth.truth_model(problem.truth, sc)
+    act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
+    state = sk.LoopState(
+        x_true=np.asarray(sc.x0, dtype=float).copy(),
+        x_hat=x_hat0.copy(),
+        p=est.p0_matrix(),
+        lam=lam,
+        chief=truth.initial_chief(problem.truth, sc),
+    )
+    log = _empty_log(n_steps + 1)
+    log.x[0] = state.x_true
+    log.x_hat[0] = state.x_hat
+    log.eps[0] = eps0
+    log.trace_p[0] = np.trace(state.p)
+    return _Loop(model, truth_model, act, sched, state, log)
+
+
+def compile_loop(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> None:
+    """Compile (or load) the kernels below the re-solves of ``arch``'s closed loop; run nothing.
+
+    The step loop of a run of ``arch`` on ``problem`` with these draws (the
+    arguments of :func:`simulate`), for the same argument types as
+    :func:`simulate` gives it: the shooting method's
+    :func:`~cwrend_cli.physics._loop_kernels.compile_steps`, the cone program's
+    :func:`~cwrend_cli.physics._loop_kernels.advance` of no step. Not the
+    re-solves: a campaign compiles those of the references meanwhile
+    (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
+    """
+    sc = problem.scenario
+    meas = sensors.sensor_noise(
+        standard_normal, sc.time_grid()[:-1], problem.estimator.r_nominal_matrix(),
+        problem.degradation.windows, fault_draws, sc.dt_s,
+    )  # fmt: skip
+    x0 = np.asarray(sc.x0, dtype=float)
+    loop = _loop_parts(
+        problem, arch, meas.noise, meas.dropout, x0, np.zeros(6), 0.0, actuator_draws
+    )
+    scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
+    if arch.resolved_method(problem.guidance) == "socp":
+        loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
+    else:
+        sk.compile_steps(loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log)
 
 
 def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:

@@ -370,7 +370,7 @@ def switching_newton(
     """
     times = np.empty((MAX_BURNS, 2))
     kinds = np.empty((MAX_BURNS, 2), dtype=np.int64)
-    lam_out[:] = lam_start  # then the last iterate, written after each step
+    kern.copy_into(lam_start, lam_out)  # then the last iterate, written after each step
     nb = initial_burns(n, lam_start, horizon, n_cells, times, kinds)
     if nb < 0:
         return False, 0
@@ -432,7 +432,7 @@ def switching_newton(
                         return False, it + 1
                     k += 1
         it += 1
-        lam_out[:] = lam
+        kern.copy_into(lam, lam_out)
 
 
 @njit(cache=True)
@@ -502,7 +502,7 @@ def bang_bang_ascent(
         )
         rp, rv = kern.terminal_residual(n, horizon, grad, res)
         if rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s:
-            lam_out[:] = lam
+            kern.copy_into(lam, lam_out)
             return kern.STATUS_CONVERGED, iters, rp, rv
         # a consistent structure not confirmed: a near plan, offered to the ascent beside the start
         pair = np.empty((2, 6))
