@@ -16,6 +16,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -120,8 +121,9 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
 # ---------------------------------------------------------------------------
 
 
-def _signatures(dispatcher: object) -> list[str]:
-    return sorted(str(sig) for sig in dispatcher.signatures)  # type: ignore[attr-defined]
+def _misses(dispatcher: Any) -> int:
+    """Compiles of ``dispatcher`` this process could not load from numba's cache."""
+    return sum(dispatcher.stats.cache_misses.values())
 
 
 def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use() -> None:
@@ -131,10 +133,12 @@ def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use() -> 
 
     cfg = config_from_dict({})
     campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)  # the compiled loop's own call
-    before = _signatures(_loop_kernels._steps)
+    before = _misses(_loop_kernels._steps)
     noise = worker.standard_normal_for(cfg, 0)
     simulation.compile_loop(problem_of(cfg), ARCHITECTURES["mtf_adaptive"], noise)
-    assert _signatures(_loop_kernels._steps) == before  # ahead of time: the same one, no other
+    # compiled or loaded already (the loop's call compiled it, or cached it): the same signature
+    assert len(_loop_kernels._steps.signatures) >= 1
+    assert _misses(_loop_kernels._steps) == before
 
 
 def test_compile_switching_gives_the_switching_newton_the_signature_the_solver_uses() -> None:
@@ -144,9 +148,11 @@ def test_compile_switching_gives_the_switching_newton_the_signature_the_solver_u
 
     problem = problem_of(config_from_dict({}))
     simulation.open_loop_references(problem)  # the solver's own call (its ε = 0 steps)
-    before = _signatures(_switching_kernels.switching_newton)
+    before = _misses(_switching_kernels.switching_newton)
     compiled.compile_switching(*simulation.solver_settings(problem).quadrature())
-    assert _signatures(_switching_kernels.switching_newton) == before
+    # compiled in this process by the solver, or loaded from the cache it filled: no new one
+    assert len(_switching_kernels.switching_newton.signatures) >= 1
+    assert _misses(_switching_kernels.switching_newton) == before
 
 
 class _Submitted:
