@@ -141,20 +141,6 @@ def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use() -> 
     assert _misses(_loop_kernels._steps) == before
 
 
-def test_compile_switching_gives_the_switching_newton_the_signature_the_solver_uses() -> None:
-    from cwrend_cli.config.adapt import problem_of
-    from cwrend_cli.physics import simulation
-    from cwrend_cli.physics.guidance import _switching_kernels
-
-    problem = problem_of(config_from_dict({}))
-    simulation.open_loop_references(problem)  # the solver's own call (its ε = 0 steps)
-    before = _misses(_switching_kernels.switching_newton)
-    compiled.compile_switching(*simulation.solver_settings(problem).quadrature())
-    # compiled in this process by the solver, or loaded from the cache it filled: no new one
-    assert len(_switching_kernels.switching_newton.signatures) >= 1
-    assert _misses(_switching_kernels.switching_newton) == before
-
-
 class _Submitted:
     """An executor that records what is submitted and runs nothing."""
 
@@ -179,7 +165,7 @@ class _References:
 
 
 @pytest.mark.parametrize("cold", [True, False])
-def test_a_first_campaign_compiles_in_two_workers_while_it_computes_the_references(
+def test_a_first_campaign_compiles_the_step_loop_in_a_worker_while_it_computes_the_references(
     cold: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from cwrend_cli.campaign import driver, worker
@@ -188,9 +174,8 @@ def test_a_first_campaign_compiles_in_two_workers_while_it_computes_the_referenc
     pool = _Submitted()
     task = object()
     driver._compile_first_run(pool, [task], _References(pool.calls))  # type: ignore[arg-type]
-    ahead = [(worker.compile_ahead, task, "switching"), (worker.compile_ahead, task, "loop")]
-    # cold: both parts go to the workers first, then this process computes the references
-    assert pool.calls == ([*ahead, ("references", task)] if cold else [])
+    # cold: a worker compiles the step loop while this process computes the references
+    assert pool.calls == ([(worker.compile_ahead, task), ("references", task)] if cold else [])
 
 
 def test_a_cone_program_campaign_compiles_no_shooting_loop_ahead(
@@ -205,7 +190,7 @@ def test_a_cone_program_campaign_compiles_no_shooting_loop_ahead(
     )
     problem = problem_of(config_from_dict({}))
     archs = [ALL_ARCHITECTURES[a] for a in ("mtf_adaptive_socp", "plain_fixed_socp")]
-    compiled.compile_ahead("loop", problem, archs, np.zeros((problem.scenario.n_steps, 3)))
+    compiled.compile_ahead(problem, archs, np.zeros((problem.scenario.n_steps, 3)))
     assert made == ["mtf_adaptive_socp"]  # one step loop per method: the cone program's
 
 

@@ -621,29 +621,26 @@ def _execute(
 def _compile_first_run(
     executor: Executor, tasks: Sequence[Task], references: _PointReferences
 ) -> None:
-    """On a first run, compile in three processes at once before the first task (issue 37 item 12).
+    """On a first run, compile in two processes at once before the first task (issue 37 item 12).
 
     Only when the references' kernels are not in numba's cache (a first run
     after an install or upgrade; :mod:`cwrend_cli.physics.compiled`). This
     process computes the first point's references, which compiles the
-    shooting solver (about half of the compile), while two pool workers
-    compile the parts that do not depend on it
-    (:data:`~cwrend_cli.physics.compiled.AHEAD_PARTS`: the solver's
-    switching-time Newton, which this process then loads, and the closed
-    loop's step kernels); the first task waits for both, so that whichever
-    worker runs it loads them rather than compiling them a second time. On a
-    2-core machine the first ablation's compile then takes about as long as
-    the references' solver and the loop's top, not the sum of every part.
+    shooting solver (about half of the compile), while a pool worker
+    compiles the closed loop's step kernels, which do not depend on it
+    (:func:`~cwrend_cli.physics.compiled.compile_ahead`); the first task
+    waits for it, so that whichever worker runs it loads them rather than
+    compiling them a second time.
     """
     from cwrend_cli.physics import compiled
 
     if not tasks or not compiled.references_cold():
         return
-    ahead = [executor.submit(compile_ahead, tasks[0], part) for part in compiled.AHEAD_PARTS]
+    ahead = executor.submit(compile_ahead, tasks[0])
     with contextlib.suppress(OSError):  # the first task's own call reports it
         references.of(tasks[0])
-    while not all(f.done() for f in ahead):  # waiting on a state: short polls stay interruptible
-        wait(ahead, timeout=_POLL_S)
+    while not ahead.done():  # waiting on a state: short polls stay interruptible
+        wait([ahead], timeout=_POLL_S)
 
 
 def _drive(

@@ -244,8 +244,8 @@ def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
     return (arch, problem.truth.model, problem.actuator.ideal)
 
 
-def compile_ahead(task: Task, part: str) -> None:
-    """Compile ``part`` of a first run's kernels for ``task``'s runs (in a pool worker).
+def compile_ahead(task: Task) -> None:
+    """Compile a first run's step loop for ``task``'s runs (in a pool worker).
 
     :func:`cwrend_cli.physics.compiled.compile_ahead` with the problem and
     draws of the task's first run and the architectures of its runs, while
@@ -259,7 +259,6 @@ def compile_ahead(task: Task, part: str) -> None:
         spec = task.runs[0]
         problem = with_values(task.problem, spec.dispersed)
         compiled.compile_ahead(
-            part,
             problem,
             [ALL_ARCHITECTURES[r.arch] for r in task.runs],
             standard_normal(task.noise, spec.seed, problem.scenario.n_steps),

@@ -33,11 +33,10 @@ _COMPILE_CPU_S = {
     "shooting": 9.0,  # _resolve_loop: the closed loop with its compiled re-solves
     "socp": 9.0,  # _advance and the cone program's grid kernels
 }
-#: Of each part, the CPU seconds a campaign's pool workers compile while the campaign
-#: process compiles the references (:func:`compile_ahead`): the switching-time Newton of
-#: the references' solver, and the step loop below each method's re-solves (about half
-#: of each method's part); on 2 cores or more they overlap the references.
-_AHEAD_CPU_S = {"references": 3.0, "shooting": 4.0, "socp": 4.0}
+#: Of each method's part, the CPU seconds a campaign's pool worker compiles while the
+#: campaign process compiles the references (:func:`compile_ahead`: the step loop below
+#: the re-solves); on 2 cores or more they overlap the references.
+_AHEAD_CPU_S = {"shooting": 4.0, "socp": 4.0}
 
 
 def _entry_points(part: str) -> tuple[Any, ...]:
@@ -82,7 +81,7 @@ def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
     cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
     seconds = sum(_COMPILE_CPU_S[part] for part in cold)
     if fan_out and "references" in cold:
-        seconds -= sum(_AHEAD_CPU_S[part] for part in cold)
+        seconds -= sum(_AHEAD_CPU_S.get(part, 0.0) for part in cold)
     return seconds
 
 
@@ -102,62 +101,34 @@ def references_cold() -> bool:
     return not all(_cached(d) for d in _entry_points("references"))
 
 
-def compile_switching(gl_x: FloatArray, gl_w: FloatArray) -> None:
-    """Compile (or load) the switching-time Newton as the references' re-solves call it.
-
-    :func:`~cwrend_cli.physics.guidance._switching_kernels.switching_newton`
-    for the argument types
-    :func:`~cwrend_cli.physics.guidance._switching_kernels.bang_bang_ascent`
-    hands it, with ``gl_x``, ``gl_w`` the Gauss–Legendre nodes and weights the
-    solver is given (their array types are part of the signature).
-    """
-    import numpy as np
-    from numba import float64, int64, typeof
-
-    from cwrend_cli.physics.guidance import _switching_kernels
-
-    vec, x, w = (typeof(a) for a in (np.empty(6), gl_x, gl_w))  # type: ignore[no-untyped-call]
-    f = float64
-    args = (f, vec, vec, f, f, x, w, int64, f, f, int64, vec)
-    _switching_kernels.switching_newton.compile(args)
-
-
-#: What pool workers compile on a first run, one part each (:func:`compile_ahead`).
-AHEAD_PARTS = ("switching", "loop")
-
-
 def compile_ahead(
-    part: str,
     problem: Problem,
     archs: Iterable[Architecture],
     standard_normal: FloatArray,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
 ) -> None:
-    """Compile one of :data:`AHEAD_PARTS` into numba's cache (a first run, issue 37 item 12).
+    """Compile what a first run needs besides the references' solver (issue 37 item 12).
 
     On a first run the campaign process compiles the shooting solver
     (``bang_bang_ascent``, for the references: about half of a first
-    compile) before any run can start, one core busy. Meanwhile two pool
-    workers compile what does not depend on it, each one part:
+    compile) before any run can start, one core busy. Meanwhile a pool
+    worker compiles, into numba's cache, what does not depend on it: the
+    step loop of the first of ``archs`` of each guidance method
+    (:func:`cwrend_cli.physics.simulation.compile_loop`), which the first
+    runs then load. What is left for the runs is the compiled loop's top
+    (``_resolve_loop``, which carries the solver, and the cone program's grid
+    kernels). ``problem`` and the draws: those of the campaign's first run,
+    so that the argument types are the runs' own.
 
-    * ``"switching"``: the switching-time Newton that solver calls after its
-      ascent (:func:`compile_switching`), which the campaign process then
-      loads instead of compiling;
-    * ``"loop"``: the step loop of the first of ``archs`` of each guidance
-      method (:func:`cwrend_cli.physics.simulation.compile_loop`), which the
-      first runs load.
-
-    What is left for the runs is the compiled loop's own top
-    (``_resolve_loop``, and the cone program's grid kernels). ``problem`` and
-    the draws: those of the campaign's first run, so that the argument types
-    are the runs' own.
+    Only the step loop: the solver's switching-time Newton, compiled in a
+    second worker, was ready only about when the campaign process reached it
+    (measured: 13 of the solver's 27 CPU s, reached after 15), so it was as
+    often compiled twice, and three compiling processes on two cores slowed
+    the solver's own compile.
     """
     from cwrend_cli.physics import simulation
 
-    if part == "switching":
-        compile_switching(*simulation.solver_settings(problem).quadrature())
-        return
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)
