@@ -50,6 +50,21 @@ def test_an_empty_cache_announces_the_first_compile(tmp_path: Path) -> None:
     assert not [f for f in tmp_path.rglob("*") if f.is_file()]  # asking compiles nothing
 
 
+def test_a_campaign_on_two_workers_announces_the_step_loop_compiled_meanwhile(
+    tmp_path: Path,
+) -> None:
+    code = (
+        "from cwrend_cli.physics import compiled; "
+        "print(compiled.compile_seconds({'shooting'}), "
+        "compiled.compile_seconds({'shooting'}, fan_out=True))"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # nothing compiled there yet
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    alone, fanned_out = (float(s) for s in out)
+    assert 0.0 < fanned_out < alone  # a worker compiles the step loop while the solver compiles
+
 def test_compiled_kernels_announce_nothing() -> None:
     # one closed loop compiles (or loads) what the shooting architectures need
     campaign.run_case(config_from_dict({}), (ARCHITECTURES["mtf_adaptive"],), 0)

@@ -25,7 +25,9 @@ if TYPE_CHECKING:
 
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls
 #: (measured one after the other in one process on a 2-core Intel Xeon, Sapphire Rapids,
-#: 2026-12-02, ``NUMBA_CACHE_DIR`` empty: the paper ablation compiled in 24-28 s).
+#: 2026-12-02, ``NUMBA_CACHE_DIR`` empty: the paper ablation compiled in 24-28 s; the
+#: shooting solver's part scaled by its measured 0.79x, now that it compiles no sort and no
+#: slice-error message, on a loaded 2-core AMD EPYC znver4).
 #: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
 #: actuator with errors) move it.
 _COMPILE_CPU_S = {
