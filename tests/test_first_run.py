@@ -65,6 +65,7 @@ def test_a_campaign_on_two_workers_announces_the_step_loop_compiled_meanwhile(
     alone, fanned_out = (float(s) for s in out)
     assert 0.0 < fanned_out < alone  # a worker compiles the step loop while the solver compiles
 
+
 def test_compiled_kernels_announce_nothing() -> None:
     # one closed loop compiles (or loads) what the shooting architectures need
     campaign.run_case(config_from_dict({}), (ARCHITECTURES["mtf_adaptive"],), 0)
