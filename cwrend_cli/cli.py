@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from enum import StrEnum
@@ -46,11 +46,13 @@ from cwrend_cli.output.layout import (
 )
 
 if TYPE_CHECKING:  # annotations only; the commands import these when they run
+    import pandas as pd
     from rich.console import Console
 
     from cwrend_cli import campaign
     from cwrend_cli.campaign import ExecutorKind, sequential
     from cwrend_cli.config import Architecture, CwrendConfig
+    from cwrend_cli.report.table import Source
 
 #: The architectures of ``--arch all`` and ``all_socp`` (the keys of
 #: ``physics.params.ARCHITECTURES`` and ``SOCP_ARCHITECTURES``, checked by a test).
@@ -796,6 +798,8 @@ def _report_campaign(
     from cwrend_cli.campaign import design
     from cwrend_cli.console import (
         ablation_console_table,
+        applied_console_table,
+        consistency_console_table,
         paired_console_table,
         phase,
         script_table,
@@ -831,6 +835,9 @@ def _report_campaign(
     if not stats.empty:
         if command == "ablate":
             stdout.print(ablation_console_table(stats, f"cwrend ablate · {out.name}"))
+            applied = applied_console_table(stats)
+            if applied is not None:
+                stdout.print(applied)
             paired = paired_console_table(stats)
             if paired is not None:
                 stdout.print(paired)
@@ -843,6 +850,15 @@ def _report_campaign(
         else:
             title = f"cwrend sweep · {out.name}"
             stdout.print(sweep_console_table(stats, list(statistics.groups), title))
+            applied = applied_console_table(stats, list(statistics.groups))
+            if applied is not None:
+                stdout.print(applied)
+        if plan.design is None:  # filter consistency against its χ² bands (issue 33)
+            table = consistency_console_table(
+                stats, list(statistics.groups), f"filter consistency · {out.name}"
+            )
+            if table is not None:
+                stdout.print(table)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
     elif (
@@ -1220,11 +1236,17 @@ def table(
             "--metric",
             "-m",
             help="Values, comma-separated, each [STATISTIC.]METRIC[@A-B][:bare][:DIGITS]: "
-            "mean|median|p95 of miss, dv, fuel (95 % bootstrap interval); solve_mean_ms, "
+            "mean|median|p95 of miss, dv, fuel (the paper's 1 s trapezoid), dv_applied, "
+            "fuel_applied (Σ‖u_k‖Δt, vs the exact fuel optimum) (95 % bootstrap interval); "
+            "solve_mean_ms, "
             "solve_max_ms, solve_success_pct; paired frac_less.miss (Wilson), median_diff.miss, "
             "mean_diff.dv, @A-B for one pair; n (ok runs; seed pairs beside paired values "
-            "only); infeasible_pct, failed_pct (share of re-solves, from runs.parquet). :bare "
-            "drops the interval, :3 shows 3 decimals.",
+            "only). From runs.parquet: infeasible_pct, failed_pct (share of re-solves), "
+            "infeasible_solves, failed_solves (their number), max.miss|dv|fuel; "
+            ":with=STEP / :without=STEP keep the runs whose re-solves used / never used that "
+            "fallback step (n:with=socp_plan counts them). :bare drops the interval, :3 shows "
+            "3 decimals. mean.nees, mean.nis: the runs' mean NEES and NIS with the χ² 95 % band "
+            "of a consistent filter.",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",
@@ -1235,6 +1257,17 @@ def table(
             help="Keep entries whose field has one of the values, in that order: "
             "[CAMPAIGN:]FIELD=V1,V2 (CAMPAIGN: only that campaign's entries). Repeatable.",
             metavar="FILTER",
+        ),
+    ] = None,
+    versus: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--versus",
+            help="Pair across campaigns: the paired values also compare A of each other "
+            "campaign with B of this one (its label), seed by seed on matching grid points, "
+            "as within a campaign; other_campaign is B's campaign. The campaigns must share "
+            "noise and seeds. Repeatable.",
+            metavar="CAMPAIGN",
         ),
     ] = None,
     fmt: Annotated[
@@ -1253,7 +1286,9 @@ def table(
     """Print a table of the statistics campaigns stored, for a paper or a script.
 
     Reads each campaign's ablation.parquet or sweep.parquet (values with their 95 %
-    intervals, never recomputed) and, for infeasible_pct / failed_pct, its runs.parquet.
+    intervals, never recomputed) and, for the values computed from the runs, its
+    runs.parquet (and solves/ for :with= / :without=); --versus pairs the runs of two
+    campaigns.
     Each cell must be one stored value: a cell that two campaigns, grid points or pairs
     fill is refused naming the field that tells them apart (exit 2), as is an unknown
     field or value. Misses in m, Δv in km/s, fuel penalty in %; a bootstrap interval
@@ -1268,5 +1303,22 @@ def table(
             raise ConfigError(f"--format {fmt!r}: one of {', '.join(tables.FORMATS)}")
         values = [tables.parse_value(t) for t in metric.split(",") if t.strip()]
         sources = [tables.load_source(r) for r in results]
-        built = tables.build_table(sources, values, rows, cols, where or (), title)
+        built = tables.build_table(
+            sources, values, rows, cols, where or (), title, versus or (), _pair_across
+        )
         typer.echo(tables.render(built, fmt))
+
+
+def _pair_across(
+    a: Source, b: Source, extra: Sequence[tuple[str, str]], keep: Callable[[tuple[str, str]], bool]
+) -> pd.DataFrame:
+    """The pairs of ``cwrend table --versus`` (:data:`cwrend_cli.report.table.PairAcross`)."""
+    from cwrend_cli.campaign import compare
+
+    a_runs, b_runs = a.runs, b.runs
+    assert a_runs is not None and b_runs is not None  # read by build_table for --versus
+    campaigns = (
+        compare.Campaign(a.path, a.manifest, a_runs),
+        compare.Campaign(b.path, b.manifest, b_runs),
+    )
+    return compare.paired_across(*campaigns, extra, keep)

@@ -27,11 +27,14 @@ from rich.table import Column, Table
 from rich.text import Text
 
 from cwrend_cli.campaign import CaseResult
+from cwrend_cli.campaign.statistics import APPLIED_METRICS
 from cwrend_cli.output.tables import reference_row, summary_row
+from cwrend_cli.physics.references import OpenLoopResult
 from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     markdown_table,
     setting_text,
     swept_values,
@@ -64,7 +67,7 @@ def _table(title: str | None, **options: Any) -> Table:
 
 def _summary_rows(case: CaseResult) -> list[dict[str, Any]]:
     """The open-loop references' rows, then each run's (``summary.parquet``'s columns)."""
-    fuel = case.references.fuel.delta_v_km_s
+    fuel = case.references.fuel
     rows = [reference_row(case.references.energy, fuel), reference_row(case.references.fuel, fuel)]
     return rows + [summary_row(r, fuel) for r in case.runs]
 
@@ -131,7 +134,36 @@ def summary_console_table(case: CaseResult, title: str = "") -> Group:
             f"{_num(r['solve_mean_ms'], '.2f')}/{_num(r['solve_max_ms'], '.1f')}",
         )
     table.caption = "solve ms: mean/max per re-solve; inf.: certified infeasible"
-    return Group(table, _consistency_table(case.runs, rows[2:]))
+    applied = _applied_run_table(rows, case.references.fuel)
+    return Group(table, applied, _consistency_table(case.runs, rows[2:]))
+
+
+def _applied_run_table(rows: Sequence[Mapping[str, Any]], fuel: OpenLoopResult) -> Table:
+    """The applied Δv of each case and its penalty against the exact fuel optimum (issue 33).
+
+    Beside the run table's Δv, the paper's 1 s trapezoid of ‖u‖
+    (:mod:`cwrend_cli.physics.metrics`).
+    """
+    table = _table(None, **_NARROW)
+    table.add_column("case", no_wrap=True)
+    for name in ("Δv applied km/s", "vs exact fuel", "trapezoid − applied m/s"):
+        table.add_column(name, justify="right", no_wrap=True)
+    for r in rows:
+        table.add_row(
+            r["arch"].replace("open_loop_", "open-loop "),
+            _num(r["delta_v_applied_km_s"], ".5f"),
+            _num(r["fuel_penalty_applied_pct"], "+.2f") + "%",
+            _num((r["delta_v_km_s"] - r["delta_v_applied_km_s"]) * M_PER_KM, "+.3f"),
+        )
+    exact = fuel.exact
+    burn = (
+        float("nan") if exact is None else float(np.sum(exact.burns_s[:, 1] - exact.burns_s[:, 0]))
+    )
+    table.caption = (
+        "applied: Σ‖u_k‖Δt of the held steps (open loop: ∫‖u‖dt of the plan)\n"
+        f"exact fuel optimum {fuel.delta_v_continuous_km_s:.7f} km/s ({burn:.3f} s of burn)"
+    )
+    return table
 
 
 def _consistency_table(runs: Sequence[RunResult], rows: Sequence[Mapping[str, Any]]) -> Table:
@@ -439,6 +471,45 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
     return table
 
 
+def applied_console_table(
+    stats: pd.DataFrame, point_cols: Sequence[str] = (), title: str = "Δv the thruster applied"
+) -> Table | None:
+    """Per architecture (and grid point): mean applied Δv and its fuel penalty, 95 % CIs.
+
+    The applied Δv is Σ‖u_k‖Δt of the zero-order-hold steps, its penalty
+    against the exact continuous fuel optimum (issue 33, item 3); the
+    ablation and sweep tables show the paper's trapezoid. ``None`` when the
+    statistics have no such rows (a campaign written before them).
+    """
+    marginal = stats[(stats["kind"] == "marginal") & stats["metric"].isin(APPLIED_METRICS)]
+    if marginal.empty:
+        return None
+    table = _table(title, **_NARROW)
+    params = [c for c in point_cols if c != "point"]
+    for p in params:
+        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    table.add_column("architecture", no_wrap=True)
+    for name in ("Δv applied km/s", "fuel pen. vs exact %"):
+        table.add_column(name, justify="right", no_wrap=True)
+    keys = [*params, "point", "arch"] if point_cols else ["arch"]
+    for _, g in marginal.groupby(keys, sort=bool(point_cols), observed=True):
+        get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
+        first = g.iloc[0]
+        table.add_row(
+            *(f"{first[p]:g}" if isinstance(first[p], float) else str(first[p]) for p in params),
+            str(first["arch"]),
+            _ci(get[("delta_v_applied_km_s", "mean")], ".4f"),
+            _ci(get[("fuel_penalty_applied_pct", "mean")], ".2f"),
+        )
+    table.caption = _caption(
+        "means, 95 % bootstrap interval below\napplied: Σ‖u_k‖Δt of the held steps\n"
+        "penalty vs the exact continuous fuel optimum",
+        marginal,
+        f"means; {ONE_REALISATION}\napplied: Σ‖u_k‖Δt of the held steps",
+    )
+    return table
+
+
 def paired_console_table(stats: pd.DataFrame) -> Table | None:
     """Seed-by-seed comparisons: P(A misses less than B) and the median miss difference."""
     pairs = stats[stats["kind"] == "paired"]
@@ -489,6 +560,66 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
         "means, 95 % bootstrap interval below; all statistics in sweep.parquet",
         marginal,
         f"means; {ONE_REALISATION}; all statistics in sweep.parquet",
+    )
+    return table
+
+
+def _in_band(row: pd.Series) -> str:
+    """Whether a consistency row's value lies in its χ² band: ``yes``, ``no``, ``–`` (no band)."""
+    value, low, high = float(row["value"]), float(row["ci_low"]), float(row["ci_high"])
+    if not (math.isfinite(value) and math.isfinite(low)):
+        return "–"
+    return "yes" if low <= value <= high else "no"
+
+
+def consistency_console_table(
+    stats: pd.DataFrame, point_cols: Sequence[str], title: str
+) -> Table | None:
+    """Per (grid point and) architecture: mean NEES and NIS of the runs against their χ² bands.
+
+    From the ``consistency`` rows of the statistics
+    (:func:`cwrend_cli.campaign.statistics.consistency`): the mean over the
+    runs of each run's mean NEES (6 if consistent) and mean NIS (nominal
+    periods, 3), the 95 % band of a consistent filter below, and whether the
+    mean is in it. ``None`` without such rows (an older campaign).
+    """
+    rows = stats[stats["kind"] == "consistency"] if "kind" in stats else stats.iloc[:0]
+    if rows.empty:
+        return None
+    table = _table(title, **_NARROW)
+    params = [c for c in point_cols if c != "point"]
+    for p in params:
+        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    for name in ("architecture", "n", "NEES", "in\nband", "NIS", "in\nband"):
+        table.add_column(name, justify="right", no_wrap=True)
+    keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]
+    # as the table above it: a sweep's by its swept values, an ablation's in its rows' order
+    for _, g in rows.groupby(keys, sort=bool(params), observed=True):
+        get = {r.metric: r for _, r in g.iterrows()}
+        first = g.iloc[0]
+        cells: list[str] = []
+        for metric in ("mean_nees", "mean_nis_nominal"):
+            r = get.get(metric)
+            if r is None or not math.isfinite(float(r["value"])):
+                cells += ["–", "–"]
+                continue
+            band = (
+                f"\n[dim]{r['ci_low']:.2f}–{r['ci_high']:.2f}[/dim]"
+                if math.isfinite(float(r["ci_low"]))
+                else ""
+            )
+            cells += [f"{consistency_text(float(r['value']))}{band}", _in_band(r)]
+        nees = get.get("mean_nees")
+        table.add_row(
+            *(f"{first[p]:g}" if isinstance(first[p], float) else str(first[p]) for p in params),
+            str(first["arch"]),
+            str(int(nees["n"])) if nees is not None else "–",
+            *cells,
+        )
+    table.caption = (
+        "filter consistency: mean over the runs of each run's mean NEES (6 if consistent) "
+        "and mean NIS outside the degradation windows (3); below, the χ² 95 % band of a "
+        "consistent filter for n runs"
     )
     return table
 

@@ -112,8 +112,9 @@ def paper_costates(
 
 
 @pytest.fixture(scope="session")
-def refused_override() -> Callable[[str], str]:
-    """``cwrend config validate`` of the paper scenario with one ``--set`` that must be refused.
+def refused_override() -> Callable[..., str]:
+    """``cwrend config validate`` of the paper scenario with ``--set`` overrides (one or
+    more) that must be refused.
 
     Checks what every refusal must do (exit code 2, no traceback) and returns
     stderr, for the test to check the message names the field.
@@ -124,8 +125,9 @@ def refused_override() -> Callable[[str], str]:
 
     paper = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 
-    def validate(override: str) -> str:
-        result = CliRunner().invoke(app, ["config", "validate", str(paper), "--set", override])
+    def validate(*overrides: str) -> str:
+        sets = [arg for override in overrides for arg in ("--set", override)]
+        result = CliRunner().invoke(app, ["config", "validate", str(paper), *sets])
         assert result.exit_code == 2, result.output
         assert "Traceback" not in result.output
         return result.stderr

@@ -17,9 +17,11 @@ from cwrend_cli.campaign import statistics
 from cwrend_cli.console import (
     RichProgress,
     ablation_console_table,
+    applied_console_table,
     paired_console_table,
     sweep_console_table,
 )
+from cwrend_cli.physics import metrics
 
 
 class _Clock:
@@ -107,6 +109,8 @@ def test_the_run_table_shows_every_case_and_number_whole_at_80_columns() -> None
         assert run.arch in cells
         assert f"{run.delta_v_km_s:.5f}" in cells
         assert f"{run.miss_km * 1e3:.3g}" in cells  # the miss in m
+        applied = metrics.applied_delta_v(run.t_s, run.u)  # its own table (issue 33)
+        assert f"{applied:.5f}" in cells
 
 
 def _stats(archs: list[str], points: int = 1) -> pd.DataFrame:
@@ -121,13 +125,18 @@ def _stats(archs: list[str], points: int = 1) -> pd.DataFrame:
                      "miss_km": 10.0 ** (k - 4) * (1 + 0.3 * rng.standard_normal()),
                      "delta_v_km_s": 0.14 + 1e-3 * rng.standard_normal(),
                      "fuel_penalty_pct": 125.0 + rng.standard_normal(),
+                     "delta_v_applied_km_s": 0.14 + 1e-3 * rng.standard_normal(),
+                     "fuel_penalty_applied_pct": 125.0 + rng.standard_normal(),
                      "solve_success_pct": 99.5, "solve_mean_ms": 123.45,
                      "solve_max_ms": 9876.5, "n_infeasible": 0}
                 )  # fmt: skip
     runs = pd.DataFrame(rows)
     by = ["point", "param.schedule.beta", "arch"] if points > 1 else ["arch"]
     groups = [c for c in by if c != "arch"]
-    return pd.concat([statistics.describe(runs, by), statistics.paired(runs, groups)])
+    return pd.concat(
+        [statistics.describe(runs, by), statistics.paired(runs, groups),
+         statistics.applied(runs, by)]
+    )  # fmt: skip
 
 
 SLUGS = ["plain_adaptive_socp", "mtf_adaptive_socp", "plain_fixed_socp", "mtf_fixed_socp"]
@@ -144,8 +153,17 @@ def test_the_campaign_tables_show_every_name_and_number_whole_at_80_columns() ->
         miss = marginal.query("arch == @arch and metric == 'miss_km' and statistic == 'mean'")
         (value,) = miss["value"]
         assert f"{value * 1e3:.2f}" in cells
+    applied = _cells(_render(applied_console_table(stats)))
+    for arch in SLUGS:
+        assert arch in applied
+        row = marginal.query(
+            "arch == @arch and metric == 'fuel_penalty_applied_pct' and statistic == 'mean'"
+        )
+        assert f"{row['value'].iloc[0]:.2f}" in applied
     paired = _render(paired_console_table(stats))
     assert all(arch in _cells(paired) for arch in SLUGS)
     sweep = _stats(SLUGS, points=3)
     text = _render(sweep_console_table(sweep, ["point", "param.schedule.beta"], "sweep"))
+    assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)
+    text = _render(applied_console_table(sweep, ["point", "param.schedule.beta"]))
     assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)

@@ -93,3 +93,20 @@ def test_no_limit_and_a_finished_block_leave_no_alarm_behind() -> None:
     with guards.time_limit(0.1):
         pass
     time.sleep(0.2)  # an alarm left armed would raise here
+
+
+def test_the_time_numba_spends_compiling_does_not_count_against_the_limit() -> None:
+    """A 2 s compile (numba's own ``numba:compile`` event, announced here as numba's
+    dispatcher does) inside a 1 s limit does not time the block out; the clock goes on
+    afterwards with the time it had left, so the block still times out once it runs long."""
+    from numba.core import event
+
+    started = time.monotonic()
+    with pytest.raises(guards.RunTimeoutError), guards.time_limit(1.0):
+        with event.trigger_event("numba:compile"):
+            time.sleep(2.0)
+        compiled = time.monotonic()
+        while time.monotonic() - started < 30.0:
+            time.sleep(0.01)
+    assert compiled - started >= 2.0  # the compile ran to its end
+    assert time.monotonic() - compiled >= 0.5  # the limit's remaining second, not 0

@@ -29,7 +29,7 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
 from cwrend_cli.report import load_results, write_compare_figure, write_report
-from cwrend_cli.report.labels import format_value, param_label, param_setting
+from cwrend_cli.report.labels import consistency_text, format_value, param_label, param_setting
 from cwrend_cli.report.load import references_file
 from cwrend_cli.report.markdown import report_md
 
@@ -44,6 +44,7 @@ PER_SEED = (
 )
 MULTI_SEED = ("miss_distribution.png", "dv_distribution.png", "paired_miss.png")
 NEES = "nees.png"  # filter consistency, when the steps hold the NEES (issue 15, item 6)
+CONSISTENCY = "consistency.png"  # ensemble means against χ² bands, likewise (issue 33, item 4)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 runner = CliRunner()
@@ -144,7 +145,7 @@ def test_report_is_rewritten_in_place(run_dir: Path, run_report, unrendered: Non
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output
     names = sorted(p.name for p in (run_dir / "report").iterdir())
-    expected = [*PER_SEED, NEES, "report.md", "report.html"]
+    expected = [*PER_SEED, NEES, CONSISTENCY, "report.md", "report.html"]
     assert names == sorted(expected)  # no temp files left behind
 
 
@@ -201,7 +202,7 @@ def _write_campaign(
                 key = f"{point}.{run.arch}.s{seed:06d}"
                 row = {"run_key": key, "point": point, "arch": run.arch, "seed": seed}
                 row |= {"status": "ok", "error": "", "duration_s": 0.01}
-                row |= summary_row(run, refs.fuel.delta_v_km_s)
+                row |= summary_row(run, refs.fuel)
                 row |= {f"param.{k}": v for k, v in params.items()}
                 rows.append(row)
                 table = steps_table(run).drop_columns(["arch"])
@@ -489,6 +490,23 @@ def test_sweep_table_carries_the_stored_intervals(sweep_dir: Path) -> None:
     )
 
 
+def test_sweep_table_gives_each_points_consistency_against_its_band(sweep_dir: Path) -> None:
+    """Per grid point: the mean of the runs' mean NEES and NIS, computed here from runs.parquet,
+    with the χ² band of its 2 runs (scipy.stats.chi2) and the verdict (issue 33, item 4)."""
+    from scipy.stats import chi2
+
+    runs = pd.read_parquet(sweep_dir / "runs.parquet").query("status == 'ok'")
+    mine = runs[(runs["point"] == "p_b") & (runs["arch"] == "plain_adaptive")]
+    md = report_md(load_results(sweep_dir), sweep_dir, [])
+    cells = _row(md.split("## Sweep of")[1], "0.5 | plain KF, adaptive ε")
+    # after the point, architecture, runs, four miss/Δv cells and the applied Δv
+    for k, (metric, dof) in enumerate((("mean_nees", 6), ("mean_nis_nominal", 3))):
+        low, high = chi2.ppf([0.025, 0.975], dof * 2) / 2
+        mean = mine[metric].mean()
+        assert cells[8 + 2 * k] == f"{consistency_text(mean)} [{low:.2f}, {high:.2f}]"
+        assert cells[9 + 2 * k] == ("yes" if low <= mean <= high else "no")
+
+
 def test_param_labels_are_symbols_with_units_and_values_as_given() -> None:
     assert param_label("param.scenario.u_max_km_s2") == "u_max [km/s²]"
     assert param_label("schedule.beta") == "β [-]"
@@ -577,7 +595,7 @@ def test_fig1_draws_the_references_over_the_runs(ablation_dir: Path) -> None:
 def test_report_html_is_self_contained(ablation_report: Path) -> None:
     page = (ablation_report / "report" / "report.html").read_text(encoding="utf-8")
     pngs = list((ablation_report / "report").glob("*.png"))
-    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 1
+    assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 2
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
     assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
     assert "<code>abc</code>" in page  # the config hash
@@ -659,7 +677,105 @@ def test_nees_figure_is_absent_without_stored_nees(ablation_dir: Path, tmp_path:
         pq.write_table(table.drop_columns(["nees"]), path)
     data = load_results(root)
     assert data.nees is None
-    assert NEES not in [f.file for f in figures.planned_figures(data)]
+    planned = [f.file for f in figures.planned_figures(data)]
+    assert NEES not in planned and CONSISTENCY not in planned
+
+
+def _stored_steps(root: Path, arch: str) -> pd.DataFrame:
+    """The stored steps of ``arch`` after the first time (row 0: the initial error)."""
+    steps = pd.read_parquet(root / "steps", filters=[("arch", "==", arch)])
+    return steps[steps["t_s"] > steps["t_s"].min()]
+
+
+def test_consistency_figure_draws_the_ensemble_means_and_their_chi2_bands(
+    ablation_dir: Path,
+) -> None:
+    """NEES panel then NIS panel, log y: one curve is the mean over the seeds of mtf_adaptive's
+    stored values at each step (NIS: of the seeds with a measurement), the band is
+    χ²(N n)/N's 95 % quantiles (scipy.stats.chi2 here) for the N seeds."""
+    from scipy.stats import chi2
+
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_consistency(load_results(ablation_dir))
+    steps = _stored_steps(ablation_dir, "mtf_adaptive")
+    n_seeds = steps["seed"].nunique()
+    assert n_seeds == 3
+    for ax, column, dof in zip(fig.axes, ("nees", "nis"), (6, 3), strict=True):
+        assert ax.get_yscale() == "log"
+        mean = steps.groupby("t_s")[column].mean().dropna()
+        assert any(
+            np.array_equal(line.get_xdata(), mean.index)
+            and np.allclose(line.get_ydata(), mean.to_numpy(), rtol=1e-12, atol=0)
+            for line in ax.get_lines()
+        ), column
+        (band,) = [c for c in ax.collections if c.get_gid() == figures.ENSEMBLE_BAND_GID]
+        y = band.get_paths()[0].vertices[:, 1]
+        if column == "nees":  # every seed has a NEES at every step: one band throughout
+            expected = chi2.ppf([0.025, 0.975], dof * n_seeds) / n_seeds
+            assert (y.min(), y.max()) == pytest.approx(tuple(expected), rel=1e-12)
+
+
+def _consistency_row(md: str, arch: str) -> dict[str, str]:
+    """The cells of ``arch`` in the consistency table by header; ``in band`` follows its mean."""
+    section = md.split("## Filter consistency")[1].split("\n## ")[0]
+    header = next(ln for ln in section.splitlines() if ln.startswith("| architecture |"))
+    columns = [c.strip() for c in header.strip("|").split("|")]
+    columns = [f"{columns[i - 1]} in band" if c == "in band" else c for i, c in enumerate(columns)]
+    return dict(zip(columns, _row(section, arch), strict=True))
+
+
+def test_report_md_gives_the_consistency_table_against_the_bands(ablation_dir: Path) -> None:
+    """The campaign mean of each run's mean NEES / NIS as stored in ablation.parquet (the
+    consistency rows), its χ² band for the 3 runs, the verdict, and the share of the steps
+    whose ensemble mean is in its band (NIS: outside the degradation windows)."""
+    from scipy.stats import chi2
+
+    md = report_md(load_results(ablation_dir), ablation_dir, [])
+    assert "## Filter consistency" in md and "over the 3 seed(s)" in md
+    runs = pd.read_parquet(ablation_dir / "runs.parquet").query("status == 'ok'")
+    stats = pd.read_parquet(ablation_dir / "ablation.parquet").query("kind == 'consistency'")
+    assert set(stats["metric"]) == {"mean_nees", "mean_nis_nominal"} and set(stats["n"]) == {3}
+    mine = runs[runs["arch"] == "mtf_adaptive"]
+    cells = _consistency_row(md, "MTF KF, adaptive ε")
+    steps = _stored_steps(ablation_dir, "mtf_adaptive")
+    nominal = steps.groupby("t_s")["degradation_window"].max() < 0
+    for metric, column, name, dof in (("mean_nees", "nees", "NEES", 6),
+                                      ("mean_nis_nominal", "nis", "NIS", 3)):  # fmt: skip
+        low, high = chi2.ppf([0.025, 0.975], dof * 3) / 3
+        mean = mine[metric].mean()
+        assert (
+            cells[f"mean {name} [95 % χ² band]"]
+            == f"{consistency_text(mean)} [{low:.2f}, {high:.2f}]"
+        )
+        verdict = "yes" if low <= mean <= high else "no"
+        assert cells[f"mean {name} [95 % χ² band] in band"] == verdict
+        per_step = steps.groupby("t_s")[column].agg(["mean", "count"]).dropna()
+        if column == "nis":
+            per_step = per_step[nominal.reindex(per_step.index).to_numpy()]
+        lo = chi2.ppf(0.025, dof * per_step["count"]) / per_step["count"]
+        hi = chi2.ppf(0.975, dof * per_step["count"]) / per_step["count"]
+        inside = ((per_step["mean"] >= lo) & (per_step["mean"] <= hi)).mean()
+        assert cells[f"steps in {name} band [%]"] == f"{100 * inside:.1f}"
+
+
+def test_report_says_over_how_many_seeds_the_steps_are(ablation_dir: Path, tmp_path: Path) -> None:
+    """Steps stored for 2 of the 3 seeds (as ``output.steps_seeds = 2`` writes them)."""
+    root = _copy(ablation_dir, tmp_path / "fewer")
+    for path in (root / "steps").rglob("*.parquet"):
+        table = pq.read_table(path, partitioning=None)
+        pq.write_table(table.filter(pc.less(table["seed"], 2)), path)
+    data = load_results(root)
+    md = report_md(data, root, [])
+    assert "over the 2 seed(s) whose steps are stored (`output.steps_seeds`)" in md
+    assert "the means over all 3" in md
+    assert _consistency_row(md, "MTF KF, adaptive ε")["runs"] == "3"
+
+
+def test_report_of_a_campaign_writes_the_consistency_figure(ablation_report: Path) -> None:
+    _check_png(ablation_report / "report" / CONSISTENCY)
+    md = (ablation_report / "report" / "report.md").read_text(encoding="utf-8")
+    assert f"]({CONSISTENCY})" in md and "## Filter consistency" in md
 
 
 def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
@@ -684,7 +800,7 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
     world = "truth: j2 · actuator errors on · sensor faults on"
     assert mismatched.world == world
     planned = figures.planned_figures(mismatched)
-    assert {*PER_SEED, *MULTI_SEED, NEES} == {f.file for f in planned}
+    assert {*PER_SEED, *MULTI_SEED, NEES, CONSISTENCY} == {f.file for f in planned}
     for f in planned:
         assert f.caption.endswith(f"Simulated world: {world}."), f.file
         assert world in f.draw().get_suptitle(), f.file

@@ -95,7 +95,16 @@ TIMING_COLUMNS = frozenset({"duration_s", "solve_mean_ms", "solve_max_ms", "wall
 #: Columns renamed since the fixture was made: old name → new name (same values).
 RENAMED = {"window": "degradation_window"}
 #: ``runs.parquet`` columns added since the fixture was made (the only ones allowed).
-NEW_RUNS_COLUMNS = frozenset({"mean_nis_nominal", "mean_nees"})
+NEW_RUNS_COLUMNS = frozenset(
+    {
+        "mean_nis_nominal",
+        "mean_nees",
+        # issue 33 item 3: the applied impulse sum ||u_k|| dt and its penalty against the exact
+        # continuous fuel optimum, beside the paper's trapezoid (delta_v_km_s, unchanged)
+        "delta_v_applied_km_s",
+        "fuel_penalty_applied_pct",
+    }
+)
 #: ``steps/`` and ``solves/`` columns added since the fixture was made (the only ones allowed).
 NEW_HISTORY_COLUMNS = frozenset(
     {"nees", "ucmd_x_km_s2", "ucmd_y_km_s2", "ucmd_z_km_s2", "dropout", "outlier"}

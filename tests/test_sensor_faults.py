@@ -125,6 +125,24 @@ def test_outlier_frequency_matches_its_probability() -> None:
     assert low <= count <= high, (count, low, high)
 
 
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_a_per_axis_outlier_hits_only_its_component_at_its_rate(axis: int) -> None:
+    # issue 35 item 3: an outlier probability given per component, 5 % on one axis, 0 on
+    # the others (each component on its own draw, stream child 3)
+    p = 0.05
+    probability = tuple(p if i == axis else 0.0 for i in range(3))
+    out = _stat_noise(Window(0.0, 1.0, outlier_probability=probability, outlier_scale=20.0))
+    std = np.random.Generator(np.random.PCG64(99)).standard_normal((N_STAT, 3))
+    ratio = out.noise / (std @ np.linalg.cholesky(R_NOM).T)
+    others = [i for i in range(3) if i != axis]
+    np.testing.assert_allclose(ratio[:, others], 1.0, rtol=1e-15)
+    np.testing.assert_allclose(ratio[out.outlier, axis], 20.0, rtol=1e-15)
+    np.testing.assert_allclose(ratio[~out.outlier, axis], 1.0, rtol=1e-15)
+    count = int(out.outlier.sum())
+    low, high = binom.ppf(FALSE_ALARM / 2, N_STAT, p), binom.ppf(1 - FALSE_ALARM / 2, N_STAT, p)
+    assert low <= count <= high, (count, low, high)
+
+
 def test_outlier_magnitudes_match_their_scale() -> None:
     c, r_scale = 20.0, 4.0
     out = _stat_noise(Window(0.0, 1.0, r_scale, outlier_probability=0.05, outlier_scale=c))

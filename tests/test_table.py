@@ -43,7 +43,10 @@ def studies(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "actuator": _campaign(
             root, "sweep", "hold_actuator", *hold, "--set", "actuator.magnitude_sigma=0.01"
         ),
-        "methods": _campaign(root, "ablate", "methods", "--arch", SOCP),
+        # an added pair: its rows come from a stream of its own, as a pair across campaigns'
+        "methods": _campaign(
+            root, "ablate", "methods", "--arch", SOCP, "--pair", "plain_adaptive:mtf_adaptive"
+        ),
     }
 
 
@@ -68,6 +71,13 @@ def _stat(path: Path, **where: str) -> pd.Series:
         stats = stats[stats[column.replace("__", ".")] == value]
     assert len(stats) == 1
     return stats.iloc[0]
+
+
+def _paired(ablation: Path, arch: str, other: str, statistic: str) -> pd.Series:
+    """A stored paired row of an ablation (mean_diff: of Δv; the others: of the miss)."""
+    metric = "delta_v_km_s" if statistic == "mean_diff" else "miss_km"
+    return _stat(ablation / "ablation.parquet", kind="paired", arch=arch, other=other,
+                 metric=metric, statistic=statistic)  # fmt: skip
 
 
 # --- the layouts of the docs' tables ------------------------------------------
@@ -198,14 +208,7 @@ def test_the_methods_table_pairs_each_cone_program_with_its_shooting_twin(
         ["| plain_adaptive_socp", "plain_adaptive"],
         ["| mtf_adaptive_socp", "mtf_adaptive"],
     ]
-    stored = _stat(
-        studies["methods"] / "ablation.parquet",
-        kind="paired",
-        arch="mtf_adaptive_socp",
-        other="mtf_adaptive",
-        metric="delta_v_km_s",
-        statistic="mean_diff",
-    )
+    stored = _paired(studies["methods"], "mtf_adaptive_socp", "mtf_adaptive", "mean_diff")
     assert lines[3].split(" | ")[2] == "3"  # seed pairs
     assert lines[3].split(" | ")[5] == _ci(stored, 1.0, 5) + " |"
 
@@ -331,3 +334,171 @@ def test_the_benchmark_script_prints_what_cwrend_table_prints(
     first = _lines(_table(sweep, "--rows", "guidance.hold,arch", "--metric", PER_ARCH))
     second = _lines(_table(sweep, "--rows", "guidance.hold", "--metric", PAIRED))
     assert tables(sweep).splitlines() == [*first, "", *second]
+
+
+# --- pairs across campaigns (--versus) --------------------------------------------
+
+PAIRED_VALUES = ",".join(
+    f"{v}@plain_adaptive-mtf_adaptive"
+    for v in ("frac_less.miss", "median_diff.miss", "mean_diff.dv")
+)
+
+
+def test_a_pair_across_campaigns_is_the_pair_within_one(studies: dict[str, Path]) -> None:
+    """plain-adaptive of the hold sweep (its sample-hold point) against mtf-adaptive of the
+    methods ablation: the same runs as the ablation's own pair, so the same row, intervals
+    included (the rows of an added pair, bootstrapped from the shared root seed)."""
+    result = _table(
+        studies["methods"],
+        studies["sweep"],
+        "--versus",
+        "methods",
+        "--where",
+        "hold:guidance.hold=sample",
+        "--rows",
+        "campaign,other_campaign",
+        "--metric",
+        f"n,{PAIRED_VALUES}",
+    )
+    lines = _lines(result)
+    assert lines[0].startswith("| campaign | vs campaign | n | P(plain_adaptive misses less")
+    within, across = (line.split(" | ") for line in lines[2:4])
+    assert within[:2] == ["| methods", "methods"] and across[:2] == ["| hold", "methods"]
+    assert within[2:] == across[2:]
+    assert within[2] == "3"
+    stored = _paired(studies["methods"], "plain_adaptive", "mtf_adaptive", "median_diff")
+    assert across[4] == _ci(stored, 1e3, 2)
+
+
+def test_a_pair_across_campaigns_takes_b_at_the_points_its_filters_keep(
+    studies: dict[str, Path],
+) -> None:
+    """As the methods table's mean-hold rows: the cone program of the ablation against the
+    shooting runs of the sweep's mean-hold point, on a row of their own."""
+    result = _table(
+        studies["methods"],
+        studies["sweep"],
+        "--versus",
+        "hold",
+        "--where",
+        "hold:guidance.hold=mean",
+        "--where",
+        "guidance.hold=sample,mean",
+        "--where",
+        "arch=mtf_adaptive_socp",
+        "--where",
+        "other=mtf_adaptive",
+        "--rows",
+        "guidance.hold=shooting hold,arch=cone program,other=vs shooting",
+        "--metric",
+        "n,frac_less.miss,median_diff.miss",
+    )
+    lines = _lines(result)
+    rows = [line.split(" | ") for line in lines[2:4]]
+    assert [r[:3] for r in rows] == [
+        ["| sample", "mtf_adaptive_socp", "mtf_adaptive"],  # the ablation's own pair
+        ["| mean", "mtf_adaptive_socp", "mtf_adaptive"],  # against the sweep's mean hold
+    ]
+    runs = pd.concat(
+        [
+            pd.read_parquet(studies["methods"] / "runs.parquet").query(
+                "arch == 'mtf_adaptive_socp'"
+            ),
+            pd.read_parquet(studies["sweep"] / "runs.parquet").query(
+                "arch == 'mtf_adaptive' and `param.guidance.hold` == 'mean'"
+            ),
+        ]
+    ).pivot_table(index="seed", columns="arch", values="miss_km")
+    d = runs["mtf_adaptive_socp"] - runs["mtf_adaptive"]
+    assert rows[1][3] == "3"
+    assert rows[1][4].startswith(f"{(d < 0).mean():.3f} [")
+    assert rows[1][5].startswith(f"{d.median() * 1e3:.2f} [")
+
+
+@pytest.mark.parametrize(
+    ("versus", "message"),
+    [
+        ("nope", "--versus 'nope': no campaign 'nope' (campaigns: two, methods)"),
+        ("methods", "--versus methods: two ran 2 seed(s) 0–1 and methods 3 seed(s) 0–2"),
+    ],
+)
+def test_a_bad_pair_across_campaigns_exits_2_saying_why(
+    studies: dict[str, Path], tmp_path: Path, versus: str, message: str
+) -> None:
+    two = _campaign(tmp_path, "ablate", "two", "--arch", "mtf_adaptive", "--seeds", "2")
+    result = _table(two, studies["methods"], "--versus", versus, "--metric", "frac_less.miss")
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert "Traceback" not in result.output
+
+
+# --- values computed from the runs and their re-solves --------------------------------
+
+
+@pytest.fixture(scope="module")
+def fallbacks(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A sweep of plain fixed ε over the hold (infeasible re-solves), in which the
+    re-solves of two runs are marked as ended by the plan of last resort (socp_plan):
+    what ``:with=socp_plan`` keeps does not depend on which seeds needed it."""
+    root = tmp_path_factory.mktemp("fallbacks")
+    path = _campaign(
+        root, "sweep", "fixed", "--param", "guidance.hold=sample,mean", "--arch", "plain_fixed"
+    )
+    for file in sorted((path / "solves").rglob("*.parquet"))[:2]:
+        solves = pd.read_parquet(file)
+        solves.loc[solves.index[-1], "fallback_step"] = "socp_plan"
+        solves.to_parquet(file, index=False)
+    return path
+
+
+def test_the_fallbacks_table_counts_what_the_solves_hold(fallbacks: Path) -> None:
+    """As the docs' fallbacks table: per hold, the ok runs, the re-solves failed and
+    infeasible, the runs that used socp_plan and the worst miss with and without it."""
+    result = _table(
+        fallbacks,
+        "--rows",
+        "guidance.hold,arch",
+        "--metric",
+        "n,failed_solves,infeasible_solves,n:with=socp_plan,max.miss:with=socp_plan,"
+        "max.miss:without=socp_plan",
+    )
+    lines = _lines(result)
+    assert lines[0] == (
+        "| hold | architecture | n | re-solves failed | re-solves infeasible | runs using "
+        "socp_plan | max miss [m], runs using socp_plan | max miss [m], runs not using "
+        "socp_plan |"
+    )
+    runs = pd.read_parquet(fallbacks / "runs.parquet")
+    solves = pd.read_parquet(fallbacks / "solves")
+    used = set(solves.loc[solves["fallback_step"] == "socp_plan", "run_key"])
+    assert len(used) >= 2  # the two marked, and any run that needed the plan
+    for line in lines[2:4]:
+        cells = line.removeprefix("| ").removesuffix(" |").split(" | ")
+        point = runs[runs["param.guidance.hold"] == cells[0]]
+        mine = solves[solves["run_key"].isin(point["run_key"])]
+        with_, without = point[point["run_key"].isin(used)], point[~point["run_key"].isin(used)]
+        assert cells[2:6] == [
+            str(len(point)),
+            str(int((mine["status"] == "failed").sum())),
+            str(int((mine["status"] == "infeasible").sum())),
+            str(len(with_)),
+        ]
+        worst = [
+            f"{1e3 * m.max():.2f}" if len(m) else "–"
+            for m in (with_["miss_km"], without["miss_km"])
+        ]
+        assert cells[6:] == worst
+    assert (solves["status"] == "infeasible").any()  # the counts are not all zero
+
+
+def test_an_unknown_fallback_step_is_refused_with_the_steps(fallbacks: Path) -> None:
+    result = _table(fallbacks, "--metric", "n:with=socp_paln")
+    assert result.exit_code == 2
+    assert "unknown fallback step 'socp_paln'" in result.stderr
+    assert "did you mean 'socp_plan'?" in result.stderr
+
+
+def test_with_keeps_runs_of_computed_values_only(fallbacks: Path) -> None:
+    result = _table(fallbacks, "--metric", "mean.miss:with=socp_plan")
+    assert result.exit_code == 2
+    assert "not of a stored statistic" in result.stderr

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,7 +46,8 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from cwrend_cli.campaign.statistics import METRICS, bootstrap_ci, wilson_ci
+from cwrend_cli.campaign import statistics
+from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, bootstrap_ci, wilson_ci
 from cwrend_cli.config.io import file_digest
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.output.layout import MANIFEST, RUNS
@@ -60,11 +61,13 @@ __all__ = [
     "Comparison",
     "Difference",
     "Matched",
+    "across_pairs",
     "compare",
     "compare_table",
     "config_diff",
     "load_campaign",
     "match_runs",
+    "paired_across",
     "parse_metrics",
 ]
 
@@ -224,26 +227,8 @@ def match_runs(a: Campaign, b: Campaign, metrics: Sequence[str] = METRICS) -> Ma
     Raises :class:`ConfigError` when the two campaigns share no noise or no run.
     Columns ``<metric>_a`` / ``<metric>_b`` and ``status_a`` / ``status_b``.
     """
-    common = [k for k in a.swept if k in b.swept]
-    swept = [*a.swept, *(k for k in b.swept if k not in a.swept)]
-    point_pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
-    noise_mismatch: list[tuple[tuple[int, int, str | None], tuple[int, int, str | None]]] = []
-    for pa_ in _points(a):
-        for pb in _points(b):
-            if not all(_equal(pa_[k], pb[k]) for k in common):
-                continue
-            na, nb = _noise_of(a, pa_), _noise_of(b, pb)
-            if _same_noise(na, nb):
-                point_pairs.append((pa_, pb))
-            else:
-                noise_mismatch.append((na, nb))
-    if not point_pairs and noise_mismatch:
-        na, nb = noise_mismatch[0]
-        raise ConfigError(
-            f"{a.path} and {b.path} do not share noise: A has {_describe_noise(na)}, "
-            f"B has {_describe_noise(nb)}; a paired comparison needs the same noise "
-            "realisations (the same noise.seed, root_seed in manifest.json, and noise file)"
-        )
+    point_pairs, noise_mismatch = _matched_points(a, b)
+    swept = _swept(a, b)
     keep = ["arch", "seed", "status", *metrics]
     frames = []
     for pa_, pb in point_pairs:
@@ -263,7 +248,7 @@ def match_runs(a: Campaign, b: Campaign, metrics: Sequence[str] = METRICS) -> Ma
         )
     notes = []
     if noise_mismatch:
-        notes.append(f"{len(noise_mismatch)} pair(s) of grid points on different noise left out")
+        notes.append(f"{noise_mismatch} pair(s) of grid points on different noise left out")
     only = sorted(set(a.runs["arch"]) ^ set(b.runs["arch"]))
     if only:
         notes.append(f"architecture(s) in one campaign only, not compared: {', '.join(only)}")
@@ -271,6 +256,42 @@ def match_runs(a: Campaign, b: Campaign, metrics: Sequence[str] = METRICS) -> Ma
     if failed:
         notes.append(f"{failed} shared run(s) failed in A or B and are left out")
     return Matched(pairs, ("point_a", "point_b", *swept), tuple(notes))
+
+
+_Point = dict[str, Any]
+
+
+def _matched_points(a: Campaign, b: Campaign) -> tuple[list[tuple[_Point, _Point]], int]:
+    """The pairs of grid points of A and B that match (equal values of every key both
+    sweep) on the same noise, in A's order then B's, and how many matched on other noise.
+
+    Raises :class:`ConfigError` when points match but none on the same noise.
+    """
+    common = [k for k in a.swept if k in b.swept]
+    point_pairs: list[tuple[_Point, _Point]] = []
+    noise_mismatch: list[tuple[tuple[int, int, str | None], tuple[int, int, str | None]]] = []
+    for pa_ in _points(a):
+        for pb in _points(b):
+            if not all(_equal(pa_[k], pb[k]) for k in common):
+                continue
+            na, nb = _noise_of(a, pa_), _noise_of(b, pb)
+            if _same_noise(na, nb):
+                point_pairs.append((pa_, pb))
+            else:
+                noise_mismatch.append((na, nb))
+    if not point_pairs and noise_mismatch:
+        na, nb = noise_mismatch[0]
+        raise ConfigError(
+            f"{a.path} and {b.path} do not share noise: A has {_describe_noise(na)}, "
+            f"B has {_describe_noise(nb)}; a paired comparison needs the same noise "
+            "realisations (the same noise.seed, root_seed in manifest.json, and noise file)"
+        )
+    return point_pairs, len(noise_mismatch)
+
+
+def _swept(a: Campaign, b: Campaign) -> list[str]:
+    """The ``param.<key>`` columns of A, then those only B sweeps."""
+    return [*a.swept, *(k for k in b.swept if k not in a.swept)]
 
 
 def _holds(c: Campaign) -> str:
@@ -352,6 +373,67 @@ def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) 
         a=a,
         b=b,
     )
+
+
+def across_pairs(
+    archs_a: Sequence[str], archs_b: Sequence[str], extra: Sequence[tuple[str, str]] = ()
+) -> tuple[tuple[str, str], ...]:
+    """The pairs (X of A, Y of B) that :func:`paired_across` compares by default: each
+    architecture against itself (as :func:`compare`), then the pairs a campaign compares
+    (:data:`~cwrend_cli.campaign.statistics.DEFAULT_PAIRS`), then ``extra``; those whose
+    X ran in A and Y in B."""
+    same = [(x, x) for x in archs_a]
+    candidates = dict.fromkeys([*same, *DEFAULT_PAIRS, *extra])
+    return tuple((x, y) for x, y in candidates if x in archs_a and y in archs_b)
+
+
+def paired_across(
+    a: Campaign,
+    b: Campaign,
+    extra: Sequence[tuple[str, str]] = (),
+    keep: Callable[[tuple[str, str]], bool] | None = None,
+) -> pd.DataFrame:
+    """Seed-by-seed comparisons of architecture X of campaign A with Y of campaign B.
+
+    For each ``(X, Y)`` of :func:`across_pairs` (with ``extra``) that ``keep`` keeps, and
+    each pair of
+    matched grid points (as :func:`match_runs`: equal values of the keys both sweep,
+    the same noise), the rows of
+    :func:`~cwrend_cli.campaign.statistics.paired_across` (``frac_less``,
+    ``median_diff``, ``mean_diff`` with their intervals, bootstrapped from the shared
+    root seed), with ``point_a``, ``point_b`` and the swept values ``param.<key>``
+    (of the campaign that sweeps the key). Raises :class:`ConfigError` when the
+    campaigns share no noise.
+    """
+    archs_a = [str(x) for x in a.runs["arch"].unique()]
+    archs_b = [str(y) for y in b.runs["arch"].unique()]
+    chosen = [p for p in across_pairs(archs_a, archs_b, extra) if keep is None or keep(p)]
+    point_pairs, _ = _matched_points(a, b)
+    if not point_pairs or not chosen:
+        return pd.DataFrame([])
+    columns = ["arch", "seed", "status", "miss_km", "delta_v_km_s"]
+    sides: tuple[list[pd.DataFrame], list[pd.DataFrame]] = ([], [])
+    for group, (pa_, pb) in enumerate(point_pairs):
+        for side, c, point in ((0, a, pa_), (1, b, pb)):
+            runs = c.runs.loc[c.runs["point"].astype(str) == str(point["point"]), columns]
+            sides[side].append(runs.assign(arch=runs["arch"].astype(str), group=group))
+    rows = statistics.paired_across(
+        pd.concat(sides[0], ignore_index=True),
+        pd.concat(sides[1], ignore_index=True),
+        chosen,
+        by=["group"],
+        seed=a.root_seed,
+    )
+    if rows.empty:
+        return rows
+    groups = rows.pop("group").to_numpy()
+    rows["point_a"] = [str(point_pairs[g][0]["point"]) for g in groups]
+    rows["point_b"] = [str(point_pairs[g][1]["point"]) for g in groups]
+    for k in _swept(a, b):
+        rows[k] = [
+            point_pairs[g][0][k] if k in point_pairs[g][0] else point_pairs[g][1][k] for g in groups
+        ]
+    return rows
 
 
 def compare_table(comparison: Comparison) -> pa.Table:

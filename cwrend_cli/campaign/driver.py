@@ -833,7 +833,7 @@ def _count_attempt(task: Task, exc: BaseException, attempts: dict[str, int]) -> 
 class CampaignStatistics:
     """The statistics of a campaign and how they are grouped."""
 
-    frame: pd.DataFrame  # statistics.describe rows, then statistics.paired rows
+    frame: pd.DataFrame  # statistics.describe, paired, safety (if any) and applied rows
     groups: tuple[str, ...]  # columns of a comparison group: () for an ablation
     path: Path | None  # the file written (None when there was nothing to write)
 
@@ -859,6 +859,12 @@ def _statistics(
     safety = statistics.safety(runs, by, seed=root_seed)  # issue 32: constrained campaigns
     if not safety.empty:
         frames.append(safety)
+    applied = statistics.applied(runs, by, seed=root_seed)  # issue 33: the applied Δv
+    if not applied.empty:
+        frames.append(applied)
+    consistency = statistics.consistency(runs, by)  # issue 33: against the χ² bands
+    if not consistency.empty:
+        frames.append(consistency)
     frame = pd.concat(frames, ignore_index=True)
     return frame, groups
 

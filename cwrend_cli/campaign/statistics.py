@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import zlib
 from collections import deque
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from itertools import pairwise
 from typing import Any
@@ -45,6 +45,7 @@ import pandas as pd
 from cwrend_cli.campaign.executors import default_workers
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
@@ -397,25 +398,27 @@ def _marginal_frame(
     value: FloatArray,
     low: FloatArray,
     high: FloatArray,
+    kind: str = "marginal",
 ) -> pd.DataFrame:
     """Marginal rows: per group key, one row per ``(metric, statistic)`` of ``labels``.
 
     ``value``, ``low`` and ``high`` are (groups × labels); ``sizes`` the ok runs per group
-    (column ``n``).
+    (column ``n``), or per group and label (groups × labels). ``kind``: the rows' kind.
     """
     per_group = len(labels)
+    n = sizes.astype(np.int64)
     return _frame(
         by,
         keys,
         per_group,
         {
-            "kind": "marginal",
+            "kind": kind,
             "metric": [m for _ in keys for m, _ in labels],
             "statistic": [s for _ in keys for _, s in labels],
             "value": value.ravel(),
             "ci_low": low.ravel(),
             "ci_high": high.ravel(),
-            "n": np.repeat(sizes.astype(np.int64), per_group),
+            "n": n.ravel() if n.ndim == 2 else np.repeat(n, per_group),
         },
     )
 
@@ -434,31 +437,88 @@ def describe(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFra
         return pd.DataFrame([])
     sizes = np.diff(bounds)
     spans = list(pairwise(bounds))
-    # (group, metric, statistic) in row order: the bootstrap draws in this order
-    samples: list[FloatArray] = []
-    fns: list[Statistic] = []
-    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m in METRICS}
-    for a, b in spans:
-        for metric in METRICS:
-            x = per_metric[metric][a:b]
-            samples += [x] * len(STATISTICS)
-            fns += STATISTICS.values()
-    ci = bootstrap_cis(samples, fns, np.random.default_rng(seed))
     n_stat = len(METRICS) * len(STATISTICS)
     value = np.empty((len(keys), n_stat + len(SOLVE_STATISTICS)))
-    for k, fn in enumerate(fns[:n_stat]):
-        value[:, k] = _point_values(samples[k::n_stat], fn)
+    low = np.full_like(value, np.nan)
+    high = np.full_like(value, np.nan)
+    value[:, :n_stat], low[:, :n_stat], high[:, :n_stat] = _bootstrapped(
+        ok, order, spans, METRICS, np.random.default_rng(seed)
+    )
     for k, (metric, _, fn) in enumerate(SOLVE_STATISTICS):
         x = ok[metric].to_numpy(dtype=float)[order]
         value[:, n_stat + k] = _point_values([x[a:b] for a, b in spans], fn)
-    low = np.full_like(value, np.nan)
-    high = np.full_like(value, np.nan)
-    low[:, :n_stat] = ci[:, 0].reshape(len(keys), n_stat)
-    high[:, :n_stat] = ci[:, 1].reshape(len(keys), n_stat)
     labels = [(m, s) for m in METRICS for s in STATISTICS] + [
         (m, s) for m, s, _ in SOLVE_STATISTICS
     ]
     return _marginal_frame(by, keys, sizes, labels, value, low, high)
+
+
+def _bootstrapped(
+    ok: pd.DataFrame,
+    order: npt.NDArray[np.intp],
+    spans: Sequence[tuple[int, int]],
+    metrics: Sequence[str],
+    rng: np.random.Generator,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each :data:`STATISTICS` of each of ``metrics`` per group, with bootstrap intervals.
+
+    Returns value, low and high, (groups × metrics·statistics); the draws are
+    made from ``rng`` in row order (group, metric, statistic).
+    """
+    samples: list[FloatArray] = []
+    fns: list[Statistic] = []
+    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m in metrics}
+    for a, b in spans:
+        for metric in metrics:
+            x = per_metric[metric][a:b]
+            samples += [x] * len(STATISTICS)
+            fns += STATISTICS.values()
+    ci = bootstrap_cis(samples, fns, rng)
+    n_stat = len(metrics) * len(STATISTICS)
+    value = np.empty((len(spans), n_stat))
+    for k, fn in enumerate(fns[:n_stat]):
+        value[:, k] = _point_values(samples[k::n_stat], fn)
+    return value, ci[:, 0].reshape(len(spans), n_stat), ci[:, 1].reshape(len(spans), n_stat)
+
+
+def _ok_groups(
+    runs: pd.DataFrame, by: Sequence[str], columns: Sequence[str]
+) -> (
+    tuple[pd.DataFrame, list[tuple[Hashable, ...]], npt.NDArray[np.intp], npt.NDArray[np.intp]]
+    | None
+):
+    """The ok runs and their groups (:func:`_segments`); None without ``columns`` or groups."""
+    if any(c not in runs.columns for c in columns):
+        return None
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    return (ok, keys, order, bounds) if keys else None
+
+
+#: The applied Δv and its fuel penalty against the exact continuous fuel optimum (issue 33,
+#: item 3), beside the paper's :data:`METRICS`.
+APPLIED_METRICS = ("delta_v_applied_km_s", "fuel_penalty_applied_pct")
+#: Stream of their bootstrap: ``default_rng([seed, APPLIED_STREAM])``, their own, so that
+#: they change no row of :func:`describe` (as :data:`SAFETY_STREAM`).
+APPLIED_STREAM = 2**32 - 4
+
+
+def applied(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame:
+    """Per group: mean/median/p95 of :data:`APPLIED_METRICS` with bootstrap CIs.
+
+    Rows as those of :func:`describe` for its metrics (ok runs only), drawn
+    from a stream of their own (:data:`APPLIED_STREAM`). Empty when the runs
+    have no such columns (a campaign written before issue 33).
+    """
+    groups = _ok_groups(runs, by, APPLIED_METRICS)
+    if groups is None:
+        return pd.DataFrame([])
+    ok, keys, order, bounds = groups
+    spans = list(pairwise(bounds))
+    rng = np.random.default_rng([seed, APPLIED_STREAM])
+    value, low, high = _bootstrapped(ok, order, spans, APPLIED_METRICS, rng)
+    labels = [(m, s) for m in APPLIED_METRICS for s in STATISTICS]
+    return _marginal_frame(by, keys, np.diff(bounds), labels, value, low, high)
 
 
 #: Stream of the safety rows' bootstrap: ``default_rng([seed, SAFETY_STREAM])``, its own, so
@@ -488,12 +548,10 @@ def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame
     bootstrap intervals from a stream of their own (:data:`SAFETY_STREAM`).
     Empty when the runs have no safety columns (a campaign without constraints).
     """
-    if "safety_violated" not in runs.columns:
+    groups = _ok_groups(runs, by, ("safety_violated",))
+    if groups is None:
         return pd.DataFrame([])
-    ok = runs[runs["status"] == "ok"]
-    keys, order, bounds = _segments(ok, by)
-    if not keys:
-        return pd.DataFrame([])
+    ok, keys, order, bounds = groups
     spans = list(pairwise(bounds))
     sizes = np.diff(bounds)
     violated = ok["safety_violated"].to_numpy(dtype=float)[order]
@@ -544,27 +602,86 @@ def paired(
     ok = runs[runs["status"] == "ok"]
     if ok.empty:
         return pd.DataFrame([])
-    # one table (group, seed) × (metric, arch), as each group's own pivot would give
-    wide = ok.pivot_table(index=[*by, "seed"], columns="arch", values=["miss_km", "delta_v_km_s"])
-    if by:  # the index is sorted: a group is a run of equal keys
-        per_row = list(zip(*(wide.index.get_level_values(c) for c in by), strict=True))
-        starts = [i for i, k in enumerate(per_row) if i == 0 or k != per_row[i - 1]]
-        keys = [per_row[i] for i in starts]
-        bounds = np.array([*starts, len(per_row)])
-    else:
-        keys, bounds = [()], np.array([0, len(wide)])
+    wide = _wide(ok, by)
+    keys, bounds = _groups(wide.index, by)
     columns: set[Any] = set(wide.columns)
     present = [
         (a, b)
         for a, b in dict.fromkeys(pairs)
         if ("miss_km", a) in columns and ("miss_km", b) in columns
     ]
+    blocks = {p: _block(wide, wide, p) for p in present}
     shared = [p for p in present if p in PAIRS]
     streams = [(shared, np.random.default_rng(seed + 1))] if shared else []
     streams += [([p], _pair_generator(seed, p)) for p in present if p not in PAIRS]
-    frames = [_paired_rows(wide, keys, bounds, chosen, by, rng) for chosen, rng in streams]
+    frames = [_paired_rows(blocks, keys, bounds, chosen, by, rng) for chosen, rng in streams]
     frames = [f for f in frames if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+def paired_across(
+    a: pd.DataFrame,
+    b: pd.DataFrame,
+    pairs: Sequence[tuple[str, str]],
+    by: Sequence[str] = (),
+    seed: int = 0,
+) -> pd.DataFrame:
+    """:func:`paired` across two campaigns on the same noise: A of each pair from the runs
+    ``a``, B from the runs ``b``, seed by seed within each group of ``by`` (columns of both).
+
+    The rows of :func:`paired` (``frac_less`` with its Wilson interval, ``median_diff``
+    and ``mean_diff`` with bootstrap intervals), each pair drawn, its groups in order,
+    from the stream of an *added* pair (:func:`_pair_generator`, keyed by its names):
+    the rows :func:`paired` gives that pair added to one campaign that holds both
+    runs. A pair may name one architecture twice (the same architecture in the two
+    campaigns).
+    """
+    ok_a, ok_b = (r[r["status"] == "ok"] for r in (a, b))
+    if ok_a.empty or ok_b.empty:
+        return pd.DataFrame([])
+    wide_a, wide_b = _wide(ok_a, by), _wide(ok_b, by)
+    index = wide_a.index.union(wide_b.index)  # sorted: a group is a run of equal keys
+    wide_a, wide_b = wide_a.reindex(index), wide_b.reindex(index)
+    keys, bounds = _groups(index, by)
+    present = [
+        (x, y)
+        for x, y in dict.fromkeys(pairs)
+        if ("miss_km", x) in wide_a.columns and ("miss_km", y) in wide_b.columns
+    ]
+    blocks = {p: _block(wide_a, wide_b, p) for p in present}
+    frames = [
+        _paired_rows(blocks, keys, bounds, [p], by, _pair_generator(seed, p)) for p in present
+    ]
+    frames = [f for f in frames if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame([])
+
+
+def _wide(ok: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+    """One table (group, seed) × (metric, arch) of the ok runs, sorted by group and seed."""
+    return ok.pivot_table(index=[*by, "seed"], columns="arch", values=["miss_km", "delta_v_km_s"])
+
+
+def _groups(
+    index: pd.Index, by: Sequence[str]
+) -> tuple[list[tuple[Hashable, ...]], npt.NDArray[np.intp]]:
+    """The group keys of a sorted (group, seed) index and each group's first row (then the end)."""
+    if not by:
+        return [()], np.array([0, len(index)])
+    per_row = list(zip(*(index.get_level_values(c) for c in by), strict=True))
+    starts = [i for i, k in enumerate(per_row) if i == 0 or k != per_row[i - 1]]
+    return [per_row[i] for i in starts], np.array([*starts, len(per_row)])
+
+
+def _block(wide_a: pd.DataFrame, wide_b: pd.DataFrame, pair: tuple[str, str]) -> FloatArray:
+    """Miss of A, miss of B, Δv of A, Δv of B per row (NaN where one did not run ok)."""
+    a, b = pair
+    columns = [
+        wide_a[("miss_km", a)],
+        wide_b[("miss_km", b)],
+        wide_a[("delta_v_km_s", a)],
+        wide_b[("delta_v_km_s", b)],
+    ]
+    return np.column_stack([c.to_numpy(dtype=float) for c in columns])
 
 
 def _pair_generator(seed: int, pair: tuple[str, str]) -> np.random.Generator:
@@ -573,20 +690,17 @@ def _pair_generator(seed: int, pair: tuple[str, str]) -> np.random.Generator:
 
 
 def _paired_rows(
-    wide: pd.DataFrame,
+    blocks: Mapping[tuple[str, str], FloatArray],
     keys: Sequence[tuple[Hashable, ...]],
     bounds: npt.NDArray[np.intp],
     pairs: Sequence[tuple[str, str]],
     by: Sequence[str],
     rng: np.random.Generator,
 ) -> pd.DataFrame:
-    """The rows of :func:`paired` for ``pairs`` (each group, then each pair), drawn from ``rng``."""
-    blocks = {
-        (a, b): wide[
-            [("miss_km", a), ("miss_km", b), ("delta_v_km_s", a), ("delta_v_km_s", b)]
-        ].to_numpy(dtype=float)
-        for a, b in pairs
-    }
+    """The rows of :func:`paired` for ``pairs`` (each group, then each pair), drawn from ``rng``.
+
+    ``blocks``: per pair, the rows of :func:`_block` (groups delimited by ``bounds``).
+    """
     idents: list[tuple[Hashable, ...]] = []
     head: list[tuple[str, str, int]] = []  # (arch, other, n) per group and pair
     less_rows: list[tuple[float, float, float]] = []
@@ -634,3 +748,52 @@ def _paired_rows(
             "ci_high": high.ravel(),
         },
     )
+
+
+# ---------------------------------------------------------------------------
+# Filter consistency against χ² bands (issue 33, item 4)
+# ---------------------------------------------------------------------------
+
+#: The runs columns of filter consistency (:mod:`cwrend_cli.physics.metrics`) and their
+#: degrees of freedom: each run's time-averaged NEES (rows 1 … N) and NIS (nominal rows).
+CONSISTENCY_METRICS: tuple[tuple[str, int], ...] = (
+    ("mean_nees", NEES_DOF),
+    ("mean_nis_nominal", NIS_DOF),
+)
+
+
+def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+    """Per group: the campaign mean of each run's time-averaged NEES and NIS, and its band.
+
+    Rows ``kind = "consistency"`` for each metric of :data:`CONSISTENCY_METRICS`
+    (statistic ``mean``): ``value`` the mean over the ok runs with a finite
+    value, ``n`` their number, and ``ci_low`` / ``ci_high`` the χ² 95 % band
+    for ``n`` runs (:func:`~cwrend_cli.physics.metrics.mean_in_band`), where the
+    mean lies for a consistent filter (a band of the hypothesis, not an
+    interval of the estimate).
+
+    The band treats each run's time average as one χ² value: the steps of a
+    run are correlated (the NEES strongly), and an average of correlated χ²_n
+    values has the mean n and at most the variance 2n of one, so the sum over
+    the runs has the mean of χ²(N n) and at most its variance: the band is
+    conservative (exact when a run's errors do not change over time). Empty
+    without the columns (runs written before cwrend stored them).
+    """
+    if not all(m in runs.columns for m, _ in CONSISTENCY_METRICS):
+        return pd.DataFrame([])
+    ok = runs[runs["status"] == "ok"]
+    keys, order, bounds = _segments(ok, by)
+    if not keys:
+        return pd.DataFrame([])
+    rows = np.array(
+        [
+            [
+                mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+                for metric, dof in CONSISTENCY_METRICS
+            ]
+            for a, b in pairwise(bounds)
+        ]
+    )  # (group, metric, [mean, low, high, n])
+    labels = [(metric, "mean") for metric, _ in CONSISTENCY_METRICS]
+    value, low, high, n = (rows[..., k] for k in range(4))
+    return _marginal_frame(by, keys, n, labels, value, low, high, kind="consistency")

@@ -479,7 +479,7 @@ def execute_task(
                         fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
                     )
                 guards.check_finite(result)
-                metrics = summary_row(result, run_refs.fuel.delta_v_km_s)
+                metrics = summary_row(result, run_refs.fuel)
                 results.setdefault(spec.arch, []).append((spec, result))
                 by_seed.setdefault(spec.seed, []).append((problem, result))
                 outcomes.append(

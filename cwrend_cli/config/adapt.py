@@ -51,6 +51,8 @@ def problem_of(cfg: CwrendConfig) -> params.Problem:
         actuator=_mirror(params.Actuator, cfg.actuator),
         constraints=constraints_of(cfg),
         model=_mirror(params.DesignModel, cfg.model),
+        target=_mirror(params.Target, cfg.target),
+        sensor=_mirror(params.Sensor, cfg.sensor),
     )
 
 

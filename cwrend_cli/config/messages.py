@@ -147,6 +147,44 @@ def _describe(err: Mapping[str, Any]) -> str:
     return msg.removeprefix("Value error, ")
 
 
+#: Error types of a union member the input is not of (a number given where the
+#: member is an array, or an array where it is a number).
+_TYPE_MISMATCH = frozenset({"tuple_type", "list_type", "float_type", "int_type"})
+
+
+def _is_union_tag(part: object) -> bool:
+    """True for the part of an error location naming a member of a union type
+    (``constrained-float``, ``tuple[constrained-float, ...]``), never a field name."""
+    return isinstance(part, str) and ("[" in part or "-" in part or part in ("float", "int"))
+
+
+def _union_errors_merged(errors: Sequence[Any]) -> list[Any]:
+    """``errors`` with the members of a union value (``r_scale``: one number or one per
+    component) merged: the member the input is not of is dropped, and the location
+    names the field alone. An input of neither kind gets one error."""
+    out: list[Any] = []
+    seen: dict[tuple[Any, ...], int] = {}
+    for err in errors:
+        loc = tuple(err["loc"])
+        if not any(_is_union_tag(p) for p in loc):
+            out.append(err)
+            continue
+        bare = tuple(p for p in loc if not _is_union_tag(p))
+        merged = {**err, "loc": bare}
+        if bare not in seen:
+            seen[bare] = len(out)
+            out.append(merged)
+        elif out[seen[bare]]["type"] in _TYPE_MISMATCH:
+            if err["type"] in _TYPE_MISMATCH:  # neither a number nor an array
+                out[seen[bare]] = {**merged, "type": "value_error",
+                                   "msg": "must be a number or an array of numbers"}  # fmt: skip
+            else:
+                out[seen[bare]] = merged
+        elif err["type"] not in _TYPE_MISMATCH:
+            out.append(merged)  # a second genuine problem (two entries of an array)
+    return out
+
+
 def format_validation_error(
     exc: ValidationError, root_model: type[BaseModel] | None = None
 ) -> list[str]:
@@ -165,7 +203,7 @@ def format_validation_error(
 
         root_model = CwrendConfig
     lines: list[str] = []
-    errors = exc.errors(include_url=False)
+    errors = _union_errors_merged(exc.errors(include_url=False))
     for err in errors[:MAX_LISTED_PROBLEMS]:
         loc = tuple(err["loc"])
         path = ".".join(str(p) for p in loc)

@@ -73,7 +73,9 @@ __all__ = [
     "OutputConfig",
     "ScenarioConfig",
     "ScheduleConfig",
+    "SensorConfig",
     "SolverConfig",
+    "TargetConfig",
     "TruthConfig",
 ]
 
@@ -119,6 +121,12 @@ DISPERSION_MAX = POSITION_VARIANCE_MAX_KM2
 #: A mean or end of a dispersion draw [the key's unit]: within ±DISPERSION_MAX.
 DispersionValue = Annotated[float, Strict(), Field(ge=-DISPERSION_MAX, le=DISPERSION_MAX)]
 
+#: A factor on a true measurement variance [-] (a degradation window's r_scale).
+RScale = Annotated[float, Strict(), Field(ge=1e-6, le=GAIN_MAX)]
+#: A probability [-] (a degradation window's outlier_probability).
+Probability = Annotated[float, Strict(), Field(ge=0, le=1)]
+#: A factor on the Gaussian noise of an outlier [-].
+OutlierScale = Annotated[float, Strict(), Field(ge=0, le=1e3)]
 PositionKm = Annotated[float, Strict(), Field(ge=-POSITION_MAX_KM, le=POSITION_MAX_KM)]
 VelocityKmS = Annotated[float, Strict(), Field(ge=-VELOCITY_MAX_KM_S, le=VELOCITY_MAX_KM_S)]
 #: A relative state [x, y, z, ẋ, ẏ, ż] [km, km/s], each entry bounded.
@@ -601,12 +609,11 @@ class DegradationWindow(_FrozenModel):
         le=TIME_MAX_S,
         description="window end time (inclusive), >= start_s, <= scenario.horizon_s [s]",
     )
-    r_scale: Float = Field(
+    r_scale: RScale | tuple[RScale, ...] = Field(
         1.0,
-        ge=1e-6,
-        le=GAIN_MAX,
-        description="true measurement covariance = r_scale * R_nominal, in [1e-6, 1e6] [-] "
-        "(paper 300)",
+        description="true measurement covariance = r_scale * R_nominal, in [1e-6, 1e6]; one "
+        "value for every component or one per measurement component (3; 2 for "
+        "sensor.model = 'angles') [-] (paper 300)",
     )
     bias_km: tuple[PositionKm, PositionKm, PositionKm] = Field(
         (0.0, 0.0, 0.0),
@@ -615,14 +622,16 @@ class DegradationWindow(_FrozenModel):
     dropout_probability: Float = Field(
         0.0, ge=0, le=1, description="probability of no measurement on a step; 1 = blackout [-]"
     )
-    outlier_probability: Float = Field(
-        0.0, ge=0, le=1, description="probability that a step's noise is an outlier [-]"
+    outlier_probability: Probability | tuple[Probability, ...] = Field(
+        0.0,
+        description="probability that a step's noise is an outlier, in [0, 1]; one value "
+        "(every component an outlier together) or one per measurement component (each on "
+        "its own draw) [-]",
     )
-    outlier_scale: Float = Field(
+    outlier_scale: OutlierScale | tuple[OutlierScale, ...] = Field(
         1.0,
-        ge=0,
-        le=1e3,
-        description="factor on the Gaussian noise of an outlier step, in [0, 1e3] [-]",
+        description="factor on the Gaussian noise of an outlier, in [0, 1e3]; one value or "
+        "one per measurement component [-]",
     )
     bias_drift_km_per_sqrt_s: Float = Field(
         0.0,
@@ -631,6 +640,32 @@ class DegradationWindow(_FrozenModel):
         description="random-walk intensity q of the bias: N(0, q² Δt) per step and axis, in "
         "[0, 10] [km/√s] (10 drifts 10 km in a second of window)",
     )
+    bias_range_km: PositionKm = Field(
+        0.0,
+        description="sensor.model = 'range_bearing': bias of the measured range, within "
+        "±1e4 km [km]",
+    )
+    bias_angles_deg: tuple[Angle, Angle] = Field(
+        (0.0, 0.0),
+        description="sensor.model = 'range_bearing' or 'angles': bias of the measured "
+        "(azimuth, elevation), each in [-180, 180] [deg]",
+    )
+
+    @field_validator("bias_angles_deg", mode="before")
+    @classmethod
+    def _two_entries(cls, value: Any) -> Any:
+        return _check_length(value, 2)
+
+    @model_serializer(mode="wrap")
+    def _without_sensor_fields_when_off(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # the nonlinear sensors' biases (issue 35) left out at zero: hashes unchanged
+        out = handler(self)
+        if isinstance(out, dict):
+            if out.get("bias_range_km") == 0.0:
+                out.pop("bias_range_km")
+            if tuple(out.get("bias_angles_deg", ())) == (0.0, 0.0):
+                out.pop("bias_angles_deg")
+        return out
 
     @field_validator("bias_km", mode="before")
     @classmethod
@@ -656,6 +691,8 @@ _PAPER_WINDOWS = tuple(
         outlier_probability=w.outlier_probability,
         outlier_scale=w.outlier_scale,
         bias_drift_km_per_sqrt_s=w.bias_drift_km_per_sqrt_s,
+        bias_range_km=w.bias_range_km,
+        bias_angles_deg=w.bias_angles_deg,
     )
     for w in _PAPER.degradation.windows
 )
@@ -722,16 +759,58 @@ class ModelConfig(_FrozenModel):
     of ``[truth]``: eccentricity ``truth.eccentricity``, true anomaly
     ``truth.true_anomaly_deg`` at t = 0. Both read the chief from ``[truth]``,
     so they need a truth that flies one (``truth.model`` ``"two_body"`` or
-    ``"j2"``). Without the section every number and hash is as before.
+    ``"j2"``). The filter also takes ``"ekf_two_body"`` and ``"ekf_j2"``: an
+    extended Kalman filter on the nonlinear two-body (two-body + J2) relative
+    dynamics about the same chief, with the same need. Without the section
+    every number and hash is as before.
     """
 
     guidance: Literal["cw", "ss", "ya"] = Field(
         _PAPER.model.guidance,
         description="design model of the re-solves: 'cw', 'ss' (J2) or 'ya' (eccentric) [-]",
     )
-    filter: Literal["cw", "ss", "ya"] = Field(
+    filter: Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"] = Field(
         _PAPER.model.filter,
-        description="design model of the Kalman filter's prediction: 'cw', 'ss' or 'ya' [-]",
+        description="model of the Kalman filter's prediction: 'cw', 'ss', 'ya', or an "
+        "extended Kalman filter on the nonlinear dynamics 'ekf_two_body' or 'ekf_j2' [-]",
+    )
+
+
+class SensorConfig(_FrozenModel):
+    """What the chaser measures (issue 35; ``[sensor]``); the paper's relative position by default.
+
+    ``"position"``: the relative position [km], noise ``estimator.r_nominal_km2``
+    (paper Eq. 13). ``"range_bearing"``: range [km], azimuth and elevation of the
+    target seen from the chaser; ``"angles"``: azimuth and elevation only (a
+    camera); both updated by an extended Kalman filter, with σ_range =
+    ``sigma_range_km`` + ``sigma_range_fraction`` × range and σ_angle =
+    ``sigma_angle_deg`` (:mod:`cwrend_cli.physics.measurement_models`). With the
+    default the section is left out of the resolved config, so every number and
+    hash is as before.
+    """
+
+    model: Literal["position", "range_bearing", "angles"] = Field(
+        _PAPER.sensor.model,
+        description="measurement: 'position', 'range_bearing' or 'angles' [-]",
+    )
+    sigma_range_km: Float = Field(
+        _PAPER.sensor.sigma_range_km,
+        gt=0,
+        le=POSITION_MAX_KM,
+        description="range_bearing: constant part of the range σ, in (0, 1e4] [km]",
+    )
+    sigma_range_fraction: Float = Field(
+        _PAPER.sensor.sigma_range_fraction,
+        ge=0,
+        le=1,
+        description="range_bearing: the range σ grows by this fraction of the range, in [0, 1] [-]",
+    )
+    sigma_angle_deg: Float = Field(
+        _PAPER.sensor.sigma_angle_deg,
+        gt=0,
+        le=10,
+        description="range_bearing and angles: σ of the azimuth and of the elevation, in "
+        "(0, 10] [deg]",
     )
 
 
@@ -1033,6 +1112,104 @@ class ConstraintsConfig(_FrozenModel):
 PORT_SURFACE_TOL = 1e-12
 
 
+#: A component of the initial attitude quaternion [-] (normalised at use; bounded so its
+#: norm is finite).
+QuaternionEntry = Annotated[float, Strict(), Field(ge=-GAIN_MAX, le=GAIN_MAX)]
+#: Largest body rate about one axis [deg/s]: 10 rpm, six times the fastest tumble of the
+#: public reference study of issue 34 (10 °/s, Sow et al. 2024).
+BODY_RATE_MAX_DEG_S = 60.0
+BodyRateDegS = Annotated[float, Strict(), Field(ge=-BODY_RATE_MAX_DEG_S, le=BODY_RATE_MAX_DEG_S)]
+#: A principal moment of inertia as a ratio [-]: positive, at most 1e6 (only ratios matter).
+InertiaRatio = Annotated[float, Strict(), Field(gt=0, le=GAIN_MAX)]
+
+
+class TargetConfig(_FrozenModel):
+    """The target's attitude (issue 34; ``[target]``); ``fixed`` by default.
+
+    ``fixed``: the target's body axes stay along the relative frame (x radial,
+    y along-track, z cross-track), today's geometry. ``tumbling``: a torque-free
+    rigid body (:mod:`cwrend_cli.physics.attitude`). The tumbling fields are
+    refused with ``fixed`` (they would do nothing). Fixed, the section is left out
+    of the resolved config, so the config hash and every number are as without
+    it. Path constraints do not rotate with a tumbling target yet: ``tumbling``
+    with ``[constraints]`` is refused.
+    """
+
+    attitude: Literal["fixed", "tumbling"] = Field(
+        "fixed",
+        description="'fixed' (body axes along the relative frame) or 'tumbling' (torque-free "
+        "rigid body) [-]",
+    )
+    initial_quaternion: tuple[
+        QuaternionEntry, QuaternionEntry, QuaternionEntry, QuaternionEntry
+    ] = Field(
+        (1.0, 0.0, 0.0, 0.0),
+        description="tumbling: attitude at t = 0, body to relative frame, scalar-first "
+        "(q0, q1, q2, q3), any non-zero length (normalised by the tool); each entry in "
+        "[-1e6, 1e6] [-]",
+    )
+    body_rates_deg_s: tuple[BodyRateDegS, BodyRateDegS, BodyRateDegS] = Field(
+        (0.0, 0.0, 0.0),
+        description="tumbling: angular velocity at t = 0 relative to inertial space, in body "
+        "axes (with its z axis along the orbit normal, a target at rest in the relative frame "
+        "has [0, 0, n]); each in [-60, 60] [deg/s]",
+    )
+    inertia: tuple[InertiaRatio, InertiaRatio, InertiaRatio] = Field(
+        (1.0, 1.0, 1.0),
+        description="tumbling: principal moments of inertia (I1, I2, I3) about the body axes, "
+        "as ratios; each in (0, 1e6], no one above the sum of the other two [-]",
+    )
+
+    @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
+    @classmethod
+    def _lengths(cls, value: Any, info: ValidationInfo) -> Any:
+        return _check_length(value, 4 if info.field_name == "initial_quaternion" else 3)
+
+    @field_validator("initial_quaternion")
+    @classmethod
+    def _non_zero(cls, value: tuple[float, ...]) -> tuple[float, ...]:
+        if not any(value):
+            raise ValueError("must be a non-zero quaternion (e.g. [1, 0, 0, 0])")
+        return value
+
+    @field_validator("inertia")
+    @classmethod
+    def _triangle(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        # a rigid body's principal moments obey I_i <= I_j + I_k (each is a sum of two of
+        # the three second moments of its mass distribution)
+        for i in range(3):
+            others = value[(i + 1) % 3] + value[(i + 2) % 3]
+            if value[i] > others:
+                raise ValueError(
+                    f"no rigid body has these moments: I{i + 1} = {fmt_num(value[i])} exceeds "
+                    f"the sum of the other two ({fmt_num(others)}): each must be at most the "
+                    "sum of the other two"
+                )
+        return value
+
+    @model_validator(mode="after")
+    def _tumbling_fields_only_when_tumbling(self) -> Self:
+        if self.attitude == "fixed":
+            unused = [
+                (name, getattr(self, name))
+                for name in ("initial_quaternion", "body_rates_deg_s", "inertia")
+                if getattr(self, name) != type(self).model_fields[name].default
+            ]
+            if unused:
+                name, value = unused[0]
+                raise rules_error(
+                    [
+                        (
+                            name,
+                            list(value),
+                            "applies to a tumbling target only: set target.attitude = "
+                            "'tumbling', or leave it out",
+                        )
+                    ]
+                )
+        return self
+
+
 SweepValue = Float | Int | bool | str | tuple[Float, ...]
 
 
@@ -1115,6 +1292,14 @@ class CwrendConfig(_FrozenModel):
         default_factory=ModelConfig,
         description="design models of the guidance and the filter (default CW)",
     )
+    sensor: SensorConfig = Field(
+        default_factory=SensorConfig,
+        description="what the chaser measures: position (default), range_bearing or angles",
+    )
+    target: TargetConfig = Field(
+        default_factory=TargetConfig,
+        description="the target's attitude: fixed (default) or tumbling",
+    )
     noise: NoiseConfig = Field(default_factory=NoiseConfig, description="measurement noise")
     output: OutputConfig = Field(default_factory=OutputConfig, description="output location")
     sweep: dict[str, tuple[SweepValue, ...] | str | dict[str, Any]] = Field(
@@ -1168,7 +1353,38 @@ class CwrendConfig(_FrozenModel):
             out.pop("constraints", None)
         if isinstance(out, dict) and self.model == ModelConfig():
             out.pop("model", None)  # no [model]: CW, hashes unchanged (issue 33)
+        if isinstance(out, dict) and self.target == TargetConfig():
+            out.pop("target", None)  # a fixed target: hashes unchanged (issue 34)
+        if isinstance(out, dict) and self.sensor == SensorConfig():
+            out.pop("sensor", None)  # no [sensor]: position, hashes unchanged (issue 35)
         return out
+
+    @model_validator(mode="before")
+    @classmethod
+    def _nis_offset_of_the_sensor(cls, data: Any) -> Any:
+        # schedule.nis_offset is the measurement dimension m of paper Eq. 24: unless given,
+        # 2 for the angles sensor (issue 35); 3 (the default) for the others
+        if not isinstance(data, dict):
+            return data
+        sensor = data.get("sensor")
+        model = sensor.get("model") if isinstance(sensor, dict) else getattr(sensor, "model", None)
+        if model != "angles":
+            return data
+        schedule = data.get("schedule", {})
+        if isinstance(schedule, ScheduleConfig):
+            if "nis_offset" in schedule.model_fields_set:
+                return data
+            return {**data, "schedule": schedule.model_copy(update={"nis_offset": 2.0})}
+        if isinstance(schedule, dict) and "nis_offset" not in schedule:
+            return {**data, "schedule": {**schedule, "nis_offset": 2.0}}
+        return data
+
+    @model_validator(mode="after")
+    def _sensor_rules(self) -> Self:
+        problems = sensor_problems(self)
+        if problems:
+            raise rules_error(problems)
+        return self
 
     @model_validator(mode="after")
     def _design_model_rules(self) -> Self:
@@ -1244,6 +1460,16 @@ class CwrendConfig(_FrozenModel):
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
                 )
             )
+        if self.target.attitude == "tumbling" and self.constraints.active:
+            problems.append(
+                (
+                    "target.attitude",
+                    self.target.attitude,
+                    "rotating constraints are not supported yet: [constraints] are given in "
+                    "the relative frame and would not turn with a tumbling target; use "
+                    "target.attitude = 'fixed' or leave out [constraints]",
+                )
+            )
         corridor = self.constraints.corridor
         if corridor is not None and tuple(sc.xf) != (*corridor.port_km, 0.0, 0.0, 0.0):
             problems.append(
@@ -1285,3 +1511,75 @@ def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
     except OSError:
         return None  # reading it reports the problem
     return noise_file_too_large(size, n_steps)
+
+
+def sensor_problems(cfg: CwrendConfig) -> list[tuple[str, Any, str]]:
+    """The fields of ``cfg`` that make no sense with its sensor model (issue 35), with the fix."""
+    model = cfg.sensor.model
+    default = SensorConfig()
+    problems: list[tuple[str, Any, str]] = []
+    unused: list[str] = []
+    if model == "position":
+        unused = ["sigma_range_km", "sigma_range_fraction", "sigma_angle_deg"]
+    elif model == "angles":
+        unused = ["sigma_range_km", "sigma_range_fraction"]
+    for name in unused:
+        value = getattr(cfg.sensor, name)
+        if value != getattr(default, name):
+            problems.append(
+                (
+                    f"sensor.{name}",
+                    value,
+                    f"the '{model}' sensor measures no "
+                    + ("angle" if name == "sigma_angle_deg" else "range")
+                    + ": leave it unset or set sensor.model to one that does"
+                    + (
+                        " (estimator.r_nominal_km2 is the position sensor's noise)"
+                        if model == "position"
+                        else ""
+                    ),
+                )
+            )
+    if model != "position" and cfg.estimator.r_nominal_km2 != EstimatorConfig().r_nominal_km2:
+        problems.append(
+            (
+                "estimator.r_nominal_km2",
+                cfg.estimator.r_nominal_km2,
+                f"the '{model}' sensor's noise is set by sensor.sigma_range_km, "
+                "sigma_range_fraction and sigma_angle_deg: leave r_nominal_km2 at the default",
+            )
+        )
+    m = 2 if model == "angles" else 3
+    for i, w in enumerate(cfg.degradation.windows):
+        key = f"degradation.windows.{i}"
+        for name in ("r_scale", "outlier_probability", "outlier_scale"):
+            value = getattr(w, name)
+            if isinstance(value, tuple) and len(value) != m:
+                problems.append(
+                    (
+                        f"{key}.{name}",
+                        list(value),
+                        f"must be one value or {m} (one per component of the '{model}' "
+                        "sensor's measurement)",
+                    )
+                )
+        if model != "range_bearing" and w.bias_range_km != 0.0:
+            problems.append(
+                (
+                    f"{key}.bias_range_km",
+                    w.bias_range_km,
+                    f"the '{model}' sensor measures no range: use "
+                    + ("bias_km" if model == "position" else "bias_angles_deg")
+                    + " or sensor.model = 'range_bearing'",
+                )
+            )
+        if model == "position" and tuple(w.bias_angles_deg) != (0.0, 0.0):
+            problems.append(
+                (
+                    f"{key}.bias_angles_deg",
+                    list(w.bias_angles_deg),
+                    "the 'position' sensor measures no angle: use bias_km, or "
+                    "sensor.model = 'range_bearing' or 'angles'",
+                )
+            )
+    return problems

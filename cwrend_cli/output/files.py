@@ -309,9 +309,8 @@ def write_run(
     """
     out = Path(out_dir)
     meta = {"config_hash": config_hash}
-    fuel_dv = refs.fuel.delta_v_km_s
-    rows = [reference_row(refs.energy, fuel_dv), reference_row(refs.fuel, fuel_dv)]
-    rows += [summary_row(r, fuel_dv) for r in results]
+    rows = [reference_row(refs.energy, refs.fuel), reference_row(refs.fuel, refs.fuel)]
+    rows += [summary_row(r, refs.fuel) for r in results]
     write_parquet(summary_table(rows, meta), out / RUN_SUMMARY)
     write_parquet(pa.concat_tables([steps_table(r, meta) for r in results]), out / RUN_STEPS)
     write_parquet(pa.concat_tables([solves_table(r, meta) for r in results]), out / RUN_SOLVES)

@@ -13,12 +13,18 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
                                        + Points3D (current position, over time)
     /arch/<slug>/trajectory/estimate   the same for the filter estimate
     /arch/<slug>/thrust                Arrows3D from the current position along u (scaled)
+    /arch/<slug>/line_of_sight         Arrows3D from the true position along the measured
+                                       line of sight (a nonlinear [sensor], issue 35)
     /arch/<slug>/{u_norm, dv_cum, eps, score, score_filtered, nis, mtf_ratio,
                   pos_err_km, est_err_km}   Scalars over sim_time
     /arch/<slug>/resolve_success       Scalars at the re-solve times (1 success, 0 not)
     /reference/{energy,fuel}/trajectory  LineStrips3D + Points3D of the open-loop plan
     /reference/{energy,fuel}/{u_norm, dv_cum, pos_err_km}
     /target                            Points3D at the origin (static)
+    /target/body                       Transform3D: a tumbling target's attitude over time
+                                       (body to relative frame; with target.attitude =
+                                       "tumbling", issue 34)
+    /target/body/axes                  Arrows3D: the body's x, y, z axes (red, green, blue)
     /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
     /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static)
     /arch/<slug>/safety_distance_km    Scalars: φ to the unsafe set (with [constraints])
@@ -48,6 +54,7 @@ import numpy as np
 
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
+from cwrend_cli.physics import measurement_models as mm
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.physics.sensors import in_window
@@ -212,6 +219,7 @@ def build_blueprint(
     *,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
     safety: bool = False,
+    tumbling: bool = False,
 ) -> rrb.Blueprint:
     """Default layout like the paper's Figures 1–2 (trajectories, control, ε/score, errors).
 
@@ -238,6 +246,7 @@ def build_blueprint(
             *[f"/arch/{s}/thrust" for s in slugs],
             *[f"/reference/{r}/trajectory" for r in reference_names],
             "/target",
+            *(["/target/body/**"] if tumbling else []),
             "/constraints/**",
         ],
         eye_controls=_eye(rrb, bounds) if bounds is not None else None,
@@ -348,6 +357,30 @@ def _send_path(
     )
 
 
+def _send_line_of_sight(
+    rec: rr.RecordingStream, path: str, run: RunResult, colour: str, radius: float
+) -> None:
+    """The measured line of sight over time: from the true position towards the target.
+
+    Its length is the measured range (``range_bearing``) or the range the filter
+    estimates, ‖x̂‖ (``angles``: no range measured). Rows without a measurement
+    (t = 0, dropouts) are left out.
+    """
+    import rerun as rr
+
+    kind = mm.KINDS[run.sensor]
+    sight = mm.line_of_sight(kind, np.asarray(run.y, dtype=float))
+    if kind == mm.ANGLES:
+        sight = sight * np.linalg.norm(run.x_hat[:, :3], axis=1)[:, None]
+    ok = np.isfinite(sight).all(axis=1)
+    rec.log(path, rr.Arrows3D.from_fields(colors=[rgb(colour)], radii=[radius]), static=True)
+    rec.send_columns(
+        path,
+        indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(run.t_s, dtype=float)[ok])],
+        columns=rr.Arrows3D.columns(origins=run.x_true[ok, :3], vectors=sight[ok]),
+    )
+
+
 #: The about panel at the default 1600×1000 window (:func:`build_blueprint`): height of a
 #: line of its markdown and of its title bar and margins [px], the height of the left
 #: column it shares with the 3D view [px], and the characters a line holds at its width
@@ -440,6 +473,9 @@ def _log_case(
     geo = next((r.safety.geometry for r in runs if r.safety is not None), None)
     if geo is not None:  # issue 32: the keep-out zone and the corridor
         _log_constraints(rec, geo, line_r)
+    tumble = next((r for r in runs if r.target_attitude is not None), None)
+    if tumble is not None:  # issue 34: the same for every architecture of the case
+        _log_target_attitude(rec, tumble, TARGET_AXES_SHARE * extent, line_r)
     rec.log(
         "/about",
         rr.TextDocument(
@@ -470,6 +506,8 @@ def _log_case(
             indexes=[rr.TimeColumn(TIMELINE, duration=t)],
             columns=rr.Arrows3D.columns(origins=run.x_true[:, :3], vectors=arrow_scale * run.u),
         )
+        if run.sensor != "position":
+            _send_line_of_sight(rec, f"{base}/line_of_sight", run, colour, 0.3 * line_r)
         u_norm = np.linalg.norm(run.u, axis=1)
         series = {
             "u_norm": u_norm,
@@ -588,6 +626,42 @@ def _log_constraints(rec: rr.RecordingStream, geo: Geometry, line_radius: float)
     )
 
 
+#: Length of the drawn body axes of a tumbling target, a share of the scene's extent [-].
+TARGET_AXES_SHARE = 0.05
+#: Colours of the body's x, y and z axes (RGB).
+BODY_AXIS_COLOURS = ((214, 39, 40), (44, 160, 44), (31, 119, 180))
+
+
+def _log_target_attitude(
+    rec: rr.RecordingStream, run: RunResult, length_km: float, line_radius: float
+) -> None:
+    """A tumbling target's attitude (issue 34): ``/target/body`` turns over time (its
+    body-to-relative-frame quaternion at every step, as a Transform3D) and carries the
+    body's axes (``/target/body/axes``, static in the body frame). Anything logged
+    under ``/target/body`` turns with the body."""
+    import rerun as rr
+
+    assert run.target_attitude is not None
+    q_hb, _ = run.target_attitude.at_steps()
+    xyzw = np.ascontiguousarray(q_hb[:, [1, 2, 3, 0]])  # Rerun's quaternions are scalar-last
+    rec.send_columns(
+        "/target/body",
+        indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(run.t_s, dtype=float))],
+        columns=rr.Transform3D.columns(quaternion=xyzw),
+    )
+    rec.log(
+        "/target/body/axes",
+        rr.Arrows3D(
+            origins=np.zeros((3, 3)),
+            vectors=length_km * np.eye(3),
+            colors=list(BODY_AXIS_COLOURS),
+            radii=[line_radius],
+            labels=["x_b", "y_b", "z_b"],
+        ),
+        static=True,
+    )
+
+
 #: Values of the ``RERUN`` environment variable that turn Rerun's logging off, in any case
 #: and unstripped ("SDK logging controls" of Rerun's documentation; checked against
 #: ``rr.is_enabled`` by a test). Rerun reads it for every new recording stream.
@@ -692,6 +766,7 @@ def encode_case(
         len(windows),
         bounds=scene_bounds(runs, refs),
         safety=any(r.safety is not None for r in runs),
+        tumbling=any(r.target_attitude is not None for r in runs),
     )
     memory = rec.memory_recording()
     rec.send_blueprint(blueprint, make_active=False, make_default=True)

@@ -62,6 +62,7 @@ SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
     ("_km_s2", "km/s^2"),
     ("_km_s", "km/s"),
     ("_rad_s", "rad/s"),
+    ("_deg_s", "deg/s"),
     ("_km2", "km^2"),
     ("_km", "km"),
     ("_deg", "deg"),
@@ -80,6 +81,20 @@ def suffix_unit(name: str) -> str | None:
         if name.endswith(suffix):
             return unit
     return None
+
+
+#: The values of the solves' ``fallback_step``: the step of the shooting chain that ended a
+#: re-solve (:mod:`cwrend_cli.physics.guidance.shooting`, in the chain's order), the plan of
+#: last resort, or the cone-program method's own re-solve.
+FALLBACK_STEPS = (
+    "warm",
+    "socp_plan",
+    "continuation_warm",
+    "continuation_energy",
+    "socp_multiplier",
+    "dual_bound",
+    "socp",
+)
 
 
 def _col(description: str, unit: str | None = None) -> tuple[str, str]:
@@ -111,7 +126,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         f"meas_{a}_km": _col(f"position measurement of row k (taken at t_k), {d}; NaN: none")
         for a, d in _A.items()
     },
-    "nis": _col("normalised innovation squared of the row's measurement (chi2_3)", "-"),
+    "meas_range_km": _col(
+        "range of the target measured at t_k (sensor.model = 'range_bearing'); NaN: none"
+    ),
+    "meas_azimuth_deg": _col(
+        "azimuth of the target measured at t_k, in (-180, 180] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "meas_elevation_deg": _col(
+        "elevation of the target measured at t_k, in [-90, 90] (sensor.model "
+        "'range_bearing' or 'angles'); NaN: none"
+    ),
+    "nis": _col(
+        "normalised innovation squared of the row's measurement (chi2_m, m = 3, or 2 for "
+        "sensor.model = 'angles')",
+        "-",
+    ),
     "mtf_ratio": _col("MTF ratio tr(S_MTF)/tr(S); 0 without MTF", "-"),
     "score": _col("composite innovation score s", "-"),
     "score_filtered": _col("low-pass filtered score s-bar", "-"),
@@ -155,9 +185,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "wall_time_ms": _col("wall time of the solve"),
     "success": _col("converged with residual below solver.success_residual", "-"),
     # summary / runs
-    "delta_v_km_s": _col("trapezoid of ||u|| (applied) over the grid"),
+    "delta_v_km_s": _col(
+        "trapezoid of ||u|| (applied) over the grid, the paper's convention: it drops "
+        "||u_0|| dt/2 of a closed-loop run"
+    ),
+    "delta_v_applied_km_s": _col(
+        "applied impulse sum_k ||u_k|| dt over the zero-order-hold steps k = 0..N-1 (what the "
+        "thruster did); open-loop references: integral of ||u|| dt of the continuous plan"
+    ),
     "miss_km": _col("terminal miss ||r(T) - r_f||"),
-    "fuel_penalty_pct": _col("delta-v above the open-loop fuel optimum"),
+    "fuel_penalty_pct": _col(
+        "delta-v above the open-loop fuel optimum's, both trapezoids (the paper's; can be < 0)"
+    ),
+    "fuel_penalty_applied_pct": _col(
+        "applied delta-v above the exact continuous fuel optimum (u_max x its burn time); "
+        ">= 0 for a run that reaches the target"
+    ),
     "n_solves": _col("receding-horizon re-solves", "-"),
     "n_converged": _col("re-solves that converged", "-"),
     "n_infeasible": _col("re-solves found infeasible", "-"),
@@ -200,6 +243,22 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
+    # the tumbling target's attitude (issue 34; only with target.attitude = "tumbling")
+    **{
+        f"target_q{i}": _col(
+            f"component {i} of the target's attitude quaternion, body to relative frame, "
+            "scalar-first (q0 the scalar part)",
+            "-",
+        )
+        for i in range(4)
+    },
+    **{
+        f"target_w{a}_deg_s": _col(
+            f"target body rate about its {a} axis: angular velocity relative to inertial "
+            "space, in body axes"
+        )
+        for a in ("x", "y", "z")
+    },
     "duration_s": _col("wall time of the run"),
     # references
     "reference": _col("open-loop reference: energy or fuel", "-"),
@@ -236,6 +295,7 @@ _DIMENSIONLESS_KEYS = (
     "solver.quadrature_nodes",
     "constraints.sigma_margin",
     "constraints.corridor.axis",
+    "target.",
 )
 #: Configuration keys without a unit suffix that are not dimensionless.
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
@@ -438,6 +498,17 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     cols["u_norm_km_s2"] = row_norm(*u)
     for i, a in enumerate(_AXES):
         cols[f"ucmd_{a}_km_s2"] = u_cmd[i]
+    if _has_angles(results):
+        # a nonlinear sensor (issue 35): its components in their own columns, the
+        # position measurement NaN (none was taken)
+        parts = [_sensor_components(r) for r in results]
+        y = np.concatenate([p[0] for p in parts], axis=1)
+        for name, values in zip(
+            ("meas_range_km", "meas_azimuth_deg", "meas_elevation_deg"),
+            np.concatenate([p[1] for p in parts], axis=1),
+            strict=True,
+        ):
+            cols[name] = values
     for i, a in enumerate(_AXES):
         cols[f"meas_{a}_km"] = y[i]
     for name in ("nis", "mtf_ratio", "score", "score_filtered", "eps"):
@@ -453,7 +524,50 @@ def _steps_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     if _has_safety(results):
         safety = [r.safety for r in results if r.safety is not None]
         cols["safety_distance_km"] = np.concatenate([sf.step_distance_km for sf in safety])
+    if _has_attitude(results):
+        steps = [r.target_attitude.at_steps() for r in results if r.target_attitude is not None]
+        q = np.concatenate([q for q, _ in steps])
+        w = np.degrees(np.concatenate([w for _, w in steps]))
+        for i in range(4):
+            cols[f"target_q{i}"] = q[:, i]
+        for i, a in enumerate(_AXES):
+            cols[f"target_w{a}_deg_s"] = w[:, i]
     return cols
+
+
+def _has_attitude(results: Sequence[RunResult]) -> bool:
+    """True when the runs carry a tumbling target's attitude (all or none of them)."""
+    flags = {r.target_attitude is not None for r in results}
+    if len(flags) > 1:
+        raise ValueError("runs with a tumbling and a fixed target in one steps table")
+    return flags == {True}
+
+
+def _has_angles(results: Sequence[RunResult]) -> bool:
+    """True when a run measures range and angles or angles (issue 35): their columns are written."""
+    return any(r.sensor != "position" for r in results)
+
+
+def _sensor_components(result: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """(position measurement (3, N) [km], (range [km], azimuth, elevation [deg]) (3, N)) of a run.
+
+    Whichever the run's sensor did not measure is NaN.
+    """
+    y = np.asarray(result.y).T
+    nan = np.full_like(y, np.nan)
+    if result.sensor == "position":
+        return y, nan
+    if result.sensor == "range_bearing":
+        return nan, np.vstack([y[:1], np.rad2deg(y[1:])])
+    return nan, np.vstack([nan[:1], np.rad2deg(y[:2])])
+
+
+#: The steps' columns of a nonlinear sensor (issue 35), only when a run has one.
+SENSOR_STEP_FIELDS = [
+    pa.field("meas_range_km", pa.float64()),
+    pa.field("meas_azimuth_deg", pa.float64()),
+    pa.field("meas_elevation_deg", pa.float64()),
+]
 
 
 def _has_safety(results: Sequence[RunResult]) -> bool:
@@ -467,7 +581,9 @@ def _has_safety(results: Sequence[RunResult]) -> bool:
 def steps_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per grid time of a closed-loop run (row semantics: :class:`RunResult`)."""
     cols = {"arch": [result.arch] * result.t_s.size, **_steps_columns([result])}
-    schema = _with_safety(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_fields(STEPS_SCHEMA, SAFETY_STEP_FIELDS, result.safety is not None)
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles([result]), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, result.target_attitude is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -520,7 +636,7 @@ SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km",
 def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per solve (the initial one of adaptive runs, then every re-solve)."""
     cols = {"arch": [result.arch] * len(result.solves), **_solves_columns([result])}
-    schema = _with_safety(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
+    schema = _with_fields(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -529,8 +645,10 @@ SUMMARY_SCHEMA = pa.schema(
         ("arch", pa.string()),
         ("seed", pa.int64()),
         ("delta_v_km_s", pa.float64()),
+        ("delta_v_applied_km_s", pa.float64()),
         ("miss_km", pa.float64()),
         ("fuel_penalty_pct", pa.float64()),
+        ("fuel_penalty_applied_pct", pa.float64()),
         ("n_solves", pa.int64()),
         ("n_converged", pa.int64()),
         ("n_infeasible", pa.int64()),
@@ -557,17 +675,23 @@ SAFETY_RUN_FIELDS = [
 SAFETY_STEP_FIELDS = [
     pa.field("safety_distance_km", pa.float64()),
 ]
+#: The steps' target-attitude columns (issue 34), written only for a tumbling target.
+ATTITUDE_STEP_FIELDS = [
+    *[pa.field(f"target_q{i}", pa.float64()) for i in range(4)],
+    *[pa.field(f"target_w{a}_deg_s", pa.float64()) for a in _AXES],
+]
 
 
-def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """A ``summary.parquet`` / ``runs.parquet`` row of one run.
 
     Among its metrics those of paper Sec. "Numerical Results and Discussion" (Δv, miss,
     fuel penalty, solve times and success).
 
     With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
+    ``fuel`` is the scenario's open-loop fuel-optimal reference (the fuel penalties).
     """
-    metrics = run_metrics(result, fuel_delta_v_km_s)
+    metrics = run_metrics(result, fuel)
     # its fields are numbers: no deep copy (dataclasses.asdict) needed
     fields = {f.name: getattr(metrics, f.name) for f in dataclasses.fields(metrics)}
     row = {"arch": result.arch, "seed": result.seed, **fields}
@@ -582,10 +706,10 @@ def summary_row(result: RunResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
     return row
 
 
-def _with_safety(
+def _with_fields(
     schema: pa.Schema, fields: Sequence[pa.Field], present: bool, before: str | None = None
 ) -> pa.Schema:
-    """``schema`` with the safety ``fields`` (before column ``before``, else last) if present."""
+    """``schema`` with the optional ``fields`` (before column ``before``, else last) if present."""
     if not present:
         return schema
     columns = list(schema)
@@ -593,9 +717,9 @@ def _with_safety(
     return pa.schema([*columns[:at], *fields, *columns[at:]])
 
 
-def reference_row(ref: OpenLoopResult, fuel_delta_v_km_s: float) -> dict[str, Any]:
+def reference_row(ref: OpenLoopResult, fuel: OpenLoopResult) -> dict[str, Any]:
     """Summary row of an open-loop reference (``arch`` = ``open_loop_<name>``)."""
-    metrics = reference_metrics(ref, fuel_delta_v_km_s)
+    metrics = reference_metrics(ref, fuel)
     return {"arch": f"open_loop_{ref.name}", "seed": -1, **dataclasses.asdict(metrics)}
 
 
@@ -604,7 +728,7 @@ def summary_table(
 ) -> pa.Table:
     """Table of summary rows (see :func:`summary_row`)."""
     safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
-    schema = _with_safety(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    schema = _with_fields(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
     table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
@@ -672,9 +796,11 @@ def campaign_steps_table(
     """
     cols = _steps_columns(results)
     cols.update(_run_columns(extra, [r.t_s.size for r in results]))
-    schema = _with_safety(
+    schema = _with_fields(
         CAMPAIGN_STEPS_SCHEMA, SAFETY_STEP_FIELDS, _has_safety(results), "run_key"
     )
+    schema = _with_fields(schema, SENSOR_STEP_FIELDS, _has_angles(results), "nis")
+    schema = _with_fields(schema, ATTITUDE_STEP_FIELDS, _has_attitude(results), "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -687,7 +813,7 @@ def campaign_solves_table(
     cols = _solves_columns(results)
     cols.update(_run_columns(extra, [len(r.solves) for r in results]))
     safety = _has_safety(results)
-    schema = _with_safety(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
+    schema = _with_fields(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 

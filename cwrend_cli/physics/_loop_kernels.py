@@ -47,6 +47,7 @@ from numba import njit, typeof
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import costate_stm, zoh_step
+from cwrend_cli.physics.ekf import EkfModel, ekf_predict
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
     EPS_BANG_BANG,
@@ -63,6 +64,7 @@ from cwrend_cli.physics.guidance._kernels import (
     workspace,
 )
 from cwrend_cli.physics.guidance._switching_kernels import bang_bang_ascent
+from cwrend_cli.physics.measurement_models import SensorModel, measure_truth, sensor_update
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 from cwrend_cli.physics.truth import TRUTH_CW, TruthModel, truth_step
 
@@ -225,6 +227,8 @@ def advance(
     state: LoopState,
     scalars: LoopScalars,
     log: StepLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
 ) -> LoopScalars:
     """Run steps ``k_start … k_stop``; the last one stops before its costate propagation.
 
@@ -237,11 +241,16 @@ def advance(
     again inside (:func:`_advance`): numba resolves a NamedTuple argument
     about seven times slower than a plain tuple (measured: 4.0 against 0.6 µs
     per call with two small tuples), and this is called once per re-solve.
-    The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`).
+    The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`),
+    and so does the position sensor (``sensor`` None: the paper's measurement,
+    compiled without the extended update; a nonlinear sensor of issue 35 is a
+    :class:`~cwrend_cli.physics.measurement_models.SensorModel`), and so does a
+    linear filter (``ekf`` None: :func:`_optional_ekf`).
     """
     out = _advance(
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
-        tuple(state), tuple(scalars), tuple(log),
+        tuple(state), tuple(scalars), tuple(log), None if sensor is None else tuple(sensor),
+        _optional_ekf(ekf),
     )  # fmt: skip
     return LoopScalars(*out)
 
@@ -265,6 +274,13 @@ def _optional(
     )
 
 
+def _optional_ekf(ekf: EkfModel | None) -> tuple[tuple[Any, ...], np.ndarray] | None:
+    """The extended Kalman filter as the compiled loop takes it: ``None`` for a linear
+    filter (the branch is pruned, as :func:`_optional`'s: the default loop compiles as
+    before), else its dynamics' plain tuple and its chief table."""
+    return None if ekf is None else (tuple(ekf.tm), ekf.chief)
+
+
 def compile_steps(
     model: LoopModel,
     truth: TruthModel,
@@ -272,11 +288,14 @@ def compile_steps(
     sched: ScheduleParams,
     state: LoopState,
     log: StepLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
 ) -> None:
     """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
 
     Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
-    tuples; the CW truth and the ideal actuator as ``None``, :func:`_optional`).
+    tuples; the CW truth, the ideal actuator, the position sensor and a linear
+    filter as ``None``, :func:`_optional`, :func:`_optional_ekf`).
     A campaign's first run compiles this in a pool worker while the campaign
     process compiles the re-solves (issue 37 item 12); the compiled loop then
     loads it from numba's cache instead of compiling it again.
@@ -284,7 +303,7 @@ def compile_steps(
     truth_t, act_t = _optional(truth, act)
     args = (
         0, 0, 0, model, None if truth_t is None else truth, None if act_t is None else act,
-        sched, state, 0.0, 0.0, True, log,
+        sched, state, 0.0, 0.0, True, log, sensor, ekf,
     )  # fmt: skip
     _steps.compile(tuple(typeof(a) for a in args))  # type: ignore[no-untyped-call]
 
@@ -301,14 +320,19 @@ def _advance(
     state_t: tuple[Any, ...],
     scalars_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
+    sensor_t: tuple[Any, ...] | None,
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
     scalars = LoopScalars(*scalars_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
+    sensor = None if sensor_t is None else SensorModel(*sensor_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     return _steps(
         k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
         LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
+        sensor, ekf,
     )  # fmt: skip
 
 
@@ -326,11 +350,17 @@ def _steps(
     sbar: float,
     first: bool,
     log: StepLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
 ) -> tuple[float, float, bool]:
     """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
 
     ``truth`` ``None``: the CW truth; ``act`` ``None``: the ideal actuator
-    (:func:`_optional`).
+    (:func:`_optional`); ``sensor`` ``None``: the position sensor (paper
+    Eq. 13), else a nonlinear sensor measured and updated by the extended
+    filter (:mod:`cwrend_cli.physics.measurement_models`; ``log.y`` then holds
+    its m components in its own units, NaN after them); ``ekf`` ``None``: the
+    linear filter of ``m.filter_phi`` (:func:`_optional_ekf`).
     """
     m = model
     ws = workspace()
@@ -366,10 +396,17 @@ def _steps(
             x_next = truth_step(truth, state.chief, x_true, u_applied)
         x_true[:] = x_next
         # measurement of the new position with the noise of the window at t_k
-        y = x_next[:3] + m.noise[k]
+        if sensor is None:  # noqa: SIM108 (an if statement: numba prunes the untaken branch)
+            y = x_next[:3] + m.noise[k]
+        else:
+            y = measure_truth(sensor, k, x_next)
         # Kalman filter predict (with the commanded control: the filter does not
-        # know the actuator errors) and update (Eqs. 11–23)
-        x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        # know the actuator errors) and update (Eqs. 11–23); or the extended Kalman
+        # filter's predict through the nonlinear dynamics (physics.ekf)
+        if ekf is None:
+            x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+        else:
+            x_pred, p_pred = ekf_predict(ekf, k, x_hat, p, u, m.q)
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
             x_hat[:] = x_pred
@@ -392,7 +429,10 @@ def _steps(
                 break  # the caller re-solves and sets the costate
             _propagate_costate(m.lam_step, lam, lam_next)
             continue
-        x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
+        if sensor is None:
+            x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
+        else:
+            x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.use_mtf)
         x_hat[:] = x_post
         p[:, :] = p_post
         # score and homotopy parameter (Eqs. 24–26)
@@ -494,6 +534,8 @@ def resolve_loop(
     carry: ResolveCarry,
     log: StepLog,
     solves: SolveLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
 ) -> tuple[int, LoopScalars]:
     """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
 
@@ -518,6 +560,8 @@ def resolve_loop(
     i, eps, sbar, first = _resolve_loop(
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
+        None if sensor is None else tuple(sensor),
+        _optional_ekf(ekf),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
 
@@ -537,6 +581,8 @@ def _resolve_loop(
     carry_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
     solves_t: tuple[Any, ...],
+    sensor_t: tuple[Any, ...] | None,
+    ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments."""
     m = LoopModel(*model_t)
@@ -549,6 +595,8 @@ def _resolve_loop(
     carry = ResolveCarry(*carry_t)
     log = StepLog(*log_t)
     solves = SolveLog(*solves_t)
+    sensor = None if sensor_t is None else SensorModel(*sensor_t)
+    ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     lam = state.lam
     k_next = k_start
@@ -556,7 +604,7 @@ def _resolve_loop(
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
         eps, sbar, first = _steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
         )
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -597,6 +645,6 @@ def _resolve_loop(
             lam[:] = np.dot(m.lam_step, carry.warm)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log
+        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
     )
     return n_resolves, eps, sbar, first

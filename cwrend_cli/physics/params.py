@@ -173,7 +173,9 @@ class Window:
     * ``dropout_probability`` p_d: no measurement with probability p_d (the
       filter predicts only; 1.0 is a blackout);
     * ``outlier_probability`` p_o, ``outlier_scale`` c: with probability p_o
-      the Gaussian part of the noise is multiplied by c (a contaminated
+      the Gaussian part of the noise is multiplied by c (either may be given
+      per measurement component, issue 35 item 3: component i is then an
+      outlier on its own draw, with probability p_o,i, scaled by c_i) (a contaminated
       Gaussian, Huber 1964, "Robust estimation of a location parameter");
     * ``bias_drift_km_per_sqrt_s`` q: the bias is ``bias_km + d_k`` with
       ``d`` a random walk (Wiener process sampled at the steps,
@@ -185,18 +187,35 @@ class Window:
 
     start_s: float
     end_s: float
-    r_scale: float = 1.0
+    r_scale: float | tuple[float, ...] = 1.0  # a scalar, or one per measurement component [-]
     bias_km: Vec3 = (0.0, 0.0, 0.0)
     dropout_probability: float = 0.0  # probability of no measurement on a step [-]
-    outlier_probability: float = 0.0  # probability of an outlier on a step [-]
-    outlier_scale: float = 1.0  # factor on the Gaussian noise of an outlier step [-]
+    #: probability of an outlier on a step, or one per measurement component [-]
+    outlier_probability: float | tuple[float, ...] = 0.0
+    #: factor on the Gaussian noise of an outlier, or one per measurement component [-]
+    outlier_scale: float | tuple[float, ...] = 1.0
     bias_drift_km_per_sqrt_s: float = 0.0  # random-walk intensity q of the bias [km/√s]
+    bias_range_km: float = 0.0  # range_bearing sensor: bias of the range [km]
+    bias_angles_deg: tuple[float, float] = (0.0, 0.0)  # nonlinear sensors: (azimuth, elevation)
+
+    @property
+    def has_outliers(self) -> bool:
+        """True when some component can be an outlier (its probability > 0, its scale ≠ 1)."""
+        p, c = self.outlier_probability, self.outlier_scale
+        ps = p if isinstance(p, tuple) else (p, p, p)
+        cs = c if isinstance(c, tuple) else (c, c, c)
+        return any(pi > 0.0 and ci != 1.0 for pi, ci in zip(ps, cs, strict=False))
 
     @property
     def label(self) -> str:
         """Short description, e.g. ``"R×300 + 17.5 m bias"``."""
         bias_m = 1e3 * math.hypot(*self.bias_km)
-        return f"R×{self.r_scale:g}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
+        scale = (
+            "(" + ", ".join(f"{s:g}" for s in self.r_scale) + ")"
+            if isinstance(self.r_scale, tuple)
+            else f"{self.r_scale:g}"
+        )
+        return f"R×{scale}" + (f" + {bias_m:.3g} m bias" if bias_m > 0 else "")
 
 
 #: The degradation windows of the paper's study (the authors' code; the paper gives no values,
@@ -212,6 +231,34 @@ class Degradation:
     """Measurement degradation schedule; later windows win where they overlap."""
 
     windows: tuple[Window, ...] = PAPER_WINDOWS
+
+
+#: The sensor models (issue 35; :mod:`cwrend_cli.physics.measurement_models`).
+SensorModelName = Literal["position", "range_bearing", "angles"]
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """What the chaser measures (issue 35); the paper's relative position by default.
+
+    ``"position"``: the relative position [km] with noise covariance
+    ``estimator.r_nominal_km2`` (paper Eq. 13). ``"range_bearing"``: range
+    [km], azimuth and elevation of the target seen from the chaser;
+    ``"angles"``: azimuth and elevation only. Their noise is diagonal:
+    σ_range = ``sigma_range_km`` + ``sigma_range_fraction`` × range,
+    σ_angle = ``sigma_angle_deg``
+    (:mod:`cwrend_cli.physics.measurement_models`).
+    """
+
+    model: SensorModelName = "position"
+    sigma_range_km: float = 1e-3  # constant part of the range σ [km]
+    sigma_range_fraction: float = 1e-3  # range σ grows by this fraction of the range [-]
+    sigma_angle_deg: float = 0.05  # σ of each angle [deg]
+
+    @property
+    def dimension(self) -> int:
+        """Measurement dimension m (3, or 2 for angles)."""
+        return 2 if self.model == "angles" else 3
 
 
 @dataclass(frozen=True)
@@ -242,6 +289,9 @@ class Truth:
 #: The design models a consumer (guidance, filter) can use (issue 33;
 #: :mod:`cwrend_cli.physics.design_models`).
 DesignModelName = Literal["cw", "ss", "ya"]
+#: The filter's models: a design model, or an extended Kalman filter on the truth's
+#: nonlinear dynamics (issue 33; :mod:`cwrend_cli.physics.ekf`).
+FilterModelName = Literal["cw", "ss", "ya", "ekf_two_body", "ekf_j2"]
 
 
 @dataclass(frozen=True)
@@ -253,10 +303,13 @@ class DesignModel:
     chief's (a from ``scenario.mean_motion_rad_s``, i = ``truth.inclination_deg``).
     ``"ya"``: Yamanaka–Ankersen, the exact transition about the eccentric chief
     of ``[truth]`` (e = ``truth.eccentricity``, f₀ = ``truth.true_anomaly_deg``).
+    The filter also takes ``"ekf_two_body"`` or ``"ekf_j2"``: an extended
+    Kalman filter on the nonlinear two-body (or two-body + J2) relative
+    dynamics about the same chief (:mod:`cwrend_cli.physics.ekf`).
     """
 
     guidance: DesignModelName = "cw"  # model of the re-solves [-]
-    filter: DesignModelName = "cw"  # model of the filter's prediction [-]
+    filter: FilterModelName = "cw"  # model of the filter's prediction [-]
 
 
 @dataclass(frozen=True)
@@ -353,6 +406,29 @@ class Constraints:
 
 
 @dataclass(frozen=True)
+class Target:
+    """The target's attitude (issue 34; :mod:`.attitude`); ``fixed`` by default.
+
+    ``fixed``: body axes along the relative (Hill) frame at all times, today's
+    geometry. ``tumbling``: a torque-free rigid body from the initial attitude
+    ``initial_quaternion`` (body→Hill at t = 0, scalar-first, normalised at use),
+    the initial ``body_rates_deg_s`` (angular velocity relative to inertial
+    space, in body axes) and the principal moments of inertia ``inertia``
+    (ratios).
+    """
+
+    attitude: Literal["fixed", "tumbling"] = "fixed"
+    initial_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # [-]
+    body_rates_deg_s: Vec3 = (0.0, 0.0, 0.0)  # ω(0), inertial, body axes [deg/s]
+    inertia: Vec3 = (1.0, 1.0, 1.0)  # principal moments (I₁, I₂, I₃), ratios [-]
+
+    @property
+    def tumbling(self) -> bool:
+        """True for a torque-free tumbling target."""
+        return self.attitude == "tumbling"
+
+
+@dataclass(frozen=True)
 class Problem:
     """Everything one closed-loop case depends on except the noise realisation."""
 
@@ -368,6 +444,10 @@ class Problem:
     constraints: Constraints | None = None
     #: design models of the guidance and the filter (issue 33); CW by default
     model: DesignModel = field(default_factory=DesignModel)
+    #: the target's attitude (issue 34); fixed in the relative frame by default
+    target: Target = field(default_factory=Target)
+    #: what the chaser measures (issue 35); the relative position by default
+    sensor: Sensor = field(default_factory=Sensor)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,13 @@ Energy-optimal: unbounded ``min ∫½‖u‖²`` solved in closed form. Fuel-opt
 ε-continuation 1.0, 0.9, …, 0.0 of the shooting problem, each solve
 warm-started from the previous one, the first from the energy costate.
 Δv (:func:`~cwrend_cli.physics.metrics.delta_v`) is the trapezoid of ‖u‖ sampled
-on the grid; the miss is that of the continuous plan, ``‖r(T) − r_f‖``.
+on the grid (the paper's convention); beside it, ``delta_v_continuous_km_s`` is
+the continuous plan's ∫‖u‖dt: for the fuel-optimal plan exactly ``u_max``
+times its burn time, the switching times refined to rounding
+(:func:`~cwrend_cli.physics.guidance.fuel_optimum.exact_bang_bang`; issue 33,
+item 3), for the energy-optimal one a Gauss–Legendre quadrature (12 nodes on
+cells of at most 40 s: the integrand is analytic). The miss is that of the
+continuous plan, ``‖r(T) − r_f‖``.
 Units: km, s, km/s, km/s².
 """
 
@@ -18,6 +24,7 @@ import scipy.linalg
 from cwrend_cli.physics import guidance
 from cwrend_cli.physics.dynamics import costate_stm, cw_system
 from cwrend_cli.physics.errors import ScenarioError
+from cwrend_cli.physics.guidance.fuel_optimum import BangBangPlan, ExactPlanError, exact_bang_bang
 from cwrend_cli.physics.metrics import delta_v
 
 #: ε sequence of the fuel-optimal continuation (the authors' code's; not in the paper).
@@ -36,6 +43,10 @@ class OpenLoopResult:
     delta_v_km_s: float
     miss_km: float
     solves: tuple[guidance.SolveResult, ...] = ()
+    #: ∫‖u‖dt of the continuous plan [km/s] (module docstring); NaN for the fuel plan if its
+    #: switching times could not be refined (:class:`ExactPlanError`: never seen)
+    delta_v_continuous_km_s: float = float("nan")
+    exact: BangBangPlan | None = None  # the fuel plan refined to rounding (None: energy)
 
 
 def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLoopResult:
@@ -59,7 +70,24 @@ def energy_optimal(problem: guidance.ShootingProblem, t_s: np.ndarray) -> OpenLo
     x = zt[:, :6]
     u = -zt[:, 9:12]  # u = −Bᵀλ = −λ_v
     miss = float(np.linalg.norm(x[-1, :3] - problem.xf[:3]))
-    return OpenLoopResult("energy", lam0, t_s, x, u, delta_v(t_s, u), miss)
+    continuous = _energy_delta_v(problem.mean_motion_rad_s, lam0, float(problem.horizon_s))
+    return OpenLoopResult(
+        "energy", lam0, t_s, x, u, delta_v(t_s, u), miss, delta_v_continuous_km_s=continuous
+    )
+
+
+def _energy_delta_v(n: float, lam0: np.ndarray, horizon_s: float) -> float:
+    """∫₀ᵀ ‖λ_v(t)‖ dt [km/s]: the Δv of the energy-optimal plan ``u = −λ_v`` (module docstring)."""
+    nodes, weights = guidance.SolverSettings().quadrature()
+    cells = guidance.n_cells(horizon_s)
+    h = horizon_s / cells
+    total = 0.0
+    for cell in range(cells):
+        mid = (cell + 0.5) * h
+        for node, weight in zip(nodes, weights, strict=True):
+            lam_v = (costate_stm(n, mid + 0.5 * h * node) @ lam0)[3:]
+            total += 0.5 * h * weight * float(np.linalg.norm(lam_v))
+    return total
 
 
 def plan_samples(
@@ -128,4 +156,12 @@ def fuel_optimal(
     )
     x, u = plan_samples(final, lam, t_s)
     miss = float(np.linalg.norm(x[-1, :3] - problem.xf[:3]))
-    return OpenLoopResult("fuel", lam, t_s, x, u, delta_v(t_s, u), miss, tuple(solves))
+    try:
+        exact: BangBangPlan | None = exact_bang_bang(final, lam, settings)
+    except ExactPlanError:
+        exact = None
+    return OpenLoopResult(
+        "fuel", lam, t_s, x, u, delta_v(t_s, u), miss, tuple(solves),
+        delta_v_continuous_km_s=float("nan") if exact is None else exact.delta_v_km_s,
+        exact=exact,
+    )  # fmt: skip

@@ -15,10 +15,13 @@ Nothing here writes files: the result is a plain :class:`RunResult` that
 
 The true state obeys ``problem.truth`` (:mod:`cwrend_cli.physics.truth`:
 CW, exact two-body or two-body + J2 relative motion); the filter and the
-guidance always use the CW model. The truth receives the control the
-actuator applies (``problem.actuator``, :mod:`cwrend_cli.physics.actuator`:
-scale error, noise, misalignment, minimum thrust, delay); the filter predicts
-with the commanded control, which it knows, not the errors. The per-step
+guidance use the design models of ``problem.model`` (CW by default;
+:mod:`cwrend_cli.physics.design_models`), or for the filter an extended
+Kalman filter on the nonlinear dynamics (:mod:`cwrend_cli.physics.ekf`).
+The truth receives the control the actuator applies (``problem.actuator``,
+:mod:`cwrend_cli.physics.actuator`: scale error, noise, misalignment, minimum
+thrust, delay); the filter predicts with the commanded control, which it
+knows, not the errors. The per-step
 actuator noise enters as draws (:class:`~cwrend_cli.physics.actuator.ActuatorDraws`)
 made by the caller, like the measurement noise, so nothing here is random.
 So are the draws of the sensor faults of the degradation windows
@@ -51,7 +54,17 @@ import numpy as np
 import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
-from cwrend_cli.physics import actuator, design_models, guidance, references, sensors, truth
+from cwrend_cli.physics import (
+    actuator,
+    attitude,
+    design_models,
+    ekf,
+    guidance,
+    measurement_models,
+    references,
+    sensors,
+    truth,
+)
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
@@ -113,6 +126,12 @@ class RunResult:
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
+    #: the tumbling target's attitude over the run (issue 34), only with target.attitude
+    #: = "tumbling"; at every step and sub-step (:func:`_target_attitude`)
+    target_attitude: attitude.TargetAttitude | None = None
+    #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
+    #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
+    sensor: str = "position"
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -281,15 +300,15 @@ def simulate(
     Python instead of compiled code, with the same arithmetic.
     """
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
-    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    n, n_steps = sc.mean_motion_rad_s, sc.n_steps
     settings = solver_settings(problem)
     t = sc.time_grid()
-    meas = sensors.sensor_noise(
-        standard_normal, t[:-1], est.r_nominal_matrix(), problem.degradation.windows,
-        fault_draws, dt,
-    )  # fmt: skip
-    noise, active = meas.noise, meas.active
+    sensor, noise, active, dropout_steps, outlier_steps = _measured(
+        problem, standard_normal, fault_draws
+    )
 
+    # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
+    target_attitude = _target_attitude(problem)
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -306,7 +325,9 @@ def simulate(
     else:
         lam = refs.fuel.costate.copy()
 
-    loop = _loop_parts(problem, arch, noise, meas.dropout, x_hat0, lam, eps0, actuator_draws)
+    loop = _loop_parts(
+        problem, arch, noise, dropout_steps, sensor, x_hat0, lam, eps0, actuator_draws
+    )
     model = loop.model
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
@@ -336,8 +357,8 @@ def simulate(
     miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
-    dropout = np.concatenate(([False], meas.dropout))
-    outlier = np.concatenate(([False], meas.outlier))
+    dropout = np.concatenate(([False], dropout_steps))
+    outlier = np.concatenate(([False], outlier_steps))
     log.nees[0] = sk.nees(est.p0_matrix(), x_hat0, x0, np.empty((6, 7)))
     return RunResult(
         arch=arch.slug,
@@ -362,7 +383,38 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        target_attitude=target_attitude,
+        sensor=problem.sensor.model,
     )
+
+
+def _measured(
+    problem: Problem, standard_normal: FloatArray, fault_draws: sensors.FaultDraws | None
+) -> tuple[
+    measurement_models.SensorModel | None,
+    FloatArray,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.bool_],
+    npt.NDArray[np.bool_],
+]:
+    """``(sensor, noise, active, dropout, outlier)`` of each step of a run.
+
+    The position sensor (``sensor`` None): its measurement noise
+    (:func:`cwrend_cli.physics.sensors.sensor_noise`); a nonlinear sensor
+    (issue 35): its model, measured and updated in the compiled loop, and no
+    additive noise. ``active``: the degradation window of each step (−1 none).
+    """
+    sc = problem.scenario
+    t = sc.time_grid()[:-1]
+    windows = problem.degradation.windows
+    r_nominal = problem.estimator.r_nominal_matrix()
+    if problem.sensor.model == "position":
+        meas = sensors.sensor_noise(standard_normal, t, r_nominal, windows, fault_draws, sc.dt_s)
+        return None, meas.noise, meas.active, meas.dropout, meas.outlier
+    sensor, parts = sensors.sensor_model(
+        problem.sensor, standard_normal, t, windows, fault_draws, sc.dt_s
+    )
+    return sensor, np.zeros((sc.n_steps, 3)), parts.active, parts.dropout, parts.outlier
 
 
 def _loop_parts(
@@ -370,6 +422,7 @@ def _loop_parts(
     arch: Architecture,
     noise: FloatArray,
     dropout: npt.NDArray[np.bool_],
+    sensor: measurement_models.SensorModel | None,
     x_hat0: FloatArray,
     lam: FloatArray,
     eps0: float,
@@ -377,8 +430,8 @@ def _loop_parts(
 ) -> _Loop:
     """The compiled loop's parts of a run of ``arch`` before its first step.
 
-    ``noise`` and ``dropout``: the measurement noise and sensor dropouts of each
-    step (:func:`cwrend_cli.physics.sensors.sensor_noise`); ``x_hat0``: the
+    ``noise``, ``dropout`` and ``sensor``: the measurement noise, the sensor
+    dropouts of each step and the sensor (:func:`_measured`); ``x_hat0``: the
     filter's initial estimate; ``lam``: the first plan's costate; ``eps0``:
     the first ε. Row 0 of the log holds the initial state, estimate and ε.
     """
@@ -424,7 +477,8 @@ def _loop_parts(
     log.x_hat[0] = state.x_hat
     log.eps[0] = eps0
     log.trace_p[0] = np.trace(state.p)
-    return _Loop(model, truth_model, act, sched, state, log)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    return _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf)
 
 
 def compile_loop(
@@ -445,19 +499,32 @@ def compile_loop(
     (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
     """
     sc = problem.scenario
-    meas = sensors.sensor_noise(
-        standard_normal, sc.time_grid()[:-1], problem.estimator.r_nominal_matrix(),
-        problem.degradation.windows, fault_draws, sc.dt_s,
-    )  # fmt: skip
+    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
     x0 = np.asarray(sc.x0, dtype=float)
-    loop = _loop_parts(
-        problem, arch, meas.noise, meas.dropout, x0, np.zeros(6), 0.0, actuator_draws
-    )
+    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
     scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
     if arch.resolved_method(problem.guidance) == "socp":
         loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
     else:
-        sk.compile_steps(loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log)
+        sk.compile_steps(
+            loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
+            loop.ekf,
+        )  # fmt: skip
+
+
+def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
+    """The tumbling target's attitude at every step and safety sub-sample (issue 34 item 1).
+
+    None for a fixed target (its axes are the relative frame's). Computed once
+    before the loop: torque-free motion depends on nothing the chaser does, so
+    these are the numbers a propagation inside the step loop would give
+    (:mod:`cwrend_cli.physics.attitude`).
+    """
+    if not problem.target.tumbling:
+        return None
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
 def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
@@ -478,6 +545,8 @@ class _Loop:
     sched: sk.ScheduleParams
     state: sk.LoopState
     log: sk.StepLog
+    sensor: measurement_models.SensorModel | None = None  # None: the position sensor
+    ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -485,7 +554,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log,
+            scalars, self.log, self.sensor, self.ekf,
         )  # fmt: skip
 
 
@@ -548,7 +617,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf,
         )  # fmt: skip
         if i == count:
             break
@@ -770,9 +839,13 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
 
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
-    it always did.
+    it always did. An extended Kalman filter predicts through the nonlinear
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
     """
-    tables = design_models.step_tables(problem.model.filter, problem.scenario, problem.truth)
+    name = problem.model.filter
+    tables = design_models.step_tables(
+        name if name == "ss" or name == "ya" else "cw", problem.scenario, problem.truth
+    )
     return np.array(tables.phi), np.array(tables.gam)
 
 

@@ -1,6 +1,8 @@
 """Truth dynamics: the world the closed loop flies in, separate from the CW design model.
 
-The guidance and the filter always use the Clohessy–Wiltshire model (paper Eqs. 3–4);
+The guidance and the filter use the Clohessy–Wiltshire model (paper Eqs. 3–4) unless
+``[model]`` gives them another (:mod:`cwrend_cli.physics.design_models`; the EKF filters
+of :mod:`cwrend_cli.physics.ekf` predict with this module's own step);
 ``truth.model`` chooses what the true relative state obeys (issue 15, item 1):
 
 * ``"cw"``: the same CW model, stepped exactly by ``x⁺ = Φx + Γu`` (Eq. 11);
@@ -62,6 +64,7 @@ from numba import njit
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
 from cwrend_cli.physics.params import FloatArray, Scenario, Truth
+from cwrend_cli.physics.variational import j2_relative_gradient, two_body_jacobian
 
 # ---------------------------------------------------------------------------
 # Constants: Earth Gravitational Model 2008 (Pavlis, Holmes, Kenyon & Factor,
@@ -83,6 +86,11 @@ TRUTH_CW = 0
 TRUTH_TWO_BODY = 1
 TRUTH_J2 = 2
 KIND_CODES = {"cw": TRUTH_CW, "two_body": TRUTH_TWO_BODY, "j2": TRUTH_J2}
+#: Codes of the same dynamics with their variational equations Φ̇ = AΦ integrated
+#: alongside (the extended Kalman filter's prediction, :mod:`cwrend_cli.physics.ekf`):
+#: the state is followed by Φ (6×6, row-major).
+VARIATIONAL_TWO_BODY = 3
+VARIATIONAL_J2 = 4
 
 #: Longest integration substep [s]; a scenario step Δt is split into ceil(Δt / this).
 MAX_SUBSTEP_S = 5.0
@@ -339,11 +347,47 @@ def _rhs_j2(tm: TruthModel, s: np.ndarray, u: np.ndarray, out: np.ndarray) -> No
 
 
 @njit(cache=True)
+def _times_phi(a: np.ndarray, s: np.ndarray, at: int, out: np.ndarray) -> None:
+    """``out[at:at+36]`` ← AΦ (row-major), ``Φ = s[at:at+36]``, A = [[0, I], [A_r, A_v]]."""
+    for i in range(3):
+        for j in range(6):
+            out[at + 6 * i + j] = s[at + 6 * (3 + i) + j]
+    for i in range(3, 6):
+        for j in range(6):
+            acc = 0.0
+            for m in range(6):
+                acc += a[i, m] * s[at + 6 * m + j]
+            out[at + 6 * i + j] = acc
+
+
+@njit(cache=True)
+def _variational_two_body(tm: TruthModel, s: np.ndarray, out: np.ndarray) -> None:
+    """Φ̇ = AΦ of ``[x y z ẋ ẏ ż r ṙ Φ]``, A of :func:`.variational.two_body_jacobian`."""
+    a = np.empty((6, 6))
+    two_body_jacobian(tm.mu, tm.h, s[0:6], s[6], s[7], a)
+    _times_phi(a, s, 8, out)
+
+
+@njit(cache=True)
+def _variational_j2(tm: TruthModel, s: np.ndarray, out: np.ndarray) -> None:
+    """Φ̇ = AΦ of ``[r_c v_c δr δv Φ]`` (inertial), A = [[0, I], [∂(δr̈)/∂δr, 0]]."""
+    a = np.zeros((6, 6))
+    j2_relative_gradient(tm.mu, tm.r_e, tm.j2, s[0:3], s[6:9], a[3:6, 0:3])
+    _times_phi(a, s, 12, out)
+
+
+@njit(cache=True)
 def _rhs(tm: TruthModel, s: np.ndarray, u: np.ndarray, out: np.ndarray) -> None:
     if tm.kind == TRUTH_TWO_BODY:
         _rhs_two_body(tm, s, u, out)
+    elif tm.kind == TRUTH_J2:
+        _rhs_j2(tm, s, u, out)
+    elif tm.kind == VARIATIONAL_TWO_BODY:
+        _rhs_two_body(tm, s, u, out)
+        _variational_two_body(tm, s, out)
     else:
         _rhs_j2(tm, s, u, out)
+        _variational_j2(tm, s, out)
 
 
 @njit(cache=True)
@@ -358,11 +402,15 @@ def rk8_step(
     n = y.shape[0]
     stages = tm.rk_b.shape[0]
     for s in range(stages):
+        # Σ_j a_sj k_j accumulated in ys in the order j = 0, 1, …, component by component
+        # (the loop over the components innermost, so that it vectorises)
+        ys[:] = 0.0
+        for j in range(s):
+            a_sj = tm.rk_a[s, j]
+            for i in range(n):
+                ys[i] += a_sj * k[j, i]
         for i in range(n):
-            acc = 0.0
-            for j in range(s):
-                acc += tm.rk_a[s, j] * k[j, i]
-            ys[i] = y[i] + h * acc
+            ys[i] = y[i] + h * ys[i]
         _rhs(tm, ys, u, k[s])
     for i in range(n):
         acc = 0.0

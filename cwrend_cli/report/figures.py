@@ -56,7 +56,6 @@ from matplotlib.patches import Ellipse, Patch, Polygon
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
 from scipy.spatial import ConvexHull
-from scipy.stats import chi2
 
 from cwrend_cli.config import ARCHITECTURES
 from cwrend_cli.output.recording import (
@@ -68,8 +67,9 @@ from cwrend_cli.output.recording import (
 )
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.constraints import Geometry
-from cwrend_cli.physics.metrics import cumulative_delta_v
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, chi2_band, cumulative_delta_v
 from cwrend_cli.physics.params import Window
+from cwrend_cli.report.consistency import step_ensembles
 from cwrend_cli.report.labels import (
     M_PER_KM,
     difference_text,
@@ -582,7 +582,7 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
 #: Two-sided probability of the χ² band drawn in the NEES figure.
 NEES_BAND_PROBABILITY = 0.95
 #: Dimension of the state: NEES of a consistent filter is χ² with this many degrees of freedom.
-STATE_DIM = 6
+STATE_DIM = NEES_DOF
 #: ``gid`` of the χ² band's patch in the NEES figure.
 NEES_BAND_GID = "nees_chi2_band"
 #: Quantiles of the band over seeds in the NEES figure.
@@ -594,8 +594,8 @@ def nees_chi2_band(probability: float = NEES_BAND_PROBABILITY) -> tuple[float, f
 
     (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): [1.24, 14.45] at 95 %.
     """
-    tail = (1.0 - probability) / 2.0
-    return float(chi2.ppf(tail, STATE_DIM)), float(chi2.ppf(1.0 - tail, STATE_DIM))
+    low, high = chi2_band(1, STATE_DIM, probability)
+    return float(low), float(high)
 
 
 def _nees_lines(nees: pd.DataFrame, archs: Sequence[str]) -> pd.DataFrame:
@@ -657,6 +657,58 @@ def fig_nees(data: ReportData) -> Figure:
 
 def _has_nees(data: ReportData) -> bool:
     return data.nees is not None and not data.nees.empty
+
+
+#: ``gid`` of the χ² band's patch in each panel of the consistency figure (NEES, NIS).
+ENSEMBLE_BAND_GID = "ensemble_chi2_band"
+_ENSEMBLE_LABELS = {"nees": ("NEES", NEES_DOF), "nis": ("NIS", NIS_DOF)}
+
+
+def fig_consistency(data: ReportData) -> Figure:
+    """Filter consistency over the seeds: the ensemble mean NEES and NIS against their χ² bands.
+
+    At each step the mean over the N seeds whose steps are stored (the NIS: over
+    those with a measurement) per architecture; shaded, the 95 % band of a
+    consistent filter's mean, χ²(N n)/N with n = 6 (NEES) or 3 (NIS)
+    (Bar-Shalom et al. 2001, §5.4.2; :mod:`~cwrend_cli.report.consistency`),
+    the widest over the architectures where their seed counts differ. Row 0
+    left out; architectures with identical curves drawn once; log y.
+    Raises ``ValueError`` without stored NEES (see :data:`FIGURES`).
+    """
+    if data.nees is None or data.nees.empty:
+        raise ValueError("no NEES stored")
+    ensembles = step_ensembles(data.nees)
+    n_seeds = int(data.nees["seed"].nunique())
+    fig = _figure(13, 4.2 + 3.4 * len(ensembles))
+    axes = np.atleast_1d(fig.subplots(len(ensembles), 1, sharex=True, squeeze=False)[:, 0])
+    handles: list[Any] = []
+    for ax, (column, ensemble) in zip(axes, ensembles.items(), strict=True):
+        name, dof = _ENSEMBLE_LABELS[column]
+        band = ensemble.groupby("t_s")[["band_low", "band_high"]].agg(
+            {"band_low": "min", "band_high": "max"}
+        )
+        ax.fill_between(band.index, band["band_low"], band["band_high"], color="0.5",
+                        alpha=0.25, lw=0, gid=ENSEMBLE_BAND_GID)  # fmt: skip
+        ax.axhline(dof, color="black", lw=1.0, ls=":")
+        groups = _groups(ensemble, data.archs, ["mean"])
+        for members, g in groups:
+            g = g[g["mean"] > 0]
+            ax.plot(g["t_s"], g["mean"], color=_group_colour(members, data.archs), lw=1.5)
+        _shade(ax, data.windows)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"mean {name} [-]")
+        ax.set_title(f"ensemble mean {name} over the seeds (consistent: inside the band, mean "
+                     f"{dof})")  # fmt: skip
+        if column == "nees":
+            handles = _group_handles(groups, data.archs)
+    axes[-1].set_xlabel("time [s]")
+    handles += [
+        Patch(color="0.5", alpha=0.25, label="95 % χ² band of a consistent filter's mean"),
+        Line2D([], [], color="black", ls=":", label="E[NEES] = 6, E[NIS] = 3"),
+    ]
+    _legend_below(fig, handles + _window_handles(data.windows), ncol=3)
+    fig.suptitle(f"Filter consistency over {n_seeds} seed(s): ensemble means against χ² bands")
+    return _finished(fig)
 
 
 # ---------------------------------------------------------------------------
@@ -1373,6 +1425,14 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "seeds, with the 95 % interval of χ²₆ (where one run's NEES lies if the filter is "
         "consistent; mean 6), log scale.",
         fig_nees,
+        _has_nees,
+    ),
+    FigureEntry(
+        "consistency.png",
+        "Filter consistency over the seeds: the ensemble mean NEES and NIS per architecture at "
+        "each step against the 95 % χ² band of a consistent filter's mean (shaded: χ²(N n)/N "
+        "for N seeds, n = 6 and 3; Bar-Shalom et al. 2001, §5.4.2), log scale.",
+        fig_consistency,
         _has_nees,
     ),
     FigureEntry(

@@ -65,6 +65,12 @@ _SUFFIXES = (
 )
 
 
+def consistency_text(value: float) -> str:
+    """A mean NEES or NIS as printed: 2 decimals below 1,000 (``5.34``, ``3.00``), else 3
+    significant digits (``2.07e+03``: a mismatch's NEES reaches 10⁶)."""
+    return f"{value:.2f}" if abs(value) < 1e3 else f"{value:.3g}"
+
+
 def param_symbol(key: str) -> tuple[str, str | None]:
     """Symbol and unit of a swept key (``param.`` prefix allowed); unit ``None`` if unknown."""
     key = key.removeprefix(PARAM_PREFIX)

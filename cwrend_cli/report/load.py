@@ -125,8 +125,9 @@ class ReportData:
     #: rows of ``ablation.parquet`` / ``sweep.parquet`` (long format: kind, arch, metric,
     #: statistic, value, ci_low, ci_high, n; ``point`` and ``param.*`` for a sweep), if stored
     stats: pd.DataFrame | None = None
-    #: per-step NEES of the reported point, every seed (arch, seed, t_s, nees); ``None``
-    #: for results written before cwrend stored it
+    #: per-step NEES of the reported point, every seed whose steps are stored (arch, seed,
+    #: t_s, nees; and nis, degradation_window when stored); ``None`` for results written
+    #: before cwrend stored the NEES
     nees: pd.DataFrame | None = None
     #: a sampled design's points (``sweep --design``) rather than a grid: no per-point
     #: sweep tables and figures (hundreds of points); ``params`` still lists the swept keys
@@ -288,8 +289,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _has_faults(w: Window) -> bool:
     """True when degradation window ``w`` switches a sensor fault on (issue 15, item 3)."""
-    outliers = w.outlier_probability > 0.0 and w.outlier_scale != 1.0
-    return w.dropout_probability > 0.0 or outliers or w.bias_drift_km_per_sqrt_s > 0.0
+    return w.dropout_probability > 0.0 or w.has_outliers or w.bias_drift_km_per_sqrt_s > 0.0
 
 
 def _read_parquet(path: Path, **kwargs: Any) -> pd.DataFrame:
@@ -304,22 +304,31 @@ def _read_steps(path: Path, **kwargs: Any) -> pd.DataFrame:
     return normalize_steps(_read_parquet(path, **kwargs))
 
 
+#: The steps columns of filter consistency read for every seed, when stored (beside the NEES).
+_CONSISTENCY_COLUMNS = ("nis", "degradation_window")
+
+
 def _nees_of(steps: pd.DataFrame) -> pd.DataFrame | None:
-    """The NEES columns of steps of every seed (``None`` when not stored)."""
+    """The consistency columns of steps of every seed (``None`` when no NEES is stored).
+
+    ``arch``, ``seed``, ``t_s``, ``nees``, and ``nis`` and ``degradation_window``
+    where the steps hold them.
+    """
     if "nees" not in steps.columns:
         return None
-    out = steps[["arch", "seed", "t_s", "nees"]].copy()
+    extra = [c for c in _CONSISTENCY_COLUMNS if c in steps.columns]
+    out = steps[["arch", "seed", "t_s", "nees", *extra]].copy()
     out["arch"] = out["arch"].astype(str)
     return out
 
 
 def _campaign_nees(steps_dir: Path, point: str | None) -> pd.DataFrame | None:
-    """NEES of every seed of the reported point from the steps/ dataset (``None``: not stored)."""
+    """NEES (and NIS) of every seed of the reported point from steps/ (``None``: not stored)."""
     names = set(ds.dataset(steps_dir, format="parquet", partitioning="hive").schema.names)
     if "nees" not in names:
         return None
-    columns = ["arch", "seed", "t_s", "nees"] + (["point"] if "point" in names else [])
-    frame = _read_parquet(steps_dir, columns=columns)
+    wanted = ["arch", "seed", "t_s", "nees", "point", *_CONSISTENCY_COLUMNS, "window"]
+    frame = _read_steps(steps_dir, columns=[c for c in wanted if c in names])
     if point is not None and "point" in frame.columns:
         frame = frame[frame["point"].astype(str) == point]
     return _nees_of(frame)

@@ -1,21 +1,25 @@
 """The report's markdown: summary tables and the text of ``report.md``.
 
 Tables (GitHub-flavoured markdown) of the reported noise seed, of every seed
-of the reported grid point and of every grid point of a sweep; the figure
-list comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`)
-with its captions. One unit and precision per quantity, as on the console:
-Δv in km/s (4 decimals), misses in m (2 decimals), fuel penalty in % (2
-decimals). Campaign tables carry the 95 % intervals and paired comparisons
-that the campaign stored in ``ablation.parquet`` / ``sweep.parquet`` (never
-recomputed here); an interval from fewer than :data:`MIN_BOOTSTRAP_N` seeds is
-marked with :data:`UNRELIABLE_MARK`. The filter-consistency means of the
-runs (``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
+of the reported grid point and of every grid point of a sweep; the figure list
+comes from the registry (:data:`~cwrend_cli.report.figures.FIGURES`) with its
+captions. One unit and precision per quantity, as on the console: Δv in km/s
+(4 decimals), misses in m (2 decimals), fuel penalty in % (2 decimals); beside
+the paper's Δv (the 1 s trapezoid of ‖u‖) and fuel penalty the applied Δv
+Σ‖u_k‖Δt and its penalty against the exact continuous fuel optimum (issue 33;
+"–" for the open-loop references, whose exact Δv the stored samples do not
+hold, and for campaigns written before). Campaign tables carry the 95 %
+intervals and paired comparisons that the campaign stored in
+``ablation.parquet`` / ``sweep.parquet`` (never recomputed here); an interval
+from fewer than :data:`MIN_BOOTSTRAP_N` seeds is marked with
+:data:`UNRELIABLE_MARK`. The filter-consistency means of the runs
+(``mean_nees``, 6 for a consistent filter; ``mean_nis_nominal``, 3) are
 averaged over the seeds (no interval is stored for them). A sampled design
 (``sweep --design``) gets the table of its Sobol indices
-(``sensitivity.parquet``) instead of a row per design point. A campaign
-whose configuration has path constraints (issue 32) gets a table of the
-safety of its true trajectories (:func:`safety_table`), from the safety rows
-of its statistics file.
+(``sensitivity.parquet``) instead of a row per design point. A campaign whose
+configuration has path constraints (issue 32) gets a table of the safety of
+its true trajectories (:func:`safety_table`), from the safety rows of its
+statistics file.
 """
 
 from __future__ import annotations
@@ -28,10 +32,13 @@ import numpy as np
 import pandas as pd
 
 from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
+from cwrend_cli.report.consistency import judged, share_inside, step_ensembles
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
+    consistency_text,
     format_value,
     markdown_table,
     param_label,
@@ -95,13 +102,15 @@ def seed_table(data: ReportData) -> str:
     """Open-loop references and each architecture's run of the reported seed."""
     runs = data.ok_runs()
     runs = runs[runs["seed"] == data.seed]
-    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "re-solves",
-              "success [%]", "infeasible", "failed", "solve mean / max [ms]"]  # fmt: skip
+    header = ["case", "Δv [km/s]", "miss [m]", "fuel penalty [%]", "applied Δv [km/s]",
+              "applied fuel penalty [%]", "re-solves", "success [%]", "infeasible", "failed",
+              "solve mean / max [ms]"]  # fmt: skip
     rows = []
     for _, r in data.ref_summary.iterrows():
         rows.append([f"open-loop {str(r['arch']).removeprefix('open_loop_')}",
                      _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
-                     _fmt(r.get("fuel_penalty_pct"), FUEL), "", "", "", "", ""])  # fmt: skip
+                     _fmt(r.get("fuel_penalty_pct"), FUEL), "–", "–", "", "", "", "",
+                     ""])  # fmt: skip
     for a in data.archs:
         g = runs[runs["arch"] == a]
         if g.empty:
@@ -109,7 +118,8 @@ def seed_table(data: ReportData) -> str:
         r = g.iloc[0]
         rows.append([
             arch_label(a), _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
-            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
+            _fmt(r.get("fuel_penalty_pct"), FUEL), _fmt(r.get("delta_v_applied_km_s"), DV),
+            _fmt(r.get("fuel_penalty_applied_pct"), FUEL), _fmt(r.get("n_solves"), "g"),
             _fmt(r.get("solve_success_pct"), ".2f"), _fmt(r.get("n_infeasible"), "g"),
             _fmt(r.get("n_failed"), "g"),
             f"{_fmt(r.get('solve_mean_ms'), '.3g')} / {_fmt(r.get('solve_max_ms'), '.3g')}",
@@ -129,7 +139,8 @@ def campaign_table(data: ReportData) -> str:
     stats = data.point_stats()
     header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
               "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
-              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)"]  # fmt: skip
+              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)",
+              "mean applied Δv [km/s]", "mean applied fuel penalty [%]"]  # fmt: skip
     rows = []
     for a in data.archs:
         g = all_runs[all_runs["arch"] == a]
@@ -147,6 +158,8 @@ def campaign_table(data: ReportData) -> str:
                 _ci(get.get(("miss_km", "median")), MISS, M_PER_KM),
                 _ci(get.get(("miss_km", "p95")), MISS, M_PER_KM), _fmt(miss.max(), MISS),
                 _ci(get.get(("fuel_penalty_pct", "mean")), FUEL), success, *consistency,
+                _ci(get.get(("delta_v_applied_km_s", "mean")), DV),
+                _ci(get.get(("fuel_penalty_applied_pct", "mean")), FUEL),
             ])  # fmt: skip
             continue
         fuel = ok["fuel_penalty_pct"].mean() if "fuel_penalty_pct" in ok else None
@@ -154,7 +167,8 @@ def campaign_table(data: ReportData) -> str:
             arch_label(a), ok_label, _fmt(ok["delta_v_km_s"].mean(), DV),
             _fmt(miss.mean(), MISS), _fmt(miss.median(), MISS),
             _fmt(miss.quantile(0.95) if len(miss) else None, MISS), _fmt(miss.max(), MISS),
-            _fmt(fuel, FUEL), success, *consistency,
+            _fmt(fuel, FUEL), success, *consistency, _mean(ok, "delta_v_applied_km_s", DV),
+            _mean(ok, "fuel_penalty_applied_pct", FUEL),
         ])  # fmt: skip
     return markdown_table(header, rows)
 
@@ -263,10 +277,123 @@ def _flagged(stats: pd.DataFrame | None) -> bool:
     return bool(boot.apply(_unreliable, axis=1).any()) if not boot.empty else False
 
 
+#: The runs columns of filter consistency, their steps column and degrees of freedom.
+_CONSISTENCY = (("mean_nees", "nees", NEES_DOF), ("mean_nis_nominal", "nis", NIS_DOF))
+BAND = ".2f"  # a χ² band's ends (dimensionless)
+
+
+def _band_cell(row: Any) -> tuple[str, str]:
+    """``mean [low, high]`` of a consistency row and whether the mean is in its band."""
+    if row is None or not _finite(row["value"]):
+        return "–", "–"
+    value, low, high = float(row["value"]), float(row["ci_low"]), float(row["ci_high"])
+    if not (_finite(low) and _finite(high)):
+        return consistency_text(value), "–"
+    text = f"{consistency_text(value)} [{low:{BAND}}, {high:{BAND}}]"
+    return text, "yes" if low <= value <= high else "no"
+
+
+def _stored_consistency(stats: pd.DataFrame, arch: Any) -> dict[str, Any]:
+    """The consistency rows of ``arch`` in statistics ``stats``, by metric (empty: none)."""
+    rows = stats[(stats["kind"] == "consistency") & (stats["arch"] == str(arch))]
+    return {str(r["metric"]): r for _, r in rows.iterrows()}
+
+
+def _consistency_rows(data: ReportData, arch: str) -> dict[str, Any]:
+    """The stored consistency rows of ``arch`` at the reported point, else computed from the runs.
+
+    From the statistics file (``campaign.statistics.consistency``); a run
+    directory or an older campaign has none: the mean of the runs' columns
+    and its band (:func:`~cwrend_cli.physics.metrics.mean_in_band`).
+    """
+    stats = data.point_stats()
+    stored = _stored_consistency(stats, arch) if stats is not None else {}
+    if stored:
+        return stored
+    runs = data.ok_runs()
+    runs = runs[runs["arch"] == arch]
+    out: dict[str, Any] = {}
+    for metric, _, dof in _CONSISTENCY:
+        if metric in runs.columns:
+            value, low, high, n = mean_in_band(pd.to_numeric(runs[metric], errors="coerce"), dof)
+            out[metric] = {"value": value, "ci_low": low, "ci_high": high, "n": n}
+    return out
+
+
+def consistency_table(data: ReportData) -> tuple[str, int] | None:
+    """Filter consistency per architecture against the χ² bands, and the seeds of the steps.
+
+    Per architecture: the mean over the ok runs of each run's mean NEES and
+    NIS with the 95 % band of a consistent filter's mean for that many runs
+    and whether it is in it; the share of the steps whose ensemble mean over
+    the seeds lies in that step's band (:mod:`~cwrend_cli.report.consistency`;
+    the NIS over the steps outside the degradation windows). Returns the
+    table and the number of seeds whose steps are stored; ``None`` when the
+    runs hold no consistency column.
+    """
+    if not any(m in data.runs.columns for m, _, _ in _CONSISTENCY):
+        return None
+    ensembles = step_ensembles(data.nees) if data.nees is not None and not data.nees.empty else {}
+    shares: dict[str, dict[str, float]] = {}
+    for column, ensemble in ensembles.items():
+        frame = share_inside(judged(ensemble, column), ["arch"])
+        names, values = frame["arch"].astype(str), frame["inside"].astype(float)
+        shares[column] = dict(zip(names, values, strict=True))
+    header = ["architecture", "runs", "mean NEES [95 % χ² band]", "in band",
+              "steps in NEES band [%]", "mean NIS [95 % χ² band]", "in band",
+              "steps in NIS band [%]"]  # fmt: skip
+    rows = []
+    for a in data.archs:
+        stored = _consistency_rows(data, a)
+        if not stored:
+            continue
+        cells: list[str] = []
+        for metric, column, _ in _CONSISTENCY:
+            cells += _band_cell(stored.get(metric))
+            inside = shares.get(column, {}).get(a)
+            cells.append(_fmt(100.0 * inside if inside is not None else None, ".1f"))
+        first = stored.get("mean_nees", stored.get("mean_nis_nominal"))
+        runs = str(int(first["n"])) if first is not None else "–"
+        rows.append([arch_label(a), runs, *cells])
+    if not rows:
+        return None
+    seeds = int(data.nees["seed"].nunique()) if ensembles and data.nees is not None else 0
+    return markdown_table(header, rows), seeds
+
+
+def _consistency_lines(data: ReportData) -> list[str]:
+    """The filter-consistency section (none without consistency columns in the runs)."""
+    found = consistency_table(data)
+    if found is None:
+        return []
+    table, seeds = found
+    n_runs = int(data.ok_runs()["seed"].nunique())
+    about = (
+        "Mean over the runs of each run's time-averaged NEES (6 for a consistent filter) and "
+        "NIS (outside the degradation windows; 3), against the 95 % χ² band of a consistent "
+        "filter's mean over that many runs (Bar-Shalom et al. 2001, §5.4.2; conservative for "
+        "time averages). Steps in band: the share of the steps at which the mean over the "
+        "seeds lies in that step's band (about 95 % for a consistent filter; the NIS over the "
+        "steps outside the degradation windows); the figure `consistency.png` draws them."
+    )
+    if seeds == 0:
+        where = "No per-step NEES is stored: no step shares."
+    elif seeds < n_runs:
+        where = (
+            f"The step shares are over the {seeds} seed(s) whose steps are stored "
+            f"(`output.steps_seeds`), the means over all {n_runs}."
+        )
+    else:
+        where = f"The step shares are over the {seeds} seed(s)."
+    return ["## Filter consistency", "", f"{about} {where}", "", table, ""]
+
+
 def sweep_table(data: ReportData) -> str:
     """One row per grid point (all swept values) and architecture.
 
-    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored.
+    Mean Δv and miss with the 95 % intervals of ``sweep.parquet`` when stored;
+    then, where it stores them, the mean NEES and NIS of the runs with their
+    χ² 95 % bands and whether each is in its band (issue 33).
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     keys: list[str] = []
@@ -276,8 +403,11 @@ def sweep_table(data: ReportData) -> str:
     stats = data.stats if data.stats is not None and "point" in data.stats.columns else None
     header = [param_label(p) for p in data.params] + [
         "architecture", "runs", "mean Δv [km/s]", "mean miss [m]", "median miss [m]",
-        "max miss [m]",
+        "max miss [m]", "mean applied Δv [km/s]",
     ]  # fmt: skip
+    consistent = stats is not None and bool((stats["kind"] == "consistency").any())
+    if consistent:
+        header += ["mean NEES [95 % χ² band]", "in band", "mean NIS [95 % χ² band]", "in band"]
     rows = []
     order = {a: i for i, a in enumerate(data.archs)}
     for values, g in runs.groupby(keys, sort=True):
@@ -286,17 +416,25 @@ def sweep_table(data: ReportData) -> str:
             miss = ga["miss_km"].astype(float) * M_PER_KM
             cells = [_fmt(ga["delta_v_km_s"].mean(), DV), _fmt(miss.mean(), MISS),
                      _fmt(miss.median(), MISS)]  # fmt: skip
+            applied = _mean(ga, "delta_v_applied_km_s", DV)
             if stats is not None:
                 point_ids = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
                 sel = stats[(stats["kind"] == "marginal") & (stats["arch"] == str(a))]
                 sel = sel[sel["point"].astype(str).isin(point_ids)]
                 if not sel.empty:
                     get = _lookup(sel)
+                    applied = _ci(get.get(("delta_v_applied_km_s", "mean")), DV)
                     cells = [_ci(get.get(("delta_v_km_s", "mean")), DV),
                              _ci(get.get(("miss_km", "mean")), MISS, M_PER_KM),
                              _ci(get.get(("miss_km", "median")), MISS, M_PER_KM)]  # fmt: skip
-            rows.append([*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
-                         *cells, _fmt(miss.max(), MISS)])  # fmt: skip
+            row = [*(format_value(v) for v in values), arch_label(str(a)), str(len(ga)),
+                   *cells, _fmt(miss.max(), MISS), applied]  # fmt: skip
+            if stats is not None and consistent:
+                points = {str(p) for p in ga["point"].unique()} if "point" in ga else set()
+                stored = _stored_consistency(stats[stats["point"].astype(str).isin(points)], a)
+                for metric, _, _ in _CONSISTENCY:
+                    row += _band_cell(stored.get(metric))
+            rows.append(row)
     return markdown_table(header, rows)
 
 
@@ -449,6 +587,7 @@ def report_md(data: ReportData, results_dir: Path, figures: Sequence[tuple[str, 
         if _flagged(stats):
             lines += [UNRELIABLE_NOTE, ""]
     lines += _safety_lines(data)
+    lines += _consistency_lines(data)
     lines += [f"## Noise seed {data.seed}", "", seed_table(data), ""]
     if data.design:
         lines += _design_lines(data)

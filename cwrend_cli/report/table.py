@@ -2,8 +2,9 @@
 
 A table is read, never recomputed, from the statistics each campaign stored
 (``ablation.parquet`` / ``sweep.parquet``: values with their 95 % intervals,
-bootstrap or Wilson) and, for the two shares of re-solves, from its
-``runs.parquet``. What a table shows is said by:
+bootstrap or Wilson); counts, shares and worst cases of the runs are computed
+from its ``runs.parquet`` (and ``solves/``), and ``--versus`` pairs the runs
+of two campaigns (:func:`_across`). What a table shows is said by:
 
 * **fields**, the dimensions of its rows (``--rows``) and columns
   (``--cols``): ``campaign`` (each results directory, named by its directory
@@ -16,22 +17,36 @@ bootstrap or Wilson) and, for the two shares of re-solves, from its
 * **values** (``--metric``), each ``[STATISTIC.]METRIC[@A-B][:bare][:DIGITS]``
   (:func:`parse_value`): a statistic of the runs of an architecture
   (``mean.miss``, ``median.miss``, ``p95.miss``, ``mean.dv``, ``mean.fuel``
-  with their bootstrap intervals; ``solve_mean_ms``, ``solve_max_ms``,
+  with their bootstrap intervals, Δv the paper's 1 s trapezoid of ‖u‖ and the
+  fuel penalty against the fuel optimum's trapezoid; ``mean.dv_applied``,
+  ``mean.fuel_applied``: the applied impulse Σ‖u_k‖Δt and its penalty against
+  the exact continuous fuel optimum, issue 33; ``solve_mean_ms``, ``solve_max_ms``,
   ``solve_success_pct`` without), a paired comparison (``frac_less.miss``
   with its Wilson interval, ``median_diff.miss``, ``mean_diff.dv``; ``@A-B``
   fixes the pair, else ``arch`` and ``other`` are fields), the runs counted
   (``n``: the ok runs; the seed pairs in a table of paired values only), or
-  the share of re-solves certified infeasible or failed
-  (``infeasible_pct``, ``failed_pct``: sums over the cell's ok runs);
+  a value computed from the cell's ok runs: the share of re-solves certified
+  infeasible or failed (``infeasible_pct``, ``failed_pct``), their number
+  (``infeasible_solves``, ``failed_solves``), the worst run (``max.miss``),
+  each with ``:with=STEP`` / ``:without=STEP`` for the runs whose re-solves
+  used / never used a fallback step (``n:with=socp_plan`` counts them);
 * **filters** (``--where [CAMPAIGN:]FIELD=V1,V2``): keep the entries whose
   field has one of the values, shown in that order (only those of one
-  campaign when prefixed).
+  campaign when prefixed, and its runs before a pair across campaigns);
+* **pairs across campaigns** (``--versus CAMPAIGN``): paired values with A
+  from another campaign and B from CAMPAIGN, paired by seed on matching grid
+  points, with the intervals of a pair within a campaign (field
+  ``other_campaign``: B's campaign).
 
 Each cell must be one stored value: two matching entries (two campaigns,
 grid points or pairs in one cell) are refused naming a field that tells
 them apart. Units and precision per quantity as in the report: misses in m
 (2 decimals), Δv in km/s (4; differences 5), fuel penalty in % (2), shares
 3 decimals. A bootstrap interval from fewer than 10 seeds is marked ``*``.
+
+``mean.nees`` and ``mean.nis`` (issue 33) are the mean over the runs of each
+run's mean NEES and nominal mean NIS; their interval is the χ² 95 % band a
+consistent filter's mean lies in (the ``consistency`` rows), never marked.
 """
 
 from __future__ import annotations
@@ -41,8 +56,8 @@ import io
 import json
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -52,9 +67,9 @@ import pandas as pd
 from cwrend_cli.config import get_dotted
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SWEEP_STATS
+from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
-from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.output.tables import FALLBACK_STEPS, PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, markdown_table
 
@@ -72,7 +87,7 @@ __all__ = [
 Format = Literal["md", "latex", "csv"]
 FORMATS: tuple[Format, ...] = ("md", "latex", "csv")
 #: Fields that are not configuration keys.
-FIELDS = ("campaign", "arch", "other", "point", "metric")
+FIELDS = ("campaign", "arch", "other", "other_campaign", "point", "metric")
 UNRELIABLE_NOTE = f"* fewer than {MIN_BOOTSTRAP_N} seeds: bootstrap interval unreliable"
 _MISSING = "–"
 
@@ -92,41 +107,67 @@ QUANTITIES: Mapping[str, _Quantity] = {
     "miss_km": _Quantity("miss", "m", M_PER_KM, 2),
     "delta_v_km_s": _Quantity("Δv", "km/s", 1.0, 4),
     "fuel_penalty_pct": _Quantity("fuel penalty", "%", 1.0, 2),
+    "delta_v_applied_km_s": _Quantity("applied Δv", "km/s", 1.0, 4),
+    "fuel_penalty_applied_pct": _Quantity("applied fuel penalty", "%", 1.0, 2),
     "solve_mean_ms": _Quantity("re-solve time", "ms", 1.0, 2),
     "solve_max_ms": _Quantity("re-solve time", "ms", 1.0, 1),
     "solve_success_pct": _Quantity("re-solve success", "%", 1.0, 2),
     "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
+    "mean_nees": _Quantity("of the runs' mean NEES", "-", 1.0, 2),
+    "mean_nis_nominal": _Quantity("of the runs' nominal mean NIS", "-", 1.0, 2),
 }
 #: Short names of ``--metric`` (those of ``cwrend compare --metric``).
-ALIASES: Mapping[str, str] = {"miss": "miss_km", "dv": "delta_v_km_s", "fuel": "fuel_penalty_pct"}
+ALIASES: Mapping[str, str] = {
+    "miss": "miss_km",
+    "dv": "delta_v_km_s",
+    "fuel": "fuel_penalty_pct",
+    "dv_applied": "delta_v_applied_km_s",
+    "fuel_applied": "fuel_penalty_applied_pct",
+    "nees": "mean_nees",
+    "nis": "mean_nis_nominal",
+}
 #: The statistics of each stored metric (the first is the default).
 MARGINAL: Mapping[str, tuple[str, ...]] = {
     "miss_km": ("mean", "median", "p95"),
     "delta_v_km_s": ("mean", "median", "p95"),
     "fuel_penalty_pct": ("mean", "median", "p95"),
+    "delta_v_applied_km_s": ("mean", "median", "p95"),
+    "fuel_penalty_applied_pct": ("mean", "median", "p95"),
     "solve_mean_ms": ("mean",),
     "solve_max_ms": ("max",),
     "solve_success_pct": ("mean",),
     "n_infeasible": ("mean",),
+    "mean_nees": ("mean",),
+    "mean_nis_nominal": ("mean",),
 }
+#: Filter consistency (issue 33): stored as ``consistency`` rows whose interval is the χ²
+#: 95 % band of a consistent filter's mean over the runs, not a confidence interval.
+CONSISTENCY = ("mean_nees", "mean_nis_nominal")
 #: The paired statistics of each metric (the first is the default).
 PAIRED: Mapping[str, tuple[str, ...]] = {
     "miss_km": ("median_diff", "frac_less"),
     "delta_v_km_s": ("mean_diff",),
 }
-#: Values computed from ``runs.parquet``: share of the re-solves of the cell's ok runs [%].
-RUN_SHARES: Mapping[str, tuple[str, str]] = {
-    "infeasible_pct": ("n_infeasible", "re-solves infeasible"),
-    "failed_pct": ("n_failed", "re-solves failed"),
+#: Values computed from ``runs.parquet`` over the cell's ok runs: name → (column,
+#: statistic, header). ``share``: 100 × Σ(column) / Σ(n_solves) [%]; ``sum``: Σ(column).
+RUN_VALUES: Mapping[str, tuple[str, Literal["share", "sum"], str]] = {
+    "infeasible_pct": ("n_infeasible", "share", "re-solves infeasible [%]"),
+    "failed_pct": ("n_failed", "share", "re-solves failed [%]"),
+    "infeasible_solves": ("n_infeasible", "sum", "re-solves infeasible"),
+    "failed_solves": ("n_failed", "sum", "re-solves failed"),
 }
+#: The metrics whose largest value over the cell's ok runs ``max.METRIC`` gives (runs.parquet).
+MAXIMA = ("miss_km", "delta_v_km_s", "fuel_penalty_pct")
 _VALUE_SYNTAX = re.compile(
     r"^(?:(?P<stat>[a-z_0-9]+)\.)?(?P<metric>[a-z_]+)(?:@(?P<a>[a-z_]+)-(?P<b>[a-z_]+))?"
-    r"(?P<mods>(?::[a-z0-9]+)*)$"
+    r"(?P<mods>(?::[a-z0-9_=]+)*)$"
 )
 _SYNTAX_HELP = (
-    "[STATISTIC.]METRIC[@A-B][:bare][:DIGITS], e.g. mean.miss, p95.miss:bare, "
-    "frac_less.miss@mtf_adaptive-plain_adaptive, mean_diff.dv, n, infeasible_pct"
+    "[STATISTIC.]METRIC[@A-B][:bare][:DIGITS][:with=STEP|:without=STEP], e.g. mean.miss, "
+    "p95.miss:bare, frac_less.miss@mtf_adaptive-plain_adaptive, mean_diff.dv, n, "
+    "infeasible_pct, failed_solves, max.miss:with=socp_plan"
 )
+_RUN_HELP = "n, max.miss, max.dv, max.fuel, " + ", ".join(RUN_VALUES) + " (computed from the runs)"
 
 
 @dataclass(frozen=True)
@@ -134,22 +175,29 @@ class Value:
     """One value asked for by ``--metric`` (:func:`parse_value`)."""
 
     text: str  # as given
-    kind: Literal["marginal", "paired", "count", "share"]
-    metric: str  # column name in the statistics (or runs.parquet for a share)
-    statistic: str
+    #: stored (marginal, paired, count: n) or computed from the cell's runs (runs)
+    kind: Literal["marginal", "paired", "count", "runs"]
+    #: column of the statistics; of a runs value: n, a name of RUN_VALUES or of MAXIMA
+    metric: str
+    statistic: str  # of a runs value: count, share, sum or max
     pair: tuple[str, str] | None = None
     interval: bool = True  # show the stored interval
     digits: int | None = None  # decimals (None: the quantity's)
+    #: of a runs value: only the runs whose re-solves used (with) or never used (without)
+    #: a fallback step (solves/ ``fallback_step``)
+    subset: tuple[Literal["with", "without"], str] | None = None
 
     @property
     def header(self) -> str:
         """The column header: quantity, unit, and the interval's kind."""
         if self.kind == "count":
             return "n"
-        if self.kind == "share":
-            return f"{RUN_SHARES[self.text.split(':')[0]][1]} [%]"
+        if self.kind == "runs":
+            return self._runs_header()
         q = QUANTITIES[self.metric]
         ci = " (95 % CI)" if self.interval else ""
+        if self.metric in CONSISTENCY:
+            ci = " (95 % χ² band)" if self.interval else ""
         if self.statistic == "frac_less":
             a, b = self.pair or ("A", "B")
             ci = " (95 % Wilson)" if self.interval else ""
@@ -159,12 +207,31 @@ class Value:
             return f"{what} {q.name} difference [{q.unit}]{ci}"
         return f"{self.statistic} {q.name} [{q.unit}]{ci}"
 
+    def _runs_header(self) -> str:
+        if self.statistic == "max":
+            q = QUANTITIES[self.metric]
+            head = f"max {q.name} [{q.unit}]"
+        elif self.statistic == "count":
+            head = "runs"
+        else:
+            head = RUN_VALUES[self.metric][2]
+        if self.subset is None:
+            return head
+        which, step = self.subset
+        using = f"runs using {step}" if which == "with" else f"runs not using {step}"
+        return using if self.statistic == "count" else f"{head}, {using}"
+
+    @property
+    def integer(self) -> bool:
+        """Whether the value counts (runs, seed pairs, re-solves)."""
+        return self.kind == "count" or (self.kind == "runs" and self.statistic in ("count", "sum"))
+
     def decimals(self) -> int:
         if self.digits is not None:
             return self.digits
-        if self.kind == "count":
+        if self.integer:
             return 0
-        if self.kind == "share":
+        if self.kind == "runs" and self.statistic == "share":
             return 2
         if self.statistic == "frac_less":
             return 3
@@ -173,7 +240,9 @@ class Value:
         return QUANTITIES[self.metric].digits
 
     def scale(self) -> float:
-        if self.kind in ("count", "share") or self.statistic == "frac_less":
+        if self.kind == "runs" and self.statistic == "max":
+            return QUANTITIES[self.metric].scale
+        if self.kind in ("count", "runs") or self.statistic == "frac_less":
             return 1.0
         return QUANTITIES[self.metric].scale
 
@@ -184,15 +253,20 @@ def parse_value(text: str) -> Value:
     if m is None:
         raise ConfigError(f"--metric {text!r}: expected {_SYNTAX_HELP}")
     interval, digits = True, None
+    subset: tuple[Literal["with", "without"], str] | None = None
     for mod in filter(None, m["mods"].split(":")):
+        which, eq, step = mod.partition("=")
         if mod == "bare":
             interval = False
         elif mod.isdigit() and int(mod) <= 12:
             digits = int(mod)
+        elif eq and which in ("with", "without") and re.fullmatch(r"[a-z_0-9]+", step):
+            subset = ("with" if which == "with" else "without", step)
         else:
             raise ConfigError(
                 f"--metric {text!r}: unknown modifier {mod!r} (':bare' drops the interval, "
-                "':3' shows 3 decimals)"
+                "':3' shows 3 decimals, ':with=socp_plan' / ':without=socp_plan' keep the runs "
+                "whose re-solves used / never used that fallback step)"
             )
     stat, name = m["stat"], m["metric"]
     metric = ALIASES.get(name, name)
@@ -204,17 +278,27 @@ def parse_value(text: str) -> Value:
                     f"--metric {text!r}: unknown architecture {slug!r} "
                     f"(choices: {', '.join(ALL_ARCHITECTURES)})"
                 )
-    if stat is None and name in ("n", *RUN_SHARES):
-        if pair is not None:
-            raise ConfigError(f"--metric {text!r}: {name} is per architecture, not per pair")
-        kind: Literal["count", "share"] = "count" if name == "n" else "share"
-        return Value(text, kind, name, name, None, False, digits)
+    runs_value = (stat is None and name in ("n", *RUN_VALUES)) or (
+        stat == "max" and metric in MAXIMA
+    )
+    if runs_value and pair is not None:
+        raise ConfigError(f"--metric {text!r}: {name} is per architecture, not per pair")
+    if stat is None and name == "n" and subset is None:
+        return Value(text, "count", name, name, None, False, digits)
+    if runs_value:
+        statistic = "count" if name == "n" else "max" if stat == "max" else RUN_VALUES[name][1]
+        column = name if stat is None else metric
+        return Value(text, "runs", column, statistic, None, False, digits, subset)
+    if subset is not None:
+        raise ConfigError(
+            f"--metric {text!r}: ':{subset[0]}=' keeps runs of a value computed from the runs "
+            f"({_RUN_HELP}), not of a stored statistic"
+        )
     paired_stats = PAIRED.get(metric, ())
     if metric not in MARGINAL:
         known = ", ".join([*ALIASES, *(m for m in MARGINAL if m not in ALIASES.values())])
         raise ConfigError(
-            f"--metric {text!r}: unknown metric {name!r} (metrics: {known}; also n, "
-            f"{', '.join(RUN_SHARES)})"
+            f"--metric {text!r}: unknown metric {name!r} (metrics: {known}; also {_RUN_HELP})"
         )
     if stat in paired_stats or (stat is None and pair is not None):
         if not paired_stats:
@@ -227,7 +311,9 @@ def parse_value(text: str) -> Value:
         )
     stat = stat or MARGINAL[metric][0]
     if stat not in MARGINAL[metric]:
-        allowed = ", ".join([*MARGINAL[metric], *paired_stats])
+        allowed = ", ".join(
+            [*MARGINAL[metric], *(["max"] if metric in MAXIMA else []), *paired_stats]
+        )
         raise ConfigError(f"--metric {text!r}: statistic {stat!r} of {metric} is one of {allowed}")
     return Value(text, "marginal", metric, stat, None, interval, digits)
 
@@ -245,7 +331,11 @@ class Source:
     path: Path
     manifest: Mapping[str, Any]
     stats: pd.DataFrame  # its ablation.parquet or sweep.parquet
-    runs: pd.DataFrame | None = field(default=None, compare=False)  # read when a share is asked
+    runs: pd.DataFrame | None = field(default=None, compare=False)  # read when a value needs it
+    #: the distinct (run_key, fallback_step) of its solves/, read for ``:with=`` / ``:without=``
+    steps: pd.DataFrame | None = field(default=None, compare=False)
+    #: of the pairs across two campaigns (``--versus``): B's campaign (``stats``: the pairs)
+    versus: Source | None = field(default=None, compare=False)
 
     @property
     def swept(self) -> tuple[str, ...]:
@@ -258,7 +348,18 @@ class Source:
         return tuple(dict.fromkeys([*keys, *cols]))
 
     def base_value(self, key: str) -> tuple[bool, Any]:
-        """(found, value) of ``key`` in the campaign's base configuration."""
+        """(found, value) of ``key`` in the campaign's base configuration.
+
+        Of the pairs across two campaigns: the value both have, else ``"a vs b"``.
+        """
+        if self.versus is not None:
+            (found_a, a), (found_b, b) = self._base(key), self.versus.base_value(key)
+            if found_a and found_b and a != b:
+                return True, f"{format_value(a)} vs {format_value(b)}"
+            return (found_a, a) if found_a else (found_b, b)
+        return self._base(key)
+
+    def _base(self, key: str) -> tuple[bool, Any]:
         config = self.manifest.get("config")
         if not isinstance(config, Mapping):
             return False, None
@@ -295,14 +396,23 @@ def load_source(text: str) -> Source:
     return Source(label or path.resolve().name, path, manifest, stats)
 
 
-def _with_runs(source: Source) -> Source:
-    if source.runs is not None:
-        return source
-    try:
-        runs = pd.read_parquet(source.path / RUNS)
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{source.path}: cannot read {RUNS} ({exc})") from None
-    return Source(source.label, source.path, source.manifest, source.stats, runs)
+def _loaded(source: Source, runs: bool, steps: bool) -> Source:
+    """``source`` with its ``runs.parquet`` (``runs``) and its solves' steps (``steps``)."""
+    if runs and source.runs is None:
+        try:
+            source = replace(source, runs=pd.read_parquet(source.path / RUNS))
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{source.path}: cannot read {RUNS} ({exc})") from None
+    if steps and source.steps is None:
+        try:
+            solves = pd.read_parquet(source.path / SOLVES, columns=["run_key", "fallback_step"])
+        except (OSError, ValueError) as exc:
+            raise ConfigError(
+                f"{source.path}: cannot read the per-solve data {SOLVES}/ ({exc}), which "
+                "':with=' / ':without=' need"
+            ) from None
+        source = replace(source, steps=solves.drop_duplicates(ignore_index=True))
+    return source
 
 
 # ---------------------------------------------------------------------------
@@ -320,8 +430,8 @@ class _Field:
         return self.name not in FIELDS
 
 
-_HEADERS = {"campaign": "campaign", "arch": "architecture", "other": "vs", "point": "point",
-            "metric": "value"}  # fmt: skip
+_HEADERS = {"campaign": "campaign", "arch": "architecture", "other": "vs",
+            "other_campaign": "vs campaign", "point": "point", "metric": "value"}  # fmt: skip
 
 
 def _field(text: str, sources: Sequence[Source], option: str) -> _Field:
@@ -443,8 +553,9 @@ def _entries(
         metric, statistic = (
             ("miss_km", "mean") if value.kind == "count" else (value.metric, value.statistic)
         )
+        stored = "consistency" if metric in CONSISTENCY else "marginal"
         sel = stats[
-            (stats["kind"] == "marginal")
+            (stats["kind"] == stored)
             & (stats["metric"] == metric)
             & (stats["statistic"] == statistic)
         ].copy()
@@ -461,9 +572,10 @@ def _entries(
         if value.pair is not None:
             sel = sel[(sel["arch"] == value.pair[0]) & (sel["other"] == value.pair[1])]
     else:
-        sel = _shares(_with_runs(source), value)
+        sel = _from_runs(source, value)
     if "point" not in sel.columns:
         sel["point"] = "base"
+    versus = source.versus.label if source.versus is not None else source.label
     out = pd.DataFrame(
         {
             "value": sel["value"].astype(float).to_numpy(),
@@ -473,6 +585,7 @@ def _entries(
             "campaign": source.label,
             "arch": sel["arch"].to_numpy(),
             "other": sel["other"].to_numpy() if "other" in sel.columns else None,
+            "other_campaign": versus if value.kind == "paired" else None,
             "point": sel["point"].astype(str).to_numpy(),
             "metric": index,
         }
@@ -487,24 +600,188 @@ def _entries(
     return out
 
 
-def _shares(source: Source, value: Value) -> pd.DataFrame:
-    """Per grid point and architecture: 100 × Σ(count) / Σ(n_solves) over the ok runs."""
+def _from_runs(source: Source, value: Value) -> pd.DataFrame:
+    """A value computed from ``runs.parquet`` per grid point and architecture.
+
+    Over the cell's ok runs (with ``value.subset``: those whose re-solves used, or
+    never used, the fallback step): their number (``count``), Σ(column) (``sum``),
+    100 × Σ(column) / Σ(n_solves) (``share``) or the largest metric (``max``; none
+    when no run is kept). ``n``: the runs kept.
+    """
     runs = source.runs
     assert runs is not None
-    column = RUN_SHARES[value.metric][0]
-    if column not in runs.columns or "n_solves" not in runs.columns:
-        raise ConfigError(f"{source.path}: {RUNS} holds no {column} (written by an older cwrend)")
+    column = RUN_VALUES[value.metric][0] if value.statistic in ("share", "sum") else value.metric
+    needed = [column] if value.statistic != "count" else []
+    needed += ["n_solves"] if value.statistic == "share" else []
+    missing = [c for c in needed if c not in runs.columns]
+    if missing:
+        raise ConfigError(
+            f"{source.path}: {RUNS} holds no {missing[0]} (written by an older cwrend)"
+        )
     ok = runs[runs["status"] == "ok"]
+    kept = pd.Series(True, index=ok.index)
+    if value.subset is not None:
+        which, step = value.subset
+        assert source.steps is not None
+        steps = source.steps
+        using = ok["run_key"].isin(set(steps.loc[steps["fallback_step"] == step, "run_key"]))
+        kept = using if which == "with" else ~using
     params = [c for c in ok.columns if c.startswith(PARAM_PREFIX)]
     rows = []
     for (point, arch), g in ok.groupby(["point", "arch"], sort=False, observed=True):
-        solves = float(g["n_solves"].sum())
-        share = 100.0 * float(g[column].sum()) / solves if solves else math.nan
+        sub = g[kept[g.index]]
+        if value.statistic == "count":
+            number = float(len(sub))
+        elif value.statistic == "sum":
+            number = float(sub[column].sum())
+        elif value.statistic == "share":
+            solves = float(sub["n_solves"].sum())
+            number = 100.0 * float(sub[column].sum()) / solves if solves else math.nan
+        else:
+            number = float(sub[column].max()) if len(sub) else math.nan
         first = g.iloc[0]
-        rows.append({"point": str(point), "arch": str(arch), "value": share, "ci_low": math.nan,
-                     "ci_high": math.nan, "n": float(len(g)),
+        rows.append({"point": str(point), "arch": str(arch), "value": number,
+                     "ci_low": math.nan, "ci_high": math.nan, "n": float(len(sub)),
                      **{p: first[p] for p in params}})  # fmt: skip
     return pd.DataFrame(rows, columns=["point", "arch", "value", "ci_low", "ci_high", "n", *params])
+
+
+def _check_steps(sources: Sequence[Source], values: Sequence[Value]) -> None:
+    """Each ``:with=`` / ``:without=`` step is a fallback step (else a typo): one of
+    :data:`~cwrend_cli.output.tables.FALLBACK_STEPS` or that ended a re-solve here."""
+    held = {str(x) for s in sources if s.steps is not None for x in s.steps["fallback_step"]}
+    known = [*FALLBACK_STEPS, *sorted(held - set(FALLBACK_STEPS))]
+    for v in values:
+        if v.subset is not None and v.subset[1] not in known:
+            raise ConfigError(
+                f"--metric {v.text!r}: unknown fallback step {v.subset[1]!r} (steps: "
+                f"{', '.join(known)}){did_you_mean(v.subset[1], known)}"
+            )
+
+
+# ---------------------------------------------------------------------------
+# Pairs across campaigns (--versus)
+# ---------------------------------------------------------------------------
+
+#: The pairs of two campaigns' runs: ``(A, B, extra, keep)`` → for each pair (X of A, Y of
+#: B) of the default ones (each architecture against itself and the pairs a campaign
+#: compares) and ``extra`` that ``keep`` keeps, the rows of a paired comparison
+#: (``kind`` … ``ci_high``, ``n``) with ``point_a``, ``point_b`` and ``param.<key>``:
+#: :func:`cwrend_cli.campaign.compare.paired_across`, given by the CLI (the report reads
+#: stored results and imports no campaign code).
+PairAcross = Callable[
+    [Source, Source, Sequence[tuple[str, str]], Callable[[tuple[str, str]], bool]],
+    pd.DataFrame,
+]
+
+
+def _across(
+    sources: Sequence[Source],
+    versus: Sequence[str],
+    values: Sequence[Value],
+    filters: Sequence[_Filter],
+    pair_across: PairAcross | None,
+) -> list[Source]:
+    """The pairs across campaigns, as campaigns: A from each campaign, B from each of
+    ``versus``, one :class:`Source` per (A, B) holding their paired rows.
+
+    Each side's runs are first kept by the ``--where CAMPAIGN:KEY=…`` filters of its
+    campaign; the pairs by the ``--where arch=…`` and ``other=…`` filters. The two
+    sides must hold the same seeds.
+    """
+    labels = [s.label for s in sources]
+    out: list[Source] = []
+    extra = [v.pair for v in values if v.pair is not None]
+    keep = _pair_filter(filters)
+    for name in dict.fromkeys(versus):
+        if name not in labels:
+            raise ConfigError(
+                f"--versus {name!r}: no campaign {name!r} (campaigns: {', '.join(labels)}); "
+                "name one by its label: its directory's name, or LABEL of a LABEL=DIR argument"
+                f"{did_you_mean(name, labels)}"
+            )
+        if len(sources) < 2:
+            raise ConfigError(
+                f"--versus {name}: the pairs take A from another campaign: give its directory "
+                f"too (cwrend table DIR_A DIR_B --versus {name})"
+            )
+        assert pair_across is not None, "build_table: --versus needs pair_across"
+        b = _side(sources[labels.index(name)], filters)
+        for a in sources:
+            if a.label == name:
+                continue
+            a = _side(a, filters)
+            _same_seeds(a, b)
+            try:
+                rows = pair_across(a, b, extra, keep)
+            except ConfigError as exc:
+                raise ConfigError(f"--versus {name}: {exc}") from None
+            if not rows.empty:
+                out.append(_crossed(a, b, rows))
+    return out
+
+
+def _side(source: Source, filters: Sequence[_Filter]) -> Source:
+    """``source`` with the runs its ``--where CAMPAIGN:KEY=…`` filters keep."""
+    runs = source.runs
+    assert runs is not None
+    for f in filters:
+        if f.campaign != source.label or not f.field.is_key:
+            continue
+        column = PARAM_PREFIX + f.field.name
+        if column in runs.columns:
+            kept = runs[column].map(
+                lambda v, f=f: any(_matches(_cell_value(v), w) for w in f.values)
+            )
+            runs = runs[kept.astype(bool)]
+        else:
+            found, base = source.base_value(f.field.name)
+            if not (found and any(_matches(base, w) for w in f.values)):
+                runs = runs.iloc[:0]
+    return replace(source, runs=runs)
+
+
+def _same_seeds(a: Source, b: Source) -> None:
+    seeds_a, seeds_b = (_seed_set(s) for s in (a, b))
+    if seeds_a and seeds_b and seeds_a != seeds_b:
+        raise ConfigError(
+            f"--versus {b.label}: {a.label} ran {_seeds(seeds_a)} and {b.label} "
+            f"{_seeds(seeds_b)}; pairs across campaigns need the same seeds: run both with "
+            "the same --seeds, or keep the same points with --where CAMPAIGN:KEY=…"
+        )
+
+
+def _seed_set(source: Source) -> set[int]:
+    assert source.runs is not None
+    return {int(x) for x in source.runs["seed"].unique()}
+
+
+def _seeds(seeds: set[int]) -> str:
+    low, high = min(seeds), max(seeds)
+    span = f"{low}–{high}" if len(seeds) == high - low + 1 else f"from {low} to {high}"
+    return f"{len(seeds)} seed(s) {span}"
+
+
+def _pair_filter(filters: Sequence[_Filter]) -> Callable[[tuple[str, str]], bool]:
+    """Whether ``--where arch=…`` and ``--where other=…`` keep a pair (X, Y)."""
+    chosen = [(0 if f.field.name == "arch" else 1, f.values) for f in filters
+              if f.campaign is None and f.field.name in ("arch", "other")]  # fmt: skip
+
+    def keep(pair: tuple[str, str]) -> bool:
+        return all(any(_matches(pair[i], w) for w in wanted) for i, wanted in chosen)
+
+    return keep
+
+
+def _crossed(a: Source, b: Source, rows: pd.DataFrame) -> Source:
+    """The pairs of A's runs with B's as a campaign: A's, its point ``"<A's> vs <B's>"``."""
+    stats = rows.copy()
+    stats["point"] = [
+        f"{x} vs {y}" for x, y in zip(stats["point_a"], stats["point_b"], strict=True)
+    ]
+    for name in ("arch", "other", "point", "kind", "metric", "statistic"):
+        stats[name] = stats[name].astype(object)
+    return Source(a.label, a.path, a.manifest, stats.drop(columns=["point_a", "point_b"]), versus=b)
 
 
 # ---------------------------------------------------------------------------
@@ -534,6 +811,8 @@ class Table:
 def _unreliable(cell: pd.Series | None, value: Value) -> bool:
     if cell is None or value.statistic == "frac_less" or not value.interval:
         return False
+    if value.metric in CONSISTENCY:  # a χ² band, not a bootstrap interval
+        return False
     return math.isfinite(float(cell["ci_low"])) and float(cell["n"]) < MIN_BOOTSTRAP_N
 
 
@@ -556,7 +835,7 @@ def _order(
     for f in filters:
         if f.field.name == field_.name and f.campaign is None:
             ranked += [v for w in f.values for v in present if _matches(_unhash(v), w)]
-    if field_.name == "campaign":
+    if field_.name in ("campaign", "other_campaign"):
         ranked += [s.label for s in sources]
     elif field_.name in ("arch", "other"):
         ranked += list(ALL_ARCHITECTURES)
@@ -608,10 +887,14 @@ def build_table(
     cols: str | None = None,
     where: Sequence[str] = (),
     title: str | None = None,
+    versus: Sequence[str] = (),
+    pair_across: PairAcross | None = None,
 ) -> Table:
     """The table of ``values`` over ``sources`` with ``rows`` and ``cols`` (comma-separated
     fields, ``FIELD=HEADER`` to rename a header) after the ``where`` filters.
 
+    ``versus``: labels of campaigns whose runs are B of pairs across campaigns, A
+    from each other campaign (computed by ``pair_across``, see :func:`_across`).
     :class:`ConfigError` (exit 2) for an unknown field, a filter that keeps
     nothing, or two stored values in one cell.
     """
@@ -623,8 +906,14 @@ def build_table(
     shared = {f.name for f in row_fields} & {f.name for f in col_fields}
     if shared:
         raise ConfigError(f"--rows and --cols both name {sorted(shared)[0]!r}")
+    steps = any(v.subset is not None for v in values)
+    runs = steps or bool(versus) or any(v.kind == "runs" for v in values)
+    sources = [_loaded(s, runs, steps) for s in sources]
+    if steps:
+        _check_steps(sources, values)
+    crossed = _across(sources, versus, values, filters, pair_across)
     if not row_fields:
-        row_fields = _default_rows(sources, values, col_fields)
+        row_fields = _default_rows(sources, values, col_fields, bool(crossed))
     if all(f.name != "metric" for f in (*row_fields, *col_fields)):
         col_fields.append(_Field("metric", "value"))
     keys = list(
@@ -637,26 +926,34 @@ def build_table(
     # n counts the seed pairs in a table of paired values only, else the ok runs
     compared = [v for v in values if v.kind != "count"]
     pairs = compared[0] if compared and all(v.kind == "paired" for v in compared) else None
-    frame = pd.concat(
-        [_entries(s, v, i, keys, pairs) for s in sources for i, v in enumerate(values)],
-        ignore_index=True,
-    )
+    entries = [_entries(s, v, i, keys, pairs) for s in sources for i, v in enumerate(values)]
+    entries += [
+        _entries(c, v, i, keys, pairs)
+        for c in crossed
+        for i, v in enumerate(values)
+        if v.kind == "paired" or (v.kind == "count" and pairs is not None)
+    ]
+    frame = pd.concat(entries, ignore_index=True)
     if frame.empty:
         raise ConfigError(
             f"no stored value of --metric {','.join(v.text for v in values)} in "
             f"{', '.join(s.label for s in sources)}: check the architectures and pairs they hold"
         )
+    # a pair across campaigns: its runs were filtered by CAMPAIGN:KEY before pairing
+    across = frame["other_campaign"].notna() & (frame["other_campaign"] != frame["campaign"])
     for f in filters:
         keep = frame[f.field.name].map(lambda v, f=f: any(_matches(v, w) for w in f.values))
         if f.campaign is not None:
             keep |= frame["campaign"] != f.campaign
+            if f.field.is_key:
+                keep |= across
         if not keep.any():
             held = frame[f.field.name].map(lambda v: _MISSING if v is None else format_value(v))
             raise ConfigError(
                 f"--where {f.field.name}={','.join(f.values)} keeps nothing: the entries have "
                 f"{f.field.name} = {', '.join(dict.fromkeys(held))}"
             )
-        frame = frame[keep.astype(bool)]
+        frame, across = frame[keep.astype(bool)], across[keep.astype(bool)]
     names = [f.name for f in (*row_fields, *col_fields)]
     for name in names:
         frame[name] = frame[name].map(_hashable)
@@ -686,15 +983,18 @@ def build_table(
 
 
 def _default_rows(
-    sources: Sequence[Source], values: Sequence[Value], cols: Sequence[_Field]
+    sources: Sequence[Source], values: Sequence[Value], cols: Sequence[_Field], crossed: bool
 ) -> list[_Field]:
-    """campaign (several), the swept keys, arch, and other (for a paired value)."""
+    """campaign (several), the swept keys, arch, other (for a paired value), and
+    other_campaign (with pairs across campaigns)."""
     taken = {f.name for f in cols}
     names = ["campaign"] if len(sources) > 1 else []
     names += list(dict.fromkeys(k for s in sources for k in s.swept))
     names += ["arch"]
     if any(v.kind == "paired" and v.pair is None for v in values):
         names += ["other"]
+    if crossed:
+        names += ["other_campaign"]
     return [_field(n, sources, "--rows") for n in names if n not in taken]
 
 
@@ -720,7 +1020,7 @@ def _check_one_per_cell(frame: pd.DataFrame, names: Sequence[str], keys: Sequenc
     if dup.empty:
         return
     first = next(iter(dup.groupby(list(names), sort=False, dropna=False)))[1]
-    candidates = ["campaign", *keys, "point", "arch", "other"]
+    candidates = ["campaign", "other_campaign", *keys, "point", "arch", "other"]
     differs = next(
         (c for c in candidates if c not in names and first[c].map(_hashable).nunique() > 1),
         "point",
@@ -823,6 +1123,6 @@ def _csv(table: Table) -> str:
                 if not math.isfinite(x):
                     row.append("")
                 else:
-                    row.append(str(int(x)) if v.kind == "count" else repr(x))
+                    row.append(str(int(x)) if v.integer else repr(x))
         writer.writerow(row)
     return out.getvalue().rstrip("\n")
