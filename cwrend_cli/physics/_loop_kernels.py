@@ -42,7 +42,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit, typeof
+from numba import njit, typeof, types
 
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
@@ -301,11 +301,14 @@ def compile_steps(
     loads it from numba's cache instead of compiling it again.
     """
     truth_t, act_t = _optional(truth, act)
-    args = (
-        0, 0, 0, model, None if truth_t is None else truth, None if act_t is None else act,
-        sched, state, 0.0, 0.0, True, log, sensor, ekf,
-    )  # fmt: skip
-    _steps.compile(tuple(typeof(a) for a in args))  # type: ignore[no-untyped-call]
+    models = (None if truth_t is None else truth, None if act_t is None else act)
+    # ``None if t is None else Model(*t)`` types as an optional Model when ``t`` is a tuple
+    chosen = tuple(
+        types.none if m is None else types.Optional(typeof(m))  # type: ignore[no-untyped-call]
+        for m in (*models, sensor, ekf)
+    )
+    plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
+    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], *chosen[2:]))
 
 
 @njit(cache=True)
