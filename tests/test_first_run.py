@@ -36,16 +36,21 @@ NOTICE = "compiling kernels (first run only, about"
 runner = CliRunner()
 
 
+def _in_empty_cache(code: str, cache: Path) -> list[str]:
+    """The lines ``python -c code`` prints with numba's cache in ``cache`` (empty: a first run)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+
+
 def test_an_empty_cache_announces_the_first_compile(tmp_path: Path) -> None:
     code = (
         "from cwrend_cli.physics import compiled; "
         "print(compiled.compiling_notice({'shooting'})); "
         "print(compiled.compiling_notice({'shooting', 'socp'}))"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # nothing compiled there yet
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout.splitlines()
+    out = _in_empty_cache(code, tmp_path)  # nothing compiled there yet
     assert all(line.startswith(NOTICE) and line.endswith(" s)…") for line in out)
     assert not [f for f in tmp_path.rglob("*") if f.is_file()]  # asking compiles nothing
 
@@ -58,11 +63,7 @@ def test_a_campaign_on_two_workers_announces_the_step_loop_compiled_meanwhile(
         "print(compiled.compile_seconds({'shooting'}), "
         "compiled.compile_seconds({'shooting'}, fan_out=True))"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # nothing compiled there yet
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout.split()
-    alone, fanned_out = (float(s) for s in out)
+    alone, fanned_out = (float(s) for s in _in_empty_cache(code, tmp_path)[0].split())
     assert 0.0 < fanned_out < alone  # a worker compiles the step loop while the solver compiles
 
 
@@ -113,10 +114,7 @@ for f in (k._bracketed_root, k._g, k._primer, k.add_control_node):
 
 
 def test_no_kernel_is_compiled_once_per_literal_argument(tmp_path: Path) -> None:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    out = subprocess.run(
-        [sys.executable, "-c", _LITERALS], env=env, capture_output=True, text=True, check=True
-    ).stdout.split()
+    out = " ".join(_in_empty_cache(_LITERALS, tmp_path)).split()
     assert out == [
         "_bracketed_root", "1", "False", "_g", "1", "False",
         "_primer", "1", "False", "add_control_node", "1", "False",
@@ -248,8 +246,4 @@ print("quicksort" in ir, "raise_with_shape_context" in ir, len(ir) > 10_000)
 
 
 def test_the_solver_compiles_no_sort_or_slice_error_message(tmp_path: Path) -> None:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    out = subprocess.run(
-        [sys.executable, "-c", _SHRUNK], env=env, capture_output=True, text=True, check=True
-    ).stdout.split()
-    assert out == ["False", "False", "True"]
+    assert _in_empty_cache(_SHRUNK, tmp_path) == ["False False True"]
