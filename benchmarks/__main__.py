@@ -22,7 +22,14 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from benchmarks import bench_campaign, bench_convex, bench_solver, bench_startup
+from benchmarks import (
+    bench_campaign,
+    bench_constrained,
+    bench_convex,
+    bench_sensors,
+    bench_solver,
+    bench_startup,
+)
 from benchmarks.common import PUBLISHED, Row
 
 RESULTS = Path(__file__).resolve().parent / "results.json"
@@ -95,6 +102,8 @@ def main() -> None:
         bench_startup.run(reps=5)  # first: fresh processes, before the machine warms up
         + bench_solver.run(seeds=seeds, naive=3)
         + bench_convex.run(seeds=seeds)
+        + bench_sensors.run(seeds=seeds)
+        + bench_constrained.run(seeds=seeds)
         + bench_campaign.run(runs=runs, big=big)
     )
     elapsed = time.perf_counter() - start

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING
 from benchmarks.common import Row
 
 if TYPE_CHECKING:
+    from cwrend_cli.config import CwrendConfig
     from cwrend_cli.physics.params import Architecture, FloatArray, Problem
     from cwrend_cli.physics.simulation import References
 
@@ -353,8 +354,12 @@ def _timed(
     return _Campaign(wall, rss, *phases(tmp / name))
 
 
-def simulate_time_per_run(slugs: list[str] | None, seeds: Sequence[int]) -> float:
+def simulate_time_per_run(
+    slugs: Sequence[str] | None, seeds: Sequence[int], cfg: CwrendConfig | None = None
+) -> float:
     """Mean in-process ``simulate`` time per run [s] of ``slugs`` (None: all four) on ``seeds``.
+
+    ``cfg``: the configuration (None: the paper's defaults).
 
     The compute bound of a campaign: what a worker cannot avoid (one closed
     loop per run), timed in this process after a warm-up run per
@@ -366,7 +371,7 @@ def simulate_time_per_run(slugs: list[str] | None, seeds: Sequence[int]) -> floa
     """
     from cwrend_cli.physics import simulation
 
-    problem, refs, archs, noise_of = _warm_loops(slugs)
+    problem, refs, archs, noise_of = _warm_loops(slugs, cfg)
     total, n = 0.0, 0
     for seed in seeds:
         noise = noise_of(seed)
@@ -379,22 +384,23 @@ def simulate_time_per_run(slugs: list[str] | None, seeds: Sequence[int]) -> floa
 
 
 def _warm_loops(
-    slugs: list[str] | None,
+    slugs: Sequence[str] | None, cfg: CwrendConfig | None = None
 ) -> tuple[Problem, References, list[Architecture], Callable[[int], FloatArray]]:
-    """What an in-process timing of runs needs, warmed up: the paper problem, its references.
+    """What an in-process timing of runs needs, warmed up: the problem of ``cfg`` (None:
+    the paper's), its references.
 
-    Also the architectures ``slugs`` (None: all four), each run once, and the
-    noise of a seed.
+    Also the architectures ``slugs`` (None: the paper's four), each run once, and
+    the noise of a seed.
     """
     from cwrend_cli import campaign
-    from cwrend_cli.config import ARCHITECTURES, CwrendConfig
+    from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig
     from cwrend_cli.config.adapt import problem_of
     from cwrend_cli.physics import simulation
 
-    cfg = CwrendConfig()
+    cfg = cfg if cfg is not None else CwrendConfig()
     problem = problem_of(cfg)
     refs = simulation.open_loop_references(problem)
-    archs = [ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
+    archs = [ALL_ARCHITECTURES[s] for s in (slugs or ARCHITECTURES)]
     for arch in archs:
         simulation.simulate(problem, arch, campaign.standard_normal_for(cfg, 0), refs)
     return problem, refs, archs, lambda seed: campaign.standard_normal_for(cfg, seed)

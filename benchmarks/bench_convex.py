@@ -17,12 +17,11 @@ Run alone: ``python -m benchmarks.bench_convex [--seeds S]``.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
-from benchmarks.common import Row
+from benchmarks.common import Row, seeds_main
 from cwrend_cli import campaign
 from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig
 from cwrend_cli.config.adapt import problem_of
@@ -129,12 +128,7 @@ def run(seeds: int = 20) -> list[Row]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=20)
-    args = parser.parse_args()
-    from benchmarks.__main__ import print_rows
-
-    print_rows(run(args.seeds))
+    seeds_main(__doc__, run)
 
 
 if __name__ == "__main__":

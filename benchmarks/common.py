@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -54,6 +56,16 @@ class Row:
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form, with the derived ratio and verdict."""
         return {**asdict(self), "ratio": self.ratio, "met": self.met}
+
+
+def seeds_main(doc: str | None, run: Callable[[int], list[Row]]) -> None:
+    """A benchmark module run alone: ``--seeds S`` (default 20), its rows printed."""
+    parser = argparse.ArgumentParser(description=(doc or "").split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=20)
+    args = parser.parse_args()
+    from benchmarks.__main__ import print_rows
+
+    print_rows(run(args.seeds))
 
 
 #: A re-solve met in a closed loop, with its warm start (and the loop's second one).

@@ -54,10 +54,12 @@ if TYPE_CHECKING:  # annotations only; the commands import these when they run
     from cwrend_cli.config import Architecture, CwrendConfig
     from cwrend_cli.report.table import Source
 
-#: The architectures of ``--arch all`` and ``all_socp`` (the keys of
-#: ``physics.params.ARCHITECTURES`` and ``SOCP_ARCHITECTURES``, checked by a test).
+#: The architectures of ``--arch all`` and ``all_socp`` and the single-factor ones
+#: (the keys of ``physics.params.ARCHITECTURES``, ``SOCP_ARCHITECTURES`` and
+#: ``STF_ARCHITECTURES``, checked by a test).
 ARCH_SLUGS = ("plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive")
 SOCP_ARCH_SLUGS = tuple(f"{a}_socp" for a in ARCH_SLUGS)
+STF_ARCH_SLUGS = ("stf_fixed", "stf_adaptive", "stf_fixed_socp", "stf_adaptive_socp")
 
 
 def _help_flag_off(option: typer.core.TyperOption | None) -> typer.core.TyperOption | None:
@@ -281,7 +283,10 @@ ARCH_HELP = (
     + ", ".join(ARCH_SLUGS)
     + "), 'all_socp' (the same with the cone-program re-solve: "
     + ", ".join(SOCP_ARCH_SLUGS)
-    + ") or 'everything' (both)."
+    + "), 'everything' (both); the single-factor baseline ("
+    + ", ".join(STF_ARCH_SLUGS)
+    + ") only by name or in 'with_stf', 'with_stf_socp', 'everything_with_stf' (each group "
+    "with the single-factor ones appended)."
 )
 
 
@@ -417,7 +422,8 @@ PairOption = Annotated[
         "--pair",
         help="Also compare A with B seed by seed (A:B, two architectures of the campaign; "
         "repeatable). By default: MTF vs plain and adaptive vs fixed within each re-solve "
-        "method, and cone program vs shooting.",
+        "method, and cone program vs shooting (with the single-factor baseline: MTF vs STF "
+        "and STF vs plain too).",
         metavar="A:B",
     ),
 ]
@@ -692,7 +698,7 @@ def _campaign(
                         f"> {widest.limit:.3g}); next batch",
                         markup=False,
                     )
-        _report_campaign(command, plan, summary, statistics, out, opts, err, pairs)
+        _report_campaign(command, plan, summary, statistics, out, opts, err)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err
             shown.print(until_console_table(achieved, opts.until or ""))
@@ -762,7 +768,7 @@ def _campaign_step(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
-        argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest,
+        argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest, pairs=pairs,
     )  # fmt: skip
     if summary.set_aside:  # said even with -q: runs were computed again
         err.print(_set_aside_line(summary.set_aside), soft_wrap=True, markup=False)
@@ -770,7 +776,8 @@ def _campaign_step(
         # cores): the statistics are written, with everything, when the campaign completes
         return plan, summary, campaign.no_statistics(command)
     with progress.phase("computing statistics"):
-        statistics = campaign.write_statistics(out, command, plan.root_seed, pairs)
+        # the pairs asked for and those earlier commands added (the manifest records them)
+        statistics = campaign.write_statistics(out, command, plan.root_seed, summary.pairs)
     return plan, summary, statistics
 
 
@@ -791,7 +798,6 @@ def _report_campaign(
     out: Path,
     opts: CampaignOptions,
     err: Console,
-    pairs: Sequence[tuple[str, str]],
 ) -> None:
     """The console tables and summary line of a finished (or interrupted) campaign."""
     from cwrend_cli import campaign
@@ -819,7 +825,9 @@ def _report_campaign(
         # a re-run naming fewer seeds, architectures or points than the directory holds:
         # report on exactly the runs asked for; the statistics file covers them all
         with phase(err, f"{label}: computing statistics of the runs named"):
-            statistics = campaign.subset_statistics(out, command, plan.root_seed, asked, pairs)
+            statistics = campaign.subset_statistics(
+                out, command, plan.root_seed, asked, summary.pairs
+            )
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
         err.print(
             f"note: the tables cover the {len(asked & held)} run(s) this command names; "
@@ -1114,8 +1122,9 @@ def compare(
         typer.Option(
             "--metric",
             "-m",
-            help="Metrics, comma-separated: miss, dv, fuel (or miss_km, delta_v_km_s, "
-            "fuel_penalty_pct).",
+            help="Metrics, comma-separated: miss, dv, fuel (the paper's trapezoid Δv and its "
+            "penalty), dv_applied, fuel_applied (the applied impulse and its penalty against "
+            "the exact fuel optimum), or their column names.",
             metavar="LIST",
         ),
     ] = "miss,dv",

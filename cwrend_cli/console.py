@@ -629,6 +629,8 @@ _COMPARE_METRICS: dict[str, tuple[str, float, str]] = {
     "miss_km": ("miss m", 1e3, ".2f"),
     "delta_v_km_s": ("Δv km/s", 1.0, ".4f"),
     "fuel_penalty_pct": ("fuel pen. %", 1.0, ".2f"),
+    "delta_v_applied_km_s": ("applied Δv km/s", 1.0, ".4f"),
+    "fuel_penalty_applied_pct": ("applied pen. %", 1.0, ".2f"),
 }
 
 

@@ -39,7 +39,7 @@ from cwrend_cli.config import CwrendConfig, config_from_dict
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import actuator, simulation
 from cwrend_cli.physics.dynamics import discretize
-from cwrend_cli.physics.estimation import kf_predict, kf_update
+from cwrend_cli.physics.estimation import PLAIN, kf_predict, kf_update
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import ARCHITECTURES, Actuator, Problem
 
@@ -221,7 +221,7 @@ def test_the_filter_predicts_with_the_commanded_control(
         out = [x]
         for k in range(run.t_s.size - 1):
             x_pred, p_pred = kf_predict(x, p, phi, gam, controls[k], est.q_matrix())
-            x, p, _, _ = kf_update(x_pred, p_pred, run.y[k + 1], est.r_nominal_matrix(), False)
+            x, p, _, _ = kf_update(x_pred, p_pred, run.y[k + 1], est.r_nominal_matrix(), PLAIN)
             out.append(x)
         return np.array(out)
 

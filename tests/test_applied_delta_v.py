@@ -271,3 +271,49 @@ def test_a_costate_that_is_no_plan_is_refused(paper_cfg) -> None:
     )
     with pytest.raises(ExactPlanError):
         exact_bang_bang(problem, np.zeros(6))
+
+
+# --- which Δv the report's figures plot --------------------------------------------------
+
+#: The report's figures that plot a Δv (paper Figs 2 and 6, the distribution, sweep, design
+#: and sensitivity figures): each plots the paper's trapezoid, and says so in its caption.
+DV_FIGURES = (
+    "fig2_control.png",
+    "fig6_dv_vs_miss.png",
+    "dv_distribution.png",
+    "sweep_{key}.png",
+    "design_{key}.png",
+    "sensitivity.png",
+)
+
+
+def test_every_figure_that_plots_delta_v_says_which_in_its_caption() -> None:
+    from cwrend_cli.report.figures import FIGURES
+
+    captions = {entry.file: entry.caption for entry in FIGURES}
+    for file in DV_FIGURES:
+        assert "trapezoid" in captions[file], file
+
+
+def test_fig6_names_the_trapezoid_and_gives_the_exact_fuel_optimum_beside_it(
+    ablation: Path,
+) -> None:
+    """The x axis is the paper's trapezoid; the fuel-optimal line's legend also gives the
+    exact continuous optimum (``delta_v_applied_km_s`` of the reference, 0.1130615 km/s)."""
+    from cwrend_cli.report import figures
+    from cwrend_cli.report.load import load_results
+
+    data = load_results(ablation)
+    ax = figures.fig_dv_vs_miss(data).axes[0]
+    assert "trapezoid" in ax.get_xlabel()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    fuel = [t for t in labels if "fuel" in t.lower()]
+    assert len(fuel) == 1 and "exact 0.1131" in fuel[0] and "0.1128" in fuel[0], labels
+
+
+def test_fig2_names_the_trapezoid_on_its_cumulative_axis(ablation: Path) -> None:
+    from cwrend_cli.report import figures
+    from cwrend_cli.report.load import load_results
+
+    fig = figures.fig_control(load_results(ablation))
+    assert any("trapezoid" in ax.get_ylabel() for ax in fig.axes)

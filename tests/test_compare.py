@@ -63,10 +63,13 @@ def _rows(out: Path) -> pd.DataFrame:
 def test_paired_differences_equal_those_of_the_runs(
     campaigns: tuple[Path, Path], compared: Path
 ) -> None:
-    merged = _expected(*campaigns)
-    rows = _rows(compared)
+    _check_differences(_rows(compared), _expected(*campaigns), ("miss_km", "delta_v_km_s"))
+
+
+def _check_differences(rows: pd.DataFrame, merged: pd.DataFrame, metrics: tuple[str, ...]) -> None:
+    """The mean and median of A − B stored per architecture and metric are those of the runs."""
     for arch, g in merged.groupby("arch"):
-        for metric in ("miss_km", "delta_v_km_s"):
+        for metric in metrics:
             d = (g[f"{metric}_a"] - g[f"{metric}_b"]).to_numpy()
             got = rows[(rows["arch"] == arch) & (rows["metric"] == metric)]
             value = dict(zip(got["statistic"], got["value"], strict=True))
@@ -307,3 +310,68 @@ def test_compare_figure_draws_intervals_that_end_a_hair_past_the_estimate() -> N
     ]  # fmt: skip
     fig = fig_compare(pd.DataFrame(rows), "A", "B")
     assert fig.axes
+
+
+# ---------------------------------------------------------------------------
+# The applied Δv and its penalty (issue 33 item 3)
+# ---------------------------------------------------------------------------
+
+
+def test_applied_delta_v_and_penalty_are_compared_seed_by_seed(
+    campaigns: tuple[Path, Path], tmp_path: Path
+) -> None:
+    result = _compare(*campaigns, "--metric", "dv_applied,fuel_applied", "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    applied = ("delta_v_applied_km_s", "fuel_penalty_applied_pct")
+    rows = _rows(tmp_path)
+    assert set(rows["metric"]) == set(applied)
+    _check_differences(rows, _expected(*campaigns), applied)
+
+
+def test_applied_metrics_have_their_own_console_rows_within_80_columns(
+    campaigns: tuple[Path, Path], tmp_path: Path
+) -> None:
+    result = _compare(*campaigns, "--metric", "dv,dv_applied,fuel_applied", "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "applied Δv km/s" in result.stdout and "applied pen. %" in result.stdout
+    assert "…" not in result.stdout
+    assert max(len(line) for line in result.stdout.splitlines()) <= 80
+
+
+def test_a_campaign_written_before_the_applied_delta_v_is_refused_naming_the_fix(
+    campaigns: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """runs.parquet without the column (cwrend before issue 33): exit 2, nothing written."""
+    import shutil
+
+    a, b = campaigns
+    old = tmp_path / "old"
+    shutil.copytree(a, old)
+    runs = pd.read_parquet(old / "runs.parquet")
+    runs.drop(columns=["delta_v_applied_km_s", "fuel_penalty_applied_pct"]).to_parquet(
+        old / "runs.parquet"
+    )
+    result = _compare(b, old, "--metric", "miss,dv_applied", "--out", tmp_path / "out")
+    assert result.exit_code == 2, result.output
+    message = " ".join(result.stderr.split())
+    assert "dv_applied" in message and "delta_v_applied_km_s" in message
+    assert str(old) in message and "re-run the campaign" in message
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()
+    # the metrics it holds are still compared
+    assert _compare(b, old, "--metric", "miss,dv", "--out", tmp_path / "o2").exit_code == 0
+
+
+def test_every_metric_name_means_the_same_column_in_compare_and_table() -> None:
+    """One table of short names (output.tables.METRIC_NAMES) for both ``--metric`` options."""
+    from cwrend_cli.output.tables import METRIC_NAMES
+    from cwrend_cli.report.table import parse_value
+
+    assert {"miss", "dv", "fuel", "dv_applied", "fuel_applied"} <= set(METRIC_NAMES)
+    for name, column in METRIC_NAMES.items():
+        assert parse_value(f"mean.{name}").metric == column
+        if column in compare.COMPARED:
+            assert compare.parse_metrics(name) == (column,)
+        else:  # the filter-consistency means: no "lower is better", not compared
+            with pytest.raises(ConfigError, match=f"--metric '{name}': unknown metric"):
+                compare.parse_metrics(name)

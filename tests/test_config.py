@@ -434,8 +434,8 @@ def test_architecture_is_the_physics_one_and_pickles() -> None:
     arch = parse_arch("plain_adaptive")
     assert Architecture is params.Architecture
     assert ARCHITECTURES is params.ARCHITECTURES
-    assert arch == params.Architecture("plain_adaptive", mtf=False, adaptive=True)
-    assert hash(arch) == hash(params.Architecture("plain_adaptive", mtf=False, adaptive=True))
+    assert arch == params.Architecture("plain_adaptive", "plain", adaptive=True)
+    assert hash(arch) == hash(params.Architecture("plain_adaptive", "plain", adaptive=True))
     assert pickle.loads(pickle.dumps(arch)) == arch
     assert pickle.loads(pickle.dumps(dict(ARCHITECTURES))) == dict(ARCHITECTURES)
 

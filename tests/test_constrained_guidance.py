@@ -8,10 +8,14 @@ unsafe set from its definition ((x/a)² + … < 1 and the angle to the corridor 
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import Any
 
 import numpy as np
+import pytest
 from scipy.linalg import expm
+from scipy.optimize import minimize
 
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
@@ -35,15 +39,24 @@ def _zoh(n: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     return e[:6, :6], e[:6, 6:]
 
 
+@functools.cache
+def _sub_steps(per_step: int) -> tuple[np.ndarray, np.ndarray]:
+    """The position rows of Φ(τ), Γ(τ) at τ = DT/per_step … DT, (per_step, 3, 6 or 3)."""
+    sub = [_zoh(N_MOTION, DT * i / per_step) for i in range(1, per_step + 1)]
+    return np.array([m[0][:3] for m in sub]), np.array([m[1][:3] for m in sub])
+
+
 def _dense(x0: np.ndarray, controls: np.ndarray, per_step: int = 40) -> np.ndarray:
-    """Positions every DT/per_step along the held-control arcs."""
-    phi, gam = _zoh(N_MOTION, DT / per_step)
-    x, out = x0.copy(), [x0[:3].copy()]
-    for u in controls:
-        for _ in range(per_step):
-            x = phi @ x + gam @ u
-            out.append(x[:3].copy())
-    return np.array(out)
+    """Positions every DT/per_step along the held-control arcs (nodes by Φ(DT), Γ(DT); the
+    points of each arc by Φ(τ), Γ(τ) from its node, τ = DT/per_step … DT)."""
+    phi, gam = _zoh(N_MOTION, DT)
+    nodes = np.empty((controls.shape[0] + 1, 6))
+    nodes[0] = x0
+    for k, u in enumerate(controls):
+        nodes[k + 1] = phi @ nodes[k] + gam @ u
+    phis, gams = _sub_steps(per_step)
+    arcs = np.einsum("iab,kb->kia", phis, nodes[:-1]) + np.einsum("iab,kb->kia", gams, controls)
+    return np.vstack([x0[:3], arcs.reshape(-1, 3)])
 
 
 def _unsafe(
@@ -92,12 +105,19 @@ def test_the_corridor_holds_at_every_corridor_node() -> None:
     assert np.all(excess <= 1e-7)  # Clarabel's tolerance, in km
 
 
+@pytest.mark.slow
 def test_random_constrained_plans_never_enter_the_unsafe_set_between_nodes() -> None:
-    """An independent dense check of planned ZOH arcs on random problems (40 sub-samples
-    a step); 40 here (the suite stays fast), 1,000 run once when this was written."""
+    """An independent dense check of planned ZOH arcs (40 sub-samples a step) on 1,000
+    random problems (issue 32's "done when"): ellipsoids of 100–300 m semi-axes, a corridor
+    of random axis and half-angle with its port 0–20 % outside the surface, a start 400 m
+    out in a random direction, an 80 s horizon (short, so that 1,000 plans take about a
+    minute), ε ∈ {0, 0.5, 1}. A softened plan (slack > 0, 2 % of them) claims no safety and
+    is not checked: problems are drawn until 1,000 plans are checked (at most 1,100)."""
     rng = np.random.default_rng(32)
     checked = 0
-    for _ in range(40):
+    for _ in range(1100):
+        if checked == 1000:
+            break
         axes = rng.uniform(0.1, 0.3, 3)
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
@@ -105,14 +125,14 @@ def test_random_constrained_plans_never_enter_the_unsafe_set_between_nodes() -> 
         port = surface * rng.uniform(1.0, 1.2)
         deg = float(rng.uniform(10, 45))
         start = rng.normal(size=3)
-        x0 = np.r_[0.8 * start / np.linalg.norm(start), rng.normal(size=3) * 1e-4]
+        x0 = np.r_[0.4 * start / np.linalg.norm(start), rng.normal(size=3) * 1e-4]
         res = cp.plan(
             N_MOTION,
             DT,
             U_MAX,
             x0,
             np.r_[port, 0, 0, 0],
-            100.0,
+            80.0,
             float(rng.choice([0.0, 0.5, 1.0])),
             _geometry(axes, port, axis, deg),
         )
@@ -121,7 +141,75 @@ def test_random_constrained_plans_never_enter_the_unsafe_set_between_nodes() -> 
         dense = _dense(x0, res.controls)
         assert not _unsafe(dense, axes, port, axis, deg).any()
         checked += 1
-    assert checked >= 30
+    assert checked == 1000
+
+
+def _detour(x0: np.ndarray, xf: np.ndarray, steps: int, radius: float, side: np.ndarray) -> Any:
+    """The minimum-energy plan (Σ‖u_j/u_max‖², ε = 1) round a keep-out sphere on one side.
+
+    Solved here by SLSQP on the exact (non-convex) constraint ‖r_k‖ ≥ radius at the nodes
+    1 … N−1, the positions affine in the held controls (condensed with this module's Φ, Γ),
+    ‖u_j‖ ≤ u_max and x_N = xf; started from the minimum-energy plan through the waypoint
+    2 × radius along ``side`` at mid-horizon, so that it finds the local optimum on that side.
+    """
+    phi, gam = _zoh(N_MOTION, DT)
+    free = np.empty((steps + 1, 6))
+    free[0] = x0
+    m = np.zeros((steps + 1, 6, 3 * steps))
+    for k in range(1, steps + 1):
+        free[k] = phi @ free[k - 1]
+        m[k] = phi @ m[k - 1]
+        m[k][:, 3 * (k - 1) : 3 * k] += gam * U_MAX
+    inner = m[1:steps, :3]
+
+    def pos(z: np.ndarray) -> np.ndarray:
+        return free[1:steps, :3] + np.einsum("kij,j->ki", inner, z)
+
+    cons = [
+        {"type": "eq", "fun": lambda z: free[steps] + m[steps] @ z - xf, "jac": lambda z: m[steps]},
+        {
+            "type": "ineq",
+            "fun": lambda z: np.sum(pos(z) ** 2, axis=1) / radius**2 - 1.0,
+            "jac": lambda z: 2.0 * np.einsum("ki,kij->kj", pos(z), inner) / radius**2,
+        },
+        {"type": "ineq", "fun": lambda z: 1.0 - np.sum(z.reshape(-1, 3) ** 2, axis=1)},
+    ]
+    mid = steps // 2
+    lhs = np.vstack([m[steps], m[mid][:3]])
+    rhs = np.r_[xf - free[steps], 2.0 * radius * side - free[mid, :3]]
+    z0 = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    return minimize(
+        lambda z: z @ z,
+        z0,
+        jac=lambda z: 2.0 * z,
+        constraints=cons,
+        method="SLSQP",
+        options={"maxiter": 2000, "ftol": 1e-12},
+    )
+
+
+@pytest.mark.parametrize("offset_km", [0.03, -0.03])
+def test_the_scp_plan_takes_the_better_of_the_two_detours(offset_km: float) -> None:
+    """A V-bar pass through a 200 m keep-out sphere (no corridor) from y = +600 m to −600 m
+    in 120 s at x = ±30 m: in the orbital plane the plan goes round above (+x) or below
+    (−x), at different costs (CW's radial terms: 19.6 vs 26.4 and 23.4 vs 21.9 here). The
+    SCP plan's energy is at least the better detour's (its nodes lie in a tightened inner
+    approximation of the safe set) and within 0.5 % of it: measured 0.09–0.10 % (the chord
+    margin and each node's predecessor half-space); the worse side costs 7–35 % more, so the
+    bound tells the sides apart."""
+    radius, steps = 0.2, 120
+    x0 = np.array([offset_km, 0.6, 0.0, 0.0, 0.0, 0.0])
+    xf = np.array([offset_km, -0.6, 0.0, 0.0, 0.0, 0.0])
+    geo = cg.geometry(Constraints(keep_out=KeepOut((radius, radius, radius))))
+    res = cp.plan(N_MOTION, DT, U_MAX, x0, xf, steps * DT, 1.0, geo)
+    assert res.status is SolveStatus.CONVERGED and res.slack_km == 0.0
+    energy = float(np.sum((res.controls / U_MAX) ** 2))
+    detours = {s: _detour(x0, xf, steps, radius, np.array([s, 0.0, 0.0])) for s in (1.0, -1.0)}
+    assert all(d.success for d in detours.values())
+    better = min(detours, key=lambda s: detours[s].fun)
+    best = float(detours[better].fun)
+    assert np.sign(res.positions[steps // 2, 0]) == better
+    assert best * (1.0 - 1e-9) <= energy <= best * 1.005
 
 
 def test_a_vanishing_covariance_margin_gives_the_unmargined_plan() -> None:

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cwrend_cli.physics.dynamics import MEAN_MOTION_PAPER_RAD_S, discretize
-from cwrend_cli.physics.estimation import kf_predict, kf_update
+from cwrend_cli.physics.estimation import MTF, PLAIN, kf_predict, kf_update
 
 H = np.hstack([np.eye(3), np.zeros((3, 3))])  # Eq. (13)
 R_NOM = np.diag([1e-6, 1e-6, 1e-6])  # km², paper Table 1 (1 m σ)
@@ -96,7 +96,7 @@ def test_kf_update_matches_spec_reference(predicted, noise_km: np.ndarray, use_m
     x_pred, p_pred = predicted
     truth = x_pred + np.array([2e-4, -1e-4, 3e-4, 1e-6, 0.0, -2e-6])
     y = truth[:3] + noise_km
-    x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, R_NOM, use_mtf)
+    x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, R_NOM, MTF if use_mtf else PLAIN)
     x_ref, p_ref, nis_ref, rho_ref, _ = reference_update(x_pred, p_pred, y, R_NOM, use_mtf)
     np.testing.assert_allclose(x_post, x_ref, rtol=0, atol=TOL_X)
     assert_cov_close(p_post, p_ref)
@@ -109,7 +109,7 @@ def test_nis_value_for_a_known_innovation() -> None:
     x_pred = np.zeros(6)
     p_pred = np.zeros((6, 6))
     y = np.array([1e-3, 2e-3, 2e-3])
-    _, _, nis, _ = kf_update(x_pred, p_pred, y, R_NOM, False)
+    _, _, nis, _ = kf_update(x_pred, p_pred, y, R_NOM, PLAIN)
     assert nis == pytest.approx(9.0, rel=1e-14)
 
 
@@ -117,7 +117,7 @@ def test_mtf_ratio_is_zero_when_mtf_off(predicted) -> None:
     """ρ = 0 without MTF, even for a huge innovation (docs/method.md; the paper does not say)."""
     x_pred, p_pred = predicted
     y = x_pred[:3] + np.array([1.0, -1.0, 1.0])  # 1 km innovation
-    _, _, nis, rho = kf_update(x_pred, p_pred, y, R_NOM, False)
+    _, _, nis, rho = kf_update(x_pred, p_pred, y, R_NOM, PLAIN)
     assert nis > 1e5
     assert rho == 0.0
 
@@ -134,7 +134,7 @@ def test_mtf_keeps_only_positive_diagonal_excess() -> None:
     p_pred[0, 3] = p_pred[3, 0] = 2e-9  # velocity correlated with x
     x_pred = np.zeros(6)
     nu = np.array([1e-2, 0.0, 1e-4])
-    x_post, p_post, _, rho = kf_update(x_pred, p_pred, nu, R_NOM, True)
+    x_post, p_post, _, rho = kf_update(x_pred, p_pred, nu, R_NOM, MTF)
 
     s_trace = 2e-6 + 3e-6 + 4e-6
     assert rho == pytest.approx((1e-4 - 2e-6) / s_trace, rel=1e-13)  # Eq. (23)
@@ -158,8 +158,8 @@ def test_mtf_inflation_reduces_the_correction(predicted) -> None:
     """An outlier moves the MTF estimate less than the plain-KF estimate (R_eff ⪰ R)."""
     x_pred, p_pred = predicted
     y = x_pred[:3] + np.array([0.05, -0.04, 0.06])  # ~50 m outlier
-    x_plain, *_ = kf_update(x_pred, p_pred, y, R_NOM, False)
-    x_mtf, *_ = kf_update(x_pred, p_pred, y, R_NOM, True)
+    x_plain, *_ = kf_update(x_pred, p_pred, y, R_NOM, PLAIN)
+    x_mtf, *_ = kf_update(x_pred, p_pred, y, R_NOM, MTF)
     assert np.linalg.norm(x_mtf[:3] - x_pred[:3]) < 0.1 * np.linalg.norm(x_plain[:3] - x_pred[:3])
 
 
@@ -198,7 +198,9 @@ def test_joseph_covariance_symmetric_psd(
     x_pred = rng.standard_normal(6)
     s = p_pred[:3, :3] + r_nom
     nu = innovation_sigmas * np.linalg.cholesky(s) @ rng.standard_normal(3)
-    _, p_post, nis, rho = kf_update(x_pred, p_pred, x_pred[:3] + nu, r_nom, use_mtf)
+    _, p_post, nis, rho = kf_update(
+        x_pred, p_pred, x_pred[:3] + nu, r_nom, MTF if use_mtf else PLAIN
+    )
     np.testing.assert_array_equal(p_post, p_post.T)
     norm = np.abs(np.linalg.eigvalsh(p_pred)).max()
     assert np.linalg.eigvalsh(p_post).min() >= -1e-13 * norm

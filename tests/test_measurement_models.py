@@ -16,7 +16,7 @@ from scipy import stats
 from cwrend_cli.physics import measurement_models as mm
 from cwrend_cli.physics import params, sensors
 from cwrend_cli.physics.dynamics import discretize
-from cwrend_cli.physics.estimation import kf_predict, kf_update
+from cwrend_cli.physics.estimation import MTF, PLAIN, kf_predict, kf_update
 
 #: Relative positions [km] the Jacobians are checked at: the paper's start (31 km
 #: cross-track, near the ±180° seam of no angle), a V-bar, an oblique and a 10 m one.
@@ -59,8 +59,8 @@ def test_azimuth_residual_across_180_deg_is_the_short_one() -> None:
     p = np.diag([1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14])  # 1 mm: 5e-7 rad at 2 km
     r = np.diag([np.deg2rad(0.1) ** 2] * 2)
     el = mm.measure(mm.ANGLES, x[:3])[1]
-    wrapped = mm.ekf_update(mm.ANGLES, x, p, np.array([np.deg2rad(-179.9), el]), r, False)
-    unwrapped = mm.ekf_update(mm.ANGLES, x, p, np.array([np.deg2rad(180.1), el]), r, False)
+    wrapped = mm.ekf_update(mm.ANGLES, x, p, np.array([np.deg2rad(-179.9), el]), r, PLAIN)
+    unwrapped = mm.ekf_update(mm.ANGLES, x, p, np.array([np.deg2rad(180.1), el]), r, PLAIN)
     np.testing.assert_allclose(wrapped[0], unwrapped[0], rtol=0, atol=1e-12)
     assert wrapped[2] == pytest.approx(unwrapped[2], rel=1e-9)  # NIS of a 0.2° residual
     assert wrapped[2] == pytest.approx(4.0, rel=1e-3)  # (0.2°/0.1°)², P small beside R
@@ -74,8 +74,8 @@ def test_the_extended_update_of_the_position_sensor_is_the_linear_one(use_mtf: b
     x = np.array([0.3, -0.2, 5.0, 1e-3, 2e-3, 0.0])
     y = x[:3] + np.array([4e-3, -1e-3, 2e-3])  # an outlier on x: MTF inflates
     r = np.diag([1e-6, 2e-6, 1.5e-6])
-    linear = kf_update(x, p, y, r, use_mtf)
-    extended = mm.ekf_update(mm.POSITION, x, p, y, r, use_mtf)
+    linear = kf_update(x, p, y, r, MTF if use_mtf else PLAIN)
+    extended = mm.ekf_update(mm.POSITION, x, p, y, r, MTF if use_mtf else PLAIN)
     for a_part, b_part in zip(linear, extended, strict=True):
         np.testing.assert_allclose(b_part, a_part, rtol=1e-12, atol=1e-18)
 
@@ -107,7 +107,7 @@ def test_the_range_bearing_filter_converges_to_the_truth_at_tiny_noise() -> None
         x = phi @ x
         y = mm.measure_truth(sensor, k, x)
         x_pred, p_pred = kf_predict(x_hat, p, phi, gam, u, q)
-        x_hat, p, _, _ = mm.sensor_update(sensor, x_pred, p_pred, y, False)
+        x_hat, p, _, _ = mm.sensor_update(sensor, x_pred, p_pred, y, PLAIN)
     # from 1.4 m and 1.5 m/s to within 1 cm and 1 mm/s
     assert np.linalg.norm(x_hat[:3] - x[:3]) < 1e-5
     assert np.linalg.norm(x_hat[3:] - x[3:]) < 1e-6

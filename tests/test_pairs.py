@@ -9,6 +9,7 @@ bit: an added pair draws its bootstrap from a stream of its own.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,12 @@ from typer.testing import CliRunner
 from cwrend_cli.campaign import sequential, statistics
 from cwrend_cli.cli import app
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.physics.params import ALL_ARCHITECTURES, SOCP_ARCHITECTURES
+from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
+    ARCHITECTURES,
+    SOCP_ARCHITECTURES,
+    STF_ARCHITECTURES,
+)
 
 runner = CliRunner()
 SOCP_WITHIN = [
@@ -28,6 +34,8 @@ SOCP_WITHIN = [
     ("mtf_adaptive_socp", "mtf_fixed_socp"),
     ("plain_adaptive_socp", "plain_fixed_socp"),
 ]
+#: The paper's eight architectures (shooting and cone program), without the single factor.
+PAPER_EIGHT = [*ARCHITECTURES, *SOCP_ARCHITECTURES]
 
 
 def _runs(archs: list[str], points: int = 1) -> pd.DataFrame:
@@ -52,14 +60,36 @@ def _pairs_of(frame: pd.DataFrame) -> set[tuple[str, str]]:
 
 
 def test_default_pairs_differ_in_one_choice_each() -> None:
-    """12 pairs: 4 within each method (2 estimator, 2 schedule) and 4 across methods."""
+    """12 pairs of the paper's eight: 4 within each method (2 estimator, 2 schedule) and 4
+    across methods; then 12 of the single factor (issue 35): within each method MTF vs STF
+    and STF vs plain at each schedule (4) and STF adaptive vs fixed (1), and 2 across."""
     pairs = statistics.DEFAULT_PAIRS
-    assert pairs[: len(statistics.PAIRS)] == statistics.PAIRS and len(set(pairs)) == 12
+    assert pairs[: len(statistics.PAIRS)] == statistics.PAIRS and len(set(pairs)) == 24
+    assert all(a in PAPER_EIGHT and b in PAPER_EIGHT for a, b in pairs[:12])
+    assert all(a in STF_ARCHITECTURES or b in STF_ARCHITECTURES for a, b in pairs[12:])
     for a, b in pairs:
         x, y = ALL_ARCHITECTURES[a], ALL_ARCHITECTURES[b]
-        differ = [x.mtf != y.mtf, x.adaptive != y.adaptive, x.method != y.method]
+        differ = [x.estimator != y.estimator, x.adaptive != y.adaptive, x.method != y.method]
         assert sum(differ) == 1
     assert set(SOCP_WITHIN) <= set(pairs)
+
+
+def test_a_campaign_with_the_single_factor_compares_mtf_with_it_first() -> None:
+    """``--arch with_stf``: the paper's pairs, then MTF vs STF at each schedule (P(MTF beats
+    STF)), STF adaptive vs fixed and STF vs plain; the paper's rows as without the STF."""
+    archs = [*ARCHITECTURES, "stf_fixed", "stf_adaptive"]
+    runs = _runs(archs)
+    frame = statistics.paired(runs, seed=7)
+    paper = statistics.paired(runs[runs["arch"].isin(list(ARCHITECTURES))], seed=7)
+    pd.testing.assert_frame_equal(frame.iloc[: len(paper)].reset_index(drop=True), paper)
+    added = list(dict.fromkeys(zip(frame["arch"], frame["other"], strict=True)))[4:]
+    assert added == [
+        ("mtf_adaptive", "stf_adaptive"),
+        ("mtf_fixed", "stf_fixed"),
+        ("stf_adaptive", "stf_fixed"),
+        ("stf_adaptive", "plain_adaptive"),
+        ("stf_fixed", "plain_fixed"),
+    ]
 
 
 def test_an_all_socp_campaign_compares_its_estimators_and_schedules() -> None:
@@ -71,7 +101,7 @@ def test_an_all_socp_campaign_compares_its_estimators_and_schedules() -> None:
 @pytest.mark.parametrize("by", [[], ["point", "param.schedule.beta"]])
 def test_the_added_pairs_append_rows_and_change_none(by: list[str]) -> None:
     """Every architecture, three grid points: the rows of PAIRS first, bit for bit as before."""
-    runs = _runs(list(ALL_ARCHITECTURES), points=3 if by else 1)
+    runs = _runs(PAPER_EIGHT, points=3 if by else 1)
     before = statistics.paired(runs, by, seed=7, pairs=statistics.PAIRS)
     now = statistics.paired(runs, by, seed=7)
     assert len(now) > len(before)
@@ -140,3 +170,63 @@ def test_a_pair_is_stored_and_shown(tmp_path: Path) -> None:
     paired = stats[stats["kind"] == "paired"]
     assert _pairs_of(paired) == {("plain_adaptive", "mtf_fixed")} and len(paired) == 3
     assert "plain_adaptive" in result.stdout and "vs mtf_fixed" in result.stdout
+
+
+def _paired_in(directory: Path, stats: str = "ablation.parquet") -> set[tuple[str, str]]:
+    frame = pd.read_parquet(directory / stats)
+    paired = frame[frame["kind"] == "paired"]
+    return _pairs_of(paired) if "other" in paired else set()  # no pair: no column
+
+
+@pytest.mark.parametrize("command", ["ablate", "sweep"])
+def test_a_pair_is_remembered_by_a_later_command_that_rewrites_the_statistics(
+    tmp_path: Path, command: str
+) -> None:
+    """A resume naming no --pair (here: one more seed) keeps the pairs added before: the
+    manifest records them and every rewrite of the statistics compares them again."""
+    cfg = _config(tmp_path)
+    base = [command, str(cfg), "--name", "p", "--arch", "mtf_fixed,plain_adaptive",
+            "-w", "1", "--no-rrd", "-q"]  # fmt: skip
+    if command == "sweep":
+        base += ["--param", "schedule.beta=0.25,0.5"]
+    stats = "ablation.parquet" if command == "ablate" else "sweep.parquet"
+    out = tmp_path / "results" / "p"
+    first = runner.invoke(app, [*base, "--seeds", "2", "--pair", "plain_adaptive:mtf_fixed"])
+    assert first.exit_code == 0, first.output
+    assert _paired_in(out, stats) == {("plain_adaptive", "mtf_fixed")}
+    resumed = runner.invoke(app, [*base, "--seeds", "3"])
+    assert resumed.exit_code == 0, resumed.output
+    assert _paired_in(out, stats) == {("plain_adaptive", "mtf_fixed")}
+    frame = pd.read_parquet(out / stats)
+    assert set(frame.loc[frame["kind"] == "paired", "n"]) == {3}  # recomputed on 3 seeds
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["pairs"] == ["plain_adaptive:mtf_fixed"]
+
+
+def test_a_remembered_pair_is_kept_by_a_rerun_naming_one_of_its_architectures(
+    tmp_path: Path,
+) -> None:
+    """A re-run of one architecture of the pair is not refused for the pair it recorded."""
+    cfg = _config(tmp_path)
+    base = ["ablate", str(cfg), "--name", "p", "-w", "1", "--no-rrd", "-q", "--seeds", "2"]
+    archs = ["--arch", "mtf_fixed,plain_adaptive"]
+    first = runner.invoke(app, [*base, *archs, "--pair", "plain_adaptive:mtf_fixed"])
+    assert first.exit_code == 0, first.output
+    again = runner.invoke(app, [*base, "--arch", "mtf_fixed"])
+    assert again.exit_code == 0, again.output
+    out = tmp_path / "results" / "p"
+    assert _paired_in(out) == {("plain_adaptive", "mtf_fixed")}
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["pairs"] == ["plain_adaptive:mtf_fixed"]
+
+
+def test_the_recorded_pairs_of_a_manifest_are_read_back_and_checked(tmp_path: Path) -> None:
+    from cwrend_cli.output.manifest import ManifestError, read_manifest, recorded_pairs
+
+    path = tmp_path / "manifest.json"
+    path.write_text(json.dumps({"root_seed": 0, "pairs": ["a:b", "c:d"]}), encoding="utf-8")
+    assert recorded_pairs(read_manifest(path, "fix")) == (("a", "b"), ("c", "d"))
+    assert recorded_pairs({"root_seed": 0}) == ()
+    path.write_text(json.dumps({"root_seed": 0, "pairs": ["a:b", "cd"]}), encoding="utf-8")
+    with pytest.raises(ManifestError, match='"pairs"'):
+        read_manifest(path, "fix")

@@ -806,6 +806,50 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
         assert world in f.draw().get_suptitle(), f.file
 
 
+@pytest.fixture(scope="module")
+def truth_sweep_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2-seed sweep over ``truth.model`` (base: CW), as ``--param truth.model=cw,two_body``."""
+    root = tmp_path_factory.mktemp("truth_sweep")
+    points = [("p_cw", {"truth.model": "cw"}), ("p_2b", {"truth.model": "two_body"})]
+    return _write_campaign(root, points, seeds=(0, 1), with_refs=True)
+
+
+@pytest.mark.parametrize(
+    ("point", "world"), [("p_cw", "truth: cw (the design model)"), ("p_2b", "truth: two_body")]
+)
+def test_figures_of_a_point_name_its_world(truth_sweep_dir: Path, point: str, world: str) -> None:
+    """Issue 37: the reported point's figures name its truth model, not the base config's."""
+    from cwrend_cli.report import figures
+
+    data = load_results(truth_sweep_dir, point=point)
+    assert data.world == world
+    per_point = [f for f in figures.planned_figures(data) if not f.file.startswith("sweep_")]
+    assert {*PER_SEED, *MULTI_SEED} <= {f.file for f in per_point}
+    for f in per_point:
+        assert f.caption.endswith(f"Simulated world: {world}."), f.file
+        assert f.draw().get_suptitle().split("\n")[-1] == world, f.file
+
+
+def test_thrust_limit_is_the_reported_points(tmp_path: Path) -> None:
+    """Issue 37: what the per-seed figures draw from the configuration is the point's (fig. 2's
+    thrust limit), not the base config's 8e-4 km/s²."""
+    points = [("p_lo", {"scenario.u_max_km_s2": 6e-4}), ("p_hi", {"scenario.u_max_km_s2": 1e-3})]
+    root = _write_campaign(tmp_path, points, seeds=(0,), with_refs=False, with_stats=False)
+    assert load_results(root, point="p_lo").u_max_km_s2 == 6e-4
+    assert load_results(root, point="p_hi").u_max_km_s2 == 1e-3
+
+
+def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
+    """Issue 37: a figure over the grid names the world of each point it shows."""
+    from cwrend_cli.report import figures
+
+    data = load_results(truth_sweep_dir)
+    (sweep,) = [f for f in figures.planned_figures(data) if f.file.startswith("sweep_")]
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert sweep.caption.endswith(f"Simulated world: {worlds}."), sweep.caption
+    assert sweep.draw().get_suptitle().split("\n")[-1] == worlds
+
+
 # ---------------------------------------------------------------------------
 # Sampled designs and their sensitivity (issue 19, item 4)
 # ---------------------------------------------------------------------------
@@ -1100,4 +1144,16 @@ def test_the_paired_miss_figure_pairs_the_cone_program_architectures_too() -> No
         ("plain_adaptive", "mtf_adaptive"),
         ("plain_fixed", "mtf_fixed"),
         ("mtf_fixed", "mtf_adaptive"),
+    ]
+
+
+def test_the_paired_miss_figure_pairs_the_single_factor_with_mtf() -> None:
+    """A campaign of the single factor and MTF only (issue 35) gets its panels."""
+    from cwrend_cli.report.figures import _pairs
+
+    archs = ["stf_fixed", "stf_adaptive", "mtf_fixed", "mtf_adaptive"]
+    assert _pairs(pd.DataFrame(columns=archs)) == [
+        ("mtf_fixed", "mtf_adaptive"),
+        ("stf_adaptive", "mtf_adaptive"),
+        ("stf_fixed", "mtf_fixed"),
     ]

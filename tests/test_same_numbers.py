@@ -107,7 +107,15 @@ NEW_RUNS_COLUMNS = frozenset(
 )
 #: ``steps/`` and ``solves/`` columns added since the fixture was made (the only ones allowed).
 NEW_HISTORY_COLUMNS = frozenset(
-    {"nees", "ucmd_x_km_s2", "ucmd_y_km_s2", "ucmd_z_km_s2", "dropout", "outlier"}
+    {
+        "nees",
+        "ucmd_x_km_s2",
+        "ucmd_y_km_s2",
+        "ucmd_z_km_s2",
+        "dropout",
+        "outlier",
+        "trace_q",  # issue 33 item 2: tr Q_k of each step (estimator.process_noise)
+    }
 )
 
 SWEEP_TOML = """

@@ -124,7 +124,7 @@ def test_an_angles_run_logs_two_components_and_writes_them_in_degrees() -> None:
     )
     refs = simulation.open_loop_references(problem)
     z = sensors.standard_normal_stream(0, problem.scenario.n_steps)
-    arch = params.Architecture("mtf_adaptive", mtf=True, adaptive=True)
+    arch = params.Architecture("mtf_adaptive", "mtf", adaptive=True)
     result = simulation.simulate(problem, arch, z, refs)
     assert np.isfinite(result.y[1:, :2]).all() and np.isnan(result.y[:, 2]).all()
     assert np.isfinite(result.nis[1:]).all()

@@ -19,7 +19,7 @@ from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import sensors, simulation
 from cwrend_cli.physics._loop_kernels import nees
 from cwrend_cli.physics.dynamics import discretize
-from cwrend_cli.physics.estimation import kf_predict, kf_update
+from cwrend_cli.physics.estimation import PLAIN, kf_predict, kf_update
 from cwrend_cli.physics.params import Degradation, Window
 
 U_MAX = 8e-4  # km/s², paper Table 1
@@ -287,7 +287,7 @@ def test_nees_uses_the_posterior_and_the_prior_on_dropouts(paper_refs) -> None:
     for row in range(1, N_STEPS + 1):
         x, p = kf_predict(run.x_hat[row - 1], p, phi, gam, run.u_cmd[row - 1], est.q_matrix())
         if not run.dropout[row]:
-            _, p, _, _ = kf_update(x, p, run.y[row], est.r_nominal_matrix(), False)
+            _, p, _, _ = kf_update(x, p, run.y[row], est.r_nominal_matrix(), PLAIN)
         expected = _nees_reference(run.x_hat[row] - run.x_true[row], p)
         assert run.nees[row] == pytest.approx(expected, rel=RTOL_NEES), row
 

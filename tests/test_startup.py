@@ -137,10 +137,11 @@ def test_help_loads_neither_numpy_nor_pydantic(args: list[str]) -> None:
 def test_the_help_names_the_physics_architectures() -> None:
     """The help text's architecture names are written out in cli.py: they must be the physics'."""
     from cwrend_cli import cli
-    from cwrend_cli.physics.params import ARCHITECTURES, SOCP_ARCHITECTURES
+    from cwrend_cli.physics.params import ARCHITECTURES, SOCP_ARCHITECTURES, STF_ARCHITECTURES
 
     assert tuple(ARCHITECTURES) == cli.ARCH_SLUGS
     assert tuple(SOCP_ARCHITECTURES) == cli.SOCP_ARCH_SLUGS
+    assert tuple(STF_ARCHITECTURES) == cli.STF_ARCH_SLUGS
 
 
 @pytest.mark.parametrize(

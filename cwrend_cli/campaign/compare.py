@@ -47,16 +47,28 @@ import pandas as pd
 import pyarrow as pa
 
 from cwrend_cli.campaign import statistics
-from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, bootstrap_ci, wilson_ci
+from cwrend_cli.campaign.statistics import (
+    APPLIED_METRICS,
+    DEFAULT_PAIRS,
+    METRICS,
+    bootstrap_ci,
+    wilson_ci,
+)
 from cwrend_cli.config.io import file_digest
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.output.layout import MANIFEST, RUNS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
-from cwrend_cli.output.tables import PARAM_PREFIX, param_columns, statistics_table
+from cwrend_cli.output.tables import (
+    METRIC_NAMES,
+    PARAM_PREFIX,
+    metric_name,
+    param_columns,
+    statistics_table,
+)
 
 __all__ = [
+    "COMPARED",
     "DEFAULT_METRICS",
-    "METRIC_ALIASES",
     "Campaign",
     "Comparison",
     "Difference",
@@ -71,12 +83,12 @@ __all__ = [
     "parse_metrics",
 ]
 
-#: Short names accepted by ``--metric`` besides the column names of ``runs.parquet``.
-METRIC_ALIASES: Mapping[str, str] = {
-    "miss": "miss_km",
-    "dv": "delta_v_km_s",
-    "fuel": "fuel_penalty_pct",
-}
+#: The ``runs.parquet`` columns ``--metric`` compares, by column name or by their short name
+#: (:data:`~cwrend_cli.output.tables.METRIC_NAMES`): the paper's metrics, then the applied
+#: Δv and its penalty against the exact fuel optimum (issue 33 item 3).
+COMPARED = (*METRICS, *APPLIED_METRICS)
+#: The short names of :data:`COMPARED` (``miss``, ``dv``, …).
+_SHORT = tuple(k for k, v in METRIC_NAMES.items() if v in COMPARED)
 DEFAULT_METRICS = ("miss_km", "delta_v_km_s")
 #: Relative tolerance of equal swept numbers across campaigns.
 _RTOL = 1e-9
@@ -84,19 +96,23 @@ _NOISE_KEYS = ("noise.seed", "noise.file")
 
 
 def parse_metrics(text: str) -> tuple[str, ...]:
-    """``miss,dv`` → ``("miss_km", "delta_v_km_s")``; unknown names raise :class:`ConfigError`."""
+    """``miss,dv`` → ``("miss_km", "delta_v_km_s")``; unknown names raise :class:`ConfigError`.
+
+    Each name is a short name of :data:`~cwrend_cli.output.tables.METRIC_NAMES` or a
+    column of :data:`COMPARED`.
+    """
     out: list[str] = []
     for part in (p.strip() for p in text.split(",")):
         if not part:
             continue
-        name = METRIC_ALIASES.get(part, part)
-        if name not in METRICS:
-            allowed = ", ".join([*METRIC_ALIASES, *METRICS])
+        name = METRIC_NAMES.get(part, part)
+        if name not in COMPARED:
+            allowed = ", ".join([*_SHORT, *COMPARED])
             raise ConfigError(f"--metric {part!r}: unknown metric (allowed: {allowed})")
         if name not in out:
             out.append(name)
     if not out:
-        raise ConfigError(f"--metric {text!r}: name at least one of {', '.join(METRIC_ALIASES)}")
+        raise ConfigError(f"--metric {text!r}: name at least one of {', '.join(_SHORT)}")
     return tuple(out)
 
 
@@ -329,6 +345,8 @@ def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) 
     run, or no run that succeeded in both.
     """
     metrics = tuple(metrics)
+    for c in (a, b):
+        _check_metrics(c, metrics)
     matched = match_runs(a, b, metrics)
     pairs = matched.pairs
     ok = pairs[(pairs["status_a"] == "ok") & (pairs["status_b"] == "ok")]
@@ -372,6 +390,22 @@ def compare(a: Campaign, b: Campaign, metrics: Sequence[str] = DEFAULT_METRICS) 
         notes=matched.notes,
         a=a,
         b=b,
+    )
+
+
+def _check_metrics(c: Campaign, metrics: Sequence[str]) -> None:
+    """Refuse (:class:`ConfigError`, exit 2) a metric that ``runs.parquet`` of ``c`` lacks:
+    a campaign written by a cwrend that did not compute it (the applied Δv before issue 33)."""
+    missing = [m for m in metrics if m not in c.runs.columns]
+    if not missing:
+        return
+    names = ", ".join(f"{metric_name(m)} ({m})" for m in missing)
+    held = ", ".join(metric_name(m) for m in COMPARED if m in c.runs.columns)
+    raise ConfigError(
+        f"{c.path}: --metric {names}: runs.parquet has no such column (the campaign was "
+        "written by a cwrend that did not compute it); re-run the campaign with this version "
+        "(its command with --force, or with another --name) to compare it, or compare "
+        f"{held or 'the metrics it holds'}"
     )
 
 
@@ -447,7 +481,8 @@ def compare_table(comparison: Comparison) -> pa.Table:
         # one config hash when both campaigns share their base config, else both
         "config_hash": hash_a if hash_a == hash_b else f"A {hash_a}; B {hash_b}",
         "difference": "A - B per seed; frac_better: share of seeds with A < B",
-        "units": "miss_km km, delta_v_km_s km/s, fuel_penalty_pct %",
+        "units": "miss_km km, delta_v_km_s km/s, fuel_penalty_pct %, delta_v_applied_km_s "
+        "km/s, fuel_penalty_applied_pct %",
         "a": str(a.path.resolve()),
         "b": str(b.path.resolve()),
         "campaign_hash_a": str(a.manifest.get("campaign_hash", "")),

@@ -93,7 +93,7 @@ from cwrend_cli.output.layout import (
     recording_path,
     references_path,
 )
-from cwrend_cli.output.manifest import read_manifest
+from cwrend_cli.output.manifest import read_manifest, recorded_pairs
 from cwrend_cli.output.tables import (
     param_columns,
     points_table,
@@ -185,6 +185,9 @@ class CampaignSummary:
     #: run records of the journal not reused, by reason: not provably this campaign's or
     #: these versions' (journal.JournalOwner); their runs are computed again
     set_aside: Mapping[str, int] = field(default_factory=dict)
+    #: the pairs to compare: those asked for (``run_campaign``'s ``pairs``), then the pairs
+    #: added by earlier commands that the manifest records (``--pair A:B``)
+    pairs: tuple[tuple[str, str], ...] = statistics.DEFAULT_PAIRS
 
 
 class _PointReferences:
@@ -325,6 +328,7 @@ def run_campaign(
     argv: Sequence[str] | None = None,
     hold: contextlib.ExitStack | None = None,
     repair_manifest: bool = False,
+    pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -346,6 +350,12 @@ def run_campaign(
     ``repair_manifest``: a damaged ``manifest.json`` is rebuilt from the
     journal (whose records must name this campaign) and this plan, instead of
     refused (:func:`~cwrend_cli.campaign.journal.check_same_campaign`).
+
+    ``pairs``: the pairs the statistics compare (``statistics.campaign_pairs``);
+    those beyond :data:`~cwrend_cli.campaign.statistics.DEFAULT_PAIRS` are recorded
+    in the manifest, after those earlier commands added (``--force`` forgets them),
+    and the summary's ``pairs`` holds them all: what every later rewrite of the
+    statistics compares.
     """
     progress = progress or _NoProgress()
     try:
@@ -355,7 +365,7 @@ def run_campaign(
             )
             return _run_locked(
                 plan_, out_dir, progress, command, executor_kind, workers, address, force,
-                retry_failed, allow_version_change, argv, repair_manifest,
+                retry_failed, allow_version_change, argv, repair_manifest, pairs,
             )  # fmt: skip
     except OSError as exc:  # outside the runs (the lock, the first manifest): nothing computed
         raise InfrastructureError(
@@ -407,6 +417,7 @@ def _run_locked(
     allow_version_change: bool,
     argv: Sequence[str] | None = None,
     repair_manifest: bool = False,
+    pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
 ) -> CampaignSummary:
     """:func:`run_campaign` once the directory exists, is confined and locked."""
     progress = _SettledProgress(progress)
@@ -428,10 +439,12 @@ def _run_locked(
     skipped = len(plan_.runs) - total
     tasks += owed  # recordings lost before: written again, counted in no run
     executor = {"kind": executor_kind, "workers": workers, "address": address}
+    added = [p for p in pairs if p not in statistics.DEFAULT_PAIRS]
     manifest = new_manifest(
         plan_, command=command, executor=executor, started=time.time(), previous=previous,
-        argv=argv,
+        argv=argv, pairs=added,
     )  # fmt: skip
+    compared = (*pairs, *(p for p in recorded_pairs(manifest) if p not in pairs))
     write_json(manifest, out_dir / MANIFEST)
     interrupted = False
     stopped: str | None = None
@@ -492,7 +505,7 @@ def _run_locked(
             "the same command to compute exactly the missing runs"
         )
     return CampaignSummary(
-        out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs), set_aside
+        out_dir, computed, skipped, ok, failed, interrupted, len(plan_.runs), set_aside, compared
     )
 
 

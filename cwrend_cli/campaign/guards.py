@@ -132,6 +132,10 @@ RESOLVE_STEP_COST_S = 100e-6
 #: (Sapphire Rapids, 2026-12-02): campaigns/safe_approach.toml's mtf_adaptive_socp run,
 #: 79 re-solves in 17-18 s, 213 ms mean (670 ms max) over 400 steps on average: 0.53 ms a
 #: step; twice that, so the limit stays a few times the cost on a machine twice as slow.
+#: Kept after the program's matrix was assembled at once (5× faster re-solves): on the
+#: 2-core AMD EPYC loaded about 4× by other processes, 296-331 ms mean over the loops of
+#: seeds 0-19 (benchmarks/bench_constrained.py), 0.74-0.83 ms a step, so a lower value
+#: would leave a loaded machine's runs less than twice their cost.
 CONSTRAINED_RESOLVE_STEP_COST_S = 1e-3
 #: A run's default limit is this multiple of its cost (:func:`run_cost_s`) ...
 COST_MULTIPLE = 3.0

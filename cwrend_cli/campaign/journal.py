@@ -69,7 +69,7 @@ from cwrend_cli.output.layout import (
     STEPS,
     SWEEP_STATS,
 )
-from cwrend_cli.output.manifest import damaged, read_manifest
+from cwrend_cli.output.manifest import damaged, pair_texts, read_manifest, recorded_pairs
 
 __all__ = [
     "DATASETS",
@@ -635,6 +635,7 @@ def new_manifest(
     started: float,
     previous: Mapping[str, Any] | None = None,
     argv: Sequence[str] | None = None,
+    pairs: Sequence[tuple[str, str]] = (),
 ) -> dict[str, Any]:
     """The manifest of a campaign invocation that starts now (``status`` = running).
 
@@ -651,6 +652,12 @@ def new_manifest(
     covers and the campaign hash does not: the files of earlier sessions keep
     their hash in their metadata, and each session's ``output`` gives back the
     whole config of that hash (the rest is the campaign's).
+
+    ``pairs``: the pairs this invocation adds to the default comparisons
+    (``--pair A:B``); ``pairs`` (as ``"A:B"``) records them after those the
+    ``previous`` manifest recorded, so that a later command that rewrites the
+    statistics compares them again (:func:`~cwrend_cli.output.manifest.recorded_pairs`).
+    Absent when no command added a pair.
     """
     sessions = _earlier_sessions(previous or {})
     earlier_hash = (previous or {}).get("config_hash")
@@ -674,7 +681,9 @@ def new_manifest(
         *(s.get("config_hash") for s in sessions),
         plan_.config_hash,
     ]
+    added = dict.fromkeys([*recorded_pairs(previous or {}), *pairs])
     return {
+        **({"pairs": pair_texts(list(added))} if added else {}),
         "cwrend_version": __version__,
         "environment": environment(),
         "command": command,

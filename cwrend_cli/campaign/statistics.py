@@ -46,7 +46,7 @@ from cwrend_cli.campaign.executors import default_workers
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
-from cwrend_cli.physics.params import ALL_ARCHITECTURES
+from cwrend_cli.physics.params import ALL_ARCHITECTURES, Architecture
 
 METRICS = ("delta_v_km_s", "miss_km", "fuel_penalty_pct")
 CONFIDENCE = 0.95
@@ -81,33 +81,53 @@ PAIRS = (
 PAIR_STREAM = 2**32 - 2
 
 
-def _pairs_by_rule() -> tuple[tuple[str, str], ...]:
-    """Every pair that differs in one design choice, better-expected first.
+#: Expected order of the estimators (a pair puts the better-expected first): the
+#: single-factor baseline (issue 35) between the plain and the MTF filter.
+_ESTIMATOR_RANK = {"plain": 0, "stf": 1, "mtf": 2}
 
-    Within each re-solve method: MTF vs plain at the same schedule, adaptive
-    vs fixed at the same estimator; across methods: cone program vs shooting
-    at the same estimator and schedule. Ordered as :data:`PAIRS` (the
-    architectures of :data:`~cwrend_cli.physics.params.ALL_ARCHITECTURES` from
-    the last: MTF adaptive first).
+
+def _pairs_by_rule(archs: Sequence[Architecture]) -> tuple[tuple[str, str], ...]:
+    """Every pair of ``archs`` that differs in one design choice, better-expected first.
+
+    Within each re-solve method: the better-expected estimator against the other
+    at the same schedule (MTF vs single-factor vs plain), adaptive vs fixed at
+    the same estimator; across methods: cone program vs shooting at the same
+    estimator and schedule. Ordered as :data:`PAIRS` (``archs`` from the last:
+    MTF adaptive first for the paper's eight).
     """
-    archs = list(ALL_ARCHITECTURES.values())[::-1]
     out: list[tuple[str, str]] = []
-    for a in archs:
-        for b in archs:
+    for a in archs[::-1]:
+        for b in archs[::-1]:
             same_method = a.method == b.method
-            estimator = same_method and a.adaptive == b.adaptive and a.mtf and not b.mtf
-            schedule = same_method and a.mtf == b.mtf and a.adaptive and not b.adaptive
-            twins = (a.mtf, a.adaptive) == (b.mtf, b.adaptive)
+            better = _ESTIMATOR_RANK[a.estimator] > _ESTIMATOR_RANK[b.estimator]
+            estimator = same_method and a.adaptive == b.adaptive and better
+            schedule = same_method and a.estimator == b.estimator and a.adaptive and not b.adaptive
+            twins = (a.estimator, a.adaptive) == (b.estimator, b.adaptive)
             method = twins and a.method == "socp" and b.method is None
             if estimator or schedule or method:
                 out.append((a.slug, b.slug))
     return tuple(out)
 
 
+def _default_pairs() -> tuple[tuple[str, str], ...]:
+    """:data:`PAIRS`, the other pairs of the paper's eight, then those of the single factor.
+
+    The single-factor pairs (issue 35) come last, MTF against the single factor
+    first (P(MTF beats STF)), so that every pair of the paper's eight keeps its place.
+    """
+    paper = [a for a in ALL_ARCHITECTURES.values() if a.estimator != "stf"]
+    out = list(PAIRS) + [p for p in _pairs_by_rule(paper) if p not in PAIRS]
+    stf = [p for p in _pairs_by_rule(list(ALL_ARCHITECTURES.values())) if p not in out]
+    stf.sort(key=lambda p: ALL_ARCHITECTURES[p[0]].estimator != "mtf")  # stable
+    return (*out, *stf)
+
+
 #: The pairs every campaign compares when both architectures are in it: :data:`PAIRS`
 #: (its rows as they always were), then the other pairs of :func:`_pairs_by_rule` (the
-#: estimators and schedules of the cone-program architectures, issue 37), added pairs.
-DEFAULT_PAIRS = PAIRS + tuple(p for p in _pairs_by_rule() if p not in PAIRS)
+#: estimators and schedules of the cone-program architectures, issue 37; then the
+#: single-factor baseline's, issue 35: MTF vs STF, STF vs plain, adaptive vs fixed and
+#: cone program vs shooting of the STF), added pairs.
+DEFAULT_PAIRS = _default_pairs()
 
 
 def campaign_pairs(asked: Sequence[str], archs: Sequence[str]) -> tuple[tuple[str, str], ...]:

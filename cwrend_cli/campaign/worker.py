@@ -66,7 +66,7 @@ from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
 from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
-from cwrend_cli.physics import actuator, sensors, simulation
+from cwrend_cli.physics import actuator, process_noise, sensors, simulation
 from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     Architecture,
@@ -235,13 +235,22 @@ _VARIANTS_RUN: set[tuple[object, ...]] = set()
 def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
     """What chooses the compiled code a run of ``arch`` on ``problem`` loads or compiles.
 
-    The architecture, and whether the closed loop carries a nonlinear truth or an
-    actuator with errors: each compiles its own specialisation of the loop
-    (:func:`cwrend_cli.physics._loop_kernels._optional`), 10-15 CPU s on a fresh
+    The architecture, and whether the closed loop carries a nonlinear truth, an
+    actuator with errors, a process noise other than ``q_process``, an extended
+    Kalman filter or a nonlinear sensor: each compiles its own specialisation of the
+    loop (:func:`cwrend_cli.physics._loop_kernels._optional`), 10-15 CPU s on a fresh
     install, so the first run of each gets the first-run allowance of its time limit,
     not only the first run of each architecture.
     """
-    return (arch, problem.truth.model, problem.actuator.ideal)
+    noise = process_noise.varies(problem.estimator, problem.actuator.ideal)
+    return (
+        arch,
+        problem.truth.model,
+        problem.actuator.ideal,
+        noise,
+        problem.model.filter,
+        problem.sensor.model,
+    )
 
 
 def compile_ahead(task: Task) -> None:

@@ -45,6 +45,7 @@ from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     ARCHITECTURES,
     SOCP_ARCHITECTURES,
+    STF_ARCHITECTURES,
     Architecture,
 )
 
@@ -52,6 +53,7 @@ __all__ = [
     "ALL_ARCHITECTURES",
     "ARCHITECTURES",
     "SOCP_ARCHITECTURES",
+    "STF_ARCHITECTURES",
     "ActuatorConfig",
     "Architecture",
     "CwrendConfig",

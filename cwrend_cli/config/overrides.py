@@ -29,6 +29,7 @@ from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     ARCHITECTURES,
     SOCP_ARCHITECTURES,
+    STF_ARCHITECTURES,
     Architecture,
 )
 
@@ -341,8 +342,11 @@ def parse_arch(slug: str) -> Architecture:
         return ALL_ARCHITECTURES[slug.strip()]
     except KeyError:
         allowed = ", ".join(ALL_ARCHITECTURES)
-        hint = did_you_mean(slug.strip(), list(ALL_ARCHITECTURES))
-        raise ConfigError(f"unknown architecture {slug!r} (allowed: {allowed}){hint}") from None
+        groups = ", ".join(ARCH_GROUPS)
+        hint = did_you_mean(slug.strip(), [*ALL_ARCHITECTURES, *ARCH_GROUPS])
+        raise ConfigError(
+            f"unknown architecture {slug!r} (allowed: {allowed}; or one group: {groups}){hint}"
+        ) from None
 
 
 #: Names of architecture groups accepted by :func:`parse_archs`.
@@ -350,13 +354,23 @@ ARCH_GROUPS: Mapping[str, tuple[Architecture, ...]] = MappingProxyType(
     {
         "all": tuple(ARCHITECTURES.values()),  # the paper's ablation (shooting)
         "all_socp": tuple(SOCP_ARCHITECTURES.values()),  # the same with the cone program
-        "everything": tuple(ALL_ARCHITECTURES.values()),  # both, shooting first
+        "everything": (*ARCHITECTURES.values(), *SOCP_ARCHITECTURES.values()),  # both
+        # the same three with the single-factor baseline (issue 35) appended
+        "with_stf": (
+            *ARCHITECTURES.values(),
+            *(a for a in STF_ARCHITECTURES.values() if a.method is None),
+        ),
+        "with_stf_socp": (
+            *SOCP_ARCHITECTURES.values(),
+            *(a for a in STF_ARCHITECTURES.values() if a.method == "socp"),
+        ),
+        "everything_with_stf": tuple(ALL_ARCHITECTURES.values()),
     }
 )
 
 
 def parse_archs(text: str) -> tuple[Architecture, ...]:
-    """A group name (``all``, ``all_socp``, ``everything``) or comma-separated slugs."""
+    """A group name (:data:`ARCH_GROUPS`) or comma-separated slugs."""
     group = ARCH_GROUPS.get(text.strip())
     if group is not None:
         return group

@@ -376,10 +376,35 @@ class EstimatorConfig(_FrozenModel):
         "Positions within ±1e4 km, velocities within ±10 km/s.",
     )
 
+    process_noise: Literal["fixed", "from_actuator", "adaptive"] = Field(
+        _PAPER.estimator.process_noise,
+        description="process noise Q_k of each step: 'fixed' (q_process, the paper's), "
+        "'from_actuator' (q_process + the actuator errors' at the commanded thrust) or "
+        "'adaptive' (Sage-Husa estimate, floored at q_process) [-]",
+    )
+    q_forgetting: Float = Field(
+        _PAPER.estimator.q_forgetting,
+        ge=0.5,
+        lt=1.0,
+        description="forgetting factor b of the adaptive process noise (memory about "
+        "1/(1 - b) steps), in [0.5, 1); read with process_noise = 'adaptive' [-]",
+    )
+
     @field_validator("initial_error", mode="before")
     @classmethod
     def _six_errors(cls, value: Any) -> Any:
         return _check_length(value, 6)
+
+    @model_serializer(mode="wrap")
+    def _without_default_process_noise(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # the process-noise fields at their defaults are left out of the resolved tree (the
+        # config and campaign hashes are computed from it): existing hashes unchanged (issue 33)
+        out = handler(self)
+        if isinstance(out, dict):
+            for name in ("process_noise", "q_forgetting"):
+                if getattr(self, name) == getattr(_PAPER.estimator, name):
+                    out.pop(name, None)
+        return out
 
     def r_nominal_matrix(self) -> np.ndarray:
         """R_nominal as a new 3×3 float64 array [km²]."""

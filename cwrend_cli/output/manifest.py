@@ -13,13 +13,22 @@ is the caller's: a resume can rebuild the manifest from the journal
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_SEED
 
-__all__ = ["MAX_MANIFEST_BYTES", "REPAIR_HINT", "ManifestError", "damaged", "read_manifest"]
+__all__ = [
+    "MAX_MANIFEST_BYTES",
+    "REPAIR_HINT",
+    "ManifestError",
+    "damaged",
+    "pair_texts",
+    "read_manifest",
+    "recorded_pairs",
+]
 
 #: Size of a manifest [bytes]: it holds a configuration, a grid of at most
 #: MAX_POINTS points and a few lines per session; anything larger is not one.
@@ -44,6 +53,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "archs": (list,),
     "sessions": (list,),
     "status": (str,),
+    "pairs": (list,),  # the pairs added by --pair A:B, as "A:B" (pair_texts)
 }
 
 
@@ -83,6 +93,9 @@ def _problem(path: Path) -> tuple[dict[str, Any] | None, str]:
         if name in value and (not isinstance(value[name], types) or isinstance(value[name], bool)):
             expected = " or ".join("null" if t is type(None) else _JSON_NAMES[t] for t in types)
             return None, f'"{name}" is {_kind(value[name])}, not {expected}'
+    pairs = value.get("pairs", [])
+    if not all(isinstance(p, str) and len(p.split(":")) == 2 for p in pairs):
+        return None, '"pairs" holds an entry that is not a string "A:B"'
     seed = value.get("root_seed")
     if isinstance(seed, int) and not 0 <= seed <= MAX_SEED:
         return None, f'"root_seed" = {seed} is outside [0, {MAX_SEED}]'
@@ -124,3 +137,18 @@ def read_manifest(path: Path, fix: str) -> dict[str, Any]:
 def damaged(path: Path) -> str:
     """What is wrong with the manifest at ``path`` (``""`` when it reads)."""
     return _problem(path)[1]
+
+
+def pair_texts(pairs: Sequence[tuple[str, str]]) -> list[str]:
+    """The ``pairs`` field of a manifest: each pair as ``"A:B"`` (as ``--pair`` takes it)."""
+    return [f"{a}:{b}" for a, b in pairs]
+
+
+def recorded_pairs(manifest: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
+    """The pairs a campaign's manifest records (``--pair A:B`` of its commands), in order.
+
+    ``manifest`` as :func:`read_manifest` returns it (entries checked); none when the
+    campaign was written before manifests recorded them or added no pair.
+    """
+    pairs = manifest.get("pairs", [])
+    return tuple((a, b) for a, b in (str(p).split(":") for p in pairs))

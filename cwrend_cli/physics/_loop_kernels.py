@@ -65,6 +65,7 @@ from cwrend_cli.physics.guidance._kernels import (
 )
 from cwrend_cli.physics.guidance._switching_kernels import bang_bang_ascent
 from cwrend_cli.physics.measurement_models import SensorModel, measure_truth, sensor_update
+from cwrend_cli.physics.process_noise import ProcessNoiseModel, adapt, step_q
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
 from cwrend_cli.physics.truth import TRUTH_CW, TruthModel, truth_step
 
@@ -83,7 +84,7 @@ class LoopModel(NamedTuple):
     dt: float  # step Δt [s]
     gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
     gl_w: np.ndarray  # and weights
-    use_mtf: bool  # MTF inflation of the filter (paper Eqs. 16–19)
+    estimator: int  # estimation.PLAIN, MTF (paper Eqs. 16–19) or STF (single factor)
     adaptive: bool  # ε from the innovation score (paper Eqs. 24–26), else held
     hold_mean: bool  # control averaged over the step, else sampled at its start
     u_override: np.ndarray  # (N, 3) controls held instead of the plan where ``override``
@@ -141,6 +142,7 @@ class StepLog(NamedTuple):
     eps: np.ndarray  # (N+1,)
     trace_p: np.ndarray  # (N+1,)
     nees: np.ndarray  # (N+1,) (x̂ − x)ᵀ P⁻¹ (x̂ − x) of the row's estimate and covariance
+    trace_q: np.ndarray  # (N+1,) tr Q_k of the prediction into the row (NaN in row 0)
 
 
 @njit(cache=True)
@@ -229,6 +231,7 @@ def advance(
     log: StepLog,
     sensor: SensorModel | None = None,
     ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
 ) -> LoopScalars:
     """Run steps ``k_start … k_stop``; the last one stops before its costate propagation.
 
@@ -244,13 +247,15 @@ def advance(
     The CW truth and the ideal actuator cross as ``None`` (:func:`_optional`),
     and so does the position sensor (``sensor`` None: the paper's measurement,
     compiled without the extended update; a nonlinear sensor of issue 35 is a
-    :class:`~cwrend_cli.physics.measurement_models.SensorModel`), and so does a
-    linear filter (``ekf`` None: :func:`_optional_ekf`).
+    :class:`~cwrend_cli.physics.measurement_models.SensorModel`), and so do a
+    linear filter (``ekf`` None: :func:`_optional_ekf`) and the fixed process noise
+    ``pn`` (``None``: ``model.q`` at every step; else
+    :mod:`cwrend_cli.physics.process_noise`).
     """
     out = _advance(
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(state), tuple(scalars), tuple(log), None if sensor is None else tuple(sensor),
-        _optional_ekf(ekf),
+        _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
     return LoopScalars(*out)
 
@@ -281,6 +286,15 @@ def _optional_ekf(ekf: EkfModel | None) -> tuple[tuple[Any, ...], np.ndarray] | 
     return None if ekf is None else (tuple(ekf.tm), ekf.chief)
 
 
+def _optional_noise(pn: ProcessNoiseModel | None) -> tuple[Any, ...] | None:
+    """The process noise as the compiled loop takes it: ``None`` when fixed (``model.q``).
+
+    As :func:`_optional`: with ``None`` numba prunes the process-noise branches of
+    :func:`_steps`, so the fixed runs compile and compute what they always did.
+    """
+    return None if pn is None else tuple(pn)
+
+
 def compile_steps(
     model: LoopModel,
     truth: TruthModel,
@@ -290,12 +304,14 @@ def compile_steps(
     log: StepLog,
     sensor: SensorModel | None = None,
     ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
 ) -> None:
     """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
 
     Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
-    tuples; the CW truth, the ideal actuator, the position sensor and a linear
-    filter as ``None``, :func:`_optional`, :func:`_optional_ekf`).
+    tuples; the CW truth, the ideal actuator, the position sensor, a linear
+    filter and a fixed process noise as ``None``, :func:`_optional`,
+    :func:`_optional_ekf`, :func:`_optional_noise`).
     A campaign's first run compiles this in a pool worker while the campaign
     process compiles the re-solves (issue 37 item 12); the compiled loop then
     loads it from numba's cache instead of compiling it again.
@@ -305,7 +321,7 @@ def compile_steps(
     # ``None if t is None else Model(*t)`` types as an optional Model when ``t`` is a tuple
     chosen = tuple(
         types.none if m is None else types.Optional(typeof(m))  # type: ignore[no-untyped-call]
-        for m in (*models, sensor, ekf)
+        for m in (*models, sensor, ekf, pn)
     )
     plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
     _steps.compile((*plain[:4], *chosen[:2], *plain[4:], *chosen[2:]))
@@ -325,6 +341,7 @@ def _advance(
     log_t: tuple[Any, ...],
     sensor_t: tuple[Any, ...] | None,
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
+    pn_t: tuple[Any, ...] | None,
 ) -> tuple[float, float, bool]:
     """:func:`advance` on the plain tuples of its typed arguments."""
     scalars = LoopScalars(*scalars_t)
@@ -332,10 +349,11 @@ def _advance(
     act = None if act_t is None else ActuatorModel(*act_t)
     sensor = None if sensor_t is None else SensorModel(*sensor_t)
     ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
+    pn = None if pn_t is None else ProcessNoiseModel(*pn_t)
     return _steps(
         k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
         LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
-        sensor, ekf,
+        sensor, ekf, pn,
     )  # fmt: skip
 
 
@@ -355,6 +373,7 @@ def _steps(
     log: StepLog,
     sensor: SensorModel | None,
     ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
 ) -> tuple[float, float, bool]:
     """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
 
@@ -363,7 +382,8 @@ def _steps(
     Eq. 13), else a nonlinear sensor measured and updated by the extended
     filter (:mod:`cwrend_cli.physics.measurement_models`; ``log.y`` then holds
     its m components in its own units, NaN after them); ``ekf`` ``None``: the
-    linear filter of ``m.filter_phi`` (:func:`_optional_ekf`).
+    linear filter of ``m.filter_phi`` (:func:`_optional_ekf`); ``pn`` ``None``: the
+    fixed process noise ``model.q`` (:func:`_optional_noise`).
     """
     m = model
     ws = workspace()
@@ -405,11 +425,16 @@ def _steps(
             y = measure_truth(sensor, k, x_next)
         # Kalman filter predict (with the commanded control: the filter does not
         # know the actuator errors) and update (Eqs. 11–23); or the extended Kalman
-        # filter's predict through the nonlinear dynamics (physics.ekf)
+        # filter's predict through the nonlinear dynamics (physics.ekf); its process
+        # noise: Q, or Q_k from the actuator or the adaptive estimate (issue 33)
+        q_k = m.q if pn is None else step_q(pn, act, k, log.u_cmd, m.filter_gam[k])
         if ekf is None:
-            x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, m.q)
+            x_pred, p_pred = kf_predict(x_hat, p, m.filter_phi[k], m.filter_gam[k], u, q_k)
         else:
-            x_pred, p_pred = ekf_predict(ekf, k, x_hat, p, u, m.q)
+            x_pred, p_pred = ekf_predict(ekf, k, x_hat, p, u, q_k)
+        log.trace_q[k + 1] = (
+            q_k[0, 0] + q_k[1, 1] + q_k[2, 2] + q_k[3, 3] + q_k[4, 4] + q_k[5, 5]
+        )  # fmt: skip
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
             x_hat[:] = x_pred
@@ -433,11 +458,13 @@ def _steps(
             _propagate_costate(m.lam_step, lam, lam_next)
             continue
         if sensor is None:
-            x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.use_mtf)
+            x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.estimator)
         else:
-            x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.use_mtf)
+            x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.estimator)
         x_hat[:] = x_post
         p[:, :] = p_post
+        if pn is not None:
+            adapt(pn, m.filter_gam[k], x_pred, x_post, p_pred, p_post, q_k)
         # score and homotopy parameter (Eqs. 24–26)
         score = composite_score(nis, rho, sched.nis_offset, sched.kappa_mtf, sched.score_max)
         sbar = lowpass_score(sbar, score, sched.score_lowpass, first)
@@ -539,6 +566,7 @@ def resolve_loop(
     solves: SolveLog,
     sensor: SensorModel | None = None,
     ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
 ) -> tuple[int, LoopScalars]:
     """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
 
@@ -564,7 +592,7 @@ def resolve_loop(
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
         None if sensor is None else tuple(sensor),
-        _optional_ekf(ekf),
+        _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
 
@@ -586,6 +614,7 @@ def _resolve_loop(
     solves_t: tuple[Any, ...],
     sensor_t: tuple[Any, ...] | None,
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
+    pn_t: tuple[Any, ...] | None,
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments."""
     m = LoopModel(*model_t)
@@ -600,6 +629,7 @@ def _resolve_loop(
     solves = SolveLog(*solves_t)
     sensor = None if sensor_t is None else SensorModel(*sensor_t)
     ekf = None if ekf_t is None else EkfModel(TruthModel(*ekf_t[0]), ekf_t[1])
+    pn = None if pn_t is None else ProcessNoiseModel(*pn_t)
     eps, sbar, first = scalars.eps, scalars.score_filtered, scalars.first
     lam = state.lam
     k_next = k_start
@@ -607,7 +637,21 @@ def _resolve_loop(
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
         eps, sbar, first = _steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
+            k_next,
+            k,
+            n_steps,
+            m,
+            truth,
+            act,
+            sched,
+            state,
+            eps,
+            sbar,
+            first,
+            log,
+            sensor,
+            ekf,
+            pn,
         )
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -648,6 +692,20 @@ def _resolve_loop(
             lam[:] = np.dot(m.lam_step, carry.warm)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log, sensor, ekf
+        k_next,
+        n_steps,
+        n_steps,
+        m,
+        truth,
+        act,
+        sched,
+        state,
+        eps,
+        sbar,
+        first,
+        log,
+        sensor,
+        ekf,
+        pn,
     )
     return n_resolves, eps, sbar, first

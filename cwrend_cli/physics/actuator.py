@@ -120,6 +120,22 @@ def actuator_model(
 
 
 @njit(cache=True)
+def misaligned(am: ActuatorModel, command: np.ndarray) -> np.ndarray:
+    """``R c``: the command rotated by the fixed misalignment (a copy of it without one)."""
+    v = np.empty(3)
+    for i in range(3):
+        if am.rotate:
+            v[i] = (
+                am.rotation[i, 0] * command[0]
+                + am.rotation[i, 1] * command[1]
+                + am.rotation[i, 2] * command[2]
+            )
+        else:
+            v[i] = command[i]
+    return v
+
+
+@njit(cache=True)
 def actuate(am: ActuatorModel, k: int, command: np.ndarray, out: np.ndarray) -> None:
     """Applied control of step ``k`` from the (already delayed) ``command`` into ``out``.
 
@@ -135,16 +151,7 @@ def actuate(am: ActuatorModel, k: int, command: np.ndarray, out: np.ndarray) -> 
     if m == 0.0 or m < am.u_min:
         out[:] = 0.0
         return
-    v = np.empty(3)
-    for i in range(3):
-        if am.rotate:
-            v[i] = (
-                am.rotation[i, 0] * command[0]
-                + am.rotation[i, 1] * command[1]
-                + am.rotation[i, 2] * command[2]
-            )
-        else:
-            v[i] = command[i]
+    v = misaligned(am, command)
     if am.sigma_pointing > 0.0:
         w = am.pointing_noise[k]
         wd = (w[0] * v[0] + w[1] * v[1] + w[2] * v[2]) / m  # w · d, d = R c / ‖c‖

@@ -1,6 +1,7 @@
 """Linear Kalman filter with measurement-side MTF covariance inflation.
 
-Paper Eqs. (11)–(23). Pure step functions on arrays (compiled with numba so the
+Paper Eqs. (11)–(23); the single-factor baseline of issue 35 (:func:`stf_inflation`,
+Hajiyev & Soken 2013). Pure step functions on arrays (compiled with numba so the
 closed loop can call them); history is kept by the caller. Units: km, km/s.
 The measurement is the relative position, ``H = [I₃ 0]`` (Eq. 13), so every
 product with ``H`` is a slice: ``H P Hᵀ = P[:3, :3]``, ``P Hᵀ = P[:, :3]``.
@@ -22,6 +23,81 @@ GAIN_REGULARISATION = 1e-12
 #: Floor of tr(S) in the MTF ratio (none in paper Eq. 23: the authors' code's,
 #: a convention of cwrend).
 TRACE_FLOOR = 1e-12
+
+#: Estimator kinds of :func:`kf_update` (and the extended update): no inflation,
+#: the per-component MTF inflation (paper Eqs. 16–18), the single-factor one.
+PLAIN = 0
+MTF = 1
+STF = 2
+#: Kind of each ``Architecture.estimator`` name.
+ESTIMATOR_KINDS = {"plain": PLAIN, "mtf": MTF, "stf": STF}
+#: False-alarm probability α of the single-factor filter's fault test (Hajiyev &
+#: Soken 2013 test NIS against the χ² quantile at a chosen α; 0.05: a convention of cwrend).
+STF_FALSE_ALARM = 0.05
+
+
+@njit(cache=True)
+def stf_threshold(m: int) -> float:
+    """χ²_{1−α, m}, the NIS above which the single-factor filter inflates R (α = 0.05) [-].
+
+    ``scipy.stats.chi2.ppf(1 − STF_FALSE_ALARM, m)`` for m = 2, 3, written out so that
+    the compiled update calls no scipy (a test checks them).
+    """
+    return 7.814727903251178 if m == 3 else 5.991464547107979
+
+
+@njit(cache=True)
+def stf_factor(
+    nis: float, threshold: float, nu_sq: float, hph_trace: float, r_trace: float
+) -> float:
+    """The single measurement-noise scale factor λ ≥ 1 (Hajiyev & Soken 2013) [-].
+
+    Hajiyev, C., Soken, H. E., "Robust adaptive Kalman filter for estimation of UAV
+    dynamics in the presence of sensor/actuator faults", Aerospace Science and
+    Technology 28 (2013) 376–383: when the fault statistic NIS = νᵀS⁻¹ν exceeds
+    χ²_{1−α, m}, R is scaled by the one factor that matches the trace of the
+    innovation covariance to the innovation's energy,
+    ``tr(ννᵀ) − tr(H P⁻ Hᵀ) = λ tr(R)``, i.e.
+
+        λ = (νᵀν − tr(H P⁻ Hᵀ)) / tr(R)   if NIS > χ²_{1−α, m},   else 1,
+
+    with their averaging window of one step (the instantaneous innovation, as MTF's
+    paper Eq. 16). λ is floored at 1 (a convention of cwrend: the filter never
+    trusts a measurement more than its nominal R; a NIS above the threshold can
+    come with νᵀν < tr(S) when S is anisotropic).
+    """
+    if not nis > threshold:
+        return 1.0
+    return max((nu_sq - hph_trace) / r_trace, 1.0)
+
+
+@njit(cache=True)
+def stf_inflation(
+    nis: float, nu: np.ndarray, hph_trace: float, r_nominal: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """``(R_eff, ρ)`` of the single-factor filter: ``R_eff = λ R`` (:func:`stf_factor`).
+
+    ``ρ = (λ − 1) tr(R) / tr(S)`` is the MTF ratio's definition (paper Eq. 23:
+    ``tr(S_eff − S)/tr(S)``, the relative growth of the innovation covariance's
+    trace) applied to the single factor, so the composite score (paper Eq. 24)
+    and the adaptive schedule read it as they read MTF's. λ = 1 returns a copy
+    of ``R`` and ρ = 0: the update is then the plain filter's, bit for bit.
+    """
+    m = nu.shape[0]
+    nu_sq = 0.0
+    r_trace = 0.0
+    for i in range(m):
+        nu_sq += nu[i] * nu[i]
+        r_trace += r_nominal[i, i]
+    lam = stf_factor(nis, stf_threshold(m), nu_sq, hph_trace, r_trace)
+    r_eff = r_nominal.copy()
+    if lam == 1.0:
+        return r_eff, 0.0
+    for i in range(m):
+        for j in range(m):
+            r_eff[i, j] *= lam
+    # ρ = tr(R_eff − R)/tr(S), with the floor of tr(S) of Eq. 23
+    return r_eff, (lam - 1.0) * r_trace / max(hph_trace + r_trace, TRACE_FLOOR)
 
 
 @njit(cache=True)
@@ -77,11 +153,13 @@ def kf_predict(
 
 @njit(cache=True)
 def kf_update(
-    x_pred: np.ndarray, p_pred: np.ndarray, y: np.ndarray, r_nominal: np.ndarray, use_mtf: bool
+    x_pred: np.ndarray, p_pred: np.ndarray, y: np.ndarray, r_nominal: np.ndarray, estimator: int
 ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Measurement update with optional MTF inflation, Eqs. (14)–(23).
 
-    Returns ``(x⁺, P⁺, NIS, ρ_MTF)``; ``ρ_MTF = 0`` when MTF is off.
+    ``estimator``: :data:`PLAIN`, :data:`MTF` or :data:`STF` (the single-factor
+    baseline, :func:`stf_inflation`). Returns ``(x⁺, P⁺, NIS, ρ)``; ``ρ = 0``
+    for the plain filter.
     """
     # innovation ν = y − H x⁻ (Eq. 14) and nominal covariance S = H P⁻ Hᵀ + R (Eq. 15)
     nu = np.empty(3)
@@ -98,7 +176,7 @@ def kf_update(
             nis += nu[i] * s_inv[i, j] * nu[j]
     r_eff = r_nominal.copy()
     rho = 0.0
-    if use_mtf:
+    if estimator == MTF:
         # S_raw = ννᵀ − S (Eq. 16); keep the positive diagonal excess only (Eq. 17)
         s_mtf_trace = 0.0
         for i in range(3):
@@ -108,6 +186,8 @@ def kf_update(
                 s_mtf_trace += excess
         # ρ = tr(S_MTF)/tr(S) (Eq. 23), with a floor on tr(S)
         rho = s_mtf_trace / max(s[0, 0] + s[1, 1] + s[2, 2], TRACE_FLOOR)
+    elif estimator == STF:
+        r_eff, rho = stf_inflation(nis, nu, p_pred[0, 0] + p_pred[1, 1] + p_pred[2, 2], r_nominal)
     # K = P⁻Hᵀ (H P⁻ Hᵀ + R_eff + δI)⁻¹ (Eq. 19)
     s_eff = np.empty((3, 3))
     for i in range(3):

@@ -46,9 +46,12 @@ from numba import njit
 
 from cwrend_cli.physics.estimation import (
     GAIN_REGULARISATION,
+    MTF,
+    STF,
     TRACE_FLOOR,
     _inverse_spd3,
     _sandwich,
+    stf_inflation,
 )
 
 #: Model codes (``SensorModel.kind``).
@@ -213,15 +216,17 @@ def ekf_update(
     p_pred: np.ndarray,
     y: np.ndarray,
     r_nominal: np.ndarray,
-    use_mtf: bool,
+    estimator: int,
 ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Extended Kalman measurement update with optional MTF inflation (paper Eqs. 14–23).
 
     ``y`` holds the m components of the measurement first; ``r_nominal`` is
-    the (m, m) nominal covariance. Returns ``(x⁺, P⁺, NIS, ρ_MTF)``; NIS is
-    χ² with m degrees of freedom for a consistent filter; ``ρ_MTF = 0`` when
-    MTF is off. For ``POSITION`` this is :func:`~cwrend_cli.physics.estimation.
-    kf_update` (to rounding).
+    the (m, m) nominal covariance; ``estimator`` a kind of
+    :func:`~cwrend_cli.physics.estimation.kf_update` (plain, MTF or the
+    single-factor STF). Returns ``(x⁺, P⁺, NIS, ρ)``; NIS is χ² with m degrees
+    of freedom for a consistent filter; ``ρ = 0`` for the plain filter. For
+    ``POSITION`` this is :func:`~cwrend_cli.physics.estimation.kf_update` (to
+    rounding).
     """
     m = dimension(kind)
     h = measure(kind, x_pred[:3])
@@ -251,7 +256,7 @@ def ekf_update(
             nis += nu[i] * s_inv[i, j] * nu[j]
     r_eff = r_nominal.copy()
     rho = 0.0
-    if use_mtf:
+    if estimator == MTF:
         # S_raw = ννᵀ − S (Eq. 16); the positive diagonal excess only (Eq. 17) into R (Eq. 18)
         s_mtf_trace = 0.0
         s_trace = 0.0
@@ -263,6 +268,11 @@ def ekf_update(
                 s_mtf_trace += excess
         # ρ = tr(S_MTF)/tr(S) (Eq. 23), with a floor on tr(S)
         rho = s_mtf_trace / max(s_trace, TRACE_FLOOR)
+    elif estimator == STF:
+        hph_trace = 0.0
+        for i in range(m):
+            hph_trace += hph[i, i]
+        r_eff, rho = stf_inflation(nis, nu, hph_trace, r_nominal)
     # K = P⁻Hᵀ (H P⁻ Hᵀ + R_eff + δI)⁻¹ (Eq. 19)
     s_eff = hph + r_eff
     for i in range(m):
@@ -290,7 +300,7 @@ def ekf_update(
 
 @njit(cache=True)
 def sensor_update(
-    sensor: SensorModel, x_pred: np.ndarray, p_pred: np.ndarray, y: np.ndarray, use_mtf: bool
+    sensor: SensorModel, x_pred: np.ndarray, p_pred: np.ndarray, y: np.ndarray, estimator: int
 ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """:func:`ekf_update` of ``sensor`` with its nominal R at the predicted range ``‖x⁻[:3]‖``.
 
@@ -300,4 +310,4 @@ def sensor_update(
     sig = sigmas(sensor.kind, rho, sensor.sigma_range_km, sensor.range_fraction,
                  sensor.sigma_angle_rad)  # fmt: skip
     r = np.diag(sig * sig)
-    return ekf_update(sensor.kind, x_pred, p_pred, y, r, use_mtf)
+    return ekf_update(sensor.kind, x_pred, p_pred, y, r, estimator)

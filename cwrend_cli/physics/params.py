@@ -93,6 +93,11 @@ class Estimator:
     q_process: Covariance = (1e-12, 1e-12, 1e-12, 1e-14, 1e-14, 1e-14)  # Q [km², km²/s²]
     p0: Covariance = (1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10)  # P0 [km², km²/s²]
     initial_error: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x̂0 − x0 [km, km/s]
+    #: Q of each step (issue 33, :mod:`cwrend_cli.physics.process_noise`): ``q_process``
+    #: ("fixed", the paper's), plus the actuator errors' ("from_actuator"), or the
+    #: Sage–Husa estimate floored at ``q_process`` ("adaptive")
+    process_noise: Literal["fixed", "from_actuator", "adaptive"] = "fixed"
+    q_forgetting: float = 0.99  # forgetting factor b of the adaptive estimate, in (0, 1) [-]
 
     def r_nominal_matrix(self) -> FloatArray:
         """R_nominal as a new 3×3 float64 array [km²]."""
@@ -452,23 +457,32 @@ class Problem:
 
 @dataclass(frozen=True)
 class Architecture:
-    """One closed-loop architecture: estimator (plain/MTF KF) × schedule × re-solve method.
+    """One closed-loop architecture: estimator × schedule × re-solve method.
 
-    ``method``: the re-solve method (``"shooting"``: the costate of the
-    shooting solver; ``"socp"``: the held controls of the smoothed minimum-fuel
-    cone program, :mod:`cwrend_cli.physics.guidance.convex`), or None for the
-    method of ``guidance.method`` (the paper's four slugs; shooting by default).
+    ``estimator``: ``"plain"`` (the linear/extended KF), ``"mtf"`` (its
+    per-component MTF inflation, paper Eqs. 16–19) or ``"stf"`` (the
+    single-factor baseline of issue 35, :func:`cwrend_cli.physics.estimation.
+    stf_inflation`). ``method``: the re-solve method (``"shooting"``: the
+    costate of the shooting solver; ``"socp"``: the held controls of the
+    smoothed minimum-fuel cone program, :mod:`cwrend_cli.physics.guidance.convex`),
+    or None for the method of ``guidance.method`` (the paper's four slugs;
+    shooting by default).
     """
 
     slug: str
-    mtf: bool
+    estimator: Literal["plain", "mtf", "stf"]
     adaptive: bool
     method: Literal["shooting", "socp"] | None = None
 
     @property
+    def mtf(self) -> bool:
+        """True for the MTF filter (paper Eqs. 16–19)."""
+        return self.estimator == "mtf"
+
+    @property
     def label(self) -> str:
         """Human-readable name, e.g. ``"MTF KF, adaptive ε"`` (``", SOCP"`` appended for socp)."""
-        kf = "MTF KF" if self.mtf else "plain KF"
+        kf = {"plain": "plain KF", "mtf": "MTF KF", "stf": "STF KF"}[self.estimator]
         tail = ", SOCP" if self.method == "socp" else ""
         return f"{kf}, {'adaptive' if self.adaptive else 'fixed'} ε{tail}"
 
@@ -483,23 +497,46 @@ ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
     {
         a.slug: a
         for a in (
-            Architecture("plain_fixed", mtf=False, adaptive=False),
-            Architecture("mtf_fixed", mtf=True, adaptive=False),
-            Architecture("plain_adaptive", mtf=False, adaptive=True),
-            Architecture("mtf_adaptive", mtf=True, adaptive=True),
+            Architecture("plain_fixed", "plain", adaptive=False),
+            Architecture("mtf_fixed", "mtf", adaptive=False),
+            Architecture("plain_adaptive", "plain", adaptive=True),
+            Architecture("mtf_adaptive", "mtf", adaptive=True),
         )
     }
 )
 
+
+def _socp(archs: Mapping[str, Architecture]) -> Mapping[str, Architecture]:
+    """The cone-program counterparts of ``archs``, slugs suffixed ``_socp``."""
+    return MappingProxyType(
+        {
+            f"{a.slug}_socp": Architecture(f"{a.slug}_socp", a.estimator, a.adaptive, "socp")
+            for a in archs.values()
+        }
+    )
+
+
 #: The same four with the cone-program re-solve (issue 16; ``--arch all_socp``).
-SOCP_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+SOCP_ARCHITECTURES: Mapping[str, Architecture] = _socp(ARCHITECTURES)
+
+#: The single-factor baseline (issue 35), fixed and adaptive ε, shooting then the cone
+#: program: in no group of the paper's ablation (``all``, ``all_socp``, ``everything``),
+#: only in the ``with_stf`` groups or named (``--arch stf_adaptive,mtf_adaptive``).
+_STF_SHOOTING: Mapping[str, Architecture] = MappingProxyType(
     {
-        f"{a.slug}_socp": Architecture(f"{a.slug}_socp", a.mtf, a.adaptive, method="socp")
-        for a in ARCHITECTURES.values()
+        a.slug: a
+        for a in (
+            Architecture("stf_fixed", "stf", adaptive=False),
+            Architecture("stf_adaptive", "stf", adaptive=True),
+        )
     }
 )
+STF_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
+    {**_STF_SHOOTING, **_socp(_STF_SHOOTING)}
+)
 
-#: Every architecture by slug (``--arch everything``): what a slug may name.
+#: Every architecture by slug: what a slug may name (``--arch everything_with_stf``);
+#: the single-factor ones last, so that the order of the paper's eight is as before.
 ALL_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
-    {**ARCHITECTURES, **SOCP_ARCHITECTURES}
+    {**ARCHITECTURES, **SOCP_ARCHITECTURES, **STF_ARCHITECTURES}
 )

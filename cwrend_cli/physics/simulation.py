@@ -2,8 +2,8 @@
 
 Paper Eqs. 11–26 and Sec. "Receding-Horizon Indirect Guidance".
 
-An architecture is estimator {plain, MTF} × schedule {fixed, adaptive}: the
-same loop with two switches. The loop runs compiled
+An architecture is estimator {plain, MTF, single-factor STF} × schedule
+{fixed, adaptive}: the same loop with two switches. The loop runs compiled
 (:mod:`cwrend_cli.physics._loop_kernels`): with the shooting method, its
 re-solves too, each the warm attempt of
 :func:`cwrend_cli.physics.guidance.solve_state`; only a re-solve whose warm
@@ -61,12 +61,14 @@ from cwrend_cli.physics import (
     ekf,
     guidance,
     measurement_models,
+    process_noise,
     references,
     sensors,
     truth,
 )
 from cwrend_cli.physics import constraints as safety_geometry
 from cwrend_cli.physics.dynamics import costate_stm, discretize
+from cwrend_cli.physics.estimation import ESTIMATOR_KINDS
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
@@ -124,6 +126,7 @@ class RunResult:
     nees: np.ndarray  # (x̂ − x)ᵀ P⁻¹ (x̂ − x): row 0 with P0, then posterior (prior on a dropout)
     dropout: np.ndarray  # bool: the row has no measurement (sensor dropout); False in row 0
     outlier: np.ndarray  # bool: the row's measurement noise was an outlier; False in row 0
+    trace_q: np.ndarray  # tr Q_k of the filter's prediction into the row (issue 33); NaN in row 0
     #: safety of the true trajectory (issue 32), only when the problem has constraints
     safety: safety_geometry.Safety | None = None
     #: the tumbling target's attitude over the run (issue 34), only with target.attitude
@@ -273,6 +276,7 @@ def _empty_log(rows: int) -> sk.StepLog:
         eps=np.full(rows, np.nan),
         trace_p=np.full(rows, np.nan),
         nees=np.full(rows, np.nan),
+        trace_q=np.full(rows, np.nan),
     )
 
 
@@ -383,6 +387,7 @@ def simulate(
         dropout=dropout,
         outlier=outlier,
         safety=_safety(problem, log.x),
+        trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
     )
@@ -452,7 +457,7 @@ def _loop_parts(
         dt=dt,
         gl_x=gl_x,
         gl_w=gl_w,
-        use_mtf=arch.mtf,
+        estimator=ESTIMATOR_KINDS[arch.estimator],
         adaptive=arch.adaptive,
         hold_mean=gd.hold == "mean",
         u_override=np.zeros((n_steps, 3)),
@@ -478,7 +483,9 @@ def _loop_parts(
     log.eps[0] = eps0
     log.trace_p[0] = np.trace(state.p)
     filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
-    return _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf)
+    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
+    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
+    return _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf, pn)
 
 
 def compile_loop(
@@ -508,7 +515,7 @@ def compile_loop(
     else:
         sk.compile_steps(
             loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
-            loop.ekf,
+            loop.ekf, loop.pn,
         )  # fmt: skip
 
 
@@ -547,6 +554,7 @@ class _Loop:
     log: sk.StepLog
     sensor: measurement_models.SensorModel | None = None  # None: the position sensor
     ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
+    pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
@@ -554,7 +562,7 @@ class _Loop:
         """:func:`~cwrend_cli.physics._loop_kernels.advance` of these parts."""
         return sk.advance(
             k_start, k_stop, n_steps, self.model, self.truth, self.act, self.sched, self.state,
-            scalars, self.log, self.sensor, self.ekf,
+            scalars, self.log, self.sensor, self.ekf, self.pn,
         )  # fmt: skip
 
 
@@ -617,7 +625,7 @@ def _shooting_resolves(
     while True:
         i, scalars = sk.resolve_loop(
             i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor, loop.ekf,
+            scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
         )  # fmt: skip
         if i == count:
             break

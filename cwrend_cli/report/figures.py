@@ -32,7 +32,9 @@ both the drawing and the figure list of ``report.md``:
 Every figure names the simulated world it shows (:attr:`ReportData.world`:
 the truth model, and actuator errors and sensor faults when configured) in
 its title and caption (issue 15, item 6): the guidance and the filter always
-assume CW, the truth need not.
+assume CW, the truth need not. In a sweep that is the reported point's world
+(its swept values set), and the figures of every point name each point's
+world (:attr:`ReportData.worlds`; issue 37).
 
 Units: km, s, km/s, km/s² (as in the Parquet files); ‖u‖ is drawn in m/s².
 """
@@ -398,7 +400,7 @@ def fig_control(data: ReportData) -> Figure:
         ax_dv.plot(r["t_s"], _cumulative_dv(r), **_ref_style(name))
     _shade(ax_dv, data.windows)
     ax_dv.set_xlabel("time [s]")
-    ax_dv.set_ylabel("cumulative Δv [km/s]")
+    ax_dv.set_ylabel(f"cumulative Δv [km/s] ({DV_TRAPEZOID})")
     ax_dv.set_title("cumulative Δv")
     handles = _arch_handles(archs) + _ref_handles(data) + _window_handles(data.windows)
     _legend_below(fig, handles, ncol=4)
@@ -536,8 +538,45 @@ def fig_errors(data: ReportData) -> Figure:
     return _finished(fig)
 
 
+#: Which Δv the report's figures plot: the paper's (``delta_v_km_s``), as its Figs 2 and 6 do.
+#: The applied impulse Σ‖u_k‖Δt of a run (``delta_v_applied_km_s``) is ‖u₀‖Δt/2 more, at
+#: most u_max Δt / 2 (0.4 m/s on the paper scenario, 0.3 % of its Δv): the same picture
+#: shifted by less than a marker; the applied Δv and its penalty are in the report's tables.
+DV_TRAPEZOID = "trapezoid of ‖u‖, the paper's"
+#: The caption's sentence on it (figures that plot Δv).
+DV_CAPTION = (
+    "Δv: the paper's trapezoid of ‖u‖ over the time steps (delta_v_km_s), not the applied "
+    "impulse Σ‖u_k‖Δt (delta_v_applied_km_s, half the first step's impulse more; in the tables)."
+)
+
+
+def _exact_fuel_optimum(data: ReportData) -> float | None:
+    """The exact continuous fuel optimum [km/s] (u_max times its burn time), from stored
+    values: the fuel reference's ``delta_v_applied_km_s`` (a run directory), else what
+    every ok run's applied Δv and penalty give, Δv_applied / (1 + penalty / 100), when they
+    agree to 1e-9 (a campaign of one scenario); ``None`` for results written before them."""
+    ref = data.ref_summary
+    if "delta_v_applied_km_s" in ref.columns:
+        row = ref.loc[ref["arch"] == "open_loop_fuel", "delta_v_applied_km_s"]
+        if not row.empty and np.isfinite(float(row.iloc[0])):
+            return float(row.iloc[0])
+    runs = data.ok_runs()
+    if runs.empty or not {"delta_v_applied_km_s", "fuel_penalty_applied_pct"} <= set(runs):
+        return None
+    dv = runs["delta_v_applied_km_s"].to_numpy(dtype=float)
+    optimum = dv / (1.0 + runs["fuel_penalty_applied_pct"].to_numpy(dtype=float) / 100.0)
+    optimum = optimum[np.isfinite(optimum)]
+    if optimum.size == 0 or np.ptp(optimum) > 1e-9 * np.max(np.abs(optimum)):
+        return None
+    return float(np.median(optimum))
+
+
 def fig_dv_vs_miss(data: ReportData) -> Figure:
-    """Fig. 6: Δv against terminal miss, every run (log miss), references as vertical lines."""
+    """Fig. 6: Δv against terminal miss, every run (log miss), references as vertical lines.
+
+    Δv is the paper's trapezoid (:data:`DV_TRAPEZOID`); the fuel-optimal line also
+    gives the exact continuous optimum, which a run left of the line does not beat.
+    """
     fig = _figure(13, 6.8)
     ax = fig.subplots()
     runs = data.ok_runs()
@@ -555,14 +594,16 @@ def fig_dv_vs_miss(data: ReportData) -> Figure:
             ax.scatter(g["delta_v_km_s"].median(), np.median(miss), s=190, marker="D",
                        facecolor="none", edgecolor=c, lw=2.2, zorder=5,
                        gid=f"median:{a}")  # fmt: skip
+    exact = _exact_fuel_optimum(data)
     for _, row in data.ref_summary.iterrows():
         name = str(row["arch"]).removeprefix("open_loop_")
         st = _ref_style(name)
+        beside = f" (trapezoid; exact {exact:.4g})" if name == "fuel" and exact else ""
         ax.axvline(float(row["delta_v_km_s"]), color=st["color"], ls=st["ls"], lw=1.6,
-                   label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s")  # fmt: skip
+                   label=f"{st['label']} Δv = {row['delta_v_km_s']:.4g} km/s{beside}")  # fmt: skip
     ax.set_yscale("log")
     ax.margins(x=0.04, y=0.08)  # no run on the frame (margins of the log axis in decades)
-    ax.set_xlabel("Δv [km/s]")
+    ax.set_xlabel(f"Δv [km/s] ({DV_TRAPEZOID})")
     ax.set_ylabel("terminal miss ‖r(T)‖ [m]")
     what = f"{len(runs)} runs; hollow diamonds: per-architecture median" if multi else _title(data)
     ax.set_title(f"Fig. 6 · Fuel against accuracy ({what})")
@@ -972,8 +1013,9 @@ def fig_dv_distribution(data: ReportData) -> Figure:
 
 
 #: The pairs of the paired-miss figure (x-axis, y-axis): the paper's three, then the same
-#: three of the cone-program architectures; at most :data:`_MAX_PAIR_PANELS` are drawn,
-#: the first present, so a cone-program campaign gets its own panels.
+#: three of the cone-program architectures, then single factor vs MTF (issue 35); at most
+#: :data:`_MAX_PAIR_PANELS` are drawn, the first present, so a cone-program campaign gets
+#: its own panels, and one of the single factor against MTF too.
 _PAIRS = (
     ("plain_adaptive", "mtf_adaptive"),
     ("plain_fixed", "mtf_fixed"),
@@ -981,6 +1023,10 @@ _PAIRS = (
     ("plain_adaptive_socp", "mtf_adaptive_socp"),
     ("plain_fixed_socp", "mtf_fixed_socp"),
     ("mtf_fixed_socp", "mtf_adaptive_socp"),
+    ("stf_adaptive", "mtf_adaptive"),
+    ("stf_fixed", "mtf_fixed"),
+    ("stf_adaptive_socp", "mtf_adaptive_socp"),
+    ("stf_fixed_socp", "mtf_fixed_socp"),
 )
 _MAX_PAIR_PANELS = 3
 
@@ -1331,6 +1377,8 @@ class FigureEntry:
     caption: str
     draw: Callable[[ReportData], Figure]
     applies: Callable[[ReportData], bool] = _always
+    #: shows every grid or design point (named by :attr:`ReportData.worlds`), not the reported one
+    every_point: bool = False
 
 
 @dataclass(frozen=True)
@@ -1356,7 +1404,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "fig2_control.png",
-        "Thrust magnitude per architecture and cumulative Δv (paper Fig. 2, top).",
+        f"Thrust magnitude per architecture and cumulative Δv (paper Fig. 2, top). {DV_CAPTION}",
         fig_control,
     ),
     FigureEntry(
@@ -1377,7 +1425,9 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "fig6_dv_vs_miss.png",
-        "Δv against terminal miss for every run; vertical lines: open-loop Δv.",
+        "Δv against terminal miss for every run; vertical lines: open-loop Δv (the fuel "
+        "plan's trapezoid, with the exact continuous optimum beside it: a run left of the line "
+        f"is the trapezoid's artefact, not a saving). {DV_CAPTION}",
         fig_dv_vs_miss,
     ),
     FigureEntry(
@@ -1388,7 +1438,7 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     FigureEntry(
         "dv_distribution.png",
-        "Δv per architecture over the seeds.",
+        f"Δv per architecture over the seeds. {DV_CAPTION}",
         fig_dv_distribution,
         ReportData.multi_seed,
     ),
@@ -1400,13 +1450,13 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     SweepFigureEntry(
         "sweep_{key}.png",
-        "Median miss and mean Δv against `{key}`.",
+        f"Median miss and mean Δv against `{{key}}`. {DV_CAPTION}",
         fig_sweep,
     ),
     SweepFigureEntry(
         "design_{key}.png",
         "Mean miss and mean Δv of every design point against `{key}` (dots), with a binned "
-        "mean (geometric for the miss) and its 95 % band per architecture.",
+        f"mean (geometric for the miss) and its 95 % band per architecture. {DV_CAPTION}",
         fig_design,
         design=True,
     ),
@@ -1415,9 +1465,10 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "Sensitivity of the sampled design: first-order (S1) and total (ST) Sobol indices of "
         "the mean miss and mean Δv over the seeds of each design point (S1 alone, by RBD-FAST, "
         "for an lhs or random design), per parameter and architecture; error bars: 95 % "
-        "intervals (sensitivity.parquet).",
+        f"intervals (sensitivity.parquet). {DV_CAPTION}",
         fig_sensitivity,
         _has_sensitivity,
+        every_point=True,
     ),
     FigureEntry(
         "nees.png",
@@ -1486,10 +1537,13 @@ def _captioned(caption: str, world: str) -> str:
 def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
     """The figures of :data:`FIGURES` that apply to ``data``, in report order.
 
-    Each one's title and caption name the simulated world (:attr:`ReportData.world`).
+    Each one's title and caption name the simulated world of the point it
+    shows (:attr:`ReportData.world`), or of every point
+    (:attr:`ReportData.worlds`) for the sweep, design and sensitivity figures.
     """
     out: list[PlannedFigure] = []
     world = data.world
+    worlds = data.worlds if data.params else world
     for entry in FIGURES:
         if isinstance(entry, SweepFigureEntry):
             for param in data.params if entry.design == data.design else ():
@@ -1497,16 +1551,17 @@ def planned_figures(data: ReportData) -> tuple[PlannedFigure, ...]:
                 out.append(
                     PlannedFigure(
                         entry.file.format(key=key),
-                        _captioned(entry.caption.format(key=key), world),
-                        partial(_with_world, partial(entry.draw, data, param), world),
+                        _captioned(entry.caption.format(key=key), worlds),
+                        partial(_with_world, partial(entry.draw, data, param), worlds),
                     )
                 )
         elif entry.applies(data):
+            shown = worlds if entry.every_point else world
             out.append(
                 PlannedFigure(
                     entry.file,
-                    _captioned(entry.caption, world),
-                    partial(_with_world, partial(entry.draw, data), world),
+                    _captioned(entry.caption, shown),
+                    partial(_with_world, partial(entry.draw, data), shown),
                 )
             )
     return tuple(out)
@@ -1521,8 +1576,10 @@ _COMPARE_AXES: dict[str, tuple[str, float]] = {
     "miss_km": ("miss, A − B [m]", 1e3),
     "delta_v_km_s": ("Δv, A − B [km/s]", 1.0),
     "fuel_penalty_pct": ("fuel penalty, A − B [points of %]", 1.0),
+    "delta_v_applied_km_s": ("applied Δv, A − B [km/s]", 1.0),
+    "fuel_penalty_applied_pct": ("applied fuel penalty, A − B [points of %]", 1.0),
 }
-_SHARE_MARKERS = ("s", "^", "v")
+_SHARE_MARKERS = ("s", "^", "v", "<", ">")
 
 
 def _error_bars(value: Any, low: Any, high: Any) -> np.ndarray:
@@ -1589,7 +1646,7 @@ def fig_compare(
             err = _error_bars(r["value"], r["ci_low"], r["ci_high"])
             dy = 0.2 * (i - (len(metrics) - 1) / 2)
             axes[-1].errorbar(r["value"], y - dy, xerr=err, color=colour,
-                              fmt=_SHARE_MARKERS[i % 3], ms=6, capsize=3, lw=1.6)  # fmt: skip
+                              fmt=_SHARE_MARKERS[i], ms=6, capsize=3, lw=1.6)  # fmt: skip
     for ax, metric in zip(axes, metrics, strict=False):
         ax.axvline(0.0, color="black", lw=1)
         ax.set_xlabel(_COMPARE_AXES[metric][0])
@@ -1606,7 +1663,7 @@ def fig_compare(
     ]
     for i, m in enumerate(metrics):
         what = _COMPARE_AXES[m][0].split(",")[0]
-        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i % 3], ls="", color="black",
+        handles.append(Line2D([], [], marker=_SHARE_MARKERS[i], ls="", color="black",
                               label=f"share A lower, {what} (95 % Wilson)"))  # fmt: skip
     _legend_below(fig, handles, ncol=2 if len(handles) == 4 else 3)
     title = f"Paired differences per noise seed, A = {label_a}, B = {label_b} (n ≤ {n})"

@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
 
@@ -47,6 +48,7 @@ import pyarrow.dataset as ds
 from cwrend_cli.config import (
     ALL_ARCHITECTURES,
     CwrendConfig,
+    apply,
     config_from_dict,
     get_dotted,
     resolved_dict,
@@ -138,13 +140,41 @@ class ReportData:
 
     @property
     def world(self) -> str:
-        """The simulated world the figures show: truth model, actuator errors, sensor faults.
+        """The simulated world of the reported point: truth model, actuator errors, sensor faults.
 
         E.g. ``truth: cw (the design model)`` or ``truth: j2 · actuator errors
         on · sensor faults on`` (issue 15: the guidance and the filter always
-        assume CW; this names what the truth was).
+        assume CW; this names what the truth was). In a sweep, the world of the
+        point the per-seed figures show, with its swept values set
+        (:attr:`point_config`; issue 37: a sweep over ``truth.model``).
         """
-        return world_of(self.config)
+        return world_of(self.point_config)
+
+    @cached_property
+    def point_config(self) -> CwrendConfig | None:
+        """The configuration of the reported point: :attr:`config` with its swept values set.
+
+        What the per-seed figures were simulated with (:func:`with_swept_values`);
+        :attr:`config` itself for a run or an ablation.
+        """
+        return with_swept_values(self.config, self.ok_runs())
+
+    @property
+    def worlds(self) -> str:
+        """The simulated worlds of every point, for the figures that show them all.
+
+        The world of each point (:attr:`world`); when they differ (a sweep over
+        ``truth.model``, say), ``one per point:`` and each distinct world once,
+        sorted, separated by ``;``.
+        """
+        ok = self.runs[self.runs["status"] == "ok"]
+        if "point" not in ok.columns or ok["point"].nunique() <= 1:
+            return self.world
+        found = {
+            world_of(with_swept_values(self.config, runs))
+            for _, runs in ok.groupby(ok["point"].astype(str), sort=False)
+        }
+        return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -159,29 +189,32 @@ class ReportData:
 
     @property
     def windows(self) -> tuple[Window, ...]:
-        """The degradation windows of the configuration (none without one)."""
-        return windows_of(self.config) if self.config is not None else ()
+        """The degradation windows of the reported point (none without a configuration)."""
+        return windows_of(self.point_config) if self.point_config is not None else ()
 
     @property
     def constraints(self) -> Geometry | None:
-        """The path constraints of the configuration as arrays (issue 32; ``None`` without).
+        """The path constraints of the reported point as arrays (issue 32; ``None`` without).
 
         The keep-out ellipsoid and the corridor cone the safety columns were measured
         against (:func:`~cwrend_cli.physics.constraints.geometry`); ``None`` without a
         stored configuration or when it has neither a keep-out zone nor a corridor.
         """
-        found = constraints_of(self.config) if self.config is not None else None
+        config = self.point_config
+        found = constraints_of(config) if config is not None else None
         return geometry(found) if found is not None else None
 
     @property
     def u_max_km_s2(self) -> float | None:
-        """Thrust limit of the scenario [km/s²] (``None`` without a configuration)."""
-        return self.config.scenario.u_max_km_s2 if self.config is not None else None
+        """Thrust limit of the reported point [km/s²] (``None`` without a configuration)."""
+        config = self.point_config
+        return config.scenario.u_max_km_s2 if config is not None else None
 
     @property
     def nis_offset(self) -> float | None:
-        """NIS offset ``m`` of the score (``None`` without a configuration)."""
-        return self.config.schedule.nis_offset if self.config is not None else None
+        """NIS offset ``m`` of the reported point's score (``None`` without a configuration)."""
+        config = self.point_config
+        return config.schedule.nis_offset if config is not None else None
 
     def ok_runs(self) -> pd.DataFrame:
         """The successful runs of the reported grid point (every run of a single point)."""
@@ -212,6 +245,29 @@ def world_of(config: CwrendConfig | None) -> str:
     if any(_has_faults(w) for w in windows_of(config)):
         parts.append("sensor faults on")
     return " · ".join(parts)
+
+
+def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
+    """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
+
+    ``runs`` are one point's rows of ``runs.parquet``; every ``param.<key>``
+    column with a single value over them is set at ``key``, as the campaign set
+    it on the base configuration. ``config`` itself when nothing was swept;
+    ``None`` without a configuration or when the result does not validate.
+    """
+    if config is None:
+        return None
+    assignment = []
+    for column in param_columns(runs.columns):
+        values = runs[column].dropna().unique()
+        if len(values) == 1:
+            assignment.append((column.removeprefix(PARAM_PREFIX), param_value(values[0])))
+    if not assignment:
+        return config
+    try:
+        return config_from_dict(apply(resolved_dict(config), assignment))
+    except ConfigError:
+        return None
 
 
 def results_world(results_dir: Path) -> str:

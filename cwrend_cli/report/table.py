@@ -69,7 +69,7 @@ from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
-from cwrend_cli.output.tables import FALLBACK_STEPS, PARAM_PREFIX
+from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES, PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
 from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, markdown_table
 
@@ -115,16 +115,6 @@ QUANTITIES: Mapping[str, _Quantity] = {
     "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
     "mean_nees": _Quantity("of the runs' mean NEES", "-", 1.0, 2),
     "mean_nis_nominal": _Quantity("of the runs' nominal mean NIS", "-", 1.0, 2),
-}
-#: Short names of ``--metric`` (those of ``cwrend compare --metric``).
-ALIASES: Mapping[str, str] = {
-    "miss": "miss_km",
-    "dv": "delta_v_km_s",
-    "fuel": "fuel_penalty_pct",
-    "dv_applied": "delta_v_applied_km_s",
-    "fuel_applied": "fuel_penalty_applied_pct",
-    "nees": "mean_nees",
-    "nis": "mean_nis_nominal",
 }
 #: The statistics of each stored metric (the first is the default).
 MARGINAL: Mapping[str, tuple[str, ...]] = {
@@ -269,7 +259,7 @@ def parse_value(text: str) -> Value:
                 "whose re-solves used / never used that fallback step)"
             )
     stat, name = m["stat"], m["metric"]
-    metric = ALIASES.get(name, name)
+    metric = METRIC_NAMES.get(name, name)
     pair = (m["a"], m["b"]) if m["a"] else None
     if pair is not None:
         for slug in pair:
@@ -296,7 +286,7 @@ def parse_value(text: str) -> Value:
         )
     paired_stats = PAIRED.get(metric, ())
     if metric not in MARGINAL:
-        known = ", ".join([*ALIASES, *(m for m in MARGINAL if m not in ALIASES.values())])
+        known = ", ".join([*METRIC_NAMES, *(m for m in MARGINAL if m not in METRIC_NAMES.values())])
         raise ConfigError(
             f"--metric {text!r}: unknown metric {name!r} (metrics: {known}; also {_RUN_HELP})"
         )

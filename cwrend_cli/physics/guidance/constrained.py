@@ -235,73 +235,100 @@ def _program(
     def xcol(k: int) -> int:  # first column of x_k, k = 1 … N
         return ix + 6 * (k - 1)
 
-    rows: list[sp.csc_matrix] = []
-    rhs: list[np.ndarray] = []
+    # Every block as (row, column, value) triplets, rows counted from the block's first,
+    # assembled at once (a sparse row at a time cost 5× the solve); explicit zeros are
+    # dropped (eliminate_zeros below), as a row-by-row assembly drops them
+    blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
     cones: list[Any] = []
+
+    def dense_block(r0: np.ndarray, c0: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Triplets of the dense (p, q) block ``m`` (or one per placement, (P, p, q)) placed
+        at rows r0 + i, columns c0 + j."""
+        p_, q_ = m.shape[-2:]
+        r = (r0[:, None, None] + np.arange(p_)[None, :, None]) + np.zeros((1, 1, q_), np.int64)
+        c = (c0[:, None, None] + np.arange(q_)[None, None, :]) + np.zeros((1, p_, 1), np.int64)
+        v = np.broadcast_to(m, (r0.size, p_, q_))
+        return r.ravel(), c.ravel(), v.ravel()
+
     # dynamics: x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 (x_0 = x0 given), and x_N = x_f
-    eq = sp.lil_matrix((6 * steps + 6, n_vars))
+    k_all = np.arange(steps)
+    parts = [
+        dense_block(6 * k_all, ix + 6 * k_all, np.eye(6)),
+        dense_block(6 * k_all, iu + 3 * k_all, -gam_u),
+        dense_block(6 * k_all[1:], ix + 6 * (k_all[1:] - 1), -phi),
+        dense_block(np.array([6 * steps]), np.array([xcol(steps)]), np.eye(6)),
+    ]
     b_eq = np.zeros(6 * steps + 6)
-    for k in range(steps):
-        eq[6 * k : 6 * k + 6, xcol(k + 1) : xcol(k + 1) + 6] = np.eye(6)
-        eq[6 * k : 6 * k + 6, iu + 3 * k : iu + 3 * k + 3] = -gam_u
-        if k == 0:
-            b_eq[0:6] = phi @ x0
-        else:
-            eq[6 * k : 6 * k + 6, xcol(k) : xcol(k) + 6] = -phi
-    eq[6 * steps :, xcol(steps) : xcol(steps) + 6] = np.eye(6)
+    b_eq[0:6] = phi @ x0
     b_eq[6 * steps :] = xf
-    rows.append(eq.tocsc())
-    rhs.append(b_eq)
+    blocks.append((*_cat(parts), 6 * steps + 6))
+    rhs = [b_eq]
     cones.append(clarabel.ZeroConeT(6 * steps + 6))
     # ‖ũ_j‖ ≤ t̃_j ≤ 1
-    rows.append(feasibility.cone_rows(steps, n_vars, it + np.arange(steps)))
+    soc_u = feasibility.cone_rows(steps, n_vars, it + np.arange(steps)).tocoo()
+    blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * steps))
     rhs.append(np.zeros(4 * steps))
     cones += [clarabel.SecondOrderConeT(4)] * steps
-    cap = sp.csc_matrix(
-        (np.ones(steps), (np.arange(steps), it + np.arange(steps))), (steps, n_vars)
-    )
     # nonnegative rows: t̃ ≤ 1, s ≥ 0, half-spaces, trust region
-    nonneg = [cap, sp.csc_matrix(([-1.0], ([0], [i_s])), (1, n_vars))]
+    parts = [(k_all, it + k_all, np.ones(steps)), (np.array([steps]), np.array([i_s]), -np.ones(1))]
     b_nonneg = [np.ones(steps), np.zeros(1)]
-    for k in range(1, steps):
-        # node k in its own half-space and in its predecessor's: the chord k−1 → k then
-        # lies in H_k−1 (convex), the arc within the chord margin of it
-        for j in (k, k - 1):
-            hs = half_spaces.get(j)
-            if hs is None or (j == k - 1 and modes[k] == 0):
-                continue
-            # nᵀ r_k + s ≥ offset  ⇔  −nᵀ r_k − s ≤ −offset
-            row = sp.lil_matrix((1, n_vars))
-            row[0, xcol(k) : xcol(k) + 3] = -hs.normal
-            row[0, i_s] = -1.0
-            nonneg.append(row.tocsc())
-            b_nonneg.append(np.array([-hs.offset_km]))
+    # node k in its own half-space and in its predecessor's: the chord k−1 → k then lies in
+    # H_k−1 (convex), the arc within the chord margin of it; nᵀ r_k + s ≥ offset ⇔
+    # −nᵀ r_k − s ≤ −offset
+    pairs = [
+        (k, j)
+        for k in range(1, steps)
+        for j in (k, k - 1)
+        if j in half_spaces and not (j == k - 1 and modes[k] == 0)
+    ]
+    row0 = steps + 1
+    if pairs:
+        node = np.array([k for k, _ in pairs])
+        normals = np.array([half_spaces[j].normal for _, j in pairs], dtype=np.float64)
+        rows_hs = row0 + np.arange(len(pairs))
+        parts.append(dense_block(rows_hs, ix + 6 * (node - 1), -normals[:, None, :]))
+        parts.append((rows_hs, np.full(len(pairs), i_s), -np.ones(len(pairs))))
+        b_nonneg.append(-np.array([half_spaces[j].offset_km for _, j in pairs]))
+        row0 += len(pairs)
     constrained = np.flatnonzero(modes > 0)
-    for node in constrained:  # ±(r_k − r̄_k) ≤ trust
-        cols = xcol(int(node)) + np.arange(3)
-        block = sp.csc_matrix(
-            (np.r_[np.ones(3), -np.ones(3)], (np.arange(6), np.r_[cols, cols])), (6, n_vars)
+    if constrained.size:  # ±(r_k − r̄_k) ≤ trust
+        rows_tr = row0 + 6 * np.arange(constrained.size)
+        cols_tr = ix + 6 * (constrained - 1)
+        parts.append(dense_block(rows_tr, cols_tr, np.eye(3)))
+        parts.append(dense_block(rows_tr + 3, cols_tr, -np.eye(3)))
+        b_nonneg.append(
+            np.column_stack([trust_km + r_bar[constrained], trust_km - r_bar[constrained]]).ravel()
         )
-        nonneg.append(block)
-        b_nonneg.append(np.r_[trust_km + r_bar[node], trust_km - r_bar[node]])
-    rows.append(sp.vstack(nonneg).tocsc())
+        row0 += 6 * constrained.size
+    blocks.append((*_cat(parts), row0))
     rhs.append(np.concatenate(b_nonneg))
-    cones.append(clarabel.NonnegativeConeT(sum(m.shape[0] for m in nonneg)))
+    cones.append(clarabel.NonnegativeConeT(row0))
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
     corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
     if corridor_nodes.size:
         soc = cg.corridor_cone(geo, margin_km)
         a_body, b_body, c_head, d_head = soc.rows()
-        for node in corridor_nodes:
-            col = xcol(int(node))
-            block = sp.lil_matrix((4, n_vars))
-            block[0, col : col + 3] = -c_head
-            block[0, i_s] = -1.0
-            block[1:4, col : col + 3] = -a_body
-            rows.append(block.tocsc())
-            rhs.append(np.r_[d_head, b_body])
-            cones.append(clarabel.SecondOrderConeT(4))
-    a = sp.vstack(rows).tocsc()
+        rows_c = 4 * np.arange(corridor_nodes.size)
+        head = np.vstack([-c_head, -a_body])
+        parts = [
+            dense_block(rows_c, ix + 6 * (corridor_nodes - 1), head[None]),
+            (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
+        ]
+        blocks.append((*_cat(parts), 4 * corridor_nodes.size))
+        rhs.append(np.tile(np.r_[d_head, b_body], corridor_nodes.size))
+        cones += [clarabel.SecondOrderConeT(4)] * corridor_nodes.size
+    offset = 0
+    r_all, c_all, v_all = [], [], []
+    for r, c, v, height in blocks:
+        r_all.append(r + offset)
+        c_all.append(c)
+        v_all.append(v)
+        offset += height
+    a = sp.csc_matrix(
+        (np.concatenate(v_all), (np.concatenate(r_all), np.concatenate(c_all))),
+        shape=(offset, n_vars),
+    )
+    a.eliminate_zeros()
     b = np.concatenate(rhs)
     weight = max(float(eps), convex.REGULARISATION)
     q = np.zeros(n_vars)
@@ -312,6 +339,15 @@ def _program(
     p = sp.diags(diag, format="csc")
     sol = feasibility.solve_cone(p, q, a, b, cones)
     return sol, int(sol.iterations)
+
+
+def _cat(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenated (rows, columns, values) of triplet parts."""
+    return (
+        np.concatenate([p[0] for p in parts]).astype(np.int64),
+        np.concatenate([p[1] for p in parts]).astype(np.int64),
+        np.concatenate([p[2] for p in parts]).astype(np.float64),
+    )
 
 
 def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
