@@ -596,11 +596,12 @@ def _announce(err: Console, plan: campaign.CampaignPlan) -> None:
     )
 
 
-def _first_run_notice(plan: campaign.CampaignPlan) -> str | None:
+def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
     """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
 
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
-    for the guidance methods the plan's runs use.
+    for the guidance methods the plan's runs use; ``fan_out``: the campaign runs on a local
+    pool of two workers or more, which compile part of the kernels at the same time.
     """
     from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
@@ -610,7 +611,7 @@ def _first_run_notice(plan: campaign.CampaignPlan) -> str | None:
         for task in plan.tasks
         for r in task.runs
     }
-    return compiling_notice(methods)
+    return compiling_notice(methods, fan_out)
 
 
 @contextmanager
@@ -767,7 +768,7 @@ def _campaign_step(
         _announce(err, plan)
     progress = RichProgress(
         err, f"{command} {out.name}", quiet=opts.quiet or opts.table_format is not None,
-        notice=_first_run_notice(plan),
+        notice=_first_run_notice(plan, executor_kind == "local" and (workers or 1) > 1),
     )  # fmt: skip
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,

@@ -16,14 +16,16 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
 from cwrend_cli import campaign
 from cwrend_cli.cli import app
-from cwrend_cli.config import ARCHITECTURES, config_from_dict
+from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, config_from_dict
 from cwrend_cli.console import RichProgress
 from cwrend_cli.physics import compiled
 
@@ -34,18 +36,35 @@ NOTICE = "compiling kernels (first run only, about"
 runner = CliRunner()
 
 
+def _in_empty_cache(code: str, cache: Path) -> list[str]:
+    """The lines ``python -c code`` prints with numba's cache in ``cache`` (empty: a first run)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+
+
 def test_an_empty_cache_announces_the_first_compile(tmp_path: Path) -> None:
     code = (
         "from cwrend_cli.physics import compiled; "
         "print(compiled.compiling_notice({'shooting'})); "
         "print(compiled.compiling_notice({'shooting', 'socp'}))"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # nothing compiled there yet
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout.splitlines()
+    out = _in_empty_cache(code, tmp_path)  # nothing compiled there yet
     assert all(line.startswith(NOTICE) and line.endswith(" s)…") for line in out)
     assert not [f for f in tmp_path.rglob("*") if f.is_file()]  # asking compiles nothing
+
+
+def test_a_campaign_on_two_workers_announces_the_step_loop_compiled_meanwhile(
+    tmp_path: Path,
+) -> None:
+    code = (
+        "from cwrend_cli.physics import compiled; "
+        "print(compiled.compile_seconds({'shooting'}), "
+        "compiled.compile_seconds({'shooting'}, fan_out=True))"
+    )
+    alone, fanned_out = (float(s) for s in _in_empty_cache(code, tmp_path)[0].split())
+    assert 0.0 < fanned_out < alone  # a worker compiles the step loop while the solver compiles
 
 
 def test_compiled_kernels_announce_nothing() -> None:
@@ -60,7 +79,7 @@ def test_a_campaign_prints_the_notice_before_its_runs(
 ) -> None:
     # every architecture, the cone-program ones too (a lookup among the paper's four alone
     # ended `ablate --arch all_socp` with a KeyError)
-    monkeypatch.setattr(compiled, "compile_seconds", lambda methods: 24.0)
+    monkeypatch.setattr(compiled, "compile_seconds", lambda methods, fan_out=False: 24.0)
     out = f"output.dir={json.dumps(str(tmp_path))}"
     args = ["ablate", str(PAPER), "--arch", arch, "-w", "1", "--no-rrd", "--set", out]
     result = runner.invoke(app, args)
@@ -95,10 +114,7 @@ for f in (k._bracketed_root, k._g, k._primer, k.add_control_node):
 
 
 def test_no_kernel_is_compiled_once_per_literal_argument(tmp_path: Path) -> None:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    out = subprocess.run(
-        [sys.executable, "-c", _LITERALS], env=env, capture_output=True, text=True, check=True
-    ).stdout.split()
+    out = " ".join(_in_empty_cache(_LITERALS, tmp_path)).split()
     assert out == [
         "_bracketed_root", "1", "False", "_g", "1", "False",
         "_primer", "1", "False", "add_control_node", "1", "False",
@@ -112,3 +128,122 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
     # arguments 4 and 5: the CW truth and the ideal actuator cross as None (pruned)
     paper = [(str(sig[4]), str(sig[5])) for sig in _loop_kernels._resolve_loop.signatures]
     assert ("none", "none") in paper
+
+
+# ---------------------------------------------------------------------------
+# The first run's compile fanned out over the campaign process and two workers
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "tree",
+    [{}, {"sensor": {"model": "range_bearing"}}, {"truth": {"model": "two_body"}}],
+    ids=["paper", "range_bearing", "two_body"],
+)
+def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use(
+    tree: dict[str, Any],
+) -> None:
+    from numba import njit
+
+    from cwrend_cli.campaign import worker
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import _loop_kernels, simulation
+
+    # the paper's loop; a nonlinear sensor (its EKF update); a nonlinear truth
+    cfg = config_from_dict(tree)
+    campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)
+    # the compiled loop types its call of the step loop here, whatever numba's cache holds:
+    # an uncached copy of it, compiled for each signature the runs gave it
+    copy = njit(_loop_kernels._resolve_loop.py_func)
+    for sig in _loop_kernels._resolve_loop.signatures:
+        copy.compile(sig)
+    before = _loop_kernels._steps.signatures
+    simulation.compile_loop(
+        problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0)
+    )
+    assert _loop_kernels._steps.signatures == before  # compiled ahead: no signature of its own
+
+
+class _Submitted:
+    """An executor that records what is submitted and runs nothing."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[object, ...]] = []
+
+    def submit(self, fn: object, *args: object) -> object:
+        from concurrent.futures import Future
+
+        self.calls.append((fn, *args))
+        future: Future[None] = Future()
+        future.set_result(None)
+        return future
+
+
+class _References:
+    def __init__(self, calls: list[tuple[object, ...]]) -> None:
+        self.calls = calls
+
+    def of(self, task: object) -> None:
+        self.calls.append(("references", task))
+
+
+@pytest.mark.parametrize("cold", [True, False])
+def test_a_first_campaign_compiles_the_step_loop_in_a_worker_while_it_computes_the_references(
+    cold: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cwrend_cli.campaign import driver, worker
+
+    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
+    pool = _Submitted()
+    task = object()
+    driver._compile_first_run(pool, [task], _References(pool.calls))  # type: ignore[arg-type]
+    # cold: a worker compiles the step loop while this process computes the references
+    assert pool.calls == ([(worker.compile_ahead, task), ("references", task)] if cold else [])
+
+
+def test_a_cone_program_campaign_compiles_no_shooting_loop_ahead(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+
+    made: list[str] = []
+    monkeypatch.setattr(
+        simulation, "compile_loop", lambda problem, arch, *draws: made.append(arch.slug)
+    )
+    problem = problem_of(config_from_dict({}))
+    archs = [ALL_ARCHITECTURES[a] for a in ("mtf_adaptive_socp", "plain_fixed_socp")]
+    compiled.compile_ahead(problem, archs, np.zeros((problem.scenario.n_steps, 3)))
+    assert made == ["mtf_adaptive_socp"]  # one step loop per method: the cone program's
+
+
+def test_sort_prefix_orders_as_numpy_sorts() -> None:
+    from cwrend_cli.physics.guidance import _kernels
+
+    rng = np.random.default_rng(7)
+    for count in (0, 1, 2, 5, 17, 40):
+        a = rng.uniform(0.0, 800.0, 48)
+        a[3:6] = a[10]  # ties
+        a[[1, 20]] = np.nan  # NaN last, as np.sort puts it
+        want = np.concatenate((np.sort(a[:count]), a[count:]))
+        _kernels.sort_prefix(a, count)
+        assert np.array_equal(a, want, equal_nan=True)  # the prefix sorted, the rest untouched
+
+
+#: Compiles the solver's start selection (and the dual evaluation and breakpoints below it)
+#: in an empty cache and prints whether its code holds numba's quicksort or the
+#: shape-mismatch message of an array-to-array slice assignment, and its code's size.
+_SHRUNK = """
+import numpy as np
+from cwrend_cli.physics.guidance import _kernels as k
+x, w = np.polynomial.legendre.leggauss(12)
+starts = np.array([[1e-3, 2e-4, 0.0, 0.9, 0.4, 0.1]])
+k.best_start(1e-3, starts, np.full(6, 1e-2), 800.0, 0.0, 8e-4, x, w, 20, True,
+             np.empty(6), np.empty((6, 6)), k.workspace())
+ir = "".join(k.best_start.inspect_llvm().values())
+print("quicksort" in ir, "raise_with_shape_context" in ir, len(ir) > 10_000)
+"""
+
+
+def test_the_solver_compiles_no_sort_or_slice_error_message(tmp_path: Path) -> None:
+    assert _in_empty_cache(_SHRUNK, tmp_path) == ["False False True"]

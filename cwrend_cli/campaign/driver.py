@@ -71,6 +71,7 @@ from cwrend_cli.campaign.worker import (
     ReferencesKey,
     TaskInterrupted,
     TaskOutcome,
+    compile_ahead,
     execute_task,
     references_id,
     references_key,
@@ -616,6 +617,8 @@ def _execute(
             time.sleep(RETRY_BACKOFF_S * 2 ** min(reopened - 1, 4))
         try:
             with open_executor(kind, workers, address) as (pool, parallel):
+                if kind == "local" and parallel > 1 and not reopened:
+                    _compile_first_run(pool, pending, references)
                 pending = _drive(
                     pool, parallel, pending, plan_, out_dir, progress, references, attempts
                 )
@@ -626,6 +629,31 @@ def _execute(
                 raise
             raise _StopError(f"the executor could not be reopened after a fault ({exc})") from None
         reopened += 1
+
+
+def _compile_first_run(
+    executor: Executor, tasks: Sequence[Task], references: _PointReferences
+) -> None:
+    """On a first run, compile in two processes at once before the first task (issue 37 item 12).
+
+    Only when the references' kernels are not in numba's cache (a first run
+    after an install or upgrade; :mod:`cwrend_cli.physics.compiled`). This
+    process computes the first point's references, which compiles the
+    shooting solver (about half of the compile), while a pool worker
+    compiles the closed loop's step kernels, which do not depend on it
+    (:func:`~cwrend_cli.physics.compiled.compile_ahead`); the first task
+    waits for it, so that whichever worker runs it loads them rather than
+    compiling them a second time.
+    """
+    from cwrend_cli.physics import compiled
+
+    if not tasks or not compiled.references_cold():
+        return
+    ahead = executor.submit(compile_ahead, tasks[0])
+    with contextlib.suppress(OSError):  # the first task's own call reports it
+        references.of(tasks[0])
+    while not ahead.done():  # waiting on a state: short polls stay interruptible
+        wait([ahead], timeout=_POLL_S)
 
 
 def _drive(

@@ -253,6 +253,31 @@ def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
     )
 
 
+def compile_ahead(task: Task) -> None:
+    """Compile a first run's step loop for ``task``'s runs (in a pool worker).
+
+    :func:`cwrend_cli.physics.compiled.compile_ahead` with the problem and
+    draws of the task's first run and the architectures of its runs, while
+    the campaign process compiles the references' solver (issue 37 item 12).
+    Compiles into numba's cache and returns nothing; a failure here is only
+    a lost head start (each run compiles what it needs), so it is swallowed.
+    """
+    from cwrend_cli.physics import compiled
+
+    try:
+        spec = task.runs[0]
+        problem = with_values(task.problem, spec.dispersed)
+        compiled.compile_ahead(
+            problem,
+            [ALL_ARCHITECTURES[r.arch] for r in task.runs],
+            standard_normal(task.noise, spec.seed, problem.scenario.n_steps),
+            actuator_draws(problem, task.noise.root_seed, spec.seed),
+            fault_draws(problem, task.noise.root_seed, spec.seed),
+        )
+    except Exception:  # the runs compile what they need themselves
+        return
+
+
 @dataclass(frozen=True)
 class RunOutcome:
     """What a worker returns for one run: small, whatever the run's length."""

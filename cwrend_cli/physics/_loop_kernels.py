@@ -42,7 +42,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, typeof, types
 
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
@@ -293,6 +293,38 @@ def _optional_noise(pn: ProcessNoiseModel | None) -> tuple[Any, ...] | None:
     :func:`_steps`, so the fixed runs compile and compute what they always did.
     """
     return None if pn is None else tuple(pn)
+
+
+def compile_steps(
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    log: StepLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
+) -> None:
+    """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
+
+    Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
+    tuples; the CW truth, the ideal actuator, the position sensor, a linear
+    filter and a fixed process noise as ``None``, :func:`_optional`,
+    :func:`_optional_ekf`, :func:`_optional_noise`).
+    A campaign's first run compiles this in a pool worker while the campaign
+    process compiles the re-solves (issue 37 item 12); the compiled loop then
+    loads it from numba's cache instead of compiling it again.
+    """
+    truth_t, act_t = _optional(truth, act)
+    models = (None if truth_t is None else truth, None if act_t is None else act)
+    # ``None if t is None else Model(*t)`` types as an optional Model when ``t`` is a tuple
+    chosen = tuple(
+        types.none if m is None else types.Optional(typeof(m))  # type: ignore[no-untyped-call]
+        for m in (*models, sensor, ekf, pn)
+    )
+    plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
+    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], *chosen[2:]))
 
 
 @njit(cache=True)

@@ -17,18 +17,28 @@ numba version or for another CPU, or holds no entry for its bytecode.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from cwrend_cli.physics import actuator, sensors
+    from cwrend_cli.physics.params import Architecture, FloatArray, Problem
 
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls
 #: (measured one after the other in one process on a 2-core Intel Xeon, Sapphire Rapids,
-#: 2026-12-02, ``NUMBA_CACHE_DIR`` empty: the paper ablation compiled in 24-28 s).
+#: 2026-12-02, ``NUMBA_CACHE_DIR`` empty: the paper ablation compiled in 24-28 s; the
+#: shooting solver's part scaled by its measured 0.79x, now that it compiles no sort and no
+#: slice-error message, on a loaded 2-core AMD EPYC znver4).
 #: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
 #: actuator with errors) move it.
 _COMPILE_CPU_S = {
-    "references": 15.0,  # bang_bang_ascent: the open-loop references and every first plan
+    "references": 12.0,  # bang_bang_ascent: the open-loop references and every first plan
     "shooting": 9.0,  # _resolve_loop: the closed loop with its compiled re-solves
     "socp": 9.0,  # _advance and the cone program's grid kernels
 }
+#: Of each method's part, the CPU seconds a campaign's pool worker compiles while the
+#: campaign process compiles the references (:func:`compile_ahead`: the step loop below
+#: the re-solves); on 2 cores or more they overlap the references.
+_AHEAD_CPU_S = {"shooting": 4.0, "socp": 4.0}
 
 
 def _entry_points(part: str) -> tuple[Any, ...]:
@@ -60,21 +70,71 @@ def _cached(dispatcher: Any) -> bool:
         return True
 
 
-def compile_seconds(methods: Iterable[str]) -> float:
+def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
     """About how many seconds the first closed loops with these guidance ``methods`` compile.
 
     ``methods``: ``"shooting"`` and/or ``"socp"``. 0 when every kernel they
     need is in numba's cache (the usual case: everything but the first run).
+    ``fan_out``: a campaign on a local pool of two workers or more, whose
+    workers compile :data:`_AHEAD_CPU_S` while the campaign process compiles
+    the references (:func:`compile_ahead`), so those seconds overlap.
     """
     parts = ["references", *sorted(set(methods))]
-    return sum(
-        _COMPILE_CPU_S[part] for part in parts if not all(_cached(d) for d in _entry_points(part))
-    )
+    cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
+    seconds = sum(_COMPILE_CPU_S[part] for part in cold)
+    if fan_out and "references" in cold:
+        seconds -= sum(_AHEAD_CPU_S.get(part, 0.0) for part in cold)
+    return seconds
 
 
-def compiling_notice(methods: Iterable[str]) -> str | None:
-    """``compiling kernels (first run only, about N s)…``, or ``None`` when all is cached."""
-    seconds = compile_seconds(methods)
+def compiling_notice(methods: Iterable[str], fan_out: bool = False) -> str | None:
+    """``compiling kernels (first run only, about N s)…``, or ``None`` when all is cached.
+
+    ``fan_out``: as for :func:`compile_seconds`.
+    """
+    seconds = compile_seconds(methods, fan_out)
     if not seconds:
         return None
     return f"compiling kernels (first run only, about {5 * round(seconds / 5):.0f} s)…"
+
+
+def references_cold() -> bool:
+    """Whether the references' kernels are missing from numba's cache: a first run."""
+    return not all(_cached(d) for d in _entry_points("references"))
+
+
+def compile_ahead(
+    problem: Problem,
+    archs: Iterable[Architecture],
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> None:
+    """Compile what a first run needs besides the references' solver (issue 37 item 12).
+
+    On a first run the campaign process compiles the shooting solver
+    (``bang_bang_ascent``, for the references: about half of a first
+    compile) before any run can start, one core busy. Meanwhile a pool
+    worker compiles, into numba's cache, what does not depend on it: the
+    step loop of the first of ``archs`` of each guidance method
+    (:func:`cwrend_cli.physics.simulation.compile_loop`), which the first
+    runs then load. What is left for the runs is the compiled loop's top
+    (``_resolve_loop``, which carries the solver, and the cone program's grid
+    kernels). ``problem`` and the draws: those of the campaign's first run,
+    so that the argument types are the runs' own.
+
+    Only the step loop: the solver's switching-time Newton, compiled in a
+    second worker, was ready only about when the campaign process reached it
+    (measured: 13 of the solver's 27 CPU s, reached after 15), so it was as
+    often compiled twice, and three compiling processes on two cores slowed
+    the solver's own compile.
+    """
+    from cwrend_cli.physics import simulation
+
+    first: dict[str, Architecture] = {}
+    for arch in archs:
+        first.setdefault(arch.resolved_method(problem.guidance), arch)
+    for method in sorted(first):  # shooting's step loop first: the cone program's links it
+        simulation.compile_loop(
+            problem, first[method], standard_normal, actuator_draws, fault_draws
+        )

@@ -304,27 +304,12 @@ def simulate(
     Python instead of compiled code, with the same arithmetic.
     """
     sc, est, sch, gd = problem.scenario, problem.estimator, problem.schedule, problem.guidance
-    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    n, n_steps = sc.mean_motion_rad_s, sc.n_steps
     settings = solver_settings(problem)
-    gl_x, gl_w = settings.quadrature()
     t = sc.time_grid()
-    phi, gam = discretize(n, dt)
-    filter_phi, filter_gam = _filter_tables(problem)
-    r_nominal = est.r_nominal_matrix()
-    windows = problem.degradation.windows
-    sensor: measurement_models.SensorModel | None = None
-    if problem.sensor.model == "position":
-        meas = sensors.sensor_noise(standard_normal, t[:-1], r_nominal, windows, fault_draws, dt)
-        noise, active, dropout_steps, outlier_steps = (
-            meas.noise, meas.active, meas.dropout, meas.outlier
-        )  # fmt: skip
-    else:  # a nonlinear sensor (issue 35): measured and updated in the compiled loop
-        sensor, parts = sensors.sensor_model(
-            problem.sensor, standard_normal, t[:-1], windows, fault_draws, dt
-        )
-        noise, active, dropout_steps, outlier_steps = (
-            np.zeros((n_steps, 3)), parts.active, parts.dropout, parts.outlier
-        )  # fmt: skip
+    sensor, noise, active, dropout_steps, outlier_steps = _measured(
+        problem, standard_normal, fault_draws
+    )
 
     # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
     target_attitude = _target_attitude(problem)
@@ -334,38 +319,20 @@ def simulate(
     x_hat0 = x0 + np.asarray(est.initial_error, dtype=float)
     solves: list[SolveRecord] = []
     socp = arch.resolved_method(gd) == "socp"
+    eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
     if arch.adaptive and not socp:
-        eps0 = sch.eps_max
         # initial solve at ε_max from the energy costate; on failure keep it (not in the paper)
         first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
         result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
     else:
-        eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
         lam = refs.fuel.costate.copy()
 
-    model = sk.LoopModel(
-        phi=phi,
-        gam=gam,
-        lam_step=costate_stm(n, dt),
-        q=est.q_matrix(),
-        r_nominal=r_nominal,
-        noise=noise,
-        n=n,
-        u_max=sc.u_max_km_s2,
-        dt=dt,
-        gl_x=gl_x,
-        gl_w=gl_w,
-        estimator=ESTIMATOR_KINDS[arch.estimator],
-        adaptive=arch.adaptive,
-        hold_mean=gd.hold == "mean",
-        u_override=np.zeros((n_steps, 3)),
-        override=np.zeros(n_steps, dtype=np.bool_),
-        dropout=dropout_steps,
-        filter_phi=filter_phi,
-        filter_gam=filter_gam,
+    loop = _loop_parts(
+        problem, arch, noise, dropout_steps, sensor, x_hat0, lam, eps0, actuator_draws
     )
+    model = loop.model
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
@@ -382,29 +349,10 @@ def simulate(
         _hold_plan(result, 0, model)
         if solves[-1].success:
             plan_costate = result.costate
-    sched = schedule_params(sch)
-    # the true relative state obeys problem.truth; guidance and filter their [model] (issue 33)
-    truth_model = truth.truth_model(problem.truth, sc)
-    act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
-    state = sk.LoopState(
-        x_true=x0.copy(),
-        x_hat=x_hat0.copy(),
-        p=est.p0_matrix(),
-        lam=lam,
-        chief=truth.initial_chief(problem.truth, sc),
-    )
     scalars = sk.LoopScalars(eps=eps0, score_filtered=0.0, first=True)
-    log = _empty_log(n_steps + 1)
-    log.x[0] = state.x_true
-    log.x_hat[0] = state.x_hat
-    log.eps[0] = eps0
-    log.trace_p[0] = np.trace(state.p)
+    log = loop.log
 
     schedule = resolve_steps(problem)
-    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
-    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
-    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
-    loop = _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf, pn)
     if socp:
         solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
     else:
@@ -443,6 +391,132 @@ def simulate(
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
     )
+
+
+def _measured(
+    problem: Problem, standard_normal: FloatArray, fault_draws: sensors.FaultDraws | None
+) -> tuple[
+    measurement_models.SensorModel | None,
+    FloatArray,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.bool_],
+    npt.NDArray[np.bool_],
+]:
+    """``(sensor, noise, active, dropout, outlier)`` of each step of a run.
+
+    The position sensor (``sensor`` None): its measurement noise
+    (:func:`cwrend_cli.physics.sensors.sensor_noise`); a nonlinear sensor
+    (issue 35): its model, measured and updated in the compiled loop, and no
+    additive noise. ``active``: the degradation window of each step (−1 none).
+    """
+    sc = problem.scenario
+    t = sc.time_grid()[:-1]
+    windows = problem.degradation.windows
+    r_nominal = problem.estimator.r_nominal_matrix()
+    if problem.sensor.model == "position":
+        meas = sensors.sensor_noise(standard_normal, t, r_nominal, windows, fault_draws, sc.dt_s)
+        return None, meas.noise, meas.active, meas.dropout, meas.outlier
+    sensor, parts = sensors.sensor_model(
+        problem.sensor, standard_normal, t, windows, fault_draws, sc.dt_s
+    )
+    return sensor, np.zeros((sc.n_steps, 3)), parts.active, parts.dropout, parts.outlier
+
+
+def _loop_parts(
+    problem: Problem,
+    arch: Architecture,
+    noise: FloatArray,
+    dropout: npt.NDArray[np.bool_],
+    sensor: measurement_models.SensorModel | None,
+    x_hat0: FloatArray,
+    lam: FloatArray,
+    eps0: float,
+    actuator_draws: actuator.ActuatorDraws | None,
+) -> _Loop:
+    """The compiled loop's parts of a run of ``arch`` before its first step.
+
+    ``noise``, ``dropout`` and ``sensor``: the measurement noise, the sensor
+    dropouts of each step and the sensor (:func:`_measured`); ``x_hat0``: the
+    filter's initial estimate; ``lam``: the first plan's costate; ``eps0``:
+    the first ε. Row 0 of the log holds the initial state, estimate and ε.
+    """
+    sc, est, gd = problem.scenario, problem.estimator, problem.guidance
+    n, dt, n_steps = sc.mean_motion_rad_s, sc.dt_s, sc.n_steps
+    gl_x, gl_w = solver_settings(problem).quadrature()
+    phi, gam = discretize(n, dt)
+    filter_phi, filter_gam = _filter_tables(problem)
+    model = sk.LoopModel(
+        phi=phi,
+        gam=gam,
+        lam_step=costate_stm(n, dt),
+        q=est.q_matrix(),
+        r_nominal=est.r_nominal_matrix(),
+        noise=noise,
+        n=n,
+        u_max=sc.u_max_km_s2,
+        dt=dt,
+        gl_x=gl_x,
+        gl_w=gl_w,
+        estimator=ESTIMATOR_KINDS[arch.estimator],
+        adaptive=arch.adaptive,
+        hold_mean=gd.hold == "mean",
+        u_override=np.zeros((n_steps, 3)),
+        override=np.zeros(n_steps, dtype=np.bool_),
+        dropout=dropout,
+        filter_phi=filter_phi,
+        filter_gam=filter_gam,
+    )
+    sched = schedule_params(problem.schedule)
+    # the true relative state obeys problem.truth; guidance and filter their [model] (issue 33)
+    truth_model = truth.truth_model(problem.truth, sc)
+    act = actuator.actuator_model(problem.actuator, sc.u_max_km_s2, n_steps, actuator_draws)
+    state = sk.LoopState(
+        x_true=np.asarray(sc.x0, dtype=float).copy(),
+        x_hat=x_hat0.copy(),
+        p=est.p0_matrix(),
+        lam=lam,
+        chief=truth.initial_chief(problem.truth, sc),
+    )
+    log = _empty_log(n_steps + 1)
+    log.x[0] = state.x_true
+    log.x_hat[0] = state.x_hat
+    log.eps[0] = eps0
+    log.trace_p[0] = np.trace(state.p)
+    filter_ekf = ekf.ekf_model(problem.model.filter, sc, problem.truth)
+    # Q_k of each step: None for estimator.process_noise = "fixed" (issue 33)
+    pn = process_noise.process_noise_model(est, problem.actuator.ideal, sc.u_max_km_s2)
+    return _Loop(model, truth_model, act, sched, state, log, sensor, filter_ekf, pn)
+
+
+def compile_loop(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> None:
+    """Compile (or load) the kernels below the re-solves of ``arch``'s closed loop; run nothing.
+
+    The step loop of a run of ``arch`` on ``problem`` with these draws (the
+    arguments of :func:`simulate`), for the same argument types as
+    :func:`simulate` gives it: the shooting method's
+    :func:`~cwrend_cli.physics._loop_kernels.compile_steps`, the cone program's
+    :func:`~cwrend_cli.physics._loop_kernels.advance` of no step. Not the
+    re-solves: a campaign compiles those of the references meanwhile
+    (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
+    """
+    sc = problem.scenario
+    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
+    x0 = np.asarray(sc.x0, dtype=float)
+    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
+    scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
+    if arch.resolved_method(problem.guidance) == "socp":
+        loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
+    else:
+        sk.compile_steps(
+            loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
+            loop.ekf, loop.pn,
+        )  # fmt: skip
 
 
 def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:

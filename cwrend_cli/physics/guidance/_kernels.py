@@ -188,6 +188,36 @@ def control_from_costate(lam_v: np.ndarray, eps: float, u_max: float, out: np.nd
 
 
 @njit(cache=True)
+def copy_into(src: np.ndarray, out: np.ndarray) -> None:
+    """``out[:] = src`` for 1-D arrays of one length, element by element.
+
+    An array-to-array slice assignment compiles numba's shape-mismatch error
+    (string formatting) into the kernel and every kernel that calls it: a
+    loop copies the same values without it (issue 37 item 12).
+    """
+    for i in range(out.shape[0]):
+        out[i] = src[i]
+
+
+@njit(cache=True)
+def sort_prefix(a: np.ndarray, count: int) -> None:
+    """Sort ``a[:count]`` in place, ascending with NaN last: ``np.sort``'s order.
+
+    Insertion sort: the prefixes sorted here hold a few dozen breakpoints, and
+    ``np.sort`` (a quicksort, which also sorts runs this short by insertion)
+    compiles about ten times more code. Equal values are equal bits (the
+    breakpoints are times, never ``-0.0``), so the order is the same.
+    """
+    for i in range(1, count):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and (v < a[j] or (a[j] != a[j] and v == v)):
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+
+
+@njit(cache=True)
 def _primer(n: float, lam0: np.ndarray, tau: float, order: int, q: np.ndarray) -> None:
     """``λ_v(τ) = W(τ)ᵀ λ₀`` and its first ``order`` time derivatives, in closed form.
 
@@ -498,7 +528,7 @@ def quadrature_breaks(
                     breaks[nb] = t
                     nb += 1
             d *= GRADING_RATIO
-    breaks[:nb] = np.sort(breaks[:nb])
+    sort_prefix(breaks, nb)
     return n_sw, nb
 
 
@@ -798,9 +828,10 @@ def best_start(
         )  # fmt: skip
         if value_t > value:
             best = r
-            grad[:] = grad_t
+            copy_into(grad_t, grad)
             if want_hess:
-                hess[:, :] = hess_t
+                for i in range(6):
+                    copy_into(hess_t[i], hess[i])
             value = value_t
             cert = cert_t
     return best, value, cert
@@ -859,10 +890,10 @@ def newton_ascent(
     rp, rv = terminal_residual(n, horizon, grad, res)
     for it in range(settings.max_iter + 1):
         if rp <= tol_pos and rv <= tol_vel:
-            lam_out[:] = lam
+            copy_into(lam, lam_out)
             return STATUS_CONVERGED, it, rp, rv
         if cert > 0.0:
-            lam_out[:] = lam
+            copy_into(lam, lam_out)
             return STATUS_INFEASIBLE, it, rp, rv
         if it == settings.max_iter:
             break
@@ -916,5 +947,5 @@ def newton_ascent(
         rv = rv_t
         if alpha == 1.0:
             mu = mu * settings.damping_shrink if mu > settings.damping_off else 0.0
-    lam_out[:] = lam
+    copy_into(lam, lam_out)
     return STATUS_FAILED, it, rp, rv

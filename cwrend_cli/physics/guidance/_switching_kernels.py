@@ -370,7 +370,7 @@ def switching_newton(
     """
     times = np.empty((MAX_BURNS, 2))
     kinds = np.empty((MAX_BURNS, 2), dtype=np.int64)
-    lam_out[:] = lam_start  # then the last iterate, written after each step
+    kern.copy_into(lam_start, lam_out)  # then the last iterate, written after each step
     nb = initial_burns(n, lam_start, horizon, n_cells, times, kinds)
     if nb < 0:
         return False, 0
@@ -432,7 +432,7 @@ def switching_newton(
                         return False, it + 1
                     k += 1
         it += 1
-        lam_out[:] = lam
+        kern.copy_into(lam, lam_out)
 
 
 @njit(cache=True)
@@ -485,7 +485,7 @@ def bang_bang_ascent(
     start = starts[best].copy()
     # the ascent below would choose this row again (same dual values): hand it only this one
     chosen = np.empty((1, 6))
-    chosen[0] = start
+    kern.copy_into(start, chosen[0])
     rp, rv = kern.terminal_residual(n, horizon, grad, res)
     if (rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s) or best_cert > 0.0:
         return kern.newton_ascent(
@@ -502,12 +502,12 @@ def bang_bang_ascent(
         )
         rp, rv = kern.terminal_residual(n, horizon, grad, res)
         if rp <= settings.tol_pos_km and rv <= settings.tol_vel_km_s:
-            lam_out[:] = lam
+            kern.copy_into(lam, lam_out)
             return kern.STATUS_CONVERGED, iters, rp, rv
         # a consistent structure not confirmed: a near plan, offered to the ascent beside the start
         pair = np.empty((2, 6))
-        pair[0] = start
-        pair[1] = lam
+        kern.copy_into(start, pair[0])
+        kern.copy_into(lam, pair[1])
         status, more, rp, rv = kern.newton_ascent(
             n, x0, xf, horizon, eps, u_max, pair, gl_x, gl_w, n_cells, settings_t, lam_out
         )
