@@ -65,6 +65,16 @@ def _table(title: str | None, **options: Any) -> Table:
     )
 
 
+def _point_table(title: str, point_cols: Sequence[str]) -> tuple[Table, list[str]]:
+    """A narrow table that opens with a column per swept value (its last key part), and
+    those values' columns (``point_cols`` without ``point``)."""
+    table = _table(title, **_NARROW)
+    params = [c for c in point_cols if c != "point"]
+    for p in params:
+        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    return table, params
+
+
 def _summary_rows(case: CaseResult) -> list[dict[str, Any]]:
     """The open-loop references' rows, then each run's (``summary.parquet``'s columns)."""
     fuel = case.references.fuel
@@ -484,10 +494,7 @@ def applied_console_table(
     marginal = stats[(stats["kind"] == "marginal") & stats["metric"].isin(APPLIED_METRICS)]
     if marginal.empty:
         return None
-    table = _table(title, **_NARROW)
-    params = [c for c in point_cols if c != "point"]
-    for p in params:
-        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    table, params = _point_table(title, point_cols)
     table.add_column("architecture", no_wrap=True)
     for name in ("Δv applied km/s", "fuel pen. vs exact %"):
         table.add_column(name, justify="right", no_wrap=True)
@@ -539,10 +546,7 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
 
 def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) -> Table:
     """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
-    table = _table(title, **_NARROW)
-    params = [c for c in point_cols if c != "point"]
-    for p in params:
-        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    table, params = _point_table(title, point_cols)
     for name in ("architecture", "n", "Δv km/s", "miss m"):
         table.add_column(name, justify="right", no_wrap=True)
     marginal = stats[stats["kind"] == "marginal"]
@@ -586,10 +590,7 @@ def consistency_console_table(
     rows = stats[stats["kind"] == "consistency"] if "kind" in stats else stats.iloc[:0]
     if rows.empty:
         return None
-    table = _table(title, **_NARROW)
-    params = [c for c in point_cols if c != "point"]
-    for p in params:
-        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+    table, params = _point_table(title, point_cols)
     for name in ("architecture", "n", "NEES", "in\nband", "NIS", "in\nband"):
         table.add_column(name, justify="right", no_wrap=True)
     keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]

@@ -637,22 +637,9 @@ def _resolve_loop(
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
         eps, sbar, first = _steps(
-            k_next,
-            k,
-            n_steps,
-            m,
-            truth,
-            act,
-            sched,
-            state,
-            eps,
-            sbar,
-            first,
-            log,
-            sensor,
-            ekf,
-            pn,
-        )
+            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+            sensor, ekf, pn,
+        )  # fmt: skip
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
         horizon = rs.horizon_s - k_from * m.dt
@@ -692,20 +679,7 @@ def _resolve_loop(
             lam[:] = np.dot(m.lam_step, carry.warm)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
-        k_next,
-        n_steps,
-        n_steps,
-        m,
-        truth,
-        act,
-        sched,
-        state,
-        eps,
-        sbar,
-        first,
-        log,
-        sensor,
-        ekf,
-        pn,
-    )
+        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+        sensor, ekf, pn,
+    )  # fmt: skip
     return n_resolves, eps, sbar, first
