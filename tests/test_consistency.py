@@ -214,3 +214,40 @@ def test_cwrend_table_gives_the_consistency_means_with_their_bands(tmp_path) -> 
         low, high = chi2.ppf([0.025, 0.975], dof * 5) / 5
         assert cell == f"{runs[column].mean():.2f} [{low:.2f}, {high:.2f}]"
     assert cells[3].endswith("\\*")
+
+
+def _stored_nis_band(tmp_path, runs: pd.DataFrame, config: dict, command: str) -> pd.DataFrame:
+    """The NIS rows ``write_statistics`` stores for ``runs`` under a manifest of ``config``."""
+    import json
+
+    from cwrend_cli.campaign.driver import write_statistics
+
+    runs["miss_km"], runs["delta_v_km_s"], runs["fuel_penalty_pct"] = 1e-3, 0.14, 1.0
+    for column in ("solve_success_pct", "solve_mean_ms", "solve_max_ms", "n_infeasible"):
+        runs[column] = 1.0
+    runs["run_key"] = [f"k{i}" for i in range(len(runs))]
+    runs.to_parquet(tmp_path / "runs.parquet")
+    (tmp_path / "manifest.json").write_text(json.dumps({"config": config}))
+    frame = write_statistics(tmp_path, command, 0, pairs=()).frame  # type: ignore[arg-type]
+    return frame[frame["metric"] == "mean_nis_nominal"]
+
+
+def test_an_angles_campaign_stores_the_nis_band_of_two_degrees_of_freedom(tmp_path) -> None:
+    # angles-only (issue 35): m = 2, the band of χ²(2 n) / n (Bar-Shalom et al. 2001, §5.4.2)
+    n = 1000
+    runs = _runs(np.full(n, 6.0), np.full(n, 2.0))
+    row = _stored_nis_band(tmp_path, runs, {"sensor": {"model": "angles"}}, "ablate").iloc[0]
+    band = chi2.ppf([0.025, 0.975], 2 * n) / n
+    np.testing.assert_allclose((row["ci_low"], row["ci_high"]), band, rtol=1e-12)  # rounding
+
+
+def test_a_sweep_over_the_sensor_stores_each_points_nis_band(tmp_path) -> None:
+    n = 10
+    runs = pd.concat([_runs(np.full(n, 6.0), np.full(n, 3.0))] * 2, ignore_index=True)
+    runs["point"] = ["p0"] * n + ["p1"] * n
+    runs["param.sensor.model"] = ["position"] * n + ["angles"] * n
+    rows = _stored_nis_band(tmp_path, runs, {}, "sweep").set_index("point")
+    for point, m in (("p0", 3), ("p1", 2)):
+        band = chi2.ppf([0.025, 0.975], m * n) / n
+        stored = rows.loc[point, ["ci_low", "ci_high"]].to_numpy(float)
+        np.testing.assert_allclose(stored, band, rtol=1e-12)  # the order of ppf's rounding

@@ -95,13 +95,15 @@ from cwrend_cli.output.layout import (
 )
 from cwrend_cli.output.manifest import read_manifest, recorded_pairs
 from cwrend_cli.output.tables import (
+    PARAM_PREFIX,
     param_columns,
     points_table,
     references_table,
     runs_table,
     statistics_table,
 )
-from cwrend_cli.physics import simulation
+from cwrend_cli.physics import measurement_models, simulation
+from cwrend_cli.physics.metrics import NIS_DOF
 
 __all__ = [
     "CampaignStatistics",
@@ -857,11 +859,27 @@ def no_statistics(command: Literal["ablate", "sweep"]) -> CampaignStatistics:
     return CampaignStatistics(pd.DataFrame(), groups, None)
 
 
+def _nis_dofs(runs: pd.DataFrame, out_dir: Path) -> list[int]:
+    """Each run's NIS degrees of freedom: its sensor's measurement dimension m (issue 35).
+
+    The swept ``sensor.model`` of the run's point, else the base config's (the
+    manifest's; ``position`` when it has no [sensor]).
+    """
+    manifest = out_dir / MANIFEST
+    base = read_manifest(manifest, "run the same command again") if manifest.exists() else {}
+    sensor = base.get("config", {}).get("sensor", {})
+    column = f"{PARAM_PREFIX}sensor.model"
+    base_model = sensor.get("model", "position")
+    models = runs[column] if column in runs.columns else [base_model] * len(runs)
+    return [measurement_models.dimension(measurement_models.KINDS[str(m)]) for m in models]
+
+
 def _statistics(
     runs: pd.DataFrame,
     command: Literal["ablate", "sweep"],
     root_seed: int,
     pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
+    nis_dof: Sequence[int] | int = NIS_DOF,
 ) -> tuple[pd.DataFrame, tuple[str, ...]]:
     groups = () if command == "ablate" else ("point", *param_columns(runs.columns))
     by = [*groups, "arch"]
@@ -875,7 +893,7 @@ def _statistics(
     applied = statistics.applied(runs, by, seed=root_seed)  # issue 33: the applied Δv
     if not applied.empty:
         frames.append(applied)
-    consistency = statistics.consistency(runs, by)  # issue 33: against the χ² bands
+    consistency = statistics.consistency(runs, by, nis_dof)  # issue 33: against the χ² bands
     if not consistency.empty:
         frames.append(consistency)
     frame = pd.concat(frames, ignore_index=True)
@@ -910,7 +928,7 @@ def write_statistics(
     always covers every run the directory holds.
     """
     runs = pd.read_parquet(out_dir / RUNS)
-    frame, groups = _statistics(runs, command, root_seed, pairs)
+    frame, groups = _statistics(runs, command, root_seed, pairs, _nis_dofs(runs, out_dir))
     if frame.empty:
         return CampaignStatistics(frame, groups, None)
     path = out_dir / (ABLATION_STATS if command == "ablate" else SWEEP_STATS)
@@ -983,5 +1001,5 @@ def subset_statistics(
     """
     runs = pd.read_parquet(out_dir / RUNS)
     subset = runs[runs["run_key"].isin(set(run_keys))]
-    frame, groups = _statistics(subset, command, root_seed, pairs)
+    frame, groups = _statistics(subset, command, root_seed, pairs, _nis_dofs(subset, out_dir))
     return CampaignStatistics(frame, groups, None)

@@ -847,7 +847,9 @@ CONSISTENCY_METRICS: tuple[tuple[str, int], ...] = (
 )
 
 
-def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
+def consistency(
+    runs: pd.DataFrame, by: Sequence[str], nis_dof: npt.ArrayLike = NIS_DOF
+) -> pd.DataFrame:
     """Per group: the campaign mean of each run's time-averaged NEES and NIS, and its band.
 
     Rows ``kind = "consistency"`` for each metric of :data:`CONSISTENCY_METRICS`
@@ -863,17 +865,26 @@ def consistency(runs: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
     the runs has the mean of χ²(N n) and at most its variance: the band is
     conservative (exact when a run's errors do not change over time). Empty
     without the columns (runs written before cwrend stored them).
+
+    ``nis_dof``: the NIS's degrees of freedom, the measurement dimension m of
+    each run's sensor (3, or 2 for angles; one value for all, or one per row
+    of ``runs``, constant within a group of ``by``).
     """
     if not all(m in runs.columns for m, _ in CONSISTENCY_METRICS):
         return pd.DataFrame([])
-    ok = runs[runs["status"] == "ok"]
+    is_ok = (runs["status"] == "ok").to_numpy()
+    ok = runs[is_ok]
+    m = np.broadcast_to(np.asarray(nis_dof, dtype=int), (len(runs),))[is_ok]
     keys, order, bounds = _segments(ok, by)
     if not keys:
         return pd.DataFrame([])
     rows = np.array(
         [
             [
-                mean_in_band(ok[metric].to_numpy(dtype=float)[order][a:b], dof)
+                mean_in_band(
+                    ok[metric].to_numpy(dtype=float)[order][a:b],
+                    int(m[order][a]) if metric == "mean_nis_nominal" else dof,
+                )
                 for metric, dof in CONSISTENCY_METRICS
             ]
             for a, b in pairwise(bounds)
