@@ -132,3 +132,26 @@ def test_an_angles_run_logs_two_components_and_writes_them_in_degrees() -> None:
     np.testing.assert_allclose(table["meas_azimuth_deg"][1:], np.rad2deg(result.y[1:, 0]))
     np.testing.assert_allclose(table["meas_elevation_deg"][1:], np.rad2deg(result.y[1:, 1]))
     assert table["meas_range_km"].isna().all() and table["meas_x_km"].isna().all()
+
+
+def _offsets(table: dict, param: str = "sensor.model=position,angles") -> dict[str, float]:
+    from cwrend_cli.campaign.plan import plan
+
+    tasks = plan(config_from_dict(table), ["mtf_adaptive"], [0], [param]).tasks
+    return {t.problem.sensor.model: t.problem.schedule.nis_offset for t in tasks}
+
+
+@pytest.mark.parametrize("base", [{}, {"sensor": {"model": "angles"}}])
+def test_a_sweep_over_the_sensor_gives_each_point_its_own_nis_offset(base: dict) -> None:
+    # nis_offset not given: each point's m (paper Eq. 24), not the base's resolved value
+    assert _offsets(base) == {"position": 3.0, "angles": 2.0}
+
+
+@pytest.mark.parametrize("offset", [3.0, 2.5])
+def test_a_given_nis_offset_is_kept_at_every_point_of_a_sensor_sweep(offset: float) -> None:
+    assert _offsets({"schedule": {"nis_offset": offset}}) == {"position": offset, "angles": offset}
+
+
+def test_a_swept_nis_offset_is_kept_with_the_sensor_swept_in_the_file() -> None:
+    table = {"sweep": {"sensor.model": ["angles"]}}
+    assert _offsets(table, "schedule.nis_offset=2.5") == {"angles": 2.5}

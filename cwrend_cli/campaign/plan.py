@@ -52,6 +52,7 @@ from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
+from cwrend_cli.config.schema import nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
 from cwrend_cli.physics.params import Architecture, DesignModel, Problem
@@ -340,10 +341,26 @@ def draw_dispersions(
 _LISTED_VALUES = 5
 
 
-def _validated(base: Mapping[str, Any], assignment: Assignment, what: str) -> CwrendConfig:
-    """The config ``base`` + ``assignment``, validated; errors name ``what`` and the values."""
+def _validated(
+    base: Mapping[str, Any], assignment: Assignment, what: str, offset_given: bool = True
+) -> CwrendConfig:
+    """The config ``base`` + ``assignment``, validated; errors name ``what`` and the values.
+
+    ``offset_given``: the base's ``schedule.nis_offset`` was given by the user. If
+    not, and ``assignment`` sets the sensor but not the offset, the offset is
+    filled in again for the point's sensor (its m, paper Eq. 24), not kept at
+    the base's resolved value.
+    """
+    tree = apply(base, assignment)
+    keys = [k for k, _ in assignment]
+    if (
+        not offset_given
+        and any(k == "sensor" or k.startswith("sensor.") for k in keys)
+        and not any(k in ("schedule", "schedule.nis_offset") for k in keys)
+    ):
+        tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
     try:
-        return config_from_dict(apply(base, assignment), source=what)
+        return config_from_dict(tree, source=what)
     except ConfigError as exc:
         values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
         if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
@@ -492,6 +509,7 @@ def plan(
     base.pop("sweep", None)
     base.pop("dispersions", None)
     root = cfg.noise.seed
+    offset_given = nis_offset_given(cfg)  # else each point's sensor fills it in (issue 35)
     spec: DesignSpec | None = None
     if design_kind is None:
         if ranges or second_order:
@@ -515,7 +533,7 @@ def plan(
     digests: list[str] = []
     noises: dict[tuple[int, str | None, int], NoiseSource] = {}
     for pid, params in points:
-        point_cfg = _validated(base, params, f"grid point {pid}")
+        point_cfg = _validated(base, params, f"grid point {pid}", offset_given)
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
         check_design_models(problem, [ALL_ARCHITECTURES[a] for a in archs])
@@ -532,7 +550,9 @@ def plan(
             for seed in chunk:
                 dispersed = draw_dispersions(cfg.dispersions, point_tree, root, seed)
                 if dispersed:
-                    run_cfg = _validated(base, params + dispersed, f"dispersed run (seed {seed})")
+                    run_cfg = _validated(
+                        base, params + dispersed, f"dispersed run (seed {seed})", offset_given
+                    )
                     _check_typed(problem, dispersed, run_cfg, seed)
                 runs.extend(
                     RunSpec(run_key(pid, a, seed), pid, a, seed, params, dispersed) for a in archs

@@ -1384,25 +1384,17 @@ class CwrendConfig(_FrozenModel):
             out.pop("sensor", None)  # no [sensor]: position, hashes unchanged (issue 35)
         return out
 
-    @model_validator(mode="before")
-    @classmethod
-    def _nis_offset_of_the_sensor(cls, data: Any) -> Any:
+    @model_validator(mode="after")
+    def _nis_offset_of_the_sensor(self) -> Self:
         # schedule.nis_offset is the measurement dimension m of paper Eq. 24: unless given,
-        # 2 for the angles sensor (issue 35); 3 (the default) for the others
-        if not isinstance(data, dict):
-            return data
-        sensor = data.get("sensor")
-        model = sensor.get("model") if isinstance(sensor, dict) else getattr(sensor, "model", None)
-        if model != "angles":
-            return data
-        schedule = data.get("schedule", {})
-        if isinstance(schedule, ScheduleConfig):
-            if "nis_offset" in schedule.model_fields_set:
-                return data
-            return {**data, "schedule": schedule.model_copy(update={"nis_offset": 2.0})}
-        if isinstance(schedule, dict) and "nis_offset" not in schedule:
-            return {**data, "schedule": {**schedule, "nis_offset": 2.0}}
-        return data
+        # 2 for the angles sensor (issue 35); 3 (the default) for the others. A filled-in
+        # value stays out of the schedule's fields set: a point of a sweep over sensor.model
+        # tells it from one the user gave (campaign.plan, nis_offset_given)
+        if self.sensor.model == "angles" and not nis_offset_given(self):
+            schedule = self.schedule.model_copy(update={"nis_offset": 2.0})
+            schedule.__pydantic_fields_set__.discard("nis_offset")
+            object.__setattr__(self, "schedule", schedule)  # frozen: set once, while validated
+        return self
 
     @model_validator(mode="after")
     def _sensor_rules(self) -> Self:
@@ -1536,6 +1528,14 @@ def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
     except OSError:
         return None  # reading it reports the problem
     return noise_file_too_large(size, n_steps)
+
+
+def nis_offset_given(cfg: CwrendConfig) -> bool:
+    """Whether ``schedule.nis_offset`` was given (in the file, ``--set`` or a swept value).
+
+    Not given: the measurement dimension m of the sensor fills it in (3, or 2 for angles).
+    """
+    return "nis_offset" in cfg.schedule.model_fields_set
 
 
 def sensor_problems(cfg: CwrendConfig) -> list[tuple[str, Any, str]]:
