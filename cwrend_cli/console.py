@@ -584,7 +584,8 @@ def consistency_console_table(
     From the ``consistency`` rows of the statistics
     (:func:`cwrend_cli.campaign.statistics.consistency`): the mean over the
     runs of each run's mean NEES (6 if consistent) and mean NIS (nominal
-    periods, 3), the 95 % band of a consistent filter below, and whether the
+    periods, the sensor's m: 3, or 2 for angles), the 95 % band of a consistent filter
+    below, and whether the
     mean is in it. ``None`` without such rows (an older campaign).
     """
     rows = stats[stats["kind"] == "consistency"] if "kind" in stats else stats.iloc[:0]
@@ -619,7 +620,8 @@ def consistency_console_table(
         )
     table.caption = (
         "filter consistency: mean over the runs of each run's mean NEES (6 if consistent) "
-        "and mean NIS outside the degradation windows (3); below, the χ² 95 % band of a "
+        "and mean NIS outside the degradation windows (its sensor's m: 3, or 2 for angles); "
+        "below, the χ² 95 % band of a "
         "consistent filter for n runs"
     )
     return table

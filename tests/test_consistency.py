@@ -251,3 +251,16 @@ def test_a_sweep_over_the_sensor_stores_each_points_nis_band(tmp_path) -> None:
         band = chi2.ppf([0.025, 0.975], m * n) / n
         stored = rows.loc[point, ["ci_low", "ci_high"]].to_numpy(float)
         np.testing.assert_allclose(stored, band, rtol=1e-12)  # the order of ppf's rounding
+
+
+def test_the_step_ensembles_of_an_angles_sensor_use_its_two_degrees_of_freedom() -> None:
+    from cwrend_cli.report.consistency import step_ensembles
+
+    runs, steps = 4, 3
+    steps_frame = pd.DataFrame(
+        {"arch": "a", "seed": np.repeat(np.arange(runs), steps),
+         "t_s": np.tile(np.arange(steps, dtype=float), runs), "nees": 6.0, "nis": 2.0}
+    )  # fmt: skip
+    nis = step_ensembles(steps_frame, nis_dof=2)["nis"]
+    band = chi2.ppf([0.025, 0.975], 2 * runs) / runs
+    np.testing.assert_allclose(nis[["band_low", "band_high"]].to_numpy(), [band] * 2, rtol=1e-12)

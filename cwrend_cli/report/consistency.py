@@ -66,7 +66,7 @@ def share_inside(ensemble: pd.DataFrame, by: Sequence[str]) -> pd.DataFrame:
 TESTED: tuple[tuple[str, int], ...] = (("nees", NEES_DOF), ("nis", NIS_DOF))
 
 
-def step_ensembles(steps: pd.DataFrame) -> dict[str, pd.DataFrame]:
+def step_ensembles(steps: pd.DataFrame, nis_dof: int = NIS_DOF) -> dict[str, pd.DataFrame]:
     """The ensemble test per architecture and step of each quantity of :data:`TESTED` stored.
 
     ``steps``: per run and step ``arch``, ``seed``, ``t_s``, ``nees`` (and
@@ -77,12 +77,15 @@ def step_ensembles(steps: pd.DataFrame) -> dict[str, pd.DataFrame]:
     a degradation window at that step (True throughout when the steps do not
     say), the steps over which the NIS is judged, as
     :func:`~cwrend_cli.physics.metrics.mean_nis_nominal` judges a run's.
+    ``nis_dof``: the NIS's degrees of freedom, the sensor's dimension m (3, or
+    2 for angles; issue 35).
     """
     later = steps[steps["t_s"] > steps["t_s"].min()]
     out: dict[str, pd.DataFrame] = {}
     for column, dof in TESTED:
         if column not in later.columns:
             continue
+        dof = nis_dof if column == "nis" else dof
         ensemble = ensemble_consistency(later, ["arch"], column, dof)
         if "degradation_window" in later.columns:
             degraded = later.loc[later["degradation_window"] >= 0, "t_s"].unique()

@@ -727,7 +727,8 @@ def fig_consistency(data: ReportData) -> Figure:
 
     At each step the mean over the N seeds whose steps are stored (the NIS: over
     those with a measurement) per architecture; shaded, the 95 % band of a
-    consistent filter's mean, χ²(N n)/N with n = 6 (NEES) or 3 (NIS)
+    consistent filter's mean, χ²(N n)/N with n = 6 (NEES) or the sensor's m (NIS: 3, or 2
+    for angles)
     (Bar-Shalom et al. 2001, §5.4.2; :mod:`~cwrend_cli.report.consistency`),
     the widest over the architectures where their seed counts differ. Row 0
     left out; architectures with identical curves drawn once; log y.
@@ -735,13 +736,14 @@ def fig_consistency(data: ReportData) -> Figure:
     """
     if data.nees is None or data.nees.empty:
         raise ValueError("no NEES stored")
-    ensembles = step_ensembles(data.nees)
+    ensembles = step_ensembles(data.nees, data.nis_dof)
     n_seeds = int(data.nees["seed"].nunique())
     fig = _figure(13, 4.2 + 3.4 * len(ensembles))
     axes = np.atleast_1d(fig.subplots(len(ensembles), 1, sharex=True, squeeze=False)[:, 0])
     handles: list[Any] = []
     for ax, (column, ensemble) in zip(axes, ensembles.items(), strict=True):
         name, dof = _ENSEMBLE_LABELS[column]
+        dof = data.nis_dof if column == "nis" else dof  # the sensor's m (issue 35)
         band = ensemble.groupby("t_s")[["band_low", "band_high"]].agg(
             {"band_low": "min", "band_high": "max"}
         )
@@ -762,7 +764,7 @@ def fig_consistency(data: ReportData) -> Figure:
     axes[-1].set_xlabel("time [s]")
     handles += [
         Patch(color="0.5", alpha=0.25, label="95 % χ² band of a consistent filter's mean"),
-        Line2D([], [], color="black", ls=":", label="E[NEES] = 6, E[NIS] = 3"),
+        Line2D([], [], color="black", ls=":", label=f"E[NEES] = 6, E[NIS] = {data.nis_dof}"),
     ]
     _legend_below(fig, handles + _window_handles(data.windows), ncol=3)
     fig.suptitle(f"Filter consistency over {n_seeds} seed(s): ensemble means against χ² bands")

@@ -82,6 +82,7 @@ from cwrend_cli.output.tables import (
     normalize_steps,
     param_columns,
 )
+from cwrend_cli.physics import measurement_models
 from cwrend_cli.physics.constraints import Geometry, geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Window
@@ -209,6 +210,16 @@ class ReportData:
         """Thrust limit of the reported point [km/s²] (``None`` without a configuration)."""
         config = self.point_config
         return config.scenario.u_max_km_s2 if config is not None else None
+
+    @property
+    def nis_dof(self) -> int:
+        """The NIS's degrees of freedom at the reported point: its sensor's dimension m.
+
+        3, or 2 for the angles sensor (issue 35); 3 without a configuration.
+        """
+        config = self.point_config
+        model = config.sensor.model if config is not None else "position"
+        return measurement_models.dimension(measurement_models.KINDS[model])
 
     @property
     def nis_offset(self) -> float | None:

@@ -314,6 +314,7 @@ def _consistency_rows(data: ReportData, arch: str) -> dict[str, Any]:
     runs = runs[runs["arch"] == arch]
     out: dict[str, Any] = {}
     for metric, _, dof in _CONSISTENCY:
+        dof = data.nis_dof if metric == "mean_nis_nominal" else dof  # the sensor's m
         if metric in runs.columns:
             value, low, high, n = mean_in_band(pd.to_numeric(runs[metric], errors="coerce"), dof)
             out[metric] = {"value": value, "ci_low": low, "ci_high": high, "n": n}
@@ -333,7 +334,8 @@ def consistency_table(data: ReportData) -> tuple[str, int] | None:
     """
     if not any(m in data.runs.columns for m, _, _ in _CONSISTENCY):
         return None
-    ensembles = step_ensembles(data.nees) if data.nees is not None and not data.nees.empty else {}
+    steps = data.nees
+    ensembles = step_ensembles(steps, data.nis_dof) if steps is not None and not steps.empty else {}
     shares: dict[str, dict[str, float]] = {}
     for column, ensemble in ensembles.items():
         frame = share_inside(judged(ensemble, column), ["arch"])
