@@ -848,7 +848,10 @@ def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
     The :func:`design_models.step_tables` of ``model.filter`` (CW: Eq. 11 at
     every step), as writable copies, so that the compiled loop sees the arrays
     it always did. An extended Kalman filter predicts through the nonlinear
-    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, unread.
+    dynamics instead (:mod:`cwrend_cli.physics.ekf`); its tables are CW's, read only
+    by ``estimator.process_noise = "from_actuator"`` (Q_k = q + Γ_k Σ_e Γ_kᵀ), where
+    CW's Γ over a 1 s step stands for the nonlinear one (they differ at O((nΔt)²)
+    relative, about 1e-6 on the paper's orbit).
     """
     name = problem.model.filter
     tables = design_models.step_tables(
