@@ -301,6 +301,7 @@ def test_csv_gives_each_value_and_its_interval_unrounded(studies: dict[str, Path
         (("--where", "guidance.hold=never"), "--where guidance.hold=never keeps nothing"),
         (("--rows", "arch"), "differ in guidance.hold (sample, mean): add guidance.hold"),
         (("--format", "html"), "--format 'html'"),
+        (("--rows", "metric,arch", "--cols", "guidance.hold"), "--rows metric: the values"),
     ],
 )
 def test_a_bad_table_exits_2_saying_why(

@@ -900,6 +900,13 @@ def build_table(
     shared = {f.name for f in row_fields} & {f.name for f in col_fields}
     if shared:
         raise ConfigError(f"--rows and --cols both name {sorted(shared)[0]!r}")
+    if any(f.name == "metric" for f in row_fields):
+        # each column is formatted as one value (its unit, digits, interval): values run
+        # across the columns, never down the rows
+        raise ConfigError(
+            "--rows metric: the values are the table's columns; name 'metric' in --cols "
+            "(with the other column fields, e.g. --cols metric,arch) or leave it out"
+        )
     steps = any(v.subset is not None for v in values)
     runs = steps or bool(versus) or any(v.kind == "runs" for v in values)
     sources = [_loaded(s, runs, steps) for s in sources]
