@@ -102,8 +102,9 @@ from cwrend_cli.output.tables import (
     runs_table,
     statistics_table,
 )
-from cwrend_cli.physics import measurement_models, simulation
+from cwrend_cli.physics import simulation
 from cwrend_cli.physics.metrics import NIS_DOF
+from cwrend_cli.physics.params import Sensor
 
 __all__ = [
     "CampaignStatistics",
@@ -871,7 +872,7 @@ def _nis_dofs(runs: pd.DataFrame, out_dir: Path) -> list[int]:
     column = f"{PARAM_PREFIX}sensor.model"
     base_model = sensor.get("model", "position")
     models = runs[column] if column in runs.columns else [base_model] * len(runs)
-    return [measurement_models.dimension(measurement_models.KINDS[str(m)]) for m in models]
+    return [Sensor(model=str(m)).dimension for m in models]  # type: ignore[arg-type]
 
 
 def _statistics(

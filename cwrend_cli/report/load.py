@@ -82,10 +82,9 @@ from cwrend_cli.output.tables import (
     normalize_steps,
     param_columns,
 )
-from cwrend_cli.physics import measurement_models
 from cwrend_cli.physics.constraints import Geometry, geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
-from cwrend_cli.physics.params import Window
+from cwrend_cli.physics.params import Sensor, Window
 from cwrend_cli.report.labels import format_value
 
 Layout = Literal["run", "campaign"]
@@ -219,7 +218,7 @@ class ReportData:
         """
         config = self.point_config
         model = config.sensor.model if config is not None else "position"
-        return measurement_models.dimension(measurement_models.KINDS[model])
+        return Sensor(model=model).dimension
 
     @property
     def nis_offset(self) -> float | None:
