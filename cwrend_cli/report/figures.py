@@ -1503,7 +1503,8 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "consistency.png",
         "Filter consistency over the seeds: the ensemble mean NEES and NIS per architecture at "
         "each step against the 95 % χ² band of a consistent filter's mean (shaded: χ²(N n)/N "
-        "for N seeds, n = 6 and 3; Bar-Shalom et al. 2001, §5.4.2), log scale.",
+        "for N seeds, n = 6 and the sensor's m: 3, or 2 for angles; Bar-Shalom et al. 2001, "
+        "§5.4.2), log scale.",
         fig_consistency,
         _has_nees,
     ),

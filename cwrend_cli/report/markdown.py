@@ -139,7 +139,7 @@ def campaign_table(data: ReportData) -> str:
     stats = data.point_stats()
     header = ["architecture", "runs ok / failed", "mean Δv [km/s]", "mean miss [m]",
               "median miss [m]", "p95 miss [m]", "max miss [m]", "mean fuel penalty [%]",
-              "mean success [%]", "mean NEES [-] (6)", "mean NIS [-] (3)",
+              "mean success [%]", "mean NEES [-] (6)", f"mean NIS [-] ({data.nis_dof})",
               "mean applied Δv [km/s]", "mean applied fuel penalty [%]"]  # fmt: skip
     rows = []
     for a in data.archs:
@@ -372,7 +372,8 @@ def _consistency_lines(data: ReportData) -> list[str]:
     n_runs = int(data.ok_runs()["seed"].nunique())
     about = (
         "Mean over the runs of each run's time-averaged NEES (6 for a consistent filter) and "
-        "NIS (outside the degradation windows; 3), against the 95 % χ² band of a consistent "
+        f"NIS (outside the degradation windows; {data.nis_dof}, the sensor's dimension m), "
+        "against the 95 % χ² band of a consistent "
         "filter's mean over that many runs (Bar-Shalom et al. 2001, §5.4.2; conservative for "
         "time averages). Steps in band: the share of the steps at which the mean over the "
         "seeds lies in that step's band (about 95 % for a consistent filter; the NIS over the "
