@@ -23,21 +23,24 @@ if TYPE_CHECKING:
     from cwrend_cli.physics import actuator, sensors
     from cwrend_cli.physics.params import Architecture, FloatArray, Problem
 
-#: CPU seconds of the first compile of each entry point's kernels, with what it calls
-#: (measured one after the other in one process on a 2-core Intel Xeon, Sapphire Rapids,
-#: 2026-12-02, ``NUMBA_CACHE_DIR`` empty: the paper ablation compiled in 24-28 s; the
-#: shooting solver's part scaled by its measured 0.79x, now that it compiles no sort and no
-#: slice-error message, on a loaded 2-core AMD EPYC znver4).
+#: CPU seconds of the first compile of each entry point's kernels, with what it calls.
+#: Measured on an idle 2-core AMD EPYC (znver4, 2026-12-02, ``NUMBA_CACHE_DIR`` empty,
+#: interleaved with the code before issue 37 item 12): the paper ablation's first run took
+#: 50.7-51.4 s wall and 49.4-49.7 CPU s (55.3-56.4 s before); on a 2-core Intel Xeon
+#: (Sapphire Rapids) it compiled in 24-28 CPU s: machines differ by about 2x, and the
+#: notice is the slower machine's figure. The parts keep the shares measured one after
+#: the other in one process (references : each method's loop about 4 : 3).
 #: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
-#: actuator with errors) move it.
+#: actuator with errors, a nonlinear sensor, an EKF) move it.
 _COMPILE_CPU_S = {
-    "references": 12.0,  # bang_bang_ascent: the open-loop references and every first plan
-    "shooting": 9.0,  # _resolve_loop: the closed loop with its compiled re-solves
-    "socp": 9.0,  # _advance and the cone program's grid kernels
+    "references": 30.0,  # bang_bang_ascent: the open-loop references and every first plan
+    "shooting": 24.0,  # _resolve_loop: the closed loop with its compiled re-solves
+    "socp": 24.0,  # _advance and the cone program's grid kernels
 }
 #: Of each method's part, the CPU seconds a campaign's pool worker compiles while the
 #: campaign process compiles the references (:func:`compile_ahead`: the step loop below
-#: the re-solves); on 2 cores or more they overlap the references.
+#: the re-solves); on 2 cores or more they overlap the references. Measured on the idle
+#: AMD EPYC above, the overlap shortened the first campaign by about 4 s of wall time.
 _AHEAD_CPU_S = {"shooting": 4.0, "socp": 4.0}
 
 
