@@ -37,6 +37,29 @@ STF_FALSE_ALARM = 0.05
 
 
 @njit(cache=True)
+def mtf_inflation(nu: np.ndarray, s: np.ndarray, r_nominal: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(R_eff, ρ)`` of the MTF filter for an m-component innovation ``ν`` with nominal
+    covariance ``S`` (paper Eqs. 16–18, 23).
+
+    ``S_raw = ννᵀ − S`` (Eq. 16); only its positive diagonal excess is kept
+    (``S_MTF``, Eq. 17) and added to R (``R_eff = R + S_MTF``, Eq. 18);
+    ``ρ = tr(S_MTF)/tr(S)`` (Eq. 23), with a floor on tr(S). The linear update
+    (:func:`kf_update`) and the extended one
+    (:func:`cwrend_cli.physics.measurement_models.ekf_update`) both call it.
+    """
+    r_eff = r_nominal.copy()
+    s_mtf_trace = 0.0
+    s_trace = 0.0
+    for i in range(nu.shape[0]):
+        excess = nu[i] * nu[i] - s[i, i]
+        s_trace += s[i, i]
+        if excess > 0.0:
+            r_eff[i, i] += excess
+            s_mtf_trace += excess
+    return r_eff, s_mtf_trace / max(s_trace, TRACE_FLOOR)
+
+
+@njit(cache=True)
 def stf_threshold(m: int) -> float:
     """χ²_{1−α, m}, the NIS above which the single-factor filter inflates R (α = 0.05) [-].
 
@@ -177,15 +200,7 @@ def kf_update(
     r_eff = r_nominal.copy()
     rho = 0.0
     if estimator == MTF:
-        # S_raw = ννᵀ − S (Eq. 16); keep the positive diagonal excess only (Eq. 17)
-        s_mtf_trace = 0.0
-        for i in range(3):
-            excess = nu[i] * nu[i] - s[i, i]
-            if excess > 0.0:
-                r_eff[i, i] += excess  # R_eff = R + S_MTF (Eq. 18)
-                s_mtf_trace += excess
-        # ρ = tr(S_MTF)/tr(S) (Eq. 23), with a floor on tr(S)
-        rho = s_mtf_trace / max(s[0, 0] + s[1, 1] + s[2, 2], TRACE_FLOOR)
+        r_eff, rho = mtf_inflation(nu, s, r_nominal)
     elif estimator == STF:
         r_eff, rho = stf_inflation(nis, nu, p_pred[0, 0] + p_pred[1, 1] + p_pred[2, 2], r_nominal)
     # K = P⁻Hᵀ (H P⁻ Hᵀ + R_eff + δI)⁻¹ (Eq. 19)

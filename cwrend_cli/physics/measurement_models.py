@@ -48,9 +48,9 @@ from cwrend_cli.physics.estimation import (
     GAIN_REGULARISATION,
     MTF,
     STF,
-    TRACE_FLOOR,
     _inverse_spd3,
     _sandwich,
+    mtf_inflation,
     stf_inflation,
 )
 
@@ -257,17 +257,7 @@ def ekf_update(
     r_eff = r_nominal.copy()
     rho = 0.0
     if estimator == MTF:
-        # S_raw = ννᵀ − S (Eq. 16); the positive diagonal excess only (Eq. 17) into R (Eq. 18)
-        s_mtf_trace = 0.0
-        s_trace = 0.0
-        for i in range(m):
-            excess = nu[i] * nu[i] - s[i, i]
-            s_trace += s[i, i]
-            if excess > 0.0:
-                r_eff[i, i] += excess
-                s_mtf_trace += excess
-        # ρ = tr(S_MTF)/tr(S) (Eq. 23), with a floor on tr(S)
-        rho = s_mtf_trace / max(s_trace, TRACE_FLOOR)
+        r_eff, rho = mtf_inflation(nu, s, r_nominal)
     elif estimator == STF:
         hph_trace = 0.0
         for i in range(m):
