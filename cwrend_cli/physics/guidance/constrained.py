@@ -44,6 +44,16 @@ the cone.
 :data:`SCP_MAX_ITER` iterations; at the cap the last iterate is returned (safe,
 see above) with its status converged if its terminal and path rows hold.
 
+**Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
+free drift from every keep-out node (the corridor nodes of the final approach,
+node 0 and the terminal node exempt) stays outside the keep-out zone for T,
+by linear rows on the node states (:mod:`cwrend_cli.physics.abort_safety`,
+which says how many drift samples and why they suffice) with their own slack
+priced :data:`ABORT_SLACK_PENALTY` per km; the chords the rows left out are
+checked on each answer and the subproblem solved again with their rows (at
+most :data:`ABORT_ROUNDS` solves an iteration; an answer still uncovered is
+not converged).
+
 **Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
 cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
 an exact (ℓ∞) penalty, so s = 0 whenever a safe plan exists and its multiplier
@@ -64,12 +74,15 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
+from cwrend_cli.physics import abort_safety as ab
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.dynamics import discretize
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveStatus
 
 __all__ = [
+    "ABORT_ROUNDS",
+    "ABORT_SLACK_PENALTY",
     "ACCEL_FACTOR",
     "SCP_COST_RTOL",
     "SCP_MAX_ITER",
@@ -99,6 +112,13 @@ SLACK_PENALTY = 1e6
 SLACK_TOL_KM = 1e-9
 #: Safety factor on the acceleration bound of the chord margin [-].
 ACCEL_FACTOR = 1.5
+#: Price of the abort-safety slack in the scaled cost [1/km]: a tenth of the path's, so a
+#: plan gives up abort safety before it enters the unsafe set, and 1 m of it outweighs 100
+#: steps at full thrust.
+ABORT_SLACK_PENALTY = 1e5
+#: Solves of one SCP iteration at most: the first, then one for each widening of the
+#: abort rows to chords the answer left uncovered [-].
+ABORT_ROUNDS = 4
 
 _CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
 
@@ -122,6 +142,7 @@ class ConstrainedPlan:
     scp_iterations: int
     solver_iterations: int
     wall_time_s: float
+    abort_slack_km: float = 0.0  # the abort rows' softening (0: every drift covered) [km]
 
 
 def node_positions(
@@ -224,13 +245,14 @@ def _program(
     margin_km: float,
     half_spaces: dict[int, cg.HalfSpace],
     trust_km: float,
+    abort_rows: ab.AbortRows | None = None,
 ) -> tuple[Any, int]:
     """One convex subproblem (module docstring) solved by Clarabel; (solution, steps)."""
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
     iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 10 * steps
-    n_vars = 10 * steps + 1
+    n_vars = 10 * steps + 1 + (abort_rows is not None)  # … and the abort slack
 
     def xcol(k: int) -> int:  # first column of x_k, k = 1 … N
         return ix + 6 * (k - 1)
@@ -290,6 +312,8 @@ def _program(
         parts.append((rows_hs, np.full(len(pairs), i_s), -np.ones(len(pairs))))
         b_nonneg.append(-np.array([half_spaces[j].offset_km for _, j in pairs]))
         row0 += len(pairs)
+    if abort_rows is not None:
+        row0 = _abort_block(abort_rows, ix, i_s + 1, row0, parts, b_nonneg)
     constrained = np.flatnonzero(modes > 0)
     if constrained.size:  # ±(r_k − r̄_k) ≤ trust
         rows_tr = row0 + 6 * np.arange(constrained.size)
@@ -334,11 +358,37 @@ def _program(
     q = np.zeros(n_vars)
     q[it : it + steps] = 1.0 - min(float(eps), 1.0)
     q[i_s] = SLACK_PENALTY
+    if abort_rows is not None:
+        q[i_s + 1] = ABORT_SLACK_PENALTY
     diag = np.zeros(n_vars)
     diag[: 3 * steps] = 2.0 * weight
     p = sp.diags(diag, format="csc")
     sol = feasibility.solve_cone(p, q, a, b, cones)
     return sol, int(sol.iterations)
+
+
+def _abort_block(
+    rows: ab.AbortRows,
+    ix: int,
+    i_slack: int,
+    row0: int,
+    parts: list[tuple[np.ndarray, ...]],
+    b_nonneg: list[np.ndarray],
+) -> int:
+    """Append the abort rows ``cᵀ x_k + s_a ≥ o`` and ``s_a ≥ 0`` (as ``−cᵀ x_k − s_a ≤ −o``,
+    ``−s_a ≤ 0``) at row ``row0`` of the nonnegative block; the next free row."""
+    count = rows.nodes.size
+    at = row0 + np.arange(count)
+    parts.append(
+        (
+            np.repeat(at, 6),
+            (ix + 6 * (rows.nodes[:, None] - 1) + np.arange(6)[None, :]).ravel(),
+            -rows.coeffs.ravel(),
+        )
+    )
+    parts.append((np.r_[at, row0 + count], np.full(count + 1, i_slack), -np.ones(count + 1)))
+    b_nonneg += [-rows.offsets_km, np.zeros(1)]
+    return row0 + count + 1
 
 
 def _cat(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -369,13 +419,15 @@ def plan(
     p_pos_km2: np.ndarray | None = None,
     sigma_margin: float = 0.0,
     warm_controls: np.ndarray | None = None,
+    abort_safe_s: float | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
     The first iterate is ``warm_controls`` (an earlier plan's remaining controls,
     N × 3) or the unconstrained plan of :func:`.convex.plan_controls`.
     ``p_pos_km2``: the filter's position covariance (3 × 3), for
-    ``sigma_margin``.
+    ``sigma_margin``. ``abort_safe_s``: the drift time T of abort safety (None:
+    off; it needs a keep-out zone).
     """
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
@@ -416,13 +468,30 @@ def plan(
         )
     result = failed
     cost = math.inf
+    drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
         margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
         half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
-        sol, iterations = _program(
-            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust
-        )
-        used += iterations
+        chords, axes = None, geo.semi_axes_km
+        if drift is not None and axes is not None:
+            nodes = np.flatnonzero(modes == _KEEP_OUT)
+            chords = ab.chord_set(axes, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
+        for _ in range(ABORT_ROUNDS):
+            rows = None
+            if chords is not None and drift is not None and axes is not None:
+                rows = ab.rows_of(axes, drift, chords)
+            sol, iterations = _program(
+                n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust,
+                rows,
+            )  # fmt: skip
+            used += iterations
+            if rows is None or not feasibility.solved(sol):
+                break
+            assert chords is not None and drift is not None and axes is not None
+            x_sol = np.vstack([x0, np.asarray(sol.x[4 * steps : 10 * steps]).reshape(steps, 6)])
+            chords = ab.widened(axes, n, drift, chords, x_sol, ACCEL_FACTOR)
+            if chords is None:
+                break
         if not feasibility.solved(sol):
             status = (
                 SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
@@ -446,6 +515,8 @@ def plan(
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
         new_modes = _modes(geo, x_new[:, :3])
         bound_ok = cg.chord_margin_km(_accel(n, dt_s, u_max_km_s2, x_new, 0.0), dt_s) <= margin
+        bound_ok = bound_ok and chords is None  # every abort chord covered (or abort off)
+        abort_slack = float(sol.x[10 * steps + 1]) if drift is not None else 0.0
         result = ConstrainedPlan(
             SolveStatus.CONVERGED if bound_ok else SolveStatus.FAILED,
             u,
@@ -455,10 +526,12 @@ def plan(
             scp,
             used,
             time.perf_counter() - start,
+            abort_slack if abort_slack > SLACK_TOL_KM else 0.0,
         )
         x_bar, r_bar = x_new, x_new[:, :3]
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
+        settled = settled and result.abort_slack_km == 0.0
         if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
