@@ -65,6 +65,7 @@ def constraints_of(cfg: CwrendConfig) -> params.Constraints | None:
         keep_out=None if c.keep_out is None else _mirror(params.KeepOut, c.keep_out),
         corridor=None if c.corridor is None else _mirror(params.Corridor, c.corridor),
         sigma_margin=c.sigma_margin,
+        abort_safe_s=c.abort_safe_s,
     )
 
 

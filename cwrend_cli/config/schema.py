@@ -1027,6 +1027,9 @@ SemiAxisKm = Annotated[float, Strict(), Field(gt=0, le=POSITION_MAX_KM)]
 AxisEntry = Annotated[float, Strict(), Field(ge=-GAIN_MAX, le=GAIN_MAX)]
 #: Largest covariance margin k [σ]: a margin of 100 σ is already absurd.
 SIGMA_MARGIN_MAX = 100.0
+#: Longest abort-safety drift [s]: one day, about 15 low orbits (the program's rows and the
+#: truth's check grow with it: a drift sample every 10 s of it for every node).
+ABORT_SAFE_MAX_S = 86_400.0
 
 
 class KeepOutConfig(_FrozenModel):
@@ -1099,12 +1102,36 @@ class ConstraintsConfig(_FrozenModel):
         "normal n, in [0, 100] [-]",
     )
 
+    abort_safe_s: Float | None = Field(
+        None,
+        gt=0,
+        le=ABORT_SAFE_MAX_S,
+        description="abort (passive) safety: the free drift from every node of the socp plan "
+        "stays outside the keep-out zone for this long (the final approach in the corridor "
+        "exempt), in (0, 86400]; unset: off [s]",
+    )
+
     @model_serializer(mode="wrap")
     def _without_unset(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
         # an unset zone or corridor is left out (TOML has no null; a dotted key can then
         # create it: --set constraints.corridor.half_angle_deg=…)
         out: dict[str, Any] = handler(self)
         return {k: v for k, v in out.items() if v is not None}
+
+    @model_validator(mode="after")
+    def _abort_needs_a_zone(self) -> Self:
+        if self.abort_safe_s is not None and self.keep_out is None:
+            raise rules_error(
+                [
+                    (
+                        "abort_safe_s",
+                        self.abort_safe_s,
+                        "abort safety keeps the free drift out of the keep-out zone: set "
+                        "constraints.keep_out.semi_axes_km, or leave abort_safe_s out",
+                    )
+                ]
+            )
+        return self
 
     @model_validator(mode="after")
     def _port_outside_keep_out(self) -> Self:
@@ -1475,6 +1502,15 @@ class CwrendConfig(_FrozenModel):
                     "actuator.min_thrust_km_s2",
                     act.min_thrust_km_s2,
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
+                )
+            )
+        if self.target.attitude == "tumbling" and self.constraints.abort_safe_s is not None:
+            problems.append(
+                (
+                    "constraints.abort_safe_s",
+                    self.constraints.abort_safe_s,
+                    "abort safety against a tumbling target's rotating keep-out zone is not "
+                    "supported: use target.attitude = 'fixed' or leave abort_safe_s out",
                 )
             )
         if self.target.attitude == "tumbling" and self.constraints.active:

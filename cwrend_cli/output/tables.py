@@ -269,6 +269,16 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "path-constraint softening the constrained cone program needed (0: every keep-out "
         "and corridor row held)"
     ),
+    # abort safety of the true trajectory (issue 34 item 4; only with constraints.abort_safe_s)
+    "abort_min_distance_km": _col(
+        "worst signed distance to the keep-out zone of the free drifts (CW, no thrust, over "
+        "constraints.abort_safe_s) from the true state of every step before the final "
+        "approach in the corridor, re-sampled every 0.1 s where near; < 0: a drift enters"
+    ),
+    "abort_unsafe_steps": _col(
+        "steps (before the final approach) whose free drift enters the keep-out zone", "-"
+    ),
+    "abort_unsafe": _col("some step's free drift enters the keep-out zone", "-"),
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
@@ -702,6 +712,12 @@ SAFETY_RUN_FIELDS = [
     pa.field("safety_approach_angle_deg", pa.float64()),
     pa.field("safety_violated", pa.bool_()),
 ]
+#: The runs' abort-safety columns (issue 34 item 4), written only with abort_safe_s.
+ABORT_RUN_FIELDS = [
+    pa.field("abort_min_distance_km", pa.float64()),
+    pa.field("abort_unsafe_steps", pa.int64()),
+    pa.field("abort_unsafe", pa.bool_()),
+]
 #: The steps' safety columns (issue 32), written only when the runs have constraints.
 SAFETY_STEP_FIELDS = [
     pa.field("safety_distance_km", pa.float64()),
@@ -719,7 +735,8 @@ def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
     Among its metrics those of paper Sec. "Numerical Results and Discussion" (Δv, miss,
     fuel penalty, solve times and success).
 
-    With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`).
+    With constraints, the safety of the true trajectory too (:data:`SAFETY_RUN_FIELDS`;
+    with abort safety, :data:`ABORT_RUN_FIELDS`).
     ``fuel`` is the scenario's open-loop fuel-optimal reference (the fuel penalties).
     """
     metrics = run_metrics(result, fuel)
@@ -734,6 +751,10 @@ def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
         row["safety_approach_speed_km_s"] = sf.approach_speed_km_s
         row["safety_approach_angle_deg"] = sf.approach_angle_deg
         row["safety_violated"] = sf.violated
+    if result.abort is not None:
+        row["abort_min_distance_km"] = result.abort.min_distance_km
+        row["abort_unsafe_steps"] = result.abort.unsafe_steps
+        row["abort_unsafe"] = result.abort.unsafe
     return row
 
 
@@ -760,6 +781,8 @@ def summary_table(
     """Table of summary rows (see :func:`summary_row`)."""
     safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
     schema = _with_fields(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    abort = any(ABORT_RUN_FIELDS[0].name in r for r in rows)
+    schema = _with_fields(schema, ABORT_RUN_FIELDS, abort)
     table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
@@ -881,7 +904,9 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
         pa.field("duration_s", pa.float64()),
     ]
     safety = any(SAFETY_RUN_FIELDS[0].name in r.get("metrics", {}) for r in records)
-    for f in _RUN_METRICS + (SAFETY_RUN_FIELDS if safety else []):
+    abort = any(ABORT_RUN_FIELDS[0].name in r.get("metrics", {}) for r in records)
+    optional = (SAFETY_RUN_FIELDS if safety else []) + (ABORT_RUN_FIELDS if abort else [])
+    for f in _RUN_METRICS + optional:
         cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
         fields.append(f)
     for prefix, key in ((PARAM_PREFIX, "params"), ("disp.", "dispersed")):

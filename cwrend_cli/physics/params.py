@@ -403,6 +403,9 @@ class Constraints:
     keep_out: KeepOut | None = None
     corridor: Corridor | None = None
     sigma_margin: float = 0.0  # covariance margin k, in σ [-]
+    #: abort safety (issue 34 item 4, :mod:`.abort_safety`): the free drift from every node
+    #: stays outside the keep-out zone for this time [s]; None: off
+    abort_safe_s: float | None = None
 
     @property
     def active(self) -> bool:

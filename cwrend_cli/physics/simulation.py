@@ -55,6 +55,7 @@ import numpy.typing as npt
 
 from cwrend_cli.physics import _loop_kernels as sk
 from cwrend_cli.physics import (
+    abort_safety,
     actuator,
     attitude,
     design_models,
@@ -135,6 +136,9 @@ class RunResult:
     #: what ``y`` holds (issue 35): "position" [km]; "range_bearing" (range [km], azimuth,
     #: elevation [rad]); "angles" (azimuth, elevation [rad], NaN)
     sensor: str = "position"
+    #: abort safety of the true trajectory (issue 34 item 4), only with
+    #: constraints.abort_safe_s (:func:`_abort_safety`)
+    abort: abort_safety.AbortSafety | None = None
 
     @property
     def resolves(self) -> tuple[SolveRecord, ...]:
@@ -390,6 +394,7 @@ def simulate(
         trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
+        abort=_abort_safety(problem, log.x),
     )
 
 
@@ -540,6 +545,19 @@ def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | No
         return None
     geo = safety_geometry.geometry(problem.constraints)
     return safety_geometry.measure_safety(x_true, problem.scenario.dt_s, geo)
+
+
+def _abort_safety(problem: Problem, x_true: FloatArray) -> abort_safety.AbortSafety | None:
+    """The abort safety of the true trajectory (issue 34 item 4): every step's true state
+    drifted freely by CW (:func:`~cwrend_cli.physics.abort_safety.measure_abort`); None
+    without ``constraints.abort_safe_s``."""
+    c = problem.constraints
+    if c is None or c.abort_safe_s is None:
+        return None
+    geo = safety_geometry.geometry(c)
+    return abort_safety.measure_abort(
+        x_true, problem.scenario.mean_motion_rad_s, geo, c.abort_safe_s
+    )
 
 
 @dataclass(frozen=True)
@@ -762,6 +780,7 @@ def _constrained_plan(
         np.asarray(p)[:3, :3],
         c.sigma_margin,
         warm,
+        c.abort_safe_s,
     )
     converged = ans.status is guidance.SolveStatus.CONVERGED
     miss = math.nan
