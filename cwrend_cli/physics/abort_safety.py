@@ -49,12 +49,15 @@ most ``‖v‖h/(2·MEASURE_SUBSAMPLES)`` above the continuous one.
 
 **Exemption.** The nodes of the final approach cannot be abort-safe against a
 zone that holds the port's neighbourhood (a drift from near the port, even at
-rest, passes through it: the cross-track motion oscillates through 0). The
-rule: the nodes inside the corridor at the end (the last contiguous stretch
-inside the cone, up to the terminal node; the cone program's corridor nodes)
-and the terminal node are exempt; every other node is constrained and
-measured (:func:`final_approach_start`). Without a corridor only the terminal
-node is exempt.
+rest, passes through it: the cross-track motion oscillates through 0), and
+neither can the nodes that slide along the zone's surface to a port on it.
+The rule (:func:`exempt`): exempt are the nodes inside the corridor at the end
+(the last contiguous stretch inside the cone, up to the terminal node: the cone
+program's corridor nodes, :func:`final_approach_start`) and every node within
+:data:`EXEMPT_RADIUS_FACTOR` × the largest semi-axis of the plan's last node
+(the port, or x_f without a corridor); every other node is constrained and
+measured. Node 0 of a plan (the state it starts from) is given, not planned:
+the cone program cannot constrain it, the truth's measure counts it.
 
 Units: km, s, km/s.
 """
@@ -87,6 +90,7 @@ __all__ = [
     "chord_accelerations",
     "chord_set",
     "drift_table",
+    "exempt",
     "final_approach_start",
     "half_space_rows",
     "measure_abort",
@@ -105,6 +109,9 @@ MEASURE_SUBSAMPLES = 100
 _CHUNK = 1 << 18
 #: Corridor membership tolerance of the final approach [km] (the SCP's, 1 mm).
 _CORRIDOR_TOL_KM = 1e-6
+#: Radius of the exempt neighbourhood of the end of a plan, a multiple of the keep-out
+#: zone's largest semi-axis [-] (module docstring, Exemption).
+EXEMPT_RADIUS_FACTOR = 1.0
 
 
 class DriftTable(NamedTuple):
@@ -289,18 +296,29 @@ def widened(
     table: DriftTable,
     cs: ChordSet,
     x_new: FloatArray,
+    nodes: np.ndarray,
     accel_factor: float,
 ) -> ChordSet | None:
     """``cs`` with the chords that the answer ``x_new`` leaves uncovered given rows
-    (linearised at ``x_new``'s drift) and δ raised to cover them; None when none is."""
-    x = x_new[cs.nodes]
-    missing = uncovered_chords(semi_axes_km, n_rad_s, table, x, cs.chords, cs.margin_km)
+    (linearised at ``x_new``'s drift) and δ raised to cover them; None when none is.
+
+    ``nodes``: those the answer needs constrained (the rule applied to its own
+    positions); any not in ``cs`` joins it, its chords checked like the others.
+    """
+    every = np.union1d(cs.nodes, nodes).astype(np.int64)
+    at = np.searchsorted(every, cs.nodes)
+    chords = np.zeros((every.size, cs.chords.shape[1]), dtype=bool)
+    chords[at] = cs.chords
+    points = np.zeros((every.size, *cs.points.shape[1:]))
+    points[at] = cs.points
+    x = x_new[every]
+    missing = uncovered_chords(semi_axes_km, n_rad_s, table, x, chords, cs.margin_km)
     if not np.any(missing):
         return None
-    points = np.where(missing[..., None], tangent_points(semi_axes_km, table, x), cs.points)
-    chords = cs.chords | missing
+    points = np.where(missing[..., None], tangent_points(semi_axes_km, table, x), points)
+    chords |= missing
     margin = max(cs.margin_km, _margin(n_rad_s, table, x, chords, accel_factor))
-    return ChordSet(cs.nodes, chords, points, margin)
+    return ChordSet(every, chords, points, margin)
 
 
 def _margin(
@@ -317,6 +335,17 @@ def _margin(
 def rows_of(semi_axes_km: FloatArray, table: DriftTable, cs: ChordSet) -> AbortRows:
     """The rows of the chord set ``cs`` (:func:`half_space_rows`)."""
     return half_space_rows(semi_axes_km, table, cs.nodes, cs.chords, cs.points, cs.margin_km)
+
+
+def exempt(geo: cg.Geometry, r_km: FloatArray) -> BoolArray:
+    """The exempt nodes (N + 1,) of positions ``r_km`` (N + 1, 3) (module docstring):
+    the final approach in the corridor (:func:`final_approach_start`) and every node
+    within :data:`EXEMPT_RADIUS_FACTOR` × the largest semi-axis of the last node."""
+    assert geo.semi_axes_km is not None
+    radius = EXEMPT_RADIUS_FACTOR * float(np.max(geo.semi_axes_km))
+    out: BoolArray = np.linalg.norm(r_km - r_km[-1], axis=1) <= radius
+    out[final_approach_start(geo, r_km) :] = True
+    return out
 
 
 def final_approach_start(geo: cg.Geometry, r_km: FloatArray) -> int:
@@ -370,26 +399,26 @@ def measure_abort(
     assert geo.semi_axes_km is not None
     a = geo.semi_axes_km
     x = np.asarray(x, dtype=np.float64)
-    checked = final_approach_start(geo, x[:, :3])
-    if checked == 0:
+    steps = np.flatnonzero(~exempt(geo, x[:, :3]))
+    if steps.size == 0:
         return AbortSafety(time_s, math.inf, 0, 0)
     table = drift_table(n_rad_s, time_s, h_s)
-    rooms = np.empty((checked, table.phis.shape[0] - 1))
+    rooms = np.empty((steps.size, table.phis.shape[0] - 1))
     best = math.inf  # the smallest upper bound of d_E over the samples
-    for part, d in _chunks(table, x[:checked]):
+    for part, d in _chunks(table, x[steps]):
         rooms[part], _ = _ball_test(a, n_rad_s, h_s, d)
         best = min(best, float(np.min(cg._ellipsoid_distance_bounds(d[:, :-1, :3], a)[1])))
     k, j = np.nonzero((rooms < 0.0) | (rooms <= best))
     fine = np.array([stm(n_rad_s, i * h_s / subsamples) for i in range(subsamples + 1)])
     keep_out = cg.Geometry(a, None, None, None)
-    unsafe = np.zeros(checked, dtype=bool)
+    unsafe = np.zeros(steps.size, dtype=bool)
     lowest = best
     per = max(1, _CHUNK // (subsamples + 1))
     for start in range(0, k.size, per):
         kk, jj = k[start : start + per], j[start : start + per]
-        starts = np.einsum("rab,rb->ra", table.phis[jj], x[kk])
+        starts = np.einsum("rab,rb->ra", table.phis[jj], x[steps[kk]])
         points = np.einsum("iab,rb->ria", fine[:, :3, :], starts)
         inside = np.any(cg.ellipsoid_level(points, a) < 1.0, axis=1)
         unsafe[kk[inside]] = True
         lowest = min(lowest, cg._min_signed_distance(points.reshape(-1, 3), keep_out, None))
-    return AbortSafety(time_s, lowest, int(np.count_nonzero(unsafe)), checked)
+    return AbortSafety(time_s, lowest, int(np.count_nonzero(unsafe)), int(steps.size))

@@ -474,7 +474,7 @@ def plan(
         half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
         chords, axes = None, geo.semi_axes_km
         if drift is not None and axes is not None:
-            nodes = np.flatnonzero(modes == _KEEP_OUT)
+            nodes = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, r_bar))
             chords = ab.chord_set(axes, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
         for _ in range(ABORT_ROUNDS):
             rows = None
@@ -489,7 +489,8 @@ def plan(
                 break
             assert chords is not None and drift is not None and axes is not None
             x_sol = np.vstack([x0, np.asarray(sol.x[4 * steps : 10 * steps]).reshape(steps, 6)])
-            chords = ab.widened(axes, n, drift, chords, x_sol, ACCEL_FACTOR)
+            needed = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, x_sol[:, :3]))
+            chords = ab.widened(axes, n, drift, chords, x_sol, needed, ACCEL_FACTOR)
             if chords is None:
                 break
         if not feasibility.solved(sol):
