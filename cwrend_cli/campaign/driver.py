@@ -891,6 +891,9 @@ def _statistics(
     safety = statistics.safety(runs, by, seed=root_seed)  # issue 32: constrained campaigns
     if not safety.empty:
         frames.append(safety)
+    abort = statistics.abort_safety(runs, by, seed=root_seed)  # issue 34 item 4
+    if not abort.empty:
+        frames.append(abort)
     applied = statistics.applied(runs, by, seed=root_seed)  # issue 33: the applied Δv
     if not applied.empty:
         frames.append(applied)

@@ -568,33 +568,71 @@ def safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame
     bootstrap intervals from a stream of their own (:data:`SAFETY_STREAM`).
     Empty when the runs have no safety columns (a campaign without constraints).
     """
-    groups = _ok_groups(runs, by, ("safety_violated",))
+    return _flag_and_statistics(
+        runs, by, "safety_violated", SAFETY_STATISTICS, np.random.default_rng([seed, SAFETY_STREAM])
+    )
+
+
+#: Abort-safety rows (issue 34 item 4): (metric, statistic name, statistic) with bootstrap
+#: intervals, beside the share of runs with ``abort_unsafe``.
+ABORT_STATISTICS: tuple[tuple[str, str, Statistic], ...] = (
+    ("abort_min_distance_km", "median", np.median),
+    ("abort_min_distance_km", "p1", _p1),
+)
+#: Stream of their bootstrap: ``default_rng([seed, ABORT_STREAM])``, their own, so that they
+#: change no other row (as :data:`SAFETY_STREAM`).
+ABORT_STREAM = 2**32 - 5
+
+
+def abort_safety(runs: pd.DataFrame, by: Sequence[str], seed: int = 0) -> pd.DataFrame:
+    """Per group, the abort safety of the true trajectories (issue 34 item 4).
+
+    ``abort_unsafe`` / ``share``: the share of ok runs with a step whose free
+    drift enters the keep-out zone (Wilson interval); the median and 1st
+    percentile of ``abort_min_distance_km`` (bootstrap, :data:`ABORT_STREAM`).
+    Empty without the abort columns (no ``constraints.abort_safe_s``).
+    """
+    return _flag_and_statistics(
+        runs, by, "abort_unsafe", ABORT_STATISTICS, np.random.default_rng([seed, ABORT_STREAM])
+    )
+
+
+def _flag_and_statistics(
+    runs: pd.DataFrame,
+    by: Sequence[str],
+    flag: str,
+    statistics: tuple[tuple[str, str, Statistic], ...],
+    rng: np.random.Generator,
+) -> pd.DataFrame:
+    """Per group: the share of ok runs with ``flag`` (Wilson) and ``statistics`` (bootstrap
+    from ``rng``); empty when the runs have no ``flag`` column."""
+    groups = _ok_groups(runs, by, (flag,))
     if groups is None:
         return pd.DataFrame([])
     ok, keys, order, bounds = groups
     spans = list(pairwise(bounds))
     sizes = np.diff(bounds)
-    violated = ok["safety_violated"].to_numpy(dtype=float)[order]
+    violated = ok[flag].to_numpy(dtype=float)[order]
     counts = np.array([np.sum(violated[a:b]) for a, b in spans])
     share_lo, share_hi = wilson_cis(counts, sizes)
     samples: list[FloatArray] = []
     fns: list[Statistic] = []
-    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m, _, _ in SAFETY_STATISTICS}
+    per_metric = {m: ok[m].to_numpy(dtype=float)[order] for m, _, _ in statistics}
     for a, b in spans:
-        for metric, _, fn in SAFETY_STATISTICS:
+        for metric, _, fn in statistics:
             samples.append(per_metric[metric][a:b])
             fns.append(fn)
-    ci = bootstrap_cis(samples, fns, np.random.default_rng([seed, SAFETY_STREAM]))
-    per_group = 1 + len(SAFETY_STATISTICS)
+    ci = bootstrap_cis(samples, fns, rng)
+    per_group = 1 + len(statistics)
     value = np.empty((len(keys), per_group))
     low = np.empty_like(value)
     high = np.empty_like(value)
     value[:, 0], low[:, 0], high[:, 0] = counts / sizes, share_lo, share_hi
-    for k, (_, _, fn) in enumerate(SAFETY_STATISTICS):
-        value[:, 1 + k] = _point_values(samples[k :: len(SAFETY_STATISTICS)], fn)
-    low[:, 1:] = ci[:, 0].reshape(len(keys), len(SAFETY_STATISTICS))
-    high[:, 1:] = ci[:, 1].reshape(len(keys), len(SAFETY_STATISTICS))
-    labels = [("safety_violated", "share")] + [(m, n) for m, n, _ in SAFETY_STATISTICS]
+    for k, (_, _, fn) in enumerate(statistics):
+        value[:, 1 + k] = _point_values(samples[k :: len(statistics)], fn)
+    low[:, 1:] = ci[:, 0].reshape(len(keys), len(statistics))
+    high[:, 1:] = ci[:, 1].reshape(len(keys), len(statistics))
+    labels = [(flag, "share")] + [(m, n) for m, n, _ in statistics]
     return _marginal_frame(by, keys, sizes, labels, value, low, high)
 
 

@@ -279,6 +279,10 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "steps (before the final approach) whose free drift enters the keep-out zone", "-"
     ),
     "abort_unsafe": _col("some step's free drift enters the keep-out zone", "-"),
+    "abort_slack_km": _col(
+        "abort-safety softening the constrained cone program needed (0: every node's free "
+        "drift kept out of the keep-out zone)"
+    ),
     "safety_distance_km": _col(
         "signed distance of the true position at t_k to the unsafe set (< 0: inside)"
     ),
@@ -667,17 +671,27 @@ def _solves_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     if _has_safety(results):
         cols["scp_iterations"] = [s.scp_iterations for r in results for s in r.solves]
         cols["slack_km"] = [s.slack_km for r in results for s in r.solves]
+    if _has_abort(results):
+        cols["abort_slack_km"] = [s.abort_slack_km for r in results for s in r.solves]
     return cols
+
+
+def _has_abort(results: Sequence[RunResult]) -> bool:
+    """True when the runs carry abort-safety measurements (one problem: all or none)."""
+    return any(r.abort is not None for r in results)
 
 
 #: The solves' columns of the constrained cone program (issue 32), only with constraints.
 SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km", pa.float64())]
+#: The solves' abort-safety column (issue 34 item 4), only with constraints.abort_safe_s.
+ABORT_SOLVE_FIELDS = [pa.field("abort_slack_km", pa.float64())]
 
 
 def solves_table(result: RunResult, metadata: Mapping[str, Any] | None = None) -> pa.Table:
     """One row per solve (the initial one of adaptive runs, then every re-solve)."""
     cols = {"arch": [result.arch] * len(result.solves), **_solves_columns([result])}
     schema = _with_fields(SOLVES_SCHEMA, SCP_SOLVE_FIELDS, result.safety is not None)
+    schema = _with_fields(schema, ABORT_SOLVE_FIELDS, result.abort is not None)
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 
@@ -868,6 +882,7 @@ def campaign_solves_table(
     cols.update(_run_columns(extra, [len(r.solves) for r in results]))
     safety = _has_safety(results)
     schema = _with_fields(CAMPAIGN_SOLVES_SCHEMA, SCP_SOLVE_FIELDS, safety, "run_key")
+    schema = _with_fields(schema, ABORT_SOLVE_FIELDS, _has_abort(results), "run_key")
     return _conventional(pa.table(cols, schema=schema), metadata)
 
 

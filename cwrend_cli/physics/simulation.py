@@ -92,6 +92,7 @@ class SolveRecord:
     success: bool  # converged and residual below solver.success_residual (not in the paper)
     scp_iterations: int = 0  # constrained cone program (issue 32): its convex programs
     slack_km: float = 0.0  # constrained cone program: the path softening it needed [km]
+    abort_slack_km: float = 0.0  # … and the abort-safety softening (issue 34 item 4) [km]
 
 
 @dataclass(frozen=True)
@@ -229,12 +230,13 @@ def _record(
     t_s: float,
     result: guidance.SolveResult,
     threshold: float,
-    scp: tuple[int, float] | None = None,
+    scp: tuple[int, float, float] | None = None,
 ) -> SolveRecord:
-    scp_iterations, slack_km = (0, 0.0) if scp is None else scp
+    scp_iterations, slack_km, abort_slack_km = (0, 0.0, 0.0) if scp is None else scp
     return SolveRecord(
         scp_iterations=scp_iterations,
         slack_km=slack_km,
+        abort_slack_km=abort_slack_km,
         kind=kind,
         step=step,
         t_s=t_s,
@@ -748,7 +750,7 @@ def _constrained_plan(
     p: FloatArray,
     model: sk.LoopModel | None,
     k_from: int,
-) -> tuple[guidance.SolveResult, tuple[int, float]] | None:
+) -> tuple[guidance.SolveResult, tuple[int, float, float]] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
 
     From the estimate ``x_hat`` at step ``k_from`` over ``horizon_s``, with the
@@ -756,7 +758,7 @@ def _constrained_plan(
     ``constraints.sigma_margin``; warm-started from the plan held from
     ``k_from`` on (``model``'s override), else from the unconstrained plan.
     Returns the result (its plan the held controls; no costate) and
-    (SCP iterations, slack [km]).
+    (SCP iterations, path slack [km], abort slack [km]).
     """
     c = problem.constraints
     if c is None or c.keep_out is None:
@@ -798,7 +800,8 @@ def _constrained_plan(
         horizon_s=steps * sc.dt_s,
         controls=ans.controls if converged else None,
     )
-    return result, (ans.scp_iterations, 0.0 if math.isnan(ans.slack_km) else ans.slack_km)
+    slack = 0.0 if math.isnan(ans.slack_km) else ans.slack_km
+    return result, (ans.scp_iterations, slack, ans.abort_slack_km)
 
 
 def _min_miss_if_infeasible(

@@ -210,20 +210,27 @@ def safety_table(data: ReportData) -> str | None:
     reported point (``campaign.statistics.safety``, never recomputed): the share
     of runs that entered the unsafe set with its 95 % Wilson interval, the
     median and 1st percentile of the minimum signed distance (m; negative:
-    inside) and the mean time inside (s) with their bootstrap intervals.
+    inside) and the mean time inside (s) with their bootstrap intervals. With
+    abort safety (issue 34 item 4, ``campaign.statistics.abort_safety``), three
+    more columns: the share of runs with a step whose free drift enters the
+    keep-out zone and the median and 1st percentile of the worst drift distance.
     ``None`` without path constraints in the configuration or without stored
     safety rows.
     """
     stats = data.point_stats()
     if data.constraints is None or stats is None:
         return None
-    rows_of = stats[(stats["kind"] == "marginal") & stats["metric"].astype(str).str.startswith(
-        "safety_")]  # fmt: skip
+    rows_of = stats[(stats["kind"] == "marginal") & stats["metric"].astype(str).str.match(
+        "safety_|abort_")]  # fmt: skip
     if rows_of.empty:
         return None
+    abort = bool(rows_of["metric"].astype(str).str.startswith("abort_").any())
     header = ["architecture", "runs", "violated (share) [95 % Wilson]",
               "median min distance [m]", "p1 min distance [m]",
               "mean unsafe time [s]"]  # fmt: skip
+    if abort:
+        header += ["abort-unsafe (share) [95 % Wilson]", "median worst drift distance [m]",
+                   "p1 worst drift distance [m]"]  # fmt: skip
     rows = []
     for a in data.archs:
         get = _lookup(rows_of[rows_of["arch"] == a])
@@ -238,7 +245,22 @@ def safety_table(data: ReportData) -> str | None:
             _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
             _ci(get.get(("safety_unsafe_time_s", "mean")), UNSAFE_TIME),
         ])  # fmt: skip
+        if abort:
+            rows[-1] += _abort_cells(get)
     return markdown_table(header, rows) if rows else None
+
+
+def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
+    """The abort-safety cells of an architecture's safety row (issue 34 item 4)."""
+    share = get.get(("abort_unsafe", "share"))
+    if share is None:
+        return ["–"] * 3
+    n = int(share["n"])
+    return [
+        f"{round(float(share['value']) * n)} of {n}: {_ci(share, SHARE, bootstrap=False)}",
+        _ci(get.get(("abort_min_distance_km", "median")), MISS, M_PER_KM),
+        _ci(get.get(("abort_min_distance_km", "p1")), MISS, M_PER_KM),
+    ]
 
 
 def _safety_lines(data: ReportData) -> list[str]:
@@ -253,7 +275,14 @@ def _safety_lines(data: ReportData) -> list[str]:
         "(the unsafe set), between steps too; from the campaign's statistics file. "
         "Violated: the run entered the unsafe set (95 % Wilson interval); min distance: the "
         "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
-        "(95 % bootstrap interval).",
+        "(95 % bootstrap interval)."
+        + (
+            " Abort-unsafe (constraints.abort_safe_s): a step before the final approach whose "
+            "free drift (CW, no thrust) enters the keep-out zone within that time; worst drift "
+            "distance: the run's smallest signed distance of those drifts to the zone."
+            if "abort-unsafe" in table
+            else ""
+        ),
         "",
         table,
         "",
