@@ -177,12 +177,16 @@ def test_the_chord_acceleration_bounds_the_drift_everywhere() -> None:
     assert np.all(per_chord <= bound * (1 + 1e-12))
 
 
+#: The last node of a measured trajectory, and so exempt with its neighbourhood: far away.
+FAR_END = np.array([0.0, 5.0, 0.0, 0.0, 0.0, 0.0])
+
+
 def test_the_truth_measure_of_a_drift_through_the_centre() -> None:
     """At rest 1 km out along z the drift is z = cos(nt) (paper Eq. 11's Φ_zz), x = y = 0: it
     passes the centre of a 200 m sphere at t = π/(2n) ≈ 1,507 s, distance −0.2 km; the
     sampled minimum is within the drift's speed there (n · 1 km) times half a re-sample
     (0.05 s), 0.05 m."""
-    x = np.array([CROSSING_X0, CROSSING_X0])  # node 1, the terminal node, is exempt
+    x = np.array([CROSSING_X0, FAR_END])
     m = ab.measure_abort(x, N_MOTION, cg.Geometry(SPHERE, None, None, None), ABORT_S)
     assert m.checked_steps == 1 and m.unsafe_steps == 1 and m.unsafe
     assert m.min_distance_km == pytest.approx(-0.2, abs=N_MOTION * 0.05)
@@ -191,7 +195,7 @@ def test_the_truth_measure_of_a_drift_through_the_centre() -> None:
 def test_the_truth_measure_of_a_stationary_point() -> None:
     """At rest on the along-track axis a chaser stays put (CW, paper Eq. 11): 800 m from the
     surface of a 200 m sphere for ever."""
-    x = np.array([[0.0, 1.0, 0.0, 0, 0, 0]] * 3)
+    x = np.array([[0.0, 1.0, 0.0, 0, 0, 0]] * 2 + [FAR_END])
     m = ab.measure_abort(x, N_MOTION, cg.Geometry(SPHERE, None, None, None), ABORT_S)
     assert m.checked_steps == 2 and m.unsafe_steps == 0 and not m.unsafe
     assert m.min_distance_km == pytest.approx(0.8, abs=1e-12)

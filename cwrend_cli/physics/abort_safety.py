@@ -34,9 +34,9 @@ node states) a chord j of node k gets the rows ``nᵀ C Φ(t_j) x_k ≥ o`` and
 tangent to E at a surface point from the previous iterate's drift
 (:func:`tangent_points`), o raised by δ: (b) holds for every iterate whose
 own A_j h²/8 ≤ δ, an inner approximation like the keep-out rows. Only the
-chords that the previous iterate has near E get rows (:func:`near_chords`,
+chords that the previous iterate has near E get rows (:func:`chord_set`,
 within the ball of (a) plus a buffer); the others are checked on the answer
-(:func:`uncovered_chords`) and any that is not covered by (a) gets its rows and
+(:func:`widened`) and any that is not covered by (a) or (b) gets its rows and
 the subproblem is solved again, so every returned plan has every chord of
 every constrained node covered by (a) or (b), not only those given rows.
 
@@ -94,10 +94,8 @@ __all__ = [
     "final_approach_start",
     "half_space_rows",
     "measure_abort",
-    "near_chords",
     "rows_of",
     "tangent_points",
-    "uncovered_chords",
     "widened",
 ]
 
@@ -140,7 +138,9 @@ def _chunks(table: DriftTable, x: FloatArray) -> Iterator[tuple[slice, FloatArra
     per = max(1, _CHUNK // table.phis.shape[0])
     for start in range(0, x.shape[0], per):
         part = slice(start, min(start + per, x.shape[0]))
-        yield part, np.einsum("jab,kb->kja", table.phis, x[part])
+        # x Φ(t_j)ᵀ for every j at once: one matrix product (K, 6) × (6, (M + 1) 6)
+        stacked = table.phis.transpose(2, 0, 1).reshape(6, -1)
+        yield part, (x[part] @ stacked).reshape(-1, table.phis.shape[0], 6)
 
 
 def chord_accelerations(n_rad_s: float, h_s: float, d: FloatArray) -> FloatArray:
@@ -162,44 +162,31 @@ def _ball_test(
     """(room, A): ``d_E`` from below minus the chord's reach ``‖v‖h + ½Ah²`` (≥ 0: covered
     by (a)), and A_j, of every chord (K, M) of the drift states ``d`` (K, M + 1, 6)."""
     accel = chord_accelerations(n_rad_s, h_s, d)
-    low, _ = cg._ellipsoid_distance_bounds(d[:, :-1, :3], semi_axes_km)
+    # d_E ≥ a_min (√g − 1) outside E (constraints._ellipsoid_distance_bounds); inside it is
+    # negative, so a chord that starts inside is never covered by (a), as it must not be
+    q = np.sqrt(cg.ellipsoid_level(d[:, :-1, :3], semi_axes_km))
+    low = float(np.min(semi_axes_km)) * (q - 1.0)
     # the reach of a step, constraints.step_excursion_km, elementwise
     reach = np.linalg.norm(d[:, :-1, 3:], axis=-1) * h_s + 0.5 * accel * h_s**2
     return low - reach, accel
 
 
-def near_chords(
-    semi_axes_km: FloatArray, n_rad_s: float, table: DriftTable, x: FloatArray, buffer_km: float
-) -> BoolArray:
-    """The chords (K, M) of the drifts from ``x`` (K, 6) that (a) leaves within
-    ``buffer_km`` of uncovered: those that get rows (module docstring)."""
-    out = np.zeros((x.shape[0], table.phis.shape[0] - 1), dtype=bool)
+def _scan(
+    semi_axes_km: FloatArray, n_rad_s: float, table: DriftTable, x: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """(room, A) of every chord (K, M) of the drifts from ``x`` (K, 6) (:func:`_ball_test`)."""
+    room = np.empty((x.shape[0], table.phis.shape[0] - 1))
+    accel = np.empty_like(room)
     for part, d in _chunks(table, x):
-        room, _ = _ball_test(semi_axes_km, n_rad_s, table.h_s, d)
-        out[part] = room < buffer_km
-    return out
+        room[part], accel[part] = _ball_test(semi_axes_km, n_rad_s, table.h_s, d)
+    return room, accel
 
 
-def uncovered_chords(
-    semi_axes_km: FloatArray,
-    n_rad_s: float,
-    table: DriftTable,
-    x: FloatArray,
-    rows: BoolArray,
-    margin_km: float,
-) -> BoolArray:
-    """The chords (K, M) of the drifts from ``x`` covered neither by (a) nor, where ``rows``
-    (K, M) gave them rows tightened by ``margin_km``, by (b) (module docstring)."""
-    out = np.zeros(rows.shape, dtype=bool)
-    for part, d in _chunks(table, x):
-        room, accel = _ball_test(semi_axes_km, n_rad_s, table.h_s, d)
-        by_rows = rows[part] & (cg.chord_margin_km(1.0, table.h_s) * accel <= margin_km)
-        out[part] = (room < 0.0) & ~by_rows
-    return out
-
-
-def tangent_points(semi_axes_km: FloatArray, table: DriftTable, x: FloatArray) -> FloatArray:
-    """Surface points (K, M, 3) of E whose tangent planes bound the chords of ``x``'s drifts.
+def tangent_points(
+    semi_axes_km: FloatArray, table: DriftTable, x: FloatArray, chords: BoolArray
+) -> FloatArray:
+    """Surface points (K, M, 3) of E whose tangent planes bound the ``chords`` (K, M) of
+    ``x``'s drifts (zero for the other chords).
 
     The first sample of a chord projected radially onto the surface (r/√g);
     inside E, moved first by the largest semi-axis towards a side of the
@@ -208,8 +195,9 @@ def tangent_points(semi_axes_km: FloatArray, table: DriftTable, x: FloatArray) -
     every sample of a drift that crosses E goes round it on one side.
     """
     a = np.asarray(semi_axes_km, dtype=np.float64)
-    out = np.empty((x.shape[0], table.phis.shape[0] - 1, 3))
-    for part, d in _chunks(table, x):
+    out = np.zeros((x.shape[0], table.phis.shape[0] - 1, 3))
+    some = np.flatnonzero(np.any(chords, axis=1))
+    for part, d in _chunks(table, x[some]):
         r = d[:, :-1, :3]
         level = cg.ellipsoid_level(r, a)
         deep = np.argmin(level, axis=1)
@@ -224,7 +212,7 @@ def tangent_points(semi_axes_km: FloatArray, table: DriftTable, x: FloatArray) -
             size[flat] = np.linalg.norm(side[flat], axis=1)
         side /= size[:, None]
         moved = np.where((level < 1.0)[..., None], r + float(np.max(a)) * side[:, None, :], r)
-        out[part] = moved / np.sqrt(cg.ellipsoid_level(moved, a))[..., None]
+        out[some[part]] = moved / np.sqrt(cg.ellipsoid_level(moved, a))[..., None]
     return out
 
 
@@ -283,11 +271,14 @@ def chord_set(
     accel_factor: float,
 ) -> ChordSet:
     """The chords of ``nodes`` that the previous iterate ``x_bar`` (N + 1, 6) has near E
-    (:func:`near_chords`), linearised there, δ = ``accel_factor`` × their largest A h²/8."""
+    (the ball test (a) short of ``buffer_km``), linearised there, δ = ``accel_factor`` ×
+    their largest A h²/8."""
     x = x_bar[nodes]
-    chords = near_chords(semi_axes_km, n_rad_s, table, x, buffer_km)
-    cs = ChordSet(nodes, chords, tangent_points(semi_axes_km, table, x), 0.0)
-    return cs._replace(margin_km=_margin(n_rad_s, table, x, chords, accel_factor))
+    room, accel = _scan(semi_axes_km, n_rad_s, table, x)
+    chords = room < buffer_km
+    points = tangent_points(semi_axes_km, table, x, chords)
+    margin = cg.chord_margin_km(accel_factor * float(np.max(accel[chords], initial=0.0)), table.h_s)
+    return ChordSet(nodes, chords, points, margin)
 
 
 def widened(
@@ -299,8 +290,9 @@ def widened(
     nodes: np.ndarray,
     accel_factor: float,
 ) -> ChordSet | None:
-    """``cs`` with the chords that the answer ``x_new`` leaves uncovered given rows
-    (linearised at ``x_new``'s drift) and δ raised to cover them; None when none is.
+    """``cs`` with the chords that the answer ``x_new`` leaves uncovered (neither (a) nor,
+    with rows, (b): module docstring) given rows linearised at ``x_new``'s drift, and δ
+    raised to cover them; None when every chord is covered.
 
     ``nodes``: those the answer needs constrained (the rule applied to its own
     positions); any not in ``cs`` joins it, its chords checked like the others.
@@ -312,24 +304,17 @@ def widened(
     points = np.zeros((every.size, *cs.points.shape[1:]))
     points[at] = cs.points
     x = x_new[every]
-    missing = uncovered_chords(semi_axes_km, n_rad_s, table, x, chords, cs.margin_km)
+    room, accel = _scan(semi_axes_km, n_rad_s, table, x)
+    by_rows = chords & (cg.chord_margin_km(1.0, table.h_s) * accel <= cs.margin_km)
+    missing = (room < 0.0) & ~by_rows
     if not np.any(missing):
         return None
-    points = np.where(missing[..., None], tangent_points(semi_axes_km, table, x), points)
+    points[missing] = tangent_points(semi_axes_km, table, x, missing)[missing]
     chords |= missing
-    margin = max(cs.margin_km, _margin(n_rad_s, table, x, chords, accel_factor))
-    return ChordSet(every, chords, points, margin)
-
-
-def _margin(
-    n_rad_s: float, table: DriftTable, x: FloatArray, chords: BoolArray, accel_factor: float
-) -> float:
-    """``accel_factor`` × the largest A_j h²/8 of the ``chords`` of the drifts from ``x``."""
-    largest = 0.0
-    for part, d in _chunks(table, x):
-        accel = chord_accelerations(n_rad_s, table.h_s, d)[chords[part]]
-        largest = max(largest, float(np.max(accel, initial=0.0)))
-    return cg.chord_margin_km(accel_factor * largest, table.h_s)
+    largest = accel_factor * float(np.max(accel[chords], initial=0.0))
+    return ChordSet(
+        every, chords, points, max(cs.margin_km, cg.chord_margin_km(largest, table.h_s))
+    )
 
 
 def rows_of(semi_axes_km: FloatArray, table: DriftTable, cs: ChordSet) -> AbortRows:
