@@ -93,7 +93,7 @@ def burn_integral(
         mid = a + arc * h + half
         for k in range(gl_x.shape[0]):
             tau = mid + half * gl_x[k]
-            kern.input_kernel(n, tau, w)
+            kern.model_input_kernel(n, tau, w)
             q0, q1, q2, p = kern.node_primer(lam0, w)
             wk = half * gl_w[k]
             kern.add_control_node(w, q0, q1, q2, p, wk, 1.0, 0.0, u_max, with_hess, grad, hess, wq)
@@ -195,7 +195,7 @@ def joint_system(
                 continue
             t = times[b, e]
             p, pdot, _ = kern._speed_and_rate(n, t, lam0, ws)
-            kern.input_kernel(n, t, w)
+            kern.model_input_kernel(n, t, w)
             sign = 1.0 if e == 1 else -1.0
             for i in range(6):
                 wqi = (w[i, 0] * lam[3] + w[i, 1] * lam[4] + w[i, 2] * lam[5]) / p
