@@ -37,8 +37,9 @@ signature beside the ``int64`` one), which was about 10 % of a first compile
 
 The design model (issue 33). ``n`` is CW's mean motion [rad/s] (paper Eqs.
 4, 11), or an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel` of another
-time-invariant model (Schweighart–Sedwick's J2 model, ``model.guidance =
-"ss"``): then ``Φ``, ``W`` and the primer are that model's
+time-invariant model as a plain tuple (Schweighart–Sedwick's J2 model,
+``model.guidance = "ss"``; numba's ``isinstance`` takes no NamedTuple, and a
+plain tuple crosses from Python faster, so the leaves name it again): then ``Φ``, ``W`` and the primer are that model's
 (:mod:`cwrend_cli.physics.lti_kernels`) and everything above holds as
 written, since it needs only ``Φ(T)Φ(−τ) = Φ(T − τ)``. Only the leaves
 :func:`model_input_kernel`, :func:`model_primer`, :func:`model_stm` and
@@ -169,7 +170,7 @@ def model_input_kernel(n: float, tau: float, w: np.ndarray) -> None:
     if isinstance(n, float):
         input_kernel(n, tau, w)
     else:
-        lti.velocity_columns(n, -tau, w)
+        lti.velocity_columns(lti.LtiKernel(*n), -tau, w)
 
 
 @njit(cache=True)
@@ -177,7 +178,7 @@ def model_stm(n: float, t: float) -> np.ndarray:
     """``Φ(t)`` (6×6) of the design model ``n`` (module docstring)."""
     if isinstance(n, float):
         return stm(n, t)
-    return lti.transition(n, t)
+    return lti.transition(lti.LtiKernel(*n), t)
 
 
 @njit(cache=True)
@@ -185,7 +186,7 @@ def model_costate_stm(n: float, t: float) -> np.ndarray:
     """``e^{−Aᵀt} = Φ(−t)ᵀ`` (6×6) of the design model ``n`` (module docstring)."""
     if isinstance(n, float):
         return costate_stm(n, t)
-    return lti.transition(n, -t).T.copy()
+    return lti.transition(lti.LtiKernel(*n), -t).T.copy()
 
 
 @njit(cache=True)
@@ -309,7 +310,7 @@ def model_primer(
     if isinstance(n, float):
         _primer(n, lam0, tau, order, q)
     else:
-        lti.primer(n, lam0, tau, order, q, ws[WS_PRIMER, 12:30].reshape((6, 3)))
+        lti.primer(lti.LtiKernel(*n), lam0, tau, order, q, ws[WS_PRIMER, 12:30].reshape((6, 3)))
 
 
 @njit(cache=True)

@@ -97,7 +97,7 @@ class ShootingProblem:
             object.__setattr__(self, name, arr)
 
     @property
-    def kernel_model(self) -> float | kern.lti.LtiKernel:
+    def kernel_model(self) -> float | tuple[float, ...]:
         """The design model as the compiled kernels take it (:mod:`._kernels`' docstring)."""
         return kernel_model(self.mean_motion_rad_s, self.design)
 
@@ -110,9 +110,13 @@ class ShootingProblem:
         return cw_system(self.mean_motion_rad_s) if self.design is None else self.design.system()
 
 
-def kernel_model(n: float, design: LinearTimeInvariant | None) -> float | kern.lti.LtiKernel:
-    """The model the kernels take: CW's mean motion ``n`` [rad/s], or ``design``'s coefficients."""
-    return n if design is None else design.kernel()
+def kernel_model(n: float, design: LinearTimeInvariant | None) -> float | tuple[float, ...]:
+    """The model the kernels take: CW's mean motion ``n`` [rad/s], or ``design``'s coefficients.
+
+    The coefficients as the plain tuple of an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel`
+    (:mod:`._kernels`' docstring).
+    """
+    return n if design is None else tuple(design.kernel())
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,7 @@ def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
 
 
 def warm_attempt(
-    n: float | kern.lti.LtiKernel,
+    n: float | tuple[float, ...],
     u_max_km_s2: float,
     x0: np.ndarray,
     xf: np.ndarray,
