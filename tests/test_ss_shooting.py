@@ -11,6 +11,7 @@ i = 51.6° (campaigns/paper_j2.toml).
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -120,7 +121,7 @@ def test_ss_shooting_reaches_the_terminal_state() -> None:
         return out
 
     x = X0.copy()
-    for t0, t1 in zip(edges[:-1], edges[1:], strict=True):
+    for t0, t1 in itertools.pairwise(edges):
         x = solve_ivp(rhs, (t0, t1), x, method="DOP853", rtol=1e-12, atol=1e-15).y[:, -1]
     assert np.linalg.norm(x[:3] - XF[:3]) < 1e-9
     assert np.linalg.norm(x[3:] - XF[3:]) < 1e-12

@@ -65,6 +65,7 @@ from cwrend_cli.physics.guidance._kernels import (
     workspace,
 )
 from cwrend_cli.physics.guidance._switching_kernels import bang_bang_ascent
+from cwrend_cli.physics.lti_kernels import KernelModel
 from cwrend_cli.physics.measurement_models import SensorModel, measure_truth, sensor_update
 from cwrend_cli.physics.process_noise import ProcessNoiseModel, adapt, step_q
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
@@ -80,7 +81,7 @@ class LoopModel(NamedTuple):
     q: np.ndarray  # (6, 6) process-noise covariance Q
     r_nominal: np.ndarray  # (3, 3) nominal measurement covariance R [km²]
     noise: np.ndarray  # (N, 3) measurement noise of each step [km]
-    n: float | tuple[float, ...]  # mean motion [rad/s] (CW), or the ss model's LtiKernel tuple
+    n: KernelModel  # mean motion [rad/s] (CW), or the ss model's LtiKernel tuple (issue 33)
     u_max: float  # [km/s²]
     dt: float  # step Δt [s]
     gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
@@ -178,7 +179,7 @@ def nees(p: np.ndarray, x_hat: np.ndarray, x_true: np.ndarray, scratch: np.ndarr
 
 @njit(cache=True)
 def mean_control(
-    n: float,
+    n: KernelModel,
     lam: np.ndarray,
     dt: float,
     eps: float,

@@ -154,7 +154,7 @@ class LinearTimeInvariant:
         return a, b
 
     def kernel(self) -> LtiKernel:
-        """The coefficients as the compiled kernels take them (:mod:`cwrend_cli.physics.lti_kernels`)."""
+        """The coefficients as the compiled kernels take them (:mod:`.lti_kernels`)."""
         return LtiKernel(alpha=self.alpha, beta=self.beta, q=self.q, omega=self.omega)
 
 

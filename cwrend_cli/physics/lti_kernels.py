@@ -33,6 +33,10 @@ from numba import njit
 
 from cwrend_cli.physics.dynamics import one_minus_cos, x_minus_sin
 
+#: The design model as the guidance kernels take it (:mod:`cwrend_cli.physics.guidance._kernels`):
+#: CW's mean motion [rad/s], or the plain tuple of an :class:`LtiKernel`.
+KernelModel = float | tuple[float, ...]
+
 
 class LtiKernel(NamedTuple):
     """The coefficients of a time-invariant model as the compiled kernels take them."""
@@ -49,7 +53,7 @@ def velocity_columns(m: LtiKernel, t: float, out: np.ndarray) -> None:
 
     Valid for negative ``t``: ``velocity_columns(m, −τ, w)`` writes ``W(τ)``.
     """
-    w, al, be = m.omega, m.alpha, m.beta
+    w, be = m.omega, m.beta
     th = w * t
     s, c = np.sin(th), np.cos(th)
     omc, xms = one_minus_cos(th), x_minus_sin(th)

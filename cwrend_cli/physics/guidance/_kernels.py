@@ -39,7 +39,8 @@ The design model (issue 33). ``n`` is CW's mean motion [rad/s] (paper Eqs.
 4, 11), or an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel` of another
 time-invariant model as a plain tuple (Schweighart–Sedwick's J2 model,
 ``model.guidance = "ss"``; numba's ``isinstance`` takes no NamedTuple, and a
-plain tuple crosses from Python faster, so the leaves name it again): then ``Φ``, ``W`` and the primer are that model's
+plain tuple crosses from Python faster, so the leaves name it again): then
+``Φ``, ``W`` and the primer are that model's
 (:mod:`cwrend_cli.physics.lti_kernels`) and everything above holds as
 written, since it needs only ``Φ(T)Φ(−τ) = Φ(T − τ)``. Only the leaves
 :func:`model_input_kernel`, :func:`model_primer`, :func:`model_stm` and
@@ -58,6 +59,7 @@ from numba import njit
 
 from cwrend_cli.physics import lti_kernels as lti
 from cwrend_cli.physics.dynamics import costate_stm, one_minus_cos, stm, x_minus_sin
+from cwrend_cli.physics.lti_kernels import KernelModel
 
 #: ε below this is exactly bang-bang (paper Eq. 10 as ε → 0; the threshold is not in the paper).
 EPS_BANG_BANG = 1e-12
@@ -165,7 +167,7 @@ def input_kernel(n: float, tau: float, w: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def model_input_kernel(n: float, tau: float, w: np.ndarray) -> None:
+def model_input_kernel(n: KernelModel, tau: float, w: np.ndarray) -> None:
     """:func:`input_kernel` of the design model ``n`` (module docstring): ``W(τ) = Φ(−τ) B``."""
     if isinstance(n, float):
         input_kernel(n, tau, w)
@@ -174,7 +176,7 @@ def model_input_kernel(n: float, tau: float, w: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def model_stm(n: float, t: float) -> np.ndarray:
+def model_stm(n: KernelModel, t: float) -> np.ndarray:
     """``Φ(t)`` (6×6) of the design model ``n`` (module docstring)."""
     if isinstance(n, float):
         return stm(n, t)
@@ -182,7 +184,7 @@ def model_stm(n: float, t: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def model_costate_stm(n: float, t: float) -> np.ndarray:
+def model_costate_stm(n: KernelModel, t: float) -> np.ndarray:
     """``e^{−Aᵀt} = Φ(−t)ᵀ`` (6×6) of the design model ``n`` (module docstring)."""
     if isinstance(n, float):
         return costate_stm(n, t)
@@ -190,7 +192,7 @@ def model_costate_stm(n: float, t: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def costate_at(n: float, tau: float, lam0: np.ndarray, out: np.ndarray) -> None:
+def costate_at(n: KernelModel, tau: float, lam0: np.ndarray, out: np.ndarray) -> None:
     """Write ``λ(τ) = Φ(−τ)ᵀ λ₀`` into ``out`` (closed-form costate, from paper Eq. 7)."""
     p = model_stm(n, -tau)
     for j in range(6):
@@ -300,7 +302,7 @@ def _primer(n: float, lam0: np.ndarray, tau: float, order: int, q: np.ndarray) -
 
 @njit(cache=True)
 def model_primer(
-    n: float, lam0: np.ndarray, tau: float, order: int, q: np.ndarray, ws: Workspace
+    n: KernelModel, lam0: np.ndarray, tau: float, order: int, q: np.ndarray, ws: Workspace
 ) -> None:
     """:func:`_primer` of the design model ``n`` (module docstring).
 
@@ -315,7 +317,7 @@ def model_primer(
 
 @njit(cache=True)
 def _speed_and_rate(
-    n: float, t: float, lam0: np.ndarray, ws: Workspace
+    n: KernelModel, t: float, lam0: np.ndarray, ws: Workspace
 ) -> tuple[float, float, float]:
     """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM, 3:6]`` holds λ_v(t) afterwards."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
@@ -332,7 +334,7 @@ def _speed_and_rate(
 
 @njit(cache=True)
 def _switch_derivs(
-    n: float, lam0: np.ndarray, t: float, ws: Workspace
+    n: KernelModel, lam0: np.ndarray, t: float, ws: Workspace
 ) -> tuple[float, float, float, float]:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
@@ -351,7 +353,7 @@ def _switch_derivs(
 
 @njit(cache=True)
 def _g(
-    n: float, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace
+    n: KernelModel, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace
 ) -> tuple[float, float]:
     """Value and derivative of ``f⁽ᵒʳᵈᵉʳ⁾(t) − level`` (level only for order 0)."""
     f0, f1, f2, f3 = _switch_derivs(n, lam0, t, ws)
@@ -364,7 +366,7 @@ def _g(
 
 @njit(cache=True)
 def _bracketed_root(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     a: float,
     b: float,
@@ -413,7 +415,7 @@ def _bracketed_root(
 
 @njit(cache=True)
 def find_switches(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     t0: float,
     t1: float,
@@ -527,7 +529,7 @@ MAX_QUAD_BREAKS = 4 * MAX_BREAKS
 
 @njit(cache=True)
 def quadrature_breaks(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     t0: float,
     t1: float,
@@ -663,7 +665,7 @@ def add_control_node(
 
 
 @njit(cache=True)
-def terminal_offset(n: float, x0: np.ndarray, xf: np.ndarray, horizon: float) -> np.ndarray:
+def terminal_offset(n: KernelModel, x0: np.ndarray, xf: np.ndarray, horizon: float) -> np.ndarray:
     """``d = Φ(−T) x_f − x₀``: the target in the initial frame (module docstring)."""
     pf = model_stm(n, -horizon)
     d = np.empty(6)
@@ -677,7 +679,7 @@ def terminal_offset(n: float, x0: np.ndarray, xf: np.ndarray, horizon: float) ->
 
 @njit(cache=True)
 def dual_evaluate(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -833,7 +835,7 @@ def step_accepted(
 
 @njit(cache=True)
 def terminal_residual(
-    n: float, horizon: float, grad: np.ndarray, out: np.ndarray
+    n: KernelModel, horizon: float, grad: np.ndarray, out: np.ndarray
 ) -> tuple[float, float]:
     """``x(T) − x_f = Φ(T) G``; returns (‖Δr‖ [km], ‖Δv‖ [km/s])."""
     p = model_stm(n, horizon)
@@ -849,7 +851,7 @@ def terminal_residual(
 
 @njit(cache=True)
 def best_start(
-    n: float,
+    n: KernelModel,
     starts: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -893,7 +895,7 @@ def best_start(
 
 @njit(cache=True)
 def newton_ascent(
-    n: float,
+    n: KernelModel,
     x0: np.ndarray,
     xf: np.ndarray,
     horizon: float,

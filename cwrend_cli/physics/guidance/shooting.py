@@ -61,6 +61,7 @@ from cwrend_cli.physics.guidance import _kernels as kern
 from cwrend_cli.physics.guidance import _switching_kernels as switching
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
+from cwrend_cli.physics.lti_kernels import KernelModel
 
 EPS_BANG_BANG = kern.EPS_BANG_BANG
 
@@ -97,7 +98,7 @@ class ShootingProblem:
             object.__setattr__(self, name, arr)
 
     @property
-    def kernel_model(self) -> float | tuple[float, ...]:
+    def kernel_model(self) -> KernelModel:
         """The design model as the compiled kernels take it (:mod:`._kernels`' docstring)."""
         return kernel_model(self.mean_motion_rad_s, self.design)
 
@@ -110,7 +111,7 @@ class ShootingProblem:
         return cw_system(self.mean_motion_rad_s) if self.design is None else self.design.system()
 
 
-def kernel_model(n: float, design: LinearTimeInvariant | None) -> float | tuple[float, ...]:
+def kernel_model(n: float, design: LinearTimeInvariant | None) -> KernelModel:
     """The model the kernels take: CW's mean motion ``n`` [rad/s], or ``design``'s coefficients.
 
     The coefficients as the plain tuple of an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel`
@@ -195,7 +196,7 @@ def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
 
 
 def warm_attempt(
-    n: float | tuple[float, ...],
+    n: KernelModel,
     u_max_km_s2: float,
     x0: np.ndarray,
     xf: np.ndarray,
@@ -392,9 +393,7 @@ def solve_state(
         warm_starts(guess, alternatives, eps),
         settings,
     )
-    return after_warm(
-        n, u_max_km_s2, x0, xf, horizon_s, eps, guess, settings, warm, start, design
-    )
+    return after_warm(n, u_max_km_s2, x0, xf, horizon_s, eps, guess, settings, warm, start, design)
 
 
 def after_warm(
