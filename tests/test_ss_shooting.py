@@ -17,15 +17,19 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.linalg import expm
 
 from cwrend_cli.physics import design_models as dm
-from cwrend_cli.physics import guidance
+from cwrend_cli.physics import guidance, simulation
+from cwrend_cli.physics.dynamics import costate_stm
 from cwrend_cli.physics.guidance import _kernels as kern
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.params import (
+    ALL_ARCHITECTURES,
     Architecture,
     DesignModel,
     Guidance,
+    Problem,
     Scenario,
     Truth,
 )
@@ -171,3 +175,26 @@ def test_validation_accepts_ss_with_shooting_and_refuses_ya() -> None:
     reason = dm.unsupported(DesignModel(guidance="ya"), arch, Guidance())
     assert reason is not None
     assert "model.guidance = 'ya'" in reason and "time-varying" in reason
+
+
+@pytest.mark.parametrize("slug", ["mtf_fixed", "mtf_adaptive_socp"])
+def test_the_shooting_loop_plans_with_ss_and_the_cone_programs_loop_as_before(slug: str) -> None:
+    """With model.guidance = 'ss' the shooting loop's kernels and costate step are ss's.
+
+    Its costate step is e^{−AᵀΔt} of the A written in the test (to 1e-13, the closed
+    form against scipy's expm); the cone program's loop keeps CW's (its plan is the
+    held controls of the ss tables; the costate law is only its fallback, as before).
+    """
+    problem = Problem(truth=J2_TRUTH, model=DesignModel(guidance="ss"))
+    arch = ALL_ARCHITECTURES[slug]
+    loop = simulation._loop_parts(
+        problem, arch, np.zeros((SC.n_steps, 3)), np.zeros(SC.n_steps, dtype=np.bool_), None,
+        X0, np.zeros(6), 0.0, None,
+    )  # fmt: skip
+    if slug == "mtf_fixed":
+        a, _ = _ss_system()
+        assert loop.model.n == tuple(SS.kernel())
+        assert np.abs(loop.model.lam_step - expm(-a.T * SC.dt_s)).max() < 1e-13
+    else:
+        assert loop.model.n == N
+        assert np.array_equal(loop.model.lam_step, costate_stm(N, SC.dt_s))
