@@ -137,6 +137,12 @@ RESOLVE_STEP_COST_S = 100e-6
 #: seeds 0-19 (benchmarks/bench_constrained.py), 0.74-0.83 ms a step, so a lower value
 #: would leave a loaded machine's runs less than twice their cost.
 CONSTRAINED_RESOLVE_STEP_COST_S = 1e-3
+#: The same with abort safety (``constraints.abort_safe_s``: drift rows, answers checked
+#: chord by chord, programs solved again) [s]. Measured on the 2-core AMD EPYC loaded by
+#: six other agents (2026-12-02), campaigns/safe_approach.toml with abort_safe_s = 5,400:
+#: mtf_fixed_socp 2.2 s mean a re-solve, mtf_adaptive_socp 0.94 s, over 400 steps on
+#: average: 5.5 and 2.4 ms a step (the fixed-ε runs timed out at 1e-3, 105 s).
+ABORT_RESOLVE_STEP_COST_S = 6e-3
 #: A run's default limit is this multiple of its cost (:func:`run_cost_s`) ...
 COST_MULTIPLE = 3.0
 #: ... plus this [s] (a worker's pauses: the machine's other processes, the file writes).
@@ -157,7 +163,7 @@ def run_cost_s(n_steps: int, n_resolves: int, per_step_s: float = RESOLVE_STEP_C
     """What a run should cost at most [s]: each of its ``n_resolves`` re-solves over the
     remaining horizon (half of the ``n_steps`` on average) at ``per_step_s`` a step
     (:data:`RESOLVE_STEP_COST_S`, or :data:`CONSTRAINED_RESOLVE_STEP_COST_S` with
-    ``[constraints]``)."""
+    ``[constraints]``, :data:`ABORT_RESOLVE_STEP_COST_S` with abort safety)."""
     return per_step_s * n_steps * n_resolves / 2
 
 
@@ -177,6 +183,8 @@ def run_timeout_s(configured: float | None, problem: Problem, *, first: bool = F
     per_step = (
         RESOLVE_STEP_COST_S if problem.constraints is None else CONSTRAINED_RESOLVE_STEP_COST_S
     )
+    if problem.constraints is not None and problem.constraints.abort_safe_s is not None:
+        per_step = ABORT_RESOLVE_STEP_COST_S
     cost = run_cost_s(problem.scenario.n_steps, resolves(problem), per_step)
     return RUN_BASE_S + COST_MULTIPLE * cost + (FIRST_RUN_ALLOWANCE_S if first else 0.0)
 
