@@ -213,20 +213,17 @@ def test_the_final_approach_in_the_corridor_is_exempt() -> None:
 
 
 ABORT_SET = [
-    "--set",
-    "constraints.keep_out.semi_axes_km=[0.2, 0.2, 0.2]",
-    "--set",
-    "constraints.corridor.port_km=[0, 0, -0.25]",
-    "--set",
-    "constraints.corridor.axis=[0, 0, -1]",
-    "--set",
-    "constraints.corridor.half_angle_deg=30",
-    "--set",
-    "scenario.x0=[0.001, 0, 1.0, -0.001, 0.0015, 0]",
-    "--set",
-    "scenario.horizon_s=400",
-    "--set",
-    "guidance.t_resolve_s=100",
+    arg
+    for value in (
+        "constraints.keep_out.semi_axes_km=[0.2, 0.2, 0.2]",
+        "constraints.corridor.port_km=[0, 0, -0.25]",
+        "constraints.corridor.axis=[0, 0, -1]",
+        "constraints.corridor.half_angle_deg=30",
+        "scenario.x0=[0.001, 0, 1.0, -0.001, 0.0015, 0]",
+        "scenario.horizon_s=400",
+        "guidance.t_resolve_s=100",
+    )
+    for arg in ("--set", value)
 ]
 RUN_COLUMNS = {"abort_min_distance_km", "abort_unsafe_steps", "abort_unsafe"}
 
