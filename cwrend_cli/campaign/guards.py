@@ -138,11 +138,12 @@ RESOLVE_STEP_COST_S = 100e-6
 #: would leave a loaded machine's runs less than twice their cost.
 CONSTRAINED_RESOLVE_STEP_COST_S = 1e-3
 #: The same with abort safety (``constraints.abort_safe_s``: drift rows, answers checked
-#: chord by chord, programs solved again) [s]. Measured on the 2-core AMD EPYC loaded by
+#: chord by chord, programs solved again) [s]. Measured on the 2-core AMD EPYC shared with
 #: six other agents (2026-12-02), campaigns/safe_approach.toml with abort_safe_s = 5,400:
 #: mtf_fixed_socp 2.2 s mean a re-solve, mtf_adaptive_socp 0.94 s, over 400 steps on
-#: average: 5.5 and 2.4 ms a step (the fixed-ε runs timed out at 1e-3, 105 s).
-ABORT_RESOLVE_STEP_COST_S = 6e-3
+#: average: 5.5 and 2.4 ms a step; a plain_fixed_socp run under a heavier load took more
+#: than 700 s (over 22 ms a step), so the limit is set for that: 20 ms, three times over.
+ABORT_RESOLVE_STEP_COST_S = 2e-2
 #: A run's default limit is this multiple of its cost (:func:`run_cost_s`) ...
 COST_MULTIPLE = 3.0
 #: ... plus this [s] (a worker's pauses: the machine's other processes, the file writes).
