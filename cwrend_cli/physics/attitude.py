@@ -69,7 +69,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.constraints import SAFETY_SUBSTEPS
+from cwrend_cli.physics.constraints import SAFETY_SUBSTEPS, BodyMotion, rate_bounds
 from cwrend_cli.physics.params import FloatArray, Target
 
 __all__ = [
@@ -78,11 +78,13 @@ __all__ = [
     "AttitudeModel",
     "TargetAttitude",
     "attitude_model",
+    "body_motion",
     "euler_rates",
     "hill_from_inertial",
     "max_rate_rad_s",
     "propagate",
     "quat_multiply",
+    "rotation_matrices",
     "target_attitude",
 ]
 
@@ -163,6 +165,37 @@ def target_attitude(
     q_ib, w = propagate(model, h_out, per, count)
     t = np.arange(count + 1, dtype=np.float64) * h_out
     return TargetAttitude(t, hill_from_inertial(q_ib, t, model.n_rad_s), w, substeps)
+
+
+def rotation_matrices(q: FloatArray) -> FloatArray:
+    """The rotation matrices (M, 3, 3) of unit scalar-first quaternions (M, 4).
+
+    ``R(q) v = q ⊗ (0, v) ⊗ q*`` (Diebel 2006: the rotation matrix of a unit
+    quaternion, written for Hamilton's product).
+    """
+    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    rows = [
+        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+        [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
+        [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
+    ]
+    return np.asarray(np.moveaxis(np.array(rows), (0, 1), (-2, -1)), dtype=np.float64)
+
+
+def body_motion(model: AttitudeModel, q_hb: FloatArray, w_rad_s: FloatArray) -> BodyMotion:
+    """The turn of the body frame relative to the Hill frame at the given samples (M rows).
+
+    ``R`` body→Hill from ``q_hb``; the body's angular velocity relative to the
+    Hill frame in Hill axes ``Ω = R ω − n ẑ`` (module docstring: ω is relative
+    to inertial space, the Hill frame turns at n about its z); the bounds of ‖Ω‖
+    and ‖Ω̇‖ from the largest rate the body reaches
+    (:func:`~cwrend_cli.physics.constraints.rate_bounds`).
+    """
+    rot = rotation_matrices(q_hb)
+    rate = np.einsum("mij,mj->mi", rot, w_rad_s)
+    rate[:, 2] -= model.n_rad_s
+    bound, bound_dot = rate_bounds(max_rate_rad_s(model), model.n_rad_s)
+    return BodyMotion(rot, np.asarray(rate, dtype=np.float64), bound, bound_dot)
 
 
 # ---------------------------------------------------------------------------

@@ -367,14 +367,26 @@ class Actuator:
 
 
 @dataclass(frozen=True)
+class KeepOutBody:
+    """One more keep-out ellipsoid ``Σ ((r_i − c_i)/a_i)² < 1`` (issue 34), axis-aligned in
+    the target's body frame (the relative frame for a fixed target)."""
+
+    centre_km: Vec3  # centre c [km]
+    semi_axes_km: Vec3  # semi-axes (a, b, c) [km]
+
+
+@dataclass(frozen=True)
 class KeepOut:
     """A keep-out ellipsoid centred on the target (the relative frame's origin).
 
     The zone is ``(x/a)² + (y/b)² + (z/c)² < 1`` with ``semi_axes_km = (a, b, c)``
-    along x (radial), y (along-track), z (cross-track) [km].
+    along x (radial), y (along-track), z (cross-track) [km], united with the
+    ellipsoids of ``bodies`` (issue 34). For a tumbling target every axis is a
+    body axis.
     """
 
     semi_axes_km: Vec3  # ellipsoid semi-axes (a, b, c) [km]
+    bodies: tuple[KeepOutBody, ...] = ()  # more ellipsoids (issue 34)
 
 
 @dataclass(frozen=True)

@@ -336,7 +336,9 @@ def simulate(
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
-        scp = _constrained_plan(problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0)
+        scp = _constrained_plan(
+            problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, target_attitude
+        )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
@@ -354,11 +356,15 @@ def simulate(
 
     schedule = resolve_steps(problem)
     if socp:
-        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
+        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, target_attitude)
     else:
         solves += _shooting_resolves(problem, settings, schedule, loop, scalars, observe)
 
-    miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
+    safety = _safety(problem, log.x, target_attitude)
+    if safety is not None and safety.rotating and not math.isnan(safety.dock_position_error_km):
+        miss = safety.dock_position_error_km  # a tumbling target: the moving port (issue 34)
+    else:
+        miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
     dropout = np.concatenate(([False], dropout_steps))
@@ -386,7 +392,7 @@ def simulate(
         nees=log.nees,
         dropout=dropout,
         outlier=outlier,
-        safety=_safety(problem, log.x),
+        safety=safety,
         trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
@@ -534,12 +540,36 @@ def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
     return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
-def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
-    """The safety of the true trajectory (issue 32 item 3); None without constraints."""
+def _body_motion(
+    problem: Problem, att: attitude.TargetAttitude, start: int, stop: int, stride: int
+) -> safety_geometry.BodyMotion:
+    """The tumbling target's turn at its samples ``start:stop:stride`` (issue 34)."""
+    model = attitude.attitude_model(problem.target, problem.scenario.mean_motion_rad_s)
+    rows = slice(start, stop, stride)
+    return attitude.body_motion(model, att.q_hb[rows], att.w_rad_s[rows])
+
+
+def _safety(
+    problem: Problem, x_true: FloatArray, att: attitude.TargetAttitude | None
+) -> safety_geometry.Safety | None:
+    """The safety of the true trajectory (issue 32 item 3); None without constraints.
+
+    A tumbling target (``att``): against the set turning with the true attitude at
+    every sub-sample (issue 34).
+    """
     if problem.constraints is None:
         return None
     geo = safety_geometry.geometry(problem.constraints)
-    return safety_geometry.measure_safety(x_true, problem.scenario.dt_s, geo)
+    motion = None
+    if att is not None:
+        motion = _body_motion(problem, att, 0, att.t_s.size, 1)
+    return safety_geometry.measure_safety(
+        x_true,
+        problem.scenario.dt_s,
+        geo,
+        att.substeps if att else safety_geometry.SAFETY_SUBSTEPS,
+        motion,
+    )
 
 
 @dataclass(frozen=True)
@@ -681,6 +711,7 @@ def _cone_resolves(
     loop: _Loop,
     scalars: sk.LoopScalars,
     plan_costate: FloatArray | None,
+    target_attitude: attitude.TargetAttitude | None = None,
 ) -> list[SolveRecord]:
     """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
 
@@ -704,7 +735,9 @@ def _cone_resolves(
         k_from = k + 1 if correct else k
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
-        scp = _constrained_plan(problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from)
+        scp = _constrained_plan(
+            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, target_attitude
+        )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
@@ -730,6 +763,7 @@ def _constrained_plan(
     p: FloatArray,
     model: sk.LoopModel | None,
     k_from: int,
+    target_attitude: attitude.TargetAttitude | None = None,
 ) -> tuple[guidance.SolveResult, tuple[int, float]] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
 
@@ -739,6 +773,13 @@ def _constrained_plan(
     ``k_from`` on (``model``'s override), else from the unconstrained plan.
     Returns the result (its plan the held controls; no costate) and
     (SCP iterations, slack [km]).
+
+    A tumbling target (``target_attitude``, issue 34): the attitude predicted over
+    the horizon from the one known at ``k_from`` (the truth's: torque-free motion
+    predicted by the same model is the truth's own) turns the keep-out bodies and
+    the corridor at every node, and with a corridor the terminal state is the
+    port's predicted position and velocity at the horizon's end,
+    ``(R p, Ω × R p)`` in the relative frame.
     """
     c = problem.constraints
     if c is None or c.keep_out is None:
@@ -750,6 +791,15 @@ def _constrained_plan(
     if model is not None and held and bool(np.all(model.override[k_from : k_from + steps])):
         warm = model.u_override[k_from : k_from + steps].copy()
     xf = np.asarray(sc.xf, dtype=float)
+    geo = safety_geometry.geometry(c)
+    motion = None
+    if target_attitude is not None:
+        every = target_attitude.substeps
+        stop = (k_from + steps) * every + 1
+        motion = _body_motion(problem, target_attitude, k_from * every, stop, every)
+        if geo.port_km is not None:
+            port = motion.rotation[-1] @ geo.port_km
+            xf = np.concatenate([port, np.cross(motion.rate_rad_s[-1], port)])
     ans = constrained.plan(
         sc.mean_motion_rad_s,
         sc.dt_s,
@@ -758,10 +808,11 @@ def _constrained_plan(
         xf,
         horizon_s,
         eps,
-        safety_geometry.geometry(c),
+        geo,
         np.asarray(p)[:3, :3],
         c.sigma_margin,
         warm,
+        motion,
     )
     converged = ans.status is guidance.SolveStatus.CONVERGED
     miss = math.nan

@@ -136,7 +136,7 @@ def node_positions(
     return x, x[:, :3]
 
 
-def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
+def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) -> np.ndarray:
     """Each node's constraint set from the previous iterate (module docstring)."""
     steps = r_bar.shape[0] - 1
     modes = np.zeros(steps + 1, dtype=np.int8)
@@ -145,7 +145,7 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    inside = cg.corridor_cone(geo, 0.0).residual_km(r_bar) >= -SCP_TOL_KM
+    inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
     first = steps  # the terminal node is the apex
     while first - 1 >= 1 and inside[first - 1]:
         first -= 1
@@ -192,22 +192,39 @@ def _half_spaces(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
+    margins_km: np.ndarray,
     p_pos_km2: np.ndarray | None,
     sigma_margin: float,
-) -> dict[int, cg.HalfSpace]:
-    """The tightened keep-out half-space H_k of every keep-out node (and of node 0)."""
-    assert geo.semi_axes_km is not None
-    axes = geo.semi_axes_km
-    side = _detour_side(axes, r_bar)
-    out: dict[int, cg.HalfSpace] = {}
-    for k in [0, *np.flatnonzero(modes >= _KEEP_OUT).tolist()]:
-        point = _tangent_point(axes, r_bar[k], side)
-        extra = margin_km
-        if sigma_margin > 0.0 and p_pos_km2 is not None:
-            normal = cg.linearise_keep_out(axes, point, 0.0).normal
-            extra += cg.covariance_margin_km(normal, p_pos_km2, sigma_margin)
-        out[int(k)] = cg.linearise_keep_out(axes, point, extra)
+    motion: cg.BodyMotion | None,
+) -> dict[tuple[int, int], cg.HalfSpace]:
+    """The tightened keep-out half-space H_k,j of every keep-out node k (and of node 0) and
+    ellipsoid j, in the body frame (the relative frame without ``motion``).
+
+    Each ellipsoid is linearised at the iterate's body-frame position at the node's
+    time (issue 34). ``margins_km`` (N+1,): each node's between-node margin. The
+    covariance margin is taken along the half-space's normal in the relative frame at
+    the two nodes it binds (k and k+1), the larger.
+    """
+    rho_bar = cg.to_body(motion, r_bar)
+    keep_out = [0, *np.flatnonzero(modes >= _KEEP_OUT).tolist()]
+    out: dict[tuple[int, int], cg.HalfSpace] = {}
+    for j, (centre, axes) in enumerate(cg.ellipsoids(geo)):
+        local = rho_bar if centre is None else rho_bar - centre
+        side = _detour_side(axes, local)
+        for k in keep_out:
+            point = _tangent_point(axes, local[k], side)
+            extra = float(margins_km[k])
+            if sigma_margin > 0.0 and p_pos_km2 is not None:
+                normal = cg.linearise_keep_out(axes, point, 0.0).normal
+                if motion is not None:
+                    at = motion.rotation[k : k + 2] @ normal
+                    extra += max(cg.covariance_margin_km(m, p_pos_km2, sigma_margin) for m in at)
+                else:
+                    extra += cg.covariance_margin_km(normal, p_pos_km2, sigma_margin)
+            hs = cg.linearise_keep_out(axes, point, extra)
+            if centre is not None:  # nᵀ(ρ − c) ≥ offset ⇔ nᵀρ ≥ offset + nᵀc
+                hs = cg.HalfSpace(hs.normal, hs.offset_km + float(hs.normal @ centre))
+            out[int(k), j] = hs
     return out
 
 
@@ -221,11 +238,16 @@ def _program(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
-    half_spaces: dict[int, cg.HalfSpace],
+    margins_km: np.ndarray,
+    half_spaces: dict[tuple[int, int], cg.HalfSpace],
     trust_km: float,
+    motion: cg.BodyMotion | None = None,
 ) -> tuple[Any, int]:
-    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps)."""
+    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
+
+    With ``motion`` (a tumbling target) every body-frame half-space and the corridor
+    cone bind node k through its body-frame position R_kᵀ r_k (issue 34).
+    """
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
@@ -275,20 +297,25 @@ def _program(
     # node k in its own half-space and in its predecessor's: the chord k−1 → k then lies in
     # H_k−1 (convex), the arc within the chord margin of it; nᵀ r_k + s ≥ offset ⇔
     # −nᵀ r_k − s ≤ −offset
+    # (one row per ellipsoid b of the zone)
+    bodies = len(cg.ellipsoids(geo))
     pairs = [
-        (k, j)
+        (k, (j, b))
         for k in range(1, steps)
         for j in (k, k - 1)
-        if j in half_spaces and not (j == k - 1 and modes[k] == 0)
+        if (j, 0) in half_spaces and not (j == k - 1 and modes[k] == 0)
+        for b in range(bodies)
     ]
     row0 = steps + 1
     if pairs:
         node = np.array([k for k, _ in pairs])
-        normals = np.array([half_spaces[j].normal for _, j in pairs], dtype=np.float64)
+        normals = np.array([half_spaces[key].normal for _, key in pairs], dtype=np.float64)
+        if motion is not None:  # nᵀ ρ_k = (R_k n)ᵀ r_k
+            normals = np.einsum("pij,pj->pi", motion.rotation[node], normals)
         rows_hs = row0 + np.arange(len(pairs))
         parts.append(dense_block(rows_hs, ix + 6 * (node - 1), -normals[:, None, :]))
         parts.append((rows_hs, np.full(len(pairs), i_s), -np.ones(len(pairs))))
-        b_nonneg.append(-np.array([half_spaces[j].offset_km for _, j in pairs]))
+        b_nonneg.append(-np.array([half_spaces[key].offset_km for _, key in pairs]))
         row0 += len(pairs)
     constrained = np.flatnonzero(modes > 0)
     if constrained.size:  # ±(r_k − r̄_k) ≤ trust
@@ -306,16 +333,27 @@ def _program(
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
     corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
     if corridor_nodes.size:
-        soc = cg.corridor_cone(geo, margin_km)
-        a_body, b_body, c_head, d_head = soc.rows()
         rows_c = 4 * np.arange(corridor_nodes.size)
-        head = np.vstack([-c_head, -a_body])
+        if motion is None:  # one margin, one cone for every node
+            soc = cg.corridor_cone(geo, float(margins_km[corridor_nodes[0]]))
+            a_body, b_body, c_head, d_head = soc.rows()
+            head = np.vstack([-c_head, -a_body])[None]
+            cone_rhs = np.tile(np.r_[d_head, b_body], corridor_nodes.size)
+        else:  # ‖P(R_kᵀ r − p)‖ ≤ (R_k c)ᵀ r + d_k: each node's turn and margin
+            heads, cone_rhs_k = [], []
+            for k in corridor_nodes:
+                a_body, b_body, c_head, d_head = cg.corridor_cone(geo, margins_km[k]).rows()
+                rot = motion.rotation[k]
+                heads.append(np.vstack([-(rot @ c_head), -(a_body @ rot.T)]))
+                cone_rhs_k.append(np.r_[d_head, b_body])
+            head = np.array(heads)
+            cone_rhs = np.concatenate(cone_rhs_k)
         parts = [
-            dense_block(rows_c, ix + 6 * (corridor_nodes - 1), head[None]),
+            dense_block(rows_c, ix + 6 * (corridor_nodes - 1), head),
             (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
         ]
         blocks.append((*_cat(parts), 4 * corridor_nodes.size))
-        rhs.append(np.tile(np.r_[d_head, b_body], corridor_nodes.size))
+        rhs.append(cone_rhs)
         cones += [clarabel.SecondOrderConeT(4)] * corridor_nodes.size
     offset = 0
     r_all, c_all, v_all = [], [], []
@@ -357,6 +395,56 @@ def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) 
     return cg.acceleration_bound(r, v, u_max, n, dt_s)
 
 
+def _step_margins(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x: np.ndarray,
+    extra_km: float,
+    factor: float,
+    motion: cg.BodyMotion | None,
+) -> np.ndarray:
+    """The chord margin of every step of a plan's states (N,) [km] (module docstring).
+
+    Fixed target: one margin, from the plan's largest ‖r‖ (+ ``extra_km``) and ‖v‖.
+    Turning body (issue 34): each step's own, from its two nodes' ‖r‖ (+ ``extra_km``)
+    and ‖v‖ and the body-frame acceleration bound
+    (:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows with
+    the distance from the target's centre. ``factor`` multiplies the acceleration.
+    """
+    steps = x.shape[0] - 1
+    if motion is None:
+        return np.full(
+            steps, cg.chord_margin_km(factor * _accel(n, dt_s, u_max, x, extra_km), dt_s)
+        )
+    r = np.linalg.norm(x[:, :3], axis=1)
+    v = np.linalg.norm(x[:, 3:], axis=1)
+    r_step = np.maximum(r[:-1], r[1:]) + extra_km
+    v_step = np.maximum(v[:-1], v[1:])
+    rate, rate_dot = motion.rate_bound_rad_s, motion.rate_dot_bound_rad_s2
+    return np.array(
+        [
+            cg.chord_margin_km(
+                factor
+                * cg.body_acceleration_bound(
+                    cg.acceleration_bound(ri, vi, u_max, n, dt_s), ri, vi, rate, rate_dot, dt_s
+                ),
+                dt_s,
+            )
+            for ri, vi in zip(r_step.tolist(), v_step.tolist(), strict=True)
+        ]
+    )
+
+
+def _node_margins(step_margins: np.ndarray) -> np.ndarray:
+    """Each node's margin (N+1,) [km]: the larger of its two steps' (a node's constraints
+    bind the chords on both sides of it; the end nodes have one step)."""
+    out = np.empty(step_margins.size + 1)
+    out[0], out[-1] = step_margins[0], step_margins[-1]
+    out[1:-1] = np.maximum(step_margins[:-1], step_margins[1:])
+    return out
+
+
 def plan(
     n: float,
     dt_s: float,
@@ -369,13 +457,16 @@ def plan(
     p_pos_km2: np.ndarray | None = None,
     sigma_margin: float = 0.0,
     warm_controls: np.ndarray | None = None,
+    motion: cg.BodyMotion | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
     The first iterate is ``warm_controls`` (an earlier plan's remaining controls,
     N × 3) or the unconstrained plan of :func:`.convex.plan_controls`.
     ``p_pos_km2``: the filter's position covariance (3 × 3), for
-    ``sigma_margin``.
+    ``sigma_margin``. ``motion`` (a tumbling target, issue 34): the predicted turn
+    of the body frame at the N + 1 nodes, in which ``geo`` is given; ``xf`` is then
+    the port's predicted state at the horizon's end.
     """
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
@@ -389,10 +480,9 @@ def plan(
         if status is not SolveStatus.CONVERGED:
             warm_controls = np.zeros((steps, 3))
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
-    trust = TRUST_RADIUS_FACTOR * (
-        float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 1.0
-    )
-    modes = _modes(geo, r_bar)
+    sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
+    trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
+    modes = _modes(geo, r_bar, motion)
     failed = ConstrainedPlan(
         SolveStatus.FAILED,
         np.zeros((steps, 3)),
@@ -417,11 +507,14 @@ def plan(
     result = failed
     cost = math.inf
     for scp in range(1, SCP_MAX_ITER + 1):
-        margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
-        half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
-        sol, iterations = _program(
-            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust
+        margins = _node_margins(
+            _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
         )
+        half_spaces = _half_spaces(geo, modes, r_bar, margins, p_pos_km2, sigma_margin, motion)
+        sol, iterations = _program(
+            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margins, half_spaces, trust,
+            motion,
+        )  # fmt: skip
         used += iterations
         if not feasibility.solved(sol):
             status = (
@@ -444,8 +537,14 @@ def plan(
         slack = float(sol.x[10 * steps])
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
-        new_modes = _modes(geo, x_new[:, :3])
-        bound_ok = cg.chord_margin_km(_accel(n, dt_s, u_max_km_s2, x_new, 0.0), dt_s) <= margin
+        new_modes = _modes(geo, x_new[:, :3], motion)
+        # each step's own bound within what both its nodes' constraints were tightened by
+        bound_ok = bool(
+            np.all(
+                _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion)
+                <= np.minimum(margins[:-1], margins[1:])
+            )
+        )
         result = ConstrainedPlan(
             SolveStatus.CONVERGED if bound_ok else SolveStatus.FAILED,
             u,
