@@ -1,0 +1,142 @@
+"""Keep-out bodies and constraints on a tumbling target (issue 34 items 1b and 2): config.
+
+``[[constraints.keep_out.bodies]]`` adds ellipsoids to the keep-out zone; without it the
+section resolves and hashes as before. With ``target.attitude = "tumbling"`` the
+constraints are accepted (they are given in the body frame). Every bad field exits 2
+naming it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.config.adapt import problem_of
+from cwrend_cli.config.io import config_from_dict, config_hash, resolved_dict
+from cwrend_cli.physics import params
+
+runner = CliRunner()
+
+PANEL = {"centre_km": [0.0, 0.2, 0.0], "semi_axes_km": [0.01, 0.1, 0.05]}
+ZONE: dict[str, Any] = {"keep_out": {"semi_axes_km": [0.1, 0.1, 0.1]}}
+
+
+def test_a_keep_out_without_bodies_resolves_and_hashes_as_before() -> None:
+    """No ``bodies`` key in the resolved tree; an explicit empty list is the same config."""
+    plain = config_from_dict({"constraints": ZONE})
+    empty = config_from_dict({"constraints": {"keep_out": {**ZONE["keep_out"], "bodies": []}}})
+    assert "bodies" not in resolved_dict(plain)["constraints"]["keep_out"]
+    assert config_hash(empty) == config_hash(plain)
+    assert problem_of(plain).constraints == params.Constraints(
+        keep_out=params.KeepOut((0.1, 0.1, 0.1))
+    )
+
+
+def test_the_bodies_reach_the_typed_problem_in_order() -> None:
+    second = {"centre_km": [0.0, -0.2, 0.0], "semi_axes_km": [0.01, 0.1, 0.06]}
+    keep_out = {**ZONE["keep_out"], "bodies": [PANEL, second]}
+    cfg = config_from_dict({"constraints": {"keep_out": keep_out}})
+    assert problem_of(cfg).constraints == params.Constraints(
+        keep_out=params.KeepOut(
+            (0.1, 0.1, 0.1),
+            (
+                params.KeepOutBody((0.0, 0.2, 0.0), (0.01, 0.1, 0.05)),
+                params.KeepOutBody((0.0, -0.2, 0.0), (0.01, 0.1, 0.06)),
+            ),
+        )
+    )
+    # the resolved tree validates back to the same config
+    assert config_from_dict(resolved_dict(cfg)) == cfg
+
+
+def test_a_tumbling_target_with_constraints_is_accepted(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["config", "validate", str(_write(tmp_path))])
+    assert result.exit_code == 0, result.output
+
+
+def test_the_shipped_tumbling_campaign_validates() -> None:
+    path = Path(__file__).parents[1] / "campaigns" / "tumbling_target.toml"
+    result = runner.invoke(app, ["config", "validate", str(path)])
+    assert result.exit_code == 0, result.output
+
+
+def _write(tmp_path: Path) -> Path:
+    path = tmp_path / "t.toml"
+    path.write_text(
+        '[target]\nattitude = "tumbling"\nbody_rates_deg_s = [0.0, 1.0, 2.0]\n'
+        "inertia = [1.0, 1.5, 2.0]\n"
+        "[constraints.keep_out]\nsemi_axes_km = [0.1, 0.1, 0.1]\n"
+        "[[constraints.keep_out.bodies]]\ncentre_km = [0.0, 0.2, 0.0]\n"
+        "semi_axes_km = [0.01, 0.1, 0.05]\n"
+        "[constraints.corridor]\nport_km = [-0.12, 0.0, 0.0]\naxis = [-1.0, 0.0, 0.0]\n"
+        "half_angle_deg = 30.0\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+REFUSED = {
+    "a port inside a panel": (
+        ["constraints.corridor.port_km=[0, 0.2, 0]", "scenario.xf=[0, 0.2, 0, 0, 0, 0]"],
+        "constraints.corridor.port_km = [0.0, 0.2, 0.0]: must lie on or outside the keep-out "
+        "zone: it is inside keep_out.bodies.0",
+    ),
+    "a zero semi-axis of a body": (
+        ["constraints.keep_out.bodies.0.semi_axes_km=[0.01, 0, 0.05]"],
+        "constraints.keep_out.bodies.0.semi_axes_km.1 = 0",
+    ),
+    "two centre entries": (
+        ["constraints.keep_out.bodies.0.centre_km=[0, 0.2]"],
+        "constraints.keep_out.bodies.0.centre_km",
+    ),
+    "a centre out of bounds": (
+        ["constraints.keep_out.bodies.0.centre_km=[0, 2e4, 0]"],
+        "constraints.keep_out.bodies.0.centre_km.1",
+    ),
+    "an unknown body key": (
+        ["constraints.keep_out.bodies.0.radius_km=0.1"],
+        "constraints.keep_out.bodies.0.radius_km",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_a_bad_body_exits_2_naming_the_field(case: str, tmp_path: Path) -> None:
+    sets, message = REFUSED[case]
+    args = ["config", "validate", str(_write(tmp_path))]
+    result = runner.invoke(app, args + [a for s in sets for a in ("--set", s)])
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+    assert "Traceback" not in result.output
+
+
+def test_more_than_sixteen_bodies_exit_2(tmp_path: Path) -> None:
+    path = tmp_path / "many.toml"
+    body = (
+        "[[constraints.keep_out.bodies]]\ncentre_km = [1.0, 0.0, 0.0]\n"
+        "semi_axes_km = [0.1, 0.1, 0.1]\n"
+    )
+    path.write_text("[constraints.keep_out]\nsemi_axes_km = [0.1, 0.1, 0.1]\n" + body * 17)
+    result = runner.invoke(app, ["config", "validate", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "constraints.keep_out.bodies" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_a_tumbling_corridor_without_a_keep_out_zone_exits_2(tmp_path: Path) -> None:
+    """The moving port is flown to by the constrained program, which needs a zone."""
+    path = tmp_path / "t.toml"
+    path.write_text(
+        '[target]\nattitude = "tumbling"\nbody_rates_deg_s = [0.0, 1.0, 2.0]\n'
+        "[constraints.corridor]\nport_km = [-0.12, 0.0, 0.0]\naxis = [-1.0, 0.0, 0.0]\n"
+        "half_angle_deg = 30.0\n",
+        encoding="utf-8",
+    )
+    result = runner.invoke(app, ["config", "validate", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "constraints.corridor" in result.output
+    assert "needs a keep-out zone" in result.output
