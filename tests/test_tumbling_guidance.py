@@ -222,3 +222,48 @@ def test_the_turn_is_the_quaternions_rotation() -> None:
     q /= np.linalg.norm(q, axis=1)[:, None]
     ref = Rotation.from_quat(q, scalar_first=True).as_matrix()
     assert np.max(np.abs(attitude.rotation_matrices(q) - ref)) <= 1e-15
+
+
+def test_a_point_at_rest_that_a_turning_panel_sweeps_through_is_measured_unsafe() -> None:
+    """A chaser held still in the relative frame, 0.2 km out along y, with the target
+    spinning at 10 °/s about z: its +y panel (0.15–0.25 km along body y) sweeps through the
+    point once a turn; fixed, the same point is inside the panel for the whole run."""
+    keep = KeepOut((0.05, 0.05, 0.05), (KeepOutBody((0.0, 0.2, 0.0), (0.01, 0.05, 0.05)),))
+    geo = cg.geometry(Constraints(keep_out=keep))
+    target = Target("tumbling", (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 10.0), (1.0, 1.0, 1.5))
+    model = attitude.attitude_model(target, N_MOTION)
+    steps = 36  # one turn of 36 s
+    att = attitude.target_attitude(model, steps, DT)
+    x = np.zeros((steps + 1, 6))
+    x[:, 1] = 0.2
+    turning = cg.measure_safety(x, DT, geo, motion=attitude.body_motion(model, att.q_hb,
+                                                                        att.w_rad_s))  # fmt: skip
+    still = cg.measure_safety(x, DT, geo)
+    assert still.unsafe_time_s == pytest.approx((steps * 20 + 1) * DT / 20)  # every sample
+    assert turning.violated and turning.rotating
+    # inside while the panel's half-width (an angle of about atan(0.01/0.2)) passes, twice
+    # 2.9° at 10 °/s: about 0.6 s, to the Δt/20 sampling
+    assert 0.3 <= turning.unsafe_time_s <= 1.0
+
+
+def test_the_docking_error_is_taken_against_the_moving_port() -> None:
+    """A trajectory that ends on the port with the port's velocity has no docking error; the
+    same end at rest has the port's speed as its velocity error."""
+    config, target, _ = _problem(np.random.default_rng(5))
+    model, att = _attitude(target)
+    motion = attitude.body_motion(model, att.q_hb, att.w_rad_s)
+    assert config.corridor is not None
+    port_b = np.array(config.corridor.port_km)
+    rot = Rotation.from_quat(att.q_hb[-1], scalar_first=True)
+    port = rot.apply(port_b)
+    v_port = rot.apply(np.cross(att.w_rad_s[-1], port_b)) - np.cross([0, 0, N_MOTION], port)
+    x = np.zeros((STEPS + 1, 6))
+    x[:, :3] = 1.0  # far away until the end
+    x[-1] = np.r_[port, v_port]
+    geo = cg.geometry(config)
+    docked = cg.measure_safety(x, DT, geo, DENSE, motion)
+    assert docked.dock_position_error_km <= 1e-15
+    assert docked.dock_velocity_error_km_s <= 1e-15
+    x[-1, 3:] = 0.0
+    resting = cg.measure_safety(x, DT, geo, DENSE, motion)
+    assert resting.dock_velocity_error_km_s == pytest.approx(np.linalg.norm(v_port), rel=1e-12)
