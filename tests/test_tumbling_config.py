@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -140,3 +141,55 @@ def test_a_tumbling_corridor_without_a_keep_out_zone_exits_2(tmp_path: Path) -> 
     assert result.exit_code == 2, result.output
     assert "constraints.corridor" in result.output
     assert "needs a keep-out zone" in result.output
+
+
+def test_perfect_attitude_knowledge_is_left_out_of_the_tree(tmp_path: Path) -> None:
+    """σ = 0 (the default) is written as before the fields existed; σ > 0 reaches the
+    typed problem."""
+    tumbling = {"attitude": "tumbling", "body_rates_deg_s": [0.0, 1.0, 2.0]}
+    plain = config_from_dict({"target": tumbling})
+    zero = config_from_dict({"target": {**tumbling, "knowledge_sigma_deg": 0.0}})
+    assert "knowledge_sigma_deg" not in resolved_dict(plain)["target"]
+    assert config_hash(zero) == config_hash(plain)
+    known = {**tumbling, "knowledge_sigma_deg": 2.0, "knowledge_sigma_deg_s": 0.2}
+    target = problem_of(config_from_dict({"target": known})).target
+    assert (target.knowledge_sigma_deg, target.knowledge_sigma_deg_s) == (2.0, 0.2)
+    assert target.knowledge_error
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        ("target.knowledge_sigma_deg=-1", "target.knowledge_sigma_deg = -1"),
+        ("target.knowledge_sigma_deg=31", "target.knowledge_sigma_deg = 31: must be <= 30"),
+        ("target.knowledge_sigma_deg_s=61", "target.knowledge_sigma_deg_s = 61: must be <= 60"),
+    ],
+)
+def test_a_bad_knowledge_error_exits_2(setting: str, message: str, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["config", "validate", str(_write(tmp_path)), "--set", setting])
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+
+
+def test_a_knowledge_error_on_a_fixed_target_exits_2(tmp_path: Path) -> None:
+    path = tmp_path / "f.toml"
+    path.write_text("[target]\nknowledge_sigma_deg = 2.0\n", encoding="utf-8")
+    result = runner.invoke(app, ["config", "validate", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "target.knowledge_sigma_deg = 2: applies to a tumbling target only" in result.output
+
+
+def test_the_knowledge_draws_are_the_runs_own_stream() -> None:
+    """Off: none. On: 6 standard normals, the same for the same (root seed, seed), another
+    for another seed, and not the noise stream's first values."""
+    from cwrend_cli.campaign import worker
+
+    tumbling = {"attitude": "tumbling", "body_rates_deg_s": [0.0, 1.0, 2.0]}
+    off = problem_of(config_from_dict({"target": tumbling}))
+    assert worker.attitude_draws(off, 42, 0) is None
+    on = problem_of(config_from_dict({"target": {**tumbling, "knowledge_sigma_deg": 2.0}}))
+    a, b, c = (worker.attitude_draws(on, 42, s) for s in (0, 0, 1))
+    assert a is not None and b is not None and c is not None
+    assert a.shape == (6,) and np.array_equal(a, b) and not np.array_equal(a, c)
+    noise = np.random.default_rng(worker.noise_seed_sequence(42, 0)).standard_normal(6)
+    assert not np.array_equal(a, noise)

@@ -1210,6 +1210,10 @@ BodyRateDegS = Annotated[float, Strict(), Field(ge=-BODY_RATE_MAX_DEG_S, le=BODY
 InertiaRatio = Annotated[float, Strict(), Field(gt=0, le=GAIN_MAX)]
 
 
+#: Largest attitude-knowledge error σ [deg]: beyond 30° per axis the prediction is noise.
+KNOWLEDGE_SIGMA_MAX_DEG = 30.0
+
+
 class TargetConfig(_FrozenModel):
     """The target's attitude (issue 34; ``[target]``); ``fixed`` by default.
 
@@ -1247,6 +1251,30 @@ class TargetConfig(_FrozenModel):
         "as ratios; each in (0, 1e6], no one above the sum of the other two [-]",
     )
 
+    knowledge_sigma_deg: Float = Field(
+        0.0,
+        ge=0,
+        le=KNOWLEDGE_SIGMA_MAX_DEG,
+        description="tumbling: the constrained guidance's attitude-knowledge error, σ of a "
+        "rotation about each body axis drawn once a run from its own stream; in [0, 30] [deg]",
+    )
+    knowledge_sigma_deg_s: Float = Field(
+        0.0,
+        ge=0,
+        le=BODY_RATE_MAX_DEG_S,
+        description="tumbling: the constrained guidance's body-rate knowledge error, σ per "
+        "axis drawn once a run from its own stream; in [0, 60] [deg/s]",
+    )
+
+    @model_serializer(mode="wrap")
+    def _without_perfect_knowledge(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # perfect attitude knowledge (the default) is written as before the fields existed
+        out: dict[str, Any] = handler(self)
+        for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
+            if getattr(self, name) == 0.0:
+                out.pop(name, None)
+        return out
+
     @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
     @classmethod
     def _lengths(cls, value: Any, info: ValidationInfo) -> Any:
@@ -1279,7 +1307,13 @@ class TargetConfig(_FrozenModel):
         if self.attitude == "fixed":
             unused = [
                 (name, getattr(self, name))
-                for name in ("initial_quaternion", "body_rates_deg_s", "inertia")
+                for name in (
+                    "initial_quaternion",
+                    "body_rates_deg_s",
+                    "inertia",
+                    "knowledge_sigma_deg",
+                    "knowledge_sigma_deg_s",
+                )
                 if getattr(self, name) != type(self).model_fields[name].default
             ]
             if unused:
@@ -1288,7 +1322,7 @@ class TargetConfig(_FrozenModel):
                     [
                         (
                             name,
-                            list(value),
+                            list(value) if isinstance(value, tuple) else value,
                             "applies to a tumbling target only: set target.attitude = "
                             "'tumbling', or leave it out",
                         )

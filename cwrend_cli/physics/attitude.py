@@ -81,7 +81,9 @@ __all__ = [
     "body_motion",
     "euler_rates",
     "hill_from_inertial",
+    "knowledge_error",
     "max_rate_rad_s",
+    "predict",
     "propagate",
     "quat_multiply",
     "rotation_matrices",
@@ -196,6 +198,59 @@ def body_motion(model: AttitudeModel, q_hb: FloatArray, w_rad_s: FloatArray) -> 
     rate[:, 2] -= model.n_rad_s
     bound, bound_dot = rate_bounds(max_rate_rad_s(model), model.n_rad_s)
     return BodyMotion(rot, np.asarray(rate, dtype=np.float64), bound, bound_dot)
+
+
+def knowledge_error(target: Target, draws: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The attitude-knowledge error of a run (issue 34 item 3) from 6 standard normals.
+
+    ``(δθ [rad], δω [rad/s])``: a rotation vector in body axes with σ =
+    ``knowledge_sigma_deg`` per axis and a body-rate error with σ =
+    ``knowledge_sigma_deg_s`` per axis. The guidance believes the attitude
+    ``q ⊗ q(δθ)`` and the rates ``ω + δω``.
+    """
+    d = np.asarray(draws, dtype=np.float64)
+    return (
+        math.radians(target.knowledge_sigma_deg) * d[:3],
+        math.radians(target.knowledge_sigma_deg_s) * d[3:6],
+    )
+
+
+def predict(
+    model: AttitudeModel,
+    q_hb: FloatArray,
+    w_rad_s: FloatArray,
+    t_s: float,
+    n_steps: int,
+    dt_s: float,
+    error: tuple[FloatArray, FloatArray],
+    substeps: int = SAFETY_SUBSTEPS,
+) -> tuple[AttitudeModel, FloatArray, FloatArray]:
+    """The attitude the guidance predicts at ``t_s + k·dt_s``, k = 0 … ``n_steps`` (issue 34).
+
+    From the known attitude at ``t_s``: the truth's ``q_hb`` (body→Hill),
+    ``w_rad_s`` turned by the knowledge ``error`` (δθ, δω of
+    :func:`knowledge_error`): ``q ⊗ q(δθ)``, ``ω + δω``; propagated by the same
+    torque-free model and integrator as the truth (:func:`target_attitude`, on
+    the same sub-samples). Returns the believed body's model (its rates at
+    ``t_s``, for the rate bounds), ``q_hb`` (n_steps+1, 4) and ``ω`` (n_steps+1, 3).
+    """
+    d_theta, d_w = error
+    angle = float(np.linalg.norm(d_theta))
+    turn = np.array([1.0, 0.0, 0.0, 0.0])
+    if angle > 0.0:
+        turn = np.r_[math.cos(0.5 * angle), math.sin(0.5 * angle) * d_theta / angle]
+    to_inertial = np.array([math.cos(0.5 * model.n_rad_s * t_s), 0.0, 0.0,
+                            math.sin(0.5 * model.n_rad_s * t_s)])  # fmt: skip
+    q_ib = quat_multiply(quat_multiply(to_inertial, np.asarray(q_hb, dtype=np.float64)), turn)
+    believed = model._replace(
+        q0=q_ib / np.linalg.norm(q_ib), w0_rad_s=np.asarray(w_rad_s, dtype=np.float64) + d_w
+    )
+    h_out = dt_s / substeps
+    per = max(1, math.ceil(max_rate_rad_s(believed) * h_out / MAX_ANGLE_PER_STEP_RAD))
+    q, w = propagate(believed, h_out, per, n_steps * substeps)
+    t = t_s + np.arange(n_steps * substeps + 1, dtype=np.float64) * h_out
+    q_h = hill_from_inertial(q, t, model.n_rad_s)
+    return believed, q_h[::substeps], w[::substeps]
 
 
 # ---------------------------------------------------------------------------

@@ -289,6 +289,7 @@ def simulate(
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
     observe: ResolveObserver | None = None,
+    attitude_draws: FloatArray | None = None,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
 
@@ -296,7 +297,9 @@ def simulate(
     errors (required when ``problem.actuator`` has per-step noise; ignored
     where its σ is zero). ``fault_draws``: the draws of the degradation
     windows' sensor faults (required for the kinds some window switches on,
-    :func:`cwrend_cli.physics.sensors.draw_faults`).
+    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the 6
+    standard normals of the guidance's attitude-knowledge error (a tumbling target
+    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`).
 
     ``observe`` (tests, benchmarks): called with the input of every shooting
     re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
@@ -313,6 +316,7 @@ def simulate(
 
     # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
     target_attitude = _target_attitude(problem)
+    known = _Knowledge(target_attitude, _knowledge_error(problem, attitude_draws))
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -337,7 +341,7 @@ def simulate(
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
         scp = _constrained_plan(
-            problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, target_attitude
+            problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, known
         )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
@@ -356,7 +360,7 @@ def simulate(
 
     schedule = resolve_steps(problem)
     if socp:
-        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, target_attitude)
+        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, known)
     else:
         solves += _shooting_resolves(problem, settings, schedule, loop, scalars, observe)
 
@@ -549,6 +553,45 @@ def _body_motion(
     return attitude.body_motion(model, att.q_hb[rows], att.w_rad_s[rows])
 
 
+@dataclass(frozen=True)
+class _Knowledge:
+    """What the guidance knows of a tumbling target's attitude (issue 34): the truth's
+    attitude (None for a fixed target) and the run's knowledge error (None: exact)."""
+
+    truth: attitude.TargetAttitude | None
+    error: tuple[FloatArray, FloatArray] | None
+
+
+def _knowledge_error(
+    problem: Problem, draws: FloatArray | None
+) -> tuple[FloatArray, FloatArray] | None:
+    """The run's attitude-knowledge error (δθ, δω), None when the guidance knows exactly."""
+    if not problem.target.knowledge_error:
+        return None
+    if draws is None:
+        raise ValueError("target.knowledge_sigma_*: the run needs its attitude draws")
+    return attitude.knowledge_error(problem.target, draws)
+
+
+def _predicted_motion(
+    problem: Problem, known: _Knowledge, k_from: int, steps: int
+) -> safety_geometry.BodyMotion:
+    """The body's turn the guidance predicts at the nodes k_from … k_from + steps."""
+    truth = known.truth
+    assert truth is not None
+    every = truth.substeps
+    if known.error is None:  # exact: the truth's own attitude at the nodes
+        return _body_motion(problem, truth, k_from * every, (k_from + steps) * every + 1, every)
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    i = k_from * every
+    believed, q_hb, w = attitude.predict(
+        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s, known.error,
+        every,
+    )  # fmt: skip
+    return attitude.body_motion(believed, q_hb, w)
+
+
 def _safety(
     problem: Problem, x_true: FloatArray, att: attitude.TargetAttitude | None
 ) -> safety_geometry.Safety | None:
@@ -711,7 +754,7 @@ def _cone_resolves(
     loop: _Loop,
     scalars: sk.LoopScalars,
     plan_costate: FloatArray | None,
-    target_attitude: attitude.TargetAttitude | None = None,
+    known: _Knowledge | None = None,
 ) -> list[SolveRecord]:
     """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
 
@@ -736,7 +779,7 @@ def _cone_resolves(
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
         scp = _constrained_plan(
-            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, target_attitude
+            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, known
         )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
@@ -763,7 +806,7 @@ def _constrained_plan(
     p: FloatArray,
     model: sk.LoopModel | None,
     k_from: int,
-    target_attitude: attitude.TargetAttitude | None = None,
+    known: _Knowledge | None = None,
 ) -> tuple[guidance.SolveResult, tuple[int, float]] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
 
@@ -774,12 +817,14 @@ def _constrained_plan(
     Returns the result (its plan the held controls; no costate) and
     (SCP iterations, slack [km]).
 
-    A tumbling target (``target_attitude``, issue 34): the attitude predicted over
-    the horizon from the one known at ``k_from`` (the truth's: torque-free motion
-    predicted by the same model is the truth's own) turns the keep-out bodies and
-    the corridor at every node, and with a corridor the terminal state is the
-    port's predicted position and velocity at the horizon's end,
-    ``(R p, Ω × R p)`` in the relative frame.
+    A tumbling target (``known``, issue 34): the attitude predicted over the
+    horizon from the one known at ``k_from`` turns the keep-out bodies and the
+    corridor at every node, and with a corridor the terminal state is the port's
+    predicted position and velocity at the horizon's end, ``(R p, Ω × R p)`` in
+    the relative frame. Known exactly, the prediction is the truth's attitude
+    (torque-free motion predicted by the same model is the truth's own); with a
+    knowledge error, :func:`cwrend_cli.physics.attitude.predict` from the truth's
+    attitude at ``k_from`` turned by it.
     """
     c = problem.constraints
     if c is None or c.keep_out is None:
@@ -793,10 +838,8 @@ def _constrained_plan(
     xf = np.asarray(sc.xf, dtype=float)
     geo = safety_geometry.geometry(c)
     motion = None
-    if target_attitude is not None:
-        every = target_attitude.substeps
-        stop = (k_from + steps) * every + 1
-        motion = _body_motion(problem, target_attitude, k_from * every, stop, every)
+    if known is not None and known.truth is not None:
+        motion = _predicted_motion(problem, known, k_from, steps)
         if geo.port_km is not None:
             port = motion.rotation[-1] @ geo.port_km
             xf = np.concatenate([port, np.cross(motion.rate_rad_s[-1], port)])
