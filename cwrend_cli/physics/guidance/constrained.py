@@ -50,6 +50,19 @@ an exact (ℓ∞) penalty, so s = 0 whenever a safe plan exists and its multipli
 is below the price; s > 0 says by how much the plan had to enter the unsafe
 set (returned as ``slack_km``).
 
+**Several bodies, a tumbling target** (issue 34). Every ellipsoid of the zone
+gets its own half-space at each keep-out node (one row each; the zone's outside
+is their intersection, convex). For a tumbling target (``motion``: the body
+frame's predicted turn R_k at every node) the geometry is given in the body
+frame: each ellipsoid is linearised at the iterate's body-frame position
+R_kᵀ r̄_k, and a body-frame row ``nᵀ ρ ≥ d`` binds node k as ``(R_k n)ᵀ r_k ≥ d``;
+the corridor cone likewise. The chord argument above holds in the body frame
+with the body-frame acceleration bound
+(:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows
+with the distance from the target, so each step has its own margin and each
+node takes the larger of its two steps'. The terminal state (the caller's
+``xf``) is then the port's predicted position and velocity.
+
 Units: km, s, km/s, km/s².
 """
 
