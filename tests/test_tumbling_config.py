@@ -147,12 +147,14 @@ def test_perfect_attitude_knowledge_is_left_out_of_the_tree(tmp_path: Path) -> N
     """σ = 0 (the default) is written as before the fields existed; σ > 0 reaches the
     typed problem."""
     tumbling = {"attitude": "tumbling", "body_rates_deg_s": [0.0, 1.0, 2.0]}
-    plain = config_from_dict({"target": tumbling})
-    zero = config_from_dict({"target": {**tumbling, "knowledge_sigma_deg": 0.0}})
+    plain = config_from_dict({"target": tumbling, "constraints": ZONE})
+    zero = config_from_dict(
+        {"target": {**tumbling, "knowledge_sigma_deg": 0.0}, "constraints": ZONE}
+    )
     assert "knowledge_sigma_deg" not in resolved_dict(plain)["target"]
     assert config_hash(zero) == config_hash(plain)
     known = {**tumbling, "knowledge_sigma_deg": 2.0, "knowledge_sigma_deg_s": 0.2}
-    target = problem_of(config_from_dict({"target": known})).target
+    target = problem_of(config_from_dict({"target": known, "constraints": ZONE})).target
     assert (target.knowledge_sigma_deg, target.knowledge_sigma_deg_s) == (2.0, 0.2)
     assert target.knowledge_error
 
@@ -171,6 +173,18 @@ def test_a_bad_knowledge_error_exits_2(setting: str, message: str, tmp_path: Pat
     assert message in result.output
 
 
+def test_a_knowledge_error_without_a_keep_out_zone_exits_2(tmp_path: Path) -> None:
+    """Only the constrained guidance uses the attitude knowledge: without a zone it would do
+    nothing."""
+    path = tmp_path / "k.toml"
+    path.write_text(
+        '[target]\nattitude = "tumbling"\nknowledge_sigma_deg_s = 0.2\n', encoding="utf-8"
+    )
+    result = runner.invoke(app, ["config", "validate", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "target.knowledge_sigma_deg_s = 0.2: the attitude knowledge is used by" in result.output
+
+
 def test_a_knowledge_error_on_a_fixed_target_exits_2(tmp_path: Path) -> None:
     path = tmp_path / "f.toml"
     path.write_text("[target]\nknowledge_sigma_deg = 2.0\n", encoding="utf-8")
@@ -187,7 +201,9 @@ def test_the_knowledge_draws_are_the_runs_own_stream() -> None:
     tumbling = {"attitude": "tumbling", "body_rates_deg_s": [0.0, 1.0, 2.0]}
     off = problem_of(config_from_dict({"target": tumbling}))
     assert worker.attitude_draws(off, 42, 0) is None
-    on = problem_of(config_from_dict({"target": {**tumbling, "knowledge_sigma_deg": 2.0}}))
+    on = problem_of(
+        config_from_dict({"target": {**tumbling, "knowledge_sigma_deg": 2.0}, "constraints": ZONE})
+    )
     a, b, c = (worker.attitude_draws(on, 42, s) for s in (0, 0, 1))
     assert a is not None and b is not None and c is not None
     assert a.shape == (6,) and np.array_equal(a, b) and not np.array_equal(a, c)

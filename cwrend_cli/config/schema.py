@@ -1587,6 +1587,16 @@ class CwrendConfig(_FrozenModel):
                     "leave out the corridor",
                 )
             )
+        for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
+            if getattr(self.target, name) > 0.0 and self.constraints.keep_out is None:
+                problems.append(
+                    (
+                        f"target.{name}",
+                        getattr(self.target, name),
+                        "the attitude knowledge is used by the constrained guidance only, "
+                        "which needs a keep-out zone: add [constraints.keep_out] or leave it 0",
+                    )
+                )
         corridor = self.constraints.corridor
         if corridor is not None and tuple(sc.xf) != (*corridor.port_km, 0.0, 0.0, 0.0):
             problems.append(
