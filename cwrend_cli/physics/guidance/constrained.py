@@ -65,7 +65,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cwrend_cli.physics import constraints as cg
-from cwrend_cli.physics.dynamics import discretize
+from cwrend_cli.physics.dynamics import discretize, stm
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveStatus
 
@@ -177,15 +177,16 @@ def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
     return np.asarray(side / np.linalg.norm(side), dtype=np.float64)
 
 
-def _tangent_point(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """The point whose tangent plane bounds node r: r itself outside the zone; inside, the
-    radial projection onto the surface of r moved by the largest semi-axis towards ``side``
-    (so the nodes of a crossing iterate all go round on one side)."""
-    level = float(cg.ellipsoid_level(r, semi_axes))
-    if level >= 1.0:
-        return r
-    shifted = r + float(np.max(semi_axes)) * side
-    return shifted / math.sqrt(float(cg.ellipsoid_level(shifted, semi_axes)))
+def _tangent_points(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """The points (K, 3) whose tangent planes bound the nodes r (K, 3): r itself outside the
+    zone; inside, the radial projection onto the surface of r moved by the largest
+    semi-axis towards ``side`` (so the nodes of a crossing iterate all go round on one
+    side)."""
+    out = np.array(r, dtype=np.float64)
+    inside = cg.ellipsoid_level(out, semi_axes) < 1.0
+    shifted = out[inside] + float(np.max(semi_axes)) * side
+    out[inside] = shifted / np.sqrt(cg.ellipsoid_level(shifted, semi_axes))[:, None]
+    return out
 
 
 def _half_spaces(
@@ -200,15 +201,89 @@ def _half_spaces(
     assert geo.semi_axes_km is not None
     axes = geo.semi_axes_km
     side = _detour_side(axes, r_bar)
-    out: dict[int, cg.HalfSpace] = {}
-    for k in [0, *np.flatnonzero(modes >= _KEEP_OUT).tolist()]:
-        point = _tangent_point(axes, r_bar[k], side)
-        extra = margin_km
-        if sigma_margin > 0.0 and p_pos_km2 is not None:
-            normal = cg.linearise_keep_out(axes, point, 0.0).normal
-            extra += cg.covariance_margin_km(normal, p_pos_km2, sigma_margin)
-        out[int(k)] = cg.linearise_keep_out(axes, point, extra)
-    return out
+    nodes = np.r_[0, np.flatnonzero(modes >= _KEEP_OUT)]
+    normals, offsets = cg.tangent_planes(axes, _tangent_points(axes, r_bar[nodes], side))
+    offsets = offsets + margin_km
+    if sigma_margin > 0.0 and p_pos_km2 is not None:
+        offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
+    return {
+        int(k): cg.HalfSpace(normal, float(offset))
+        for k, normal, offset in zip(nodes, normals, offsets, strict=True)
+    }
+
+
+def _pairs(
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    half_spaces: dict[int, cg.HalfSpace],
+    trust_km: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The half-space rows (node k, half-space j) of the program, and those left out,
+    each (P, 2).
+
+    Node k lies in its own half-space and in its predecessor's: the chord
+    k−1 → k then lies in H_k−1 (convex), the arc within the chord margin of it.
+    A row is **left out** when the trust box of its node cannot reach the
+    plane: ``nᵀ r̄_k − trust ‖n‖₁ ≥ offset + SCP_TOL_KM`` (the smallest nᵀr over
+    the box ``‖r − r̄_k‖_∞ ≤ trust``, with a millimetre to spare over the
+    solver's feasibility tolerance), so the trust rows imply it: the program,
+    and its answer, are the same with and without it.
+    """
+    k = np.arange(1, modes.size - 1)
+    has = np.zeros(modes.size, dtype=bool)
+    has[list(half_spaces)] = True
+    own = k[has[k]]
+    before = k[has[k - 1] & (modes[k] != 0)]
+    pairs = np.concatenate(
+        [np.column_stack([own, own]), np.column_stack([before, before - 1])]
+    ).astype(np.int64)
+    pairs = pairs[np.lexsort((-pairs[:, 1], pairs[:, 0]))]  # node by node, own plane first
+    normals, offsets = _planes(half_spaces, pairs[:, 1])
+    low = np.sum(normals * r_bar[pairs[:, 0]], axis=1) - trust_km * np.sum(np.abs(normals), axis=1)
+    left_out = low >= offsets + SCP_TOL_KM
+    return pairs[~left_out], pairs[left_out]
+
+
+def _planes(half_spaces: dict[int, cg.HalfSpace], j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (P, 3), offsets (P,) [km]) of the half-spaces H_j."""
+    normals = np.array([half_spaces[i].normal for i in j.tolist()], dtype=np.float64)
+    offsets = np.array([half_spaces[i].offset_km for i in j.tolist()], dtype=np.float64)
+    return normals.reshape(-1, 3), offsets
+
+
+def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
+    """The first node that carries a half-space or a corridor row (N when none does)."""
+    corridor = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    return int(np.min(np.r_[pairs[:, 0], corridor, modes.size - 1]))
+
+
+def _broken_rows(
+    x: np.ndarray,
+    r_bar: np.ndarray,
+    modes: np.ndarray,
+    first: int,
+    half_spaces: dict[int, cg.HalfSpace],
+    dropped: np.ndarray,
+    trust_km: float,
+    slack_km: float,
+) -> np.ndarray:
+    """The nodes whose left-out rows fail at the answer ``x`` (N + 1, 6) of :func:`_program`.
+
+    The program left out the trust rows of the constrained nodes before
+    ``first`` and the half-space rows ``dropped`` by :func:`_pairs` (their
+    trust box implied them). The answer of the relaxed program is that of the
+    whole one when it satisfies what was left out (the relaxation is convex
+    and its cost strictly convex in the controls, which fix the states): every
+    such node within ``trust + SLACK_TOL_KM`` of r̄_k (the solver's tolerance),
+    and, so that every iterate stays safe whatever that tolerance, every
+    left-out half-space row held exactly (with the answer's slack, as written).
+    """
+    r = x[:, :3]
+    normals, offsets = _planes(half_spaces, dropped[:, 1])
+    residual = np.sum(normals * r[dropped[:, 0]], axis=1) - offsets + slack_km
+    prefix = np.flatnonzero(modes[:first] > 0)
+    moved = np.max(np.abs(r[prefix] - r_bar[prefix]), axis=1, initial=0.0)
+    return np.union1d(dropped[residual < 0.0, 0], prefix[moved > trust_km + SLACK_TOL_KM])
 
 
 def _program(
@@ -224,16 +299,28 @@ def _program(
     margin_km: float,
     half_spaces: dict[int, cg.HalfSpace],
     trust_km: float,
+    pairs: np.ndarray,
+    first: int,
 ) -> tuple[Any, int]:
-    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps)."""
+    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
+
+    ``pairs``: the half-space rows (node k, half-space j) to write
+    (:func:`_pairs`); ``first``: the first node whose state is a variable
+    (:func:`_first_node`): the nodes before it carry no row, so their states
+    are substituted (x_first = Φ^first x0 + Σ_j<first Φ^(first−1−j) Γ u_j, one
+    block of 6 rows) and the trust region of constrained nodes before it is
+    left to :func:`_dropped_rows_hold`, checked on the answer.
+    """
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
-    iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 10 * steps
-    n_vars = 10 * steps + 1
+    powers = feasibility.grid_problem(n, x0, xf, first * dt_s, dt_s, u_max).blocks
+    n_x = steps - first + 1  # states x_first … x_N
+    iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 4 * steps + 6 * n_x
+    n_vars = i_s + 1
 
-    def xcol(k: int) -> int:  # first column of x_k, k = 1 … N
-        return ix + 6 * (k - 1)
+    def xcol(k: int) -> int:  # first column of x_k, k = first … N
+        return ix + 6 * (k - first)
 
     # Every block as (row, column, value) triplets, rows counted from the block's first,
     # assembled at once (a sparse row at a time cost 5× the solve); explicit zeros are
@@ -250,20 +337,25 @@ def _program(
         v = np.broadcast_to(m, (r0.size, p_, q_))
         return r.ravel(), c.ravel(), v.ravel()
 
-    # dynamics: x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 (x_0 = x0 given), and x_N = x_f
+    # dynamics: x_first − Σ_j<first Φ^(first−1−j) Γ̃ ũ_j = Φ^first x0 (x_1 − Γ̃ ũ_0 = Φ x0 when
+    # first = 1), x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 for k ≥ first, and x_N = x_f
     k_all = np.arange(steps)
+    k_dyn = np.arange(first, steps)
+    rows_dyn = 6 * (k_dyn - first + 1)
     parts = [
-        dense_block(6 * k_all, ix + 6 * k_all, np.eye(6)),
-        dense_block(6 * k_all, iu + 3 * k_all, -gam_u),
-        dense_block(6 * k_all[1:], ix + 6 * (k_all[1:] - 1), -phi),
-        dense_block(np.array([6 * steps]), np.array([xcol(steps)]), np.eye(6)),
+        dense_block(np.zeros(first, np.int64), iu + 3 * k_all[:first], -powers * u_max),
+        dense_block(np.zeros(1, np.int64), np.array([xcol(first)]), np.eye(6)),
+        dense_block(rows_dyn, ix + 6 * (k_dyn + 1 - first), np.eye(6)),
+        dense_block(rows_dyn, iu + 3 * k_dyn, -gam_u),
+        dense_block(rows_dyn, ix + 6 * (k_dyn - first), -phi),
+        dense_block(np.array([6 * n_x]), np.array([xcol(steps)]), np.eye(6)),
     ]
-    b_eq = np.zeros(6 * steps + 6)
-    b_eq[0:6] = phi @ x0
-    b_eq[6 * steps :] = xf
-    blocks.append((*_cat(parts), 6 * steps + 6))
+    b_eq = np.zeros(6 * n_x + 6)
+    b_eq[0:6] = stm(n, first * dt_s) @ x0
+    b_eq[6 * n_x :] = xf
+    blocks.append((*_cat(parts), 6 * n_x + 6))
     rhs = [b_eq]
-    cones.append(clarabel.ZeroConeT(6 * steps + 6))
+    cones.append(clarabel.ZeroConeT(6 * n_x + 6))
     # ‖ũ_j‖ ≤ t̃_j ≤ 1
     soc_u = feasibility.cone_rows(steps, n_vars, it + np.arange(steps)).tocoo()
     blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * steps))
@@ -272,28 +364,21 @@ def _program(
     # nonnegative rows: t̃ ≤ 1, s ≥ 0, half-spaces, trust region
     parts = [(k_all, it + k_all, np.ones(steps)), (np.array([steps]), np.array([i_s]), -np.ones(1))]
     b_nonneg = [np.ones(steps), np.zeros(1)]
-    # node k in its own half-space and in its predecessor's: the chord k−1 → k then lies in
-    # H_k−1 (convex), the arc within the chord margin of it; nᵀ r_k + s ≥ offset ⇔
-    # −nᵀ r_k − s ≤ −offset
-    pairs = [
-        (k, j)
-        for k in range(1, steps)
-        for j in (k, k - 1)
-        if j in half_spaces and not (j == k - 1 and modes[k] == 0)
-    ]
+    # nᵀ r_k + s ≥ offset ⇔ −nᵀ r_k − s ≤ −offset
     row0 = steps + 1
-    if pairs:
-        node = np.array([k for k, _ in pairs])
-        normals = np.array([half_spaces[j].normal for _, j in pairs], dtype=np.float64)
-        rows_hs = row0 + np.arange(len(pairs))
-        parts.append(dense_block(rows_hs, ix + 6 * (node - 1), -normals[:, None, :]))
-        parts.append((rows_hs, np.full(len(pairs), i_s), -np.ones(len(pairs))))
-        b_nonneg.append(-np.array([half_spaces[j].offset_km for _, j in pairs]))
-        row0 += len(pairs)
+    if pairs.size:
+        node = pairs[:, 0]
+        normals, offsets = _planes(half_spaces, pairs[:, 1])
+        rows_hs = row0 + np.arange(node.size)
+        parts.append(dense_block(rows_hs, ix + 6 * (node - first), -normals[:, None, :]))
+        parts.append((rows_hs, np.full(node.size, i_s), -np.ones(node.size)))
+        b_nonneg.append(-offsets)
+        row0 += node.size
     constrained = np.flatnonzero(modes > 0)
+    constrained = constrained[constrained >= first]
     if constrained.size:  # ±(r_k − r̄_k) ≤ trust
         rows_tr = row0 + 6 * np.arange(constrained.size)
-        cols_tr = ix + 6 * (constrained - 1)
+        cols_tr = ix + 6 * (constrained - first)
         parts.append(dense_block(rows_tr, cols_tr, np.eye(3)))
         parts.append(dense_block(rows_tr + 3, cols_tr, -np.eye(3)))
         b_nonneg.append(
@@ -311,7 +396,7 @@ def _program(
         rows_c = 4 * np.arange(corridor_nodes.size)
         head = np.vstack([-c_head, -a_body])
         parts = [
-            dense_block(rows_c, ix + 6 * (corridor_nodes - 1), head[None]),
+            dense_block(rows_c, ix + 6 * (corridor_nodes - first), head[None]),
             (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
         ]
         blocks.append((*_cat(parts), 4 * corridor_nodes.size))
@@ -348,6 +433,24 @@ def _cat(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray, n
         np.concatenate([p[1] for p in parts]).astype(np.int64),
         np.concatenate([p[2] for p in parts]).astype(np.float64),
     )
+
+
+def _answer(
+    n: float, dt_s: float, u_max: float, x0: np.ndarray, sol: Any, steps: int, first: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(controls (N, 3) [km/s²], states (N + 1, 6), slack [km]) of a solved :func:`_program`.
+
+    Interior-point controls may exceed u_max by the solver tolerance: they are
+    projected onto the ball. The states before ``first`` (not variables of the
+    program) follow from the controls by the dynamics (Eq. 11).
+    """
+    x_sol = np.asarray(sol.x)
+    u = x_sol[: 3 * steps].reshape(steps, 3)
+    norms = np.linalg.norm(u, axis=1)
+    u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max
+    head, _ = node_positions(n, dt_s, x0, u[: first - 1])
+    x = np.vstack([head, x_sol[4 * steps : -1].reshape(steps - first + 1, 6)])
+    return u, x, float(x_sol[-1])
 
 
 def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
@@ -419,10 +522,35 @@ def plan(
     for scp in range(1, SCP_MAX_ITER + 1):
         margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
         half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
-        sol, iterations = _program(
-            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust
-        )
-        used += iterations
+        pairs, dropped = _pairs(modes, r_bar, half_spaces, trust)
+        first = _first_node(modes, pairs)
+        while True:  # the relaxed program, with what its answer broke put back (at most N)
+            sol, iterations = _program(
+                n,
+                dt_s,
+                u_max_km_s2,
+                x0,
+                xf,
+                eps,
+                geo,
+                modes,
+                r_bar,
+                margin,
+                half_spaces,
+                trust,
+                pairs,
+                first,
+            )
+            used += iterations
+            if not feasibility.solved(sol):
+                break  # infeasible relaxed: so is the whole program
+            u, x_new, slack = _answer(n, dt_s, u_max_km_s2, x0, sol, steps, first)
+            broken = _broken_rows(x_new, r_bar, modes, first, half_spaces, dropped, trust, slack)
+            if broken.size == 0:
+                break
+            first = min(first, int(broken[0]))
+            back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
+            pairs, dropped = np.concatenate([pairs, dropped[back]]), dropped[~back]
         if not feasibility.solved(sol):
             status = (
                 SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
@@ -437,11 +565,6 @@ def plan(
                 used,
                 time.perf_counter() - start,
             )
-        u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3)
-        norms = np.linalg.norm(u, axis=1)
-        u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max_km_s2
-        x_new = np.vstack([x0, np.asarray(sol.x[4 * steps : 10 * steps]).reshape(steps, 6)])
-        slack = float(sol.x[10 * steps])
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
         new_modes = _modes(geo, x_new[:, :3])
