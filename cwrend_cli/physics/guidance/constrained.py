@@ -65,12 +65,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from cwrend_cli.physics import constraints as cg
-from cwrend_cli.physics.dynamics import discretize, stm
+from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveStatus
 
 __all__ = [
     "ACCEL_FACTOR",
+    "COAST_TOL",
+    "REDUCED_ROUNDS",
     "SCP_COST_RTOL",
     "SCP_MAX_ITER",
     "SCP_TOL_KM",
@@ -99,6 +101,10 @@ SLACK_PENALTY = 1e6
 SLACK_TOL_KM = 1e-9
 #: Safety factor on the acceleration bound of the chord margin [-].
 ACCEL_FACTOR = 1.5
+#: A step of the previous iterate with ‖u‖ ≤ this × u_max is guessed coasting [-].
+COAST_TOL = 1e-6
+#: Reduced programs of one SCP iteration before the whole program is solved [-].
+REDUCED_ROUNDS = 4
 
 _CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
 
@@ -129,10 +135,12 @@ def node_positions(
 ) -> tuple[np.ndarray, np.ndarray]:
     """States (N+1, 6) of held ``controls`` from x0 under the exact ZOH dynamics (Eq. 11)."""
     phi, gam = discretize(n, dt_s)
-    x = np.empty((controls.shape[0] + 1, 6))
-    x[0] = x0
-    for k, u in enumerate(controls):
-        x[k + 1] = phi @ x[k] + gam @ u
+    x = zoh_rollout(
+        phi,
+        gam,
+        np.ascontiguousarray(x0, dtype=np.float64),
+        np.ascontiguousarray(controls, dtype=np.float64),
+    )
     return x, x[:, :3]
 
 
@@ -286,6 +294,89 @@ def _broken_rows(
     return np.union1d(dropped[residual < 0.0, 0], prefix[moved > trust_km + SLACK_TOL_KM])
 
 
+def _thrust_guess(u_bar: np.ndarray, u_max: float, eps: float) -> np.ndarray:
+    """The steps whose control the next program leaves free: those of the iterate ``u_bar``
+    (N, 3) [km/s²] above :data:`COAST_TOL` u_max, and their neighbours (a switch moves by
+    a step between re-solves); every step when ε ≥ 1 (no step coasts: the cost is then
+    quadratic) or when the iterate never thrusts."""
+    steps = u_bar.shape[0]
+    on = np.linalg.norm(u_bar, axis=1) > COAST_TOL * u_max
+    if eps >= 1.0 or not np.any(on):
+        return np.arange(steps)
+    on[1:] |= on[:-1].copy()
+    on[:-1] |= on[1:].copy()
+    return np.flatnonzero(on)
+
+
+def _reduced_solve(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    eps: float,
+    geo: cg.Geometry,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    u_bar: np.ndarray,
+    margin_km: float,
+    half_spaces: dict[int, cg.HalfSpace],
+    trust_km: float,
+) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
+    """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
+    (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
+    slack [km]) or None when unsolved).
+
+    Starts without the left-out rows of :func:`_pairs`, without the states before
+    :func:`_first_node` and with the controls of :func:`_thrust_guess` only; puts back
+    whatever the answer breaks (:func:`_broken_rows`, :func:`_coasting_broken`) and
+    solves again, at most :data:`REDUCED_ROUNDS` times, then the whole program.
+    Unsolved with every row that could make it infeasible: so is the whole program.
+    """
+    steps = modes.size - 1
+    pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km)
+    first = _first_node(modes, pairs)
+    thrust = _thrust_guess(u_bar, u_max, eps)
+    used = 0
+    for attempt in range(REDUCED_ROUNDS + 1):
+        if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
+            first, thrust = 1, np.arange(steps)
+        sol, iterations = _program(
+            n,
+            dt_s,
+            u_max,
+            x0,
+            xf,
+            eps,
+            geo,
+            modes,
+            r_bar,
+            margin_km,
+            half_spaces,
+            trust_km,
+            pairs,
+            first,
+            thrust,
+        )
+        used += iterations
+        if not feasibility.solved(sol):
+            if thrust.size == steps:
+                return sol, used, None
+            thrust = np.arange(steps)  # the held steps may be why: free them
+            continue
+        u, x, slack = _answer(n, dt_s, u_max, x0, sol, steps, first, thrust)
+        broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack)
+        wake = _coasting_broken(n, dt_s, u_max, x0, xf, eps, sol, steps, first, thrust)
+        if attempt == REDUCED_ROUNDS or (broken.size == 0 and wake.size == 0):
+            return sol, used, (u, x, slack)
+        if broken.size:
+            first = min(first, int(broken[0]))
+            back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
+            pairs, dropped = np.concatenate([pairs, dropped[back]]), dropped[~back]
+        thrust = np.union1d(thrust, wake)
+    raise AssertionError("unreachable")  # the last attempt returns
+
+
 def _program(
     n: float,
     dt_s: float,
@@ -301,6 +392,7 @@ def _program(
     trust_km: float,
     pairs: np.ndarray,
     first: int,
+    thrust: np.ndarray,
 ) -> tuple[Any, int]:
     """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
 
@@ -309,15 +401,21 @@ def _program(
     (:func:`_first_node`): the nodes before it carry no row, so their states
     are substituted (x_first = Φ^first x0 + Σ_j<first Φ^(first−1−j) Γ u_j, one
     block of 6 rows) and the trust region of constrained nodes before it is
-    left to :func:`_dropped_rows_hold`, checked on the answer.
+    left to :func:`_broken_rows`, checked on the answer; ``thrust``: the steps
+    whose control is a variable (sorted), the others held at zero
+    (:func:`_coasting_broken` checks that on the answer). Variables: ũ_j and
+    t̃_j of the ``thrust`` steps, x_first … x_N, s.
     """
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
-    powers = feasibility.grid_problem(n, x0, xf, first * dt_s, dt_s, u_max).blocks
+    powers = _powers(n, dt_s, x0, xf, u_max, first)
     n_x = steps - first + 1  # states x_first … x_N
-    iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 4 * steps + 6 * n_x
+    n_u = thrust.size
+    iu, it, ix, i_s = 0, 3 * n_u, 4 * n_u, 4 * n_u + 6 * n_x
     n_vars = i_s + 1
+    ucol = np.full(steps, -1, dtype=np.int64)
+    ucol[thrust] = iu + 3 * np.arange(n_u)
 
     def xcol(k: int) -> int:  # first column of x_k, k = first … N
         return ix + 6 * (k - first)
@@ -339,14 +437,14 @@ def _program(
 
     # dynamics: x_first − Σ_j<first Φ^(first−1−j) Γ̃ ũ_j = Φ^first x0 (x_1 − Γ̃ ũ_0 = Φ x0 when
     # first = 1), x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 for k ≥ first, and x_N = x_f
-    k_all = np.arange(steps)
     k_dyn = np.arange(first, steps)
     rows_dyn = 6 * (k_dyn - first + 1)
+    pre, dyn_u = thrust[thrust < first], k_dyn[ucol[k_dyn] >= 0]
     parts = [
-        dense_block(np.zeros(first, np.int64), iu + 3 * k_all[:first], -powers * u_max),
+        dense_block(np.zeros(pre.size, np.int64), ucol[pre], -powers[pre]),
         dense_block(np.zeros(1, np.int64), np.array([xcol(first)]), np.eye(6)),
         dense_block(rows_dyn, ix + 6 * (k_dyn + 1 - first), np.eye(6)),
-        dense_block(rows_dyn, iu + 3 * k_dyn, -gam_u),
+        dense_block(6 * (dyn_u - first + 1), ucol[dyn_u], -gam_u),
         dense_block(rows_dyn, ix + 6 * (k_dyn - first), -phi),
         dense_block(np.array([6 * n_x]), np.array([xcol(steps)]), np.eye(6)),
     ]
@@ -357,15 +455,16 @@ def _program(
     rhs = [b_eq]
     cones.append(clarabel.ZeroConeT(6 * n_x + 6))
     # ‖ũ_j‖ ≤ t̃_j ≤ 1
-    soc_u = feasibility.cone_rows(steps, n_vars, it + np.arange(steps)).tocoo()
-    blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * steps))
-    rhs.append(np.zeros(4 * steps))
-    cones += [clarabel.SecondOrderConeT(4)] * steps
+    soc_u = feasibility.cone_rows(n_u, n_vars, it + np.arange(n_u)).tocoo()
+    blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * n_u))
+    rhs.append(np.zeros(4 * n_u))
+    cones += [clarabel.SecondOrderConeT(4)] * n_u
     # nonnegative rows: t̃ ≤ 1, s ≥ 0, half-spaces, trust region
-    parts = [(k_all, it + k_all, np.ones(steps)), (np.array([steps]), np.array([i_s]), -np.ones(1))]
-    b_nonneg = [np.ones(steps), np.zeros(1)]
+    j_u = np.arange(n_u)
+    parts = [(j_u, it + j_u, np.ones(n_u)), (np.array([n_u]), np.array([i_s]), -np.ones(1))]
+    b_nonneg = [np.ones(n_u), np.zeros(1)]
     # nᵀ r_k + s ≥ offset ⇔ −nᵀ r_k − s ≤ −offset
-    row0 = steps + 1
+    row0 = n_u + 1
     if pairs.size:
         node = pairs[:, 0]
         normals, offsets = _planes(half_spaces, pairs[:, 1])
@@ -417,10 +516,10 @@ def _program(
     b = np.concatenate(rhs)
     weight = max(float(eps), convex.REGULARISATION)
     q = np.zeros(n_vars)
-    q[it : it + steps] = 1.0 - min(float(eps), 1.0)
+    q[it : it + n_u] = 1.0 - min(float(eps), 1.0)
     q[i_s] = SLACK_PENALTY
     diag = np.zeros(n_vars)
-    diag[: 3 * steps] = 2.0 * weight
+    diag[: 3 * n_u] = 2.0 * weight
     p = sp.diags(diag, format="csc")
     sol = feasibility.solve_cone(p, q, a, b, cones)
     return sol, int(sol.iterations)
@@ -435,8 +534,61 @@ def _cat(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray, n
     )
 
 
+def _powers(
+    n: float, dt_s: float, x0: np.ndarray, xf: np.ndarray, u_max: float, first: int
+) -> np.ndarray:
+    """``Φ^(first−1−j) Γ u_max`` (first, 6, 3): how ũ_j moves x_first (Eq. 11)."""
+    return feasibility.grid_problem(n, x0, xf, first * dt_s, dt_s, u_max).blocks * u_max
+
+
+def _coasting_broken(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    eps: float,
+    sol: Any,
+    steps: int,
+    first: int,
+    thrust: np.ndarray,
+) -> np.ndarray:
+    """The steps held at zero by :func:`_program` for which zero is not optimal.
+
+    With the multipliers z of the dynamics rows at the answer, ũ_j = 0 (and
+    t̃_j = 0) is optimal in the program with ũ_j free iff ``‖A_jᵀ z‖ ≤ 1 − ε``
+    (A_j the rows' columns of ũ_j: minimising ``(1 − ε)‖ũ‖ + w‖ũ‖² + (A_jᵀz)ᵀũ``
+    over the ball, zero wins iff the linear term cannot beat the norm); the
+    same screen as the unconstrained program's (:func:`.convex.plan_controls`).
+    When every held step passes, the answer satisfies the optimality
+    conditions of the program with every step free, to Clarabel's tolerance.
+    """
+    linear = 1.0 - min(float(eps), 1.0)
+    coast = np.setdiff1d(np.arange(steps), thrust)
+    z = np.asarray(sol.z)
+    z_first = z[0:6]
+    pre, late = coast[coast < first], coast[coast >= first]
+    _, gam = discretize(n, dt_s)
+    rows = 6 * (late - first + 1)
+    z_late = z[rows[:, None] + np.arange(6)]
+    norms = np.r_[
+        np.linalg.norm(
+            np.einsum("kij,i->kj", _powers(n, dt_s, x0, xf, u_max, first)[pre], z_first), axis=1
+        ),
+        np.linalg.norm(z_late @ (gam * u_max), axis=1),
+    ]
+    return np.asarray(np.r_[pre, late][norms > linear], dtype=np.int64)
+
+
 def _answer(
-    n: float, dt_s: float, u_max: float, x0: np.ndarray, sol: Any, steps: int, first: int
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    sol: Any,
+    steps: int,
+    first: int,
+    thrust: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """(controls (N, 3) [km/s²], states (N + 1, 6), slack [km]) of a solved :func:`_program`.
 
@@ -445,11 +597,12 @@ def _answer(
     program) follow from the controls by the dynamics (Eq. 11).
     """
     x_sol = np.asarray(sol.x)
-    u = x_sol[: 3 * steps].reshape(steps, 3)
+    u = np.zeros((steps, 3))
+    u[thrust] = x_sol[: 3 * thrust.size].reshape(-1, 3)
     norms = np.linalg.norm(u, axis=1)
     u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max
     head, _ = node_positions(n, dt_s, x0, u[: first - 1])
-    x = np.vstack([head, x_sol[4 * steps : -1].reshape(steps - first + 1, 6)])
+    x = np.vstack([head, x_sol[4 * thrust.size : -1].reshape(steps - first + 1, 6)])
     return u, x, float(x_sol[-1])
 
 
@@ -492,6 +645,7 @@ def plan(
         if status is not SolveStatus.CONVERGED:
             warm_controls = np.zeros((steps, 3))
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
+    u_bar = warm_controls
     trust = TRUST_RADIUS_FACTOR * (
         float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 1.0
     )
@@ -522,36 +676,11 @@ def plan(
     for scp in range(1, SCP_MAX_ITER + 1):
         margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
         half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
-        pairs, dropped = _pairs(modes, r_bar, half_spaces, trust)
-        first = _first_node(modes, pairs)
-        while True:  # the relaxed program, with what its answer broke put back (at most N)
-            sol, iterations = _program(
-                n,
-                dt_s,
-                u_max_km_s2,
-                x0,
-                xf,
-                eps,
-                geo,
-                modes,
-                r_bar,
-                margin,
-                half_spaces,
-                trust,
-                pairs,
-                first,
-            )
-            used += iterations
-            if not feasibility.solved(sol):
-                break  # infeasible relaxed: so is the whole program
-            u, x_new, slack = _answer(n, dt_s, u_max_km_s2, x0, sol, steps, first)
-            broken = _broken_rows(x_new, r_bar, modes, first, half_spaces, dropped, trust, slack)
-            if broken.size == 0:
-                break
-            first = min(first, int(broken[0]))
-            back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
-            pairs, dropped = np.concatenate([pairs, dropped[back]]), dropped[~back]
-        if not feasibility.solved(sol):
+        sol, iterations, answer = _reduced_solve(
+            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margin, half_spaces, trust
+        )
+        used += iterations
+        if answer is None:
             status = (
                 SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
             )
@@ -565,6 +694,7 @@ def plan(
                 used,
                 time.perf_counter() - start,
             )
+        u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
         new_modes = _modes(geo, x_new[:, :3])
@@ -579,7 +709,7 @@ def plan(
             used,
             time.perf_counter() - start,
         )
-        x_bar, r_bar = x_new, x_new[:, :3]
+        x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
