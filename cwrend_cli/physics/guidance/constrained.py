@@ -42,7 +42,31 @@ the cone.
 :data:`SCP_TOL_KM` between iterates or the cost falls by less than
 :data:`SCP_COST_RTOL` of itself, with no slack and the modes unchanged, at most
 :data:`SCP_MAX_ITER` iterations; at the cap the last iterate is returned (safe,
-see above) with its status converged if its terminal and path rows hold.
+see above) with its status converged if its terminal and path rows hold. The
+cost before the first iterate counts as infinite, so its fall is infinite too
+and meets the test: **the first program is the last** whenever it needs no
+slack, leaves every node's mode as it found it and its own chord bound holds
+(a warm re-solve, from the previous plan shifted to the current step, nearly
+always: 1 program in 99 % of the re-solves of campaigns/safe_approach.toml).
+
+**Reductions.** Each iteration's program is solved smaller, with the same
+answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
+cannot reach its plane is left out (:func:`_pairs`: implied by the trust rows,
+exactly); (ii) the states before the first node that carries a path row are
+substituted by the dynamics, their trust rows left out (:func:`_first_node`);
+(iii) the steps that the previous iterate leaves coasting (but for their
+neighbours) are held at zero (:func:`_thrust_guess`). (ii) and (iii) relax the
+program, so the answer is checked: every left-out trust row within
+:data:`SLACK_TOL_KM` and every left-out half-space row held exactly
+(:func:`_broken_rows`), every held step passing the screen of the unconstrained
+program, ``‖A_jᵀ z‖ ≤ 1 − ε`` (:func:`_coasting_broken`: its KKT conditions with
+the step free); whatever fails is put back and the program solved again, the
+whole program after :data:`REDUCED_ROUNDS` reduced ones. A relaxation's answer
+that is feasible for the whole program is its answer (the relaxation's cost is
+no higher, and the whole program's optimum is unique in the controls, which
+fix the states), so every iterate keeps the safety argued above. In
+campaigns/safe_approach.toml a re-solve's program has path rows on about the
+last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 
 **Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
 cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
@@ -322,6 +346,7 @@ def _reduced_solve(
     margin_km: float,
     half_spaces: dict[int, cg.HalfSpace],
     trust_km: float,
+    reduce: bool = True,
 ) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
     """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
     (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
@@ -332,13 +357,16 @@ def _reduced_solve(
     whatever the answer breaks (:func:`_broken_rows`, :func:`_coasting_broken`) and
     solves again, at most :data:`REDUCED_ROUNDS` times, then the whole program.
     Unsolved with every row that could make it infeasible: so is the whole program.
+    ``reduce=False``: the whole program at once, every row written (the reference).
     """
     steps = modes.size - 1
     pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km)
     first = _first_node(modes, pairs)
     thrust = _thrust_guess(u_bar, u_max, eps)
+    if not reduce:
+        pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used = 0
-    for attempt in range(REDUCED_ROUNDS + 1):
+    for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
         if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
             first, thrust = 1, np.arange(steps)
         sol, iterations = _program(
@@ -625,13 +653,16 @@ def plan(
     p_pos_km2: np.ndarray | None = None,
     sigma_margin: float = 0.0,
     warm_controls: np.ndarray | None = None,
+    reduce: bool = True,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
     The first iterate is ``warm_controls`` (an earlier plan's remaining controls,
     N × 3) or the unconstrained plan of :func:`.convex.plan_controls`.
     ``p_pos_km2``: the filter's position covariance (3 × 3), for
-    ``sigma_margin``.
+    ``sigma_margin``. ``reduce=False`` solves every SCP iteration's whole
+    program, every row written (the reference the reductions are tested
+    against; module docstring, *Reductions*).
     """
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
@@ -677,7 +708,20 @@ def plan(
         margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
         half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
         sol, iterations, answer = _reduced_solve(
-            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margin, half_spaces, trust
+            n,
+            dt_s,
+            u_max_km_s2,
+            x0,
+            xf,
+            eps,
+            geo,
+            modes,
+            r_bar,
+            u_bar,
+            margin,
+            half_spaces,
+            trust,
+            reduce,
         )
         used += iterations
         if answer is None:
