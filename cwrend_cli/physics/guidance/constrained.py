@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -187,6 +188,29 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
     return modes
 
 
+class HalfSpaces(Mapping[int, cg.HalfSpace]):
+    """The half-spaces H_j of the nodes j that have one: node j → :class:`.HalfSpace`, kept
+    as arrays (``normals`` (K, 3), ``offsets`` (K,) [km] of ``nodes`` (K,); ``index``
+    (N + 1,): a node's row, −1 for none) so that the program reads them at once."""
+
+    def __init__(self, nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray, size: int):
+        self.nodes, self.normals, self.offsets = nodes, normals, offsets
+        self.index = np.full(size, -1, dtype=np.int64)
+        self.index[nodes] = np.arange(nodes.size)
+
+    def __getitem__(self, j: int) -> cg.HalfSpace:
+        i = int(self.index[j]) if 0 <= j < self.index.size else -1
+        if i < 0:
+            raise KeyError(j)
+        return cg.HalfSpace(self.normals[i], float(self.offsets[i]))
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(self.nodes.tolist())
+
+    def __len__(self) -> int:
+        return int(self.nodes.size)
+
+
 def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
     """The side (a unit vector) on which an iterate that crosses the zone goes round it.
 
@@ -228,7 +252,7 @@ def _half_spaces(
     margin_km: float,
     p_pos_km2: np.ndarray | None,
     sigma_margin: float,
-) -> dict[int, cg.HalfSpace]:
+) -> HalfSpaces:
     """The tightened keep-out half-space H_k of every keep-out node (and of node 0)."""
     assert geo.semi_axes_km is not None
     axes = geo.semi_axes_km
@@ -238,16 +262,13 @@ def _half_spaces(
     offsets = offsets + margin_km
     if sigma_margin > 0.0 and p_pos_km2 is not None:
         offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
-    return {
-        int(k): cg.HalfSpace(normal, float(offset))
-        for k, normal, offset in zip(nodes, normals, offsets, strict=True)
-    }
+    return HalfSpaces(nodes, normals, offsets, modes.size)
 
 
 def _pairs(
     modes: np.ndarray,
     r_bar: np.ndarray,
-    half_spaces: dict[int, cg.HalfSpace],
+    half_spaces: HalfSpaces,
     trust_km: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The half-space rows (node k, half-space j) of the program, and those left out,
@@ -262,8 +283,7 @@ def _pairs(
     and its answer, are the same with and without it.
     """
     k = np.arange(1, modes.size - 1)
-    has = np.zeros(modes.size, dtype=bool)
-    has[list(half_spaces)] = True
+    has = half_spaces.index >= 0
     own = k[has[k]]
     before = k[has[k - 1] & (modes[k] != 0)]
     pairs = np.concatenate(
@@ -276,11 +296,10 @@ def _pairs(
     return pairs[~left_out], pairs[left_out]
 
 
-def _planes(half_spaces: dict[int, cg.HalfSpace], j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _planes(half_spaces: HalfSpaces, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(normals (P, 3), offsets (P,) [km]) of the half-spaces H_j."""
-    normals = np.array([half_spaces[i].normal for i in j.tolist()], dtype=np.float64)
-    offsets = np.array([half_spaces[i].offset_km for i in j.tolist()], dtype=np.float64)
-    return normals.reshape(-1, 3), offsets
+    i = half_spaces.index[j]
+    return half_spaces.normals[i].reshape(-1, 3), half_spaces.offsets[i]
 
 
 def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
@@ -294,7 +313,7 @@ def _broken_rows(
     r_bar: np.ndarray,
     modes: np.ndarray,
     first: int,
-    half_spaces: dict[int, cg.HalfSpace],
+    half_spaces: HalfSpaces,
     dropped: np.ndarray,
     trust_km: float,
     slack_km: float,
@@ -344,7 +363,7 @@ def _reduced_solve(
     r_bar: np.ndarray,
     u_bar: np.ndarray,
     margin_km: float,
-    half_spaces: dict[int, cg.HalfSpace],
+    half_spaces: HalfSpaces,
     trust_km: float,
     reduce: bool = True,
 ) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
@@ -416,7 +435,7 @@ def _program(
     modes: np.ndarray,
     r_bar: np.ndarray,
     margin_km: float,
-    half_spaces: dict[int, cg.HalfSpace],
+    half_spaces: HalfSpaces,
     trust_km: float,
     pairs: np.ndarray,
     first: int,
