@@ -47,7 +47,8 @@ cost before the first iterate counts as infinite, so its fall is infinite too
 and meets the test: **the first program is the last** whenever it needs no
 slack, leaves every node's mode as it found it and its own chord bound holds
 (a warm re-solve, from the previous plan shifted to the current step, nearly
-always: 1 program in 99 % of the re-solves of campaigns/safe_approach.toml).
+always: one iteration in 776 of the 780 re-solves of seeds 0–4 of
+campaigns/safe_approach.toml, MTF architectures).
 
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
@@ -61,7 +62,10 @@ program, so the answer is checked: every left-out trust row within
 (:func:`_broken_rows`), every held step passing the screen of the unconstrained
 program, ``‖A_jᵀ z‖ ≤ 1 − ε`` (:func:`_coasting_broken`: its KKT conditions with
 the step free); whatever fails is put back and the program solved again, the
-whole program after :data:`REDUCED_ROUNDS` reduced ones. A relaxation's answer
+whole program after :data:`REDUCED_ROUNDS` reduced ones (seed 0 of
+campaigns/safe_approach.toml: a second program in 3 of 78 warm re-solves at
+ε = 0, in 15 of 78 adaptive ones, whose far nodes move by up to 10 trust radii
+from the shifted plan: there the trust rows are active). A relaxation's answer
 that is feasible for the whole program is its answer (the relaxation's cost is
 no higher, and the whole program's optimum is unique in the controls, which
 fix the states), so every iterate keeps the safety argued above. In
