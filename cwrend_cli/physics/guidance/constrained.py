@@ -471,6 +471,13 @@ def _program(
     def xcol(k: int) -> int:  # first column of x_k, k = first … N
         return ix + 6 * (k - first)
 
+    def xcols(nodes: np.ndarray) -> np.ndarray:
+        """First columns of the states of ``nodes``: a path row on a node before ``first``
+        (not a variable) is a bug: every row block names its nodes in :func:`_first_node`."""
+        if np.any(nodes < first):
+            raise ValueError(f"a path row on node {int(np.min(nodes))} < first = {first}")
+        return np.asarray(ix + 6 * (nodes - first), dtype=np.int64)
+
     # Every block as (row, column, value) triplets, rows counted from the block's first,
     # assembled at once (a sparse row at a time cost 5× the solve); explicit zeros are
     # dropped (eliminate_zeros below), as a row-by-row assembly drops them
@@ -520,7 +527,7 @@ def _program(
         node = pairs[:, 0]
         normals, offsets = _planes(half_spaces, pairs[:, 1])
         rows_hs = row0 + np.arange(node.size)
-        parts.append(dense_block(rows_hs, ix + 6 * (node - first), -normals[:, None, :]))
+        parts.append(dense_block(rows_hs, xcols(node), -normals[:, None, :]))
         parts.append((rows_hs, np.full(node.size, i_s), -np.ones(node.size)))
         b_nonneg.append(-offsets)
         row0 += node.size
@@ -528,7 +535,7 @@ def _program(
     constrained = constrained[constrained >= first]
     if constrained.size:  # ±(r_k − r̄_k) ≤ trust
         rows_tr = row0 + 6 * np.arange(constrained.size)
-        cols_tr = ix + 6 * (constrained - first)
+        cols_tr = xcols(constrained)
         parts.append(dense_block(rows_tr, cols_tr, np.eye(3)))
         parts.append(dense_block(rows_tr + 3, cols_tr, -np.eye(3)))
         b_nonneg.append(
@@ -546,7 +553,7 @@ def _program(
         rows_c = 4 * np.arange(corridor_nodes.size)
         head = np.vstack([-c_head, -a_body])
         parts = [
-            dense_block(rows_c, ix + 6 * (corridor_nodes - first), head[None]),
+            dense_block(rows_c, xcols(corridor_nodes), head[None]),
             (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
         ]
         blocks.append((*_cat(parts), 4 * corridor_nodes.size))
