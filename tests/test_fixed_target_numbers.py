@@ -6,7 +6,8 @@ every plan must be what it was: the fixture ``data/fixed_constrained_plans.json`
 the controls (as ``float.hex``), statuses, slacks and iteration counts of 12 random
 constrained plans (with and without a corridor, with and without a covariance margin),
 made by running this module as a script on the code before issue 34 (``main`` at
-e7c7f5f, ``PYTHONPATH=/work/main python tests/test_fixed_target_numbers.py``).
+eba92ce, ``PYTHONPATH=/work/main python tests/test_fixed_target_numbers.py`` run outside the
+worktree).
 
 Bits can only be compared on the platform the fixture was made on
 (``test_same_numbers.platform_signature``: OpenBLAS, numpy and Clarabel's roundings
