@@ -788,8 +788,9 @@ def _answer(
     norms = np.linalg.norm(u, axis=1)
     u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max
     head, _ = node_positions(n, dt_s, x0, u[: first - 1])
-    x = np.vstack([head, x_sol[4 * thrust.size : -1].reshape(steps - first + 1, 6)])
-    return u, x, float(x_sol[-1])
+    i_x, n_x = 4 * thrust.size, steps - first + 1  # the path slack follows the states
+    x = np.vstack([head, x_sol[i_x : i_x + 6 * n_x].reshape(n_x, 6)])
+    return u, x, float(x_sol[i_x + 6 * n_x])
 
 
 def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
