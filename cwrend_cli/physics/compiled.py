@@ -117,23 +117,31 @@ def compile_ahead(
 
     On a first run the campaign process compiles the shooting solver
     (``bang_bang_ascent``, for the references: about half of a first
-    compile) before any run can start, one core busy. Meanwhile a pool
-    worker compiles, into numba's cache, what does not depend on it: the
-    step loop of the first of ``archs`` of each guidance method
-    (:func:`cwrend_cli.physics.simulation.compile_loop`), which the first
-    runs then load. What is left for the runs is the compiled loop's top
-    (``_resolve_loop``, which carries the solver, and the cone program's grid
-    kernels). ``problem`` and the draws: those of the campaign's first run,
-    so that the argument types are the runs' own.
+    compile) before any run can start, one core busy. Meanwhile a second
+    process (a pool worker, or a helper beside an in-process campaign)
+    compiles into numba's cache, for the campaign process and the first runs
+    to load:
 
-    Only the step loop: the solver's switching-time Newton, compiled in a
-    second worker, was ready only about when the campaign process reached it
-    (measured: 13 of the solver's 27 CPU s, reached after 15), so it was as
-    often compiled twice, and three compiling processes on two cores slowed
-    the solver's own compile.
+    - the solver's switching-time Newton
+      (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
+      which the campaign process reaches last, after the dual ascent;
+    - the step loop of the first of ``archs`` of each guidance method
+      (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
+      depend on the solver.
+
+    The Newton first, so that it is cached before the campaign process
+    reaches it (the switching-time search below both then compiles in both
+    processes, at the same time, on two cores): after the step loop it was
+    ready only about when the campaign process reached it (seen on a loaded
+    2-core AMD EPYC). What is left for the runs is the compiled
+    loop's top (``_resolve_loop``, which carries the solver, and the cone
+    program's grid kernels). ``problem`` and the draws: those of the
+    campaign's first run, so that the argument types are the runs' own.
     """
     from cwrend_cli.physics import simulation
+    from cwrend_cli.physics.guidance import _switching_kernels
 
+    _switching_kernels.compile_switching_newton()
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)
