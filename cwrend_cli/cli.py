@@ -600,8 +600,9 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
     """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
 
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
-    for the guidance methods the plan's runs use; ``fan_out``: the campaign runs on a local
-    pool of two workers or more, which compile part of the kernels at the same time.
+    for the guidance methods the plan's runs use; ``fan_out``: a local campaign given two
+    workers or more (a pool, or a helper process beside a campaign of one task), which
+    compile part of the kernels at the same time.
     """
     from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
