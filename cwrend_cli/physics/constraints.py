@@ -71,6 +71,7 @@ __all__ = [
     "corridor_angle_deg",
     "corridor_cone",
     "covariance_margin_km",
+    "covariance_margins_km",
     "ellipsoid_level",
     "ellipsoid_signed_distance",
     "geometry",
@@ -79,6 +80,7 @@ __all__ = [
     "measure_safety",
     "signed_distance",
     "step_excursion_km",
+    "tangent_planes",
 ]
 
 #: Bisection steps of the ellipsoid distance (geometric, on a range of at most 1e40):
@@ -228,13 +230,20 @@ def linearise_keep_out(
     raised by ``margin_km``, so every point of the returned half-space has its
     ball of radius ``margin_km`` outside the zone (d_E ≥ margin). r̄ ≠ 0.
     """
+    normals, offsets = tangent_planes(semi_axes_km, np.reshape(r_bar_km, (1, 3)))
+    return HalfSpace(normals[0], float(offsets[0]) + margin_km)
+
+
+def tangent_planes(semi_axes_km: FloatArray, r_bar_km: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`linearise_keep_out` at K points at once, untightened: (unit normals (K, 3),
+    offsets (K,) [km]) of the half-spaces ``nᵀ r ≥ offset``; rows r̄ ≠ 0."""
     a = np.asarray(semi_axes_km, dtype=np.float64)
     r_bar = np.asarray(r_bar_km, dtype=np.float64)
     grad = 2.0 * r_bar / a**2
-    size = float(np.linalg.norm(grad))
-    normal = grad / size
-    g = float(ellipsoid_level(r_bar, a))
-    return HalfSpace(normal, float(normal @ r_bar) + (1.0 - g) / size + margin_km)
+    size = np.sqrt(np.sum(grad * grad, axis=1))
+    normals = grad / size[:, None]
+    g = ellipsoid_level(r_bar, a)
+    return normals, np.sum(normals * r_bar, axis=1) + (1.0 - g) / size
 
 
 @dataclass(frozen=True)
@@ -300,8 +309,14 @@ def chord_margin_km(accel_km_s2: float, dt_s: float) -> float:
 
 def covariance_margin_km(normal: FloatArray, p_pos_km2: FloatArray, k: float) -> float:
     """``k √(nᵀ P_pos n)`` [km]: k σ of the position estimate along the unit normal n."""
-    n = np.asarray(normal, dtype=np.float64)
-    return k * math.sqrt(max(float(n @ p_pos_km2 @ n), 0.0))
+    return float(covariance_margins_km(np.reshape(normal, (1, 3)), p_pos_km2, k)[0])
+
+
+def covariance_margins_km(normals: FloatArray, p_pos_km2: FloatArray, k: float) -> FloatArray:
+    """:func:`covariance_margin_km` of K unit normals (K, 3) at once [km]."""
+    n = np.asarray(normals, dtype=np.float64)
+    quad = np.einsum("ki,ij,kj->k", n, np.asarray(p_pos_km2, dtype=np.float64), n)
+    return np.asarray(k * np.sqrt(np.maximum(quad, 0.0)), dtype=np.float64)
 
 
 # ---------------------------------------------------------------------------
