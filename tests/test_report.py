@@ -850,6 +850,15 @@ def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
     assert sweep.draw().get_suptitle().split("\n")[-1] == worlds
 
 
+def test_compare_names_the_worlds_of_a_sweeps_points_not_its_base(truth_sweep_dir: Path) -> None:
+    """``cwrend compare``'s world of a sweep over ``truth.model`` (base: CW) is its points'
+    (as the report's figures over every point name them), not the base configuration's."""
+    from cwrend_cli.report.load import results_world
+
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert results_world(truth_sweep_dir) == worlds
+
+
 # ---------------------------------------------------------------------------
 # Sampled designs and their sensitivity (issue 19, item 4)
 # ---------------------------------------------------------------------------

@@ -165,16 +165,9 @@ class ReportData:
 
         The world of each point (:attr:`world`); when they differ (a sweep over
         ``truth.model``, say), ``one per point:`` and each distinct world once,
-        sorted, separated by ``;``.
+        sorted, separated by ``;`` (:func:`worlds_of`).
         """
-        ok = self.runs[self.runs["status"] == "ok"]
-        if "point" not in ok.columns or ok["point"].nunique() <= 1:
-            return self.world
-        found = {
-            world_of(with_swept_values(self.config, runs))
-            for _, runs in ok.groupby(ok["point"].astype(str), sort=False)
-        }
-        return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
+        return worlds_of(self.config, self.runs)
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -257,6 +250,24 @@ def world_of(config: CwrendConfig | None) -> str:
     return " · ".join(parts)
 
 
+def worlds_of(config: CwrendConfig | None, runs: pd.DataFrame) -> str:
+    """The simulated worlds of every point of ``runs`` (rows of ``runs.parquet``).
+
+    The world of each point's successful runs, ``config`` with their swept values
+    set (:func:`with_swept_values`); when they differ (a sweep over ``truth.model``,
+    say), ``one per point:`` and each distinct world once, sorted, separated by
+    ``;``. ``config``'s own world without runs (a single run's directory).
+    """
+    ok = runs[runs["status"] == "ok"] if "status" in runs.columns else runs
+    if "point" not in ok.columns or ok["point"].nunique() <= 1:
+        return world_of(with_swept_values(config, ok))
+    found = {
+        world_of(with_swept_values(config, point))
+        for _, point in ok.groupby(ok["point"].astype(str), sort=False)
+    }
+    return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
+
+
 def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
     """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
 
@@ -281,10 +292,12 @@ def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> Cwrend
 
 
 def results_world(results_dir: Path) -> str:
-    """The simulated world of a run or campaign directory, from its stored configuration.
+    """The simulated worlds of a run or campaign directory (:func:`worlds_of`).
 
-    For figures that are not part of a report (``cwrend compare``'s): reads
-    ``manifest.json`` (campaign) or ``config.json`` (run) only;
+    For figures that are not part of a report (``cwrend compare``'s): the stored
+    configuration of ``manifest.json`` (campaign) or ``config.json`` (run), with
+    the swept values of each point of a campaign's ``runs.parquet`` set (a sweep
+    over ``truth.model`` names each point's world, not the base's);
     ``truth model not stored`` when neither holds a configuration that validates.
     """
     root = Path(results_dir)
@@ -293,9 +306,10 @@ def results_world(results_dir: Path) -> str:
         if path.exists():
             try:
                 raw = _read_json(path).get("config")
+                runs = _read_parquet(root / RUNS) if (root / RUNS).exists() else pd.DataFrame()
             except ReportError:
                 break
-            return world_of(_stored_config(raw, path, []))
+            return worlds_of(_stored_config(raw, path, []), runs)
     return world_of(None)
 
 
