@@ -664,6 +664,11 @@ def new_manifest(
     architectures (the campaign hash does not cover them) and keeps the runs of
     the earlier ones; :func:`finish_manifest` adds those of the journal's runs
     (a manifest rebuilt by ``--repair-manifest`` has no ``previous``).
+
+    ``nis_offset_given``: the base config's ``schedule.nis_offset`` was given by
+    the user (:attr:`CampaignPlan.nis_offset_given`); ``config`` is a resolved
+    tree, which has lost that, and a point that sets the sensor fills the offset
+    in for its sensor only when it was not. Outside ``config``: no hash changes.
     """
     sessions = _earlier_sessions(previous or {})
     earlier_hash = (previous or {}).get("config_hash")
@@ -702,6 +707,7 @@ def new_manifest(
         "seeds": list(plan_.seeds),
         "root_seed": plan_.root_seed,
         "archs": _union((previous or {}).get("archs"), plan_.archs),
+        "nis_offset_given": plan_.nis_offset_given,
         "executor": dict(executor),
         "started_at": sessions[0].get("started_at", iso(started)) if sessions else iso(started),
         "status": "running",
