@@ -285,12 +285,12 @@ def test_a_left_out_half_space_row_holds_on_the_whole_trust_box() -> None:
     for _ in range(5):
         x0, _, geo = _far_problem(rng)
         r_bar = x0[:3] + np.linspace(0.0, 1.0, 301)[:, None] * (-1.9 * x0[:3])
-        modes = cp._modes(geo, r_bar)
+        modes = cp._modes(geo, r_bar, None)
         trust = cp.TRUST_RADIUS_FACTOR * 0.2
-        half_spaces = cp._half_spaces(geo, modes, r_bar, 1e-4, None, 0.0)
+        half_spaces = cp._half_spaces(geo, modes, r_bar, np.full(modes.size, 1e-4), None, 0.0)
         kept, left_out = cp._pairs(modes, r_bar, half_spaces, trust)
         assert left_out.shape[0] > kept.shape[0] > 0
-        for k, j in left_out:
+        for k, j, b in left_out:  # (node, half-space, ellipsoid: issue 34)
             box = r_bar[k] + trust * corners
-            h = half_spaces[int(j)]
+            h = half_spaces[int(b)][int(j)]
             assert np.all(h.residual_km(box) >= cp.SCP_TOL_KM * (1 - 1e-9))

@@ -78,6 +78,19 @@ an exact (ℓ∞) penalty, so s = 0 whenever a safe plan exists and its multipli
 is below the price; s > 0 says by how much the plan had to enter the unsafe
 set (returned as ``slack_km``).
 
+**Several bodies, a tumbling target** (issue 34). Every ellipsoid of the zone
+gets its own half-space at each keep-out node (one row each; the zone's outside
+is their intersection, convex). For a tumbling target (``motion``: the body
+frame's predicted turn R_k at every node) the geometry is given in the body
+frame: each ellipsoid is linearised at the iterate's body-frame position
+R_kᵀ r̄_k, and a body-frame row ``nᵀ ρ ≥ d`` binds node k as ``(R_k n)ᵀ r_k ≥ d``;
+the corridor cone likewise. The chord argument above holds in the body frame
+with the body-frame acceleration bound
+(:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows
+with the distance from the target, so each step has its own margin and each
+node takes the larger of its two steps'. The terminal state (the caller's
+``xf``) is then the port's predicted position and velocity.
+
 Units: km, s, km/s, km/s².
 """
 
@@ -173,7 +186,7 @@ def node_positions(
     return x, x[:, :3]
 
 
-def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
+def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) -> np.ndarray:
     """Each node's constraint set from the previous iterate (module docstring)."""
     steps = r_bar.shape[0] - 1
     modes = np.zeros(steps + 1, dtype=np.int8)
@@ -182,7 +195,7 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    inside = cg.corridor_cone(geo, 0.0).residual_km(r_bar) >= -SCP_TOL_KM
+    inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
     first = steps  # the terminal node is the apex
     while first - 1 >= 1 and inside[first - 1]:
         first -= 1
@@ -253,30 +266,55 @@ def _half_spaces(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
+    margins_km: np.ndarray,
     p_pos_km2: np.ndarray | None,
     sigma_margin: float,
-) -> HalfSpaces:
-    """The tightened keep-out half-space H_k of every keep-out node (and of node 0)."""
-    assert geo.semi_axes_km is not None
-    axes = geo.semi_axes_km
-    side = _detour_side(axes, r_bar)
+    motion: cg.BodyMotion | None = None,
+) -> list[HalfSpaces]:
+    """The tightened keep-out half-spaces H_k,b of every keep-out node k (and of node 0), one
+    :class:`HalfSpaces` per ellipsoid b of the zone, in the body frame (the relative frame
+    without ``motion``).
+
+    Each ellipsoid is linearised at the iterate's body-frame position at the node's time
+    (issue 34). ``margins_km`` (N+1,): each node's between-node margin. With ``motion``
+    the covariance margin is taken along the half-space's normal in the relative frame at
+    the two nodes it binds (k and k+1), the larger.
+    """
+    rho_bar = cg.to_body(motion, r_bar)
     nodes = np.r_[0, np.flatnonzero(modes >= _KEEP_OUT)]
-    normals, offsets = cg.tangent_planes(axes, _tangent_points(axes, r_bar[nodes], side))
-    offsets = offsets + margin_km
-    if sigma_margin > 0.0 and p_pos_km2 is not None:
-        offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
-    return HalfSpaces(nodes, normals, offsets, modes.size)
+    out = []
+    for centre, axes in cg.ellipsoids(geo):
+        local = rho_bar if centre is None else rho_bar - centre
+        side = _detour_side(axes, local)
+        normals, offsets = cg.tangent_planes(axes, _tangent_points(axes, local[nodes], side))
+        offsets = offsets + margins_km[nodes]
+        if sigma_margin > 0.0 and p_pos_km2 is not None:
+            if motion is None:
+                offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
+            else:
+                after = np.minimum(nodes + 1, modes.size - 1)
+                turned = [
+                    np.einsum("kij,kj->ki", motion.rotation[at], normals) for at in (nodes, after)
+                ]
+                offsets = offsets + np.maximum(
+                    cg.covariance_margins_km(turned[0], p_pos_km2, sigma_margin),
+                    cg.covariance_margins_km(turned[1], p_pos_km2, sigma_margin),
+                )
+        if centre is not None:  # nᵀ(ρ − c) ≥ offset ⇔ nᵀρ ≥ offset + nᵀc
+            offsets = offsets + normals @ centre
+        out.append(HalfSpaces(nodes, normals, offsets, modes.size))
+    return out
 
 
 def _pairs(
     modes: np.ndarray,
     r_bar: np.ndarray,
-    half_spaces: HalfSpaces,
+    half_spaces: list[HalfSpaces],
     trust_km: float,
+    motion: cg.BodyMotion | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The half-space rows (node k, half-space j) of the program, and those left out,
-    each (P, 2).
+    """The half-space rows (node k, half-space j, ellipsoid b) of the program, and those
+    left out, each (P, 3).
 
     Node k lies in its own half-space and in its predecessor's: the chord
     k−1 → k then lies in H_k−1 (convex), the arc within the chord margin of it.
@@ -287,23 +325,42 @@ def _pairs(
     and its answer, are the same with and without it.
     """
     k = np.arange(1, modes.size - 1)
-    has = half_spaces.index >= 0
+    has = half_spaces[0].index >= 0  # every ellipsoid has the same nodes
     own = k[has[k]]
     before = k[has[k - 1] & (modes[k] != 0)]
+    bodies = range(len(half_spaces))
     pairs = np.concatenate(
-        [np.column_stack([own, own]), np.column_stack([before, before - 1])]
+        [np.column_stack([own, own, np.full(own.size, b)]) for b in bodies]
+        + [np.column_stack([before, before - 1, np.full(before.size, b)]) for b in bodies]
     ).astype(np.int64)
-    pairs = pairs[np.lexsort((-pairs[:, 1], pairs[:, 0]))]  # node by node, own plane first
-    normals, offsets = _planes(half_spaces, pairs[:, 1])
+    # node by node, own plane first, ellipsoid by ellipsoid
+    pairs = pairs[np.lexsort((pairs[:, 2], -pairs[:, 1], pairs[:, 0]))]
+    normals, offsets = _planes(half_spaces, pairs, motion)
     low = np.sum(normals * r_bar[pairs[:, 0]], axis=1) - trust_km * np.sum(np.abs(normals), axis=1)
     left_out = low >= offsets + SCP_TOL_KM
     return pairs[~left_out], pairs[left_out]
 
 
-def _planes(half_spaces: HalfSpaces, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(normals (P, 3), offsets (P,) [km]) of the half-spaces H_j."""
-    i = half_spaces.index[j]
-    return half_spaces.normals[i].reshape(-1, 3), half_spaces.offsets[i]
+def _planes(
+    half_spaces: list[HalfSpaces], rows: np.ndarray, motion: cg.BodyMotion | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (P, 3), offsets (P,) [km]) of the rows (node k, half-space j, ellipsoid b):
+    H_j,b, its normal turned to node k's time with ``motion`` (nᵀ ρ_k = (R_k n)ᵀ r_k)."""
+    if len(half_spaces) == 1:  # one ellipsoid (issue 32's arithmetic)
+        i = half_spaces[0].index[rows[:, 1]]
+        normals = half_spaces[0].normals[i].reshape(-1, 3)
+        offsets = half_spaces[0].offsets[i]
+    else:
+        normals = np.empty((rows.shape[0], 3))
+        offsets = np.empty(rows.shape[0])
+        for b, hs in enumerate(half_spaces):
+            sel = rows[:, 2] == b
+            i = hs.index[rows[sel, 1]]
+            normals[sel] = hs.normals[i].reshape(-1, 3)
+            offsets[sel] = hs.offsets[i]
+    if motion is not None:
+        normals = np.einsum("pij,pj->pi", motion.rotation[rows[:, 0]], normals)
+    return normals, offsets
 
 
 def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
@@ -317,10 +374,11 @@ def _broken_rows(
     r_bar: np.ndarray,
     modes: np.ndarray,
     first: int,
-    half_spaces: HalfSpaces,
+    half_spaces: list[HalfSpaces],
     dropped: np.ndarray,
     trust_km: float,
     slack_km: float,
+    motion: cg.BodyMotion | None = None,
 ) -> np.ndarray:
     """The nodes whose left-out rows fail at the answer ``x`` (N + 1, 6) of :func:`_program`.
 
@@ -334,7 +392,7 @@ def _broken_rows(
     left-out half-space row held exactly (with the answer's slack, as written).
     """
     r = x[:, :3]
-    normals, offsets = _planes(half_spaces, dropped[:, 1])
+    normals, offsets = _planes(half_spaces, dropped, motion)
     residual = np.sum(normals * r[dropped[:, 0]], axis=1) - offsets + slack_km
     prefix = np.flatnonzero(modes[:first] > 0)
     moved = np.max(np.abs(r[prefix] - r_bar[prefix]), axis=1, initial=0.0)
@@ -366,10 +424,11 @@ def _reduced_solve(
     modes: np.ndarray,
     r_bar: np.ndarray,
     u_bar: np.ndarray,
-    margin_km: float,
-    half_spaces: HalfSpaces,
+    margins_km: np.ndarray,
+    half_spaces: list[HalfSpaces],
     trust_km: float,
     reduce: bool = True,
+    motion: cg.BodyMotion | None = None,
 ) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
     """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
     (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
@@ -383,7 +442,7 @@ def _reduced_solve(
     ``reduce=False``: the whole program at once, every row written (the reference).
     """
     steps = modes.size - 1
-    pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km)
+    pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km, motion)
     first = _first_node(modes, pairs)
     thrust = _thrust_guess(u_bar, u_max, eps)
     if not reduce:
@@ -402,12 +461,13 @@ def _reduced_solve(
             geo,
             modes,
             r_bar,
-            margin_km,
+            margins_km,
             half_spaces,
             trust_km,
             pairs,
             first,
             thrust,
+            motion,
         )
         used += iterations
         if not feasibility.solved(sol):
@@ -416,7 +476,7 @@ def _reduced_solve(
             thrust = np.arange(steps)  # the held steps may be why: free them
             continue
         u, x, slack = _answer(n, dt_s, u_max, x0, sol, steps, first, thrust)
-        broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack)
+        broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack, motion)
         wake = _coasting_broken(n, dt_s, u_max, x0, xf, eps, sol, steps, first, thrust)
         if attempt == REDUCED_ROUNDS or (broken.size == 0 and wake.size == 0):
             return sol, used, (u, x, slack)
@@ -438,12 +498,13 @@ def _program(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
-    half_spaces: HalfSpaces,
+    margins_km: np.ndarray,
+    half_spaces: list[HalfSpaces],
     trust_km: float,
     pairs: np.ndarray,
     first: int,
     thrust: np.ndarray,
+    motion: cg.BodyMotion | None = None,
 ) -> tuple[Any, int]:
     """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
 
@@ -455,7 +516,9 @@ def _program(
     left to :func:`_broken_rows`, checked on the answer; ``thrust``: the steps
     whose control is a variable (sorted), the others held at zero
     (:func:`_coasting_broken` checks that on the answer). Variables: ũ_j and
-    t̃_j of the ``thrust`` steps, x_first … x_N, s.
+    t̃_j of the ``thrust`` steps, x_first … x_N, s. With ``motion`` (a tumbling
+    target) every body-frame half-space and the corridor cone bind node k through
+    its body-frame position R_kᵀ r_k (issue 34).
     """
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
@@ -525,7 +588,7 @@ def _program(
     row0 = n_u + 1
     if pairs.size:
         node = pairs[:, 0]
-        normals, offsets = _planes(half_spaces, pairs[:, 1])
+        normals, offsets = _planes(half_spaces, pairs, motion)
         rows_hs = row0 + np.arange(node.size)
         parts.append(dense_block(rows_hs, xcols(node), -normals[:, None, :]))
         parts.append((rows_hs, np.full(node.size, i_s), -np.ones(node.size)))
@@ -548,16 +611,27 @@ def _program(
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
     corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
     if corridor_nodes.size:
-        soc = cg.corridor_cone(geo, margin_km)
-        a_body, b_body, c_head, d_head = soc.rows()
         rows_c = 4 * np.arange(corridor_nodes.size)
-        head = np.vstack([-c_head, -a_body])
+        if motion is None:  # one margin, one cone for every node
+            soc = cg.corridor_cone(geo, float(margins_km[corridor_nodes[0]]))
+            a_body, b_body, c_head, d_head = soc.rows()
+            head = np.vstack([-c_head, -a_body])[None]
+            cone_rhs = np.tile(np.r_[d_head, b_body], corridor_nodes.size)
+        else:  # ‖P(R_kᵀ r − p)‖ ≤ (R_k c)ᵀ r + d_k: each node's turn and margin
+            heads, cone_rhs_k = [], []
+            for k in corridor_nodes:
+                a_body, b_body, c_head, d_head = cg.corridor_cone(geo, margins_km[k]).rows()
+                rot = motion.rotation[k]
+                heads.append(np.vstack([-(rot @ c_head), -(a_body @ rot.T)]))
+                cone_rhs_k.append(np.r_[d_head, b_body])
+            head = np.array(heads)
+            cone_rhs = np.concatenate(cone_rhs_k)
         parts = [
-            dense_block(rows_c, xcols(corridor_nodes), head[None]),
+            dense_block(rows_c, xcols(corridor_nodes), head),
             (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
         ]
         blocks.append((*_cat(parts), 4 * corridor_nodes.size))
-        rhs.append(np.tile(np.r_[d_head, b_body], corridor_nodes.size))
+        rhs.append(cone_rhs)
         cones += [clarabel.SecondOrderConeT(4)] * corridor_nodes.size
     offset = 0
     r_all, c_all, v_all = [], [], []
@@ -671,6 +745,56 @@ def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) 
     return cg.acceleration_bound(r, v, u_max, n, dt_s)
 
 
+def _step_margins(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x: np.ndarray,
+    extra_km: float,
+    factor: float,
+    motion: cg.BodyMotion | None,
+) -> np.ndarray:
+    """The chord margin of every step of a plan's states (N,) [km] (module docstring).
+
+    Fixed target: one margin, from the plan's largest ‖r‖ (+ ``extra_km``) and ‖v‖.
+    Turning body (issue 34): each step's own, from its two nodes' ‖r‖ (+ ``extra_km``)
+    and ‖v‖ and the body-frame acceleration bound
+    (:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows with
+    the distance from the target's centre. ``factor`` multiplies the acceleration.
+    """
+    steps = x.shape[0] - 1
+    if motion is None:
+        return np.full(
+            steps, cg.chord_margin_km(factor * _accel(n, dt_s, u_max, x, extra_km), dt_s)
+        )
+    r = np.linalg.norm(x[:, :3], axis=1)
+    v = np.linalg.norm(x[:, 3:], axis=1)
+    r_step = np.maximum(r[:-1], r[1:]) + extra_km
+    v_step = np.maximum(v[:-1], v[1:])
+    rate, rate_dot = motion.rate_bound_rad_s, motion.rate_dot_bound_rad_s2
+    return np.array(
+        [
+            cg.chord_margin_km(
+                factor
+                * cg.body_acceleration_bound(
+                    cg.acceleration_bound(ri, vi, u_max, n, dt_s), ri, vi, rate, rate_dot, dt_s
+                ),
+                dt_s,
+            )
+            for ri, vi in zip(r_step.tolist(), v_step.tolist(), strict=True)
+        ]
+    )
+
+
+def _node_margins(step_margins: np.ndarray) -> np.ndarray:
+    """Each node's margin (N+1,) [km]: the larger of its two steps' (a node's constraints
+    bind the chords on both sides of it; the end nodes have one step)."""
+    out = np.empty(step_margins.size + 1)
+    out[0], out[-1] = step_margins[0], step_margins[-1]
+    out[1:-1] = np.maximum(step_margins[:-1], step_margins[1:])
+    return out
+
+
 def plan(
     n: float,
     dt_s: float,
@@ -684,6 +808,7 @@ def plan(
     sigma_margin: float = 0.0,
     warm_controls: np.ndarray | None = None,
     reduce: bool = True,
+    motion: cg.BodyMotion | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
@@ -692,7 +817,9 @@ def plan(
     ``p_pos_km2``: the filter's position covariance (3 × 3), for
     ``sigma_margin``. ``reduce=False`` solves every SCP iteration's whole
     program, every row written (the reference the reductions are tested
-    against; module docstring, *Reductions*).
+    against; module docstring, *Reductions*). ``motion`` (a tumbling target,
+    issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
+    ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
     """
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
@@ -707,10 +834,9 @@ def plan(
             warm_controls = np.zeros((steps, 3))
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
     u_bar = warm_controls
-    trust = TRUST_RADIUS_FACTOR * (
-        float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 1.0
-    )
-    modes = _modes(geo, r_bar)
+    sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
+    trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
+    modes = _modes(geo, r_bar, motion)
     failed = ConstrainedPlan(
         SolveStatus.FAILED,
         np.zeros((steps, 3)),
@@ -735,8 +861,10 @@ def plan(
     result = failed
     cost = math.inf
     for scp in range(1, SCP_MAX_ITER + 1):
-        margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
-        half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
+        margins = _node_margins(
+            _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
+        )
+        half_spaces = _half_spaces(geo, modes, r_bar, margins, p_pos_km2, sigma_margin, motion)
         sol, iterations, answer = _reduced_solve(
             n,
             dt_s,
@@ -748,10 +876,11 @@ def plan(
             modes,
             r_bar,
             u_bar,
-            margin,
+            margins,
             half_spaces,
             trust,
             reduce,
+            motion,
         )
         used += iterations
         if answer is None:
@@ -771,8 +900,14 @@ def plan(
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
-        new_modes = _modes(geo, x_new[:, :3])
-        bound_ok = cg.chord_margin_km(_accel(n, dt_s, u_max_km_s2, x_new, 0.0), dt_s) <= margin
+        new_modes = _modes(geo, x_new[:, :3], motion)
+        # each step's own bound within what both its nodes' constraints were tightened by
+        bound_ok = bool(
+            np.all(
+                _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion)
+                <= np.minimum(margins[:-1], margins[1:])
+            )
+        )
         result = ConstrainedPlan(
             SolveStatus.CONVERGED if bound_ok else SolveStatus.FAILED,
             u,
