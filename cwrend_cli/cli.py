@@ -683,7 +683,7 @@ def _campaign(
             # forgets it): it may be the target
             recorded = () if opts.force else pairs_recorded_at(out / MANIFEST)
             remembered = [p for p in recorded if p not in pairs and set(p) <= set(archs)]
-            target = sequential.parse_until(opts.until, [*pairs, *remembered])
+            target = sequential.parse_until(opts.until, [*pairs, *remembered], archs, recorded)
             if opts.max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []

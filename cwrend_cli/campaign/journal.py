@@ -658,6 +658,17 @@ def new_manifest(
     ``previous`` manifest recorded, so that a later command that rewrites the
     statistics compares them again (:func:`~cwrend_cli.output.manifest.recorded_pairs`).
     Absent when no command added a pair.
+
+    ``archs``: every architecture the campaign's files hold, in order of first
+    use (the ``previous`` manifest's, then this invocation's): a resume may add
+    architectures (the campaign hash does not cover them) and keeps the runs of
+    the earlier ones; :func:`finish_manifest` adds those of the journal's runs
+    (a manifest rebuilt by ``--repair-manifest`` has no ``previous``).
+
+    ``nis_offset_given``: the base config's ``schedule.nis_offset`` was given by
+    the user (:attr:`CampaignPlan.nis_offset_given`); ``config`` is a resolved
+    tree, which has lost that, and a point that sets the sensor fills the offset
+    in for its sensor only when it was not. Outside ``config``: no hash changes.
     """
     sessions = _earlier_sessions(previous or {})
     earlier_hash = (previous or {}).get("config_hash")
@@ -695,7 +706,8 @@ def new_manifest(
         "design": _design_record(plan_),
         "seeds": list(plan_.seeds),
         "root_seed": plan_.root_seed,
-        "archs": list(plan_.archs),
+        "archs": _union((previous or {}).get("archs"), plan_.archs),
+        "nis_offset_given": plan_.nis_offset_given,
         "executor": dict(executor),
         "started_at": sessions[0].get("started_at", iso(started)) if sessions else iso(started),
         "status": "running",
@@ -703,11 +715,22 @@ def new_manifest(
     }
 
 
+def _union(earlier: object, later: Iterable[str]) -> list[str]:
+    """The strings of the list ``earlier`` (anything else: none), then the new ones of ``later``."""
+    kept = [a for a in earlier if isinstance(a, str)] if isinstance(earlier, list) else []
+    return list(dict.fromkeys([*kept, *later]))
+
+
 def finish_manifest(
     manifest: dict[str, Any], *, finished: float, status: str, computed: int, skipped: int,
-    counts: Mapping[str, int],
+    counts: Mapping[str, int], archs: Iterable[str] = (),
 ) -> None:  # fmt: skip
-    """Record the end of this invocation in ``manifest`` (its last session) and the counts."""
+    """Record the end of this invocation in ``manifest`` (its last session) and the counts.
+
+    ``archs``: the architectures of the runs the campaign's files now hold, added
+    to the manifest's ``archs`` (:func:`new_manifest`).
+    """
+    manifest["archs"] = _union(manifest.get("archs"), archs)
     end = iso(finished)
     manifest["sessions"][-1].update(
         finished_at=end, status=status, runs_computed=computed, runs_skipped=skipped
