@@ -500,6 +500,7 @@ def _run_locked(
                     skipped=skipped,
                     counts={"ok": ok, "failed": failed, "runs": len(records)},
                     archs=(str(r["arch"]) for r in records),
+                    seeds=(int(r["seed"]) for r in records),
                 )
                 write_json(manifest, out_dir / MANIFEST)
             except OSError as exc:
