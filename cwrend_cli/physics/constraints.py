@@ -114,6 +114,7 @@ __all__ = [
     "linearise_keep_out",
     "measure_safety",
     "rate_bounds",
+    "rotate_to_body",
     "signed_distance",
     "step_excursion_km",
     "tangent_planes",
@@ -217,7 +218,13 @@ def to_body(motion: BodyMotion | None, r_km: FloatArray) -> FloatArray:
     """Body-frame coordinates ``ρ_i = R_iᵀ r_i`` of Hill positions (M, 3); ``r`` without motion."""
     if motion is None:
         return r_km
-    return np.asarray(np.einsum("mji,mj->mi", motion.rotation, r_km), dtype=np.float64)
+    return rotate_to_body(motion.rotation, r_km)
+
+
+def rotate_to_body(rotation: FloatArray, r_km: FloatArray) -> FloatArray:
+    """``ρ_i = R_iᵀ r_i`` [km]: Hill positions (M, 3) in the body frame of the rotations
+    body→Hill (M, 3, 3) at their times."""
+    return np.asarray(np.einsum("mji,mj->mi", rotation, r_km), dtype=np.float64)
 
 
 def rate_bounds(omega_max_rad_s: float, n_rad_s: float) -> tuple[float, float]:

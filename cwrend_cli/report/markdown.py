@@ -224,6 +224,9 @@ def safety_table(data: ReportData) -> str | None:
     header = ["architecture", "runs", "violated (share) [95 % Wilson]",
               "median min distance [m]", "p1 min distance [m]",
               "mean unsafe time [s]"]  # fmt: skip
+    runs = data.ok_runs()
+    docking = [c for c in DOCKING_COLUMNS if c in runs.columns]
+    header += [DOCKING_COLUMNS[c][0] for c in docking]
     rows = []
     for a in data.archs:
         get = _lookup(rows_of[rows_of["arch"] == a])
@@ -237,8 +240,26 @@ def safety_table(data: ReportData) -> str | None:
             _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
             _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
             _ci(get.get(("safety_unsafe_time_s", "mean")), UNSAFE_TIME),
+            *[_median_max(runs[runs["arch"] == a], c) for c in docking],
         ])  # fmt: skip
     return markdown_table(header, rows) if rows else None
+
+
+#: A tumbling target's docking errors (issue 34; runs.parquet, with a corridor): column →
+#: (table header, scale to the header's unit, format).
+DOCKING_COLUMNS: dict[str, tuple[str, float, str]] = {
+    "safety_dock_position_error_km": ("dock position error [m], median (max)", M_PER_KM, ".2f"),
+    "safety_dock_velocity_error_km_s": ("dock velocity error [mm/s], median (max)", 1e6, ".2f"),
+}
+
+
+def _median_max(runs: pd.DataFrame, column: str) -> str:
+    """``median (max)`` of a docking-error column over the runs, scaled (``–``: none stored)."""
+    _, scale, spec = DOCKING_COLUMNS[column]
+    values = pd.to_numeric(runs[column], errors="coerce").dropna() * scale
+    if values.empty:
+        return "–"
+    return f"{_fmt(values.median(), spec)} ({_fmt(values.max(), spec)})"
 
 
 def _safety_lines(data: ReportData) -> list[str]:
@@ -253,7 +274,13 @@ def _safety_lines(data: ReportData) -> list[str]:
         "(the unsafe set), between steps too; from the campaign's statistics file. "
         "Violated: the run entered the unsafe set (95 % Wilson interval); min distance: the "
         "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
-        "(95 % bootstrap interval).",
+        "(95 % bootstrap interval)."
+        + (
+            " Dock errors (a tumbling target): the distance to the moving port and the "
+            "speed relative to it at the end, over the seeds (runs.parquet)."
+            if any(c in data.ok_runs().columns for c in DOCKING_COLUMNS)
+            else ""
+        ),
         "",
         table,
         "",
