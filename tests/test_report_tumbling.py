@@ -82,13 +82,17 @@ def test_the_body_frame_figure_draws_the_bodies_fixed_and_the_paths_turned(
     x_y = axes[0]
     ellipses = [p for p in x_y.patches if isinstance(p, Ellipse)]
     # the bus and the two panels, as configured in body axes (x–y plane: semi-axes x, y)
-    got = sorted((e.center[1], e.width, e.height) for e in ellipses)
-    assert got == pytest.approx([(-0.16, 0.02, 0.2), (0.0, 0.16, 0.12), (0.16, 0.02, 0.2)])
+    got = np.array(sorted((e.center[1], e.width, e.height) for e in ellipses))
+    configured = [(-0.16, 0.02, 0.2), (0.0, 0.16, 0.12), (0.16, 0.02, 0.2)]
+    assert np.allclose(got, configured, rtol=0.0, atol=1e-15)  # drawn as given: no arithmetic
     steps = data.steps[data.steps["arch"] == "mtf_fixed_socp"]
     body = body_frame_steps(steps)
     drawn = [ln for ln in x_y.get_lines() if len(ln.get_xdata()) == len(body)]
     assert len(drawn) == 1
-    assert np.array_equal(drawn[0].get_xdata(), body["x_km"].to_numpy())
+    x_drawn = np.asarray(drawn[0].get_xdata(), dtype=float)
+    shown = np.isfinite(x_drawn)  # the path near the target; far out the line is broken
+    assert shown[-1] and not shown[0]
+    assert np.array_equal(x_drawn[shown], body["x_km"].to_numpy()[shown])
     # the run ends at the port, which stands still in the body frame (1 m: the dock error)
     end = body[["x_km", "y_km", "z_km"]].to_numpy()[-1]
     assert np.linalg.norm(end - PORT_KM) < 1e-3
