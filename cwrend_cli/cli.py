@@ -600,8 +600,9 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
     """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
 
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
-    for the guidance methods the plan's runs use; ``fan_out``: the campaign runs on a local
-    pool of two workers or more, which compile part of the kernels at the same time.
+    for the guidance methods the plan's runs use; ``fan_out``: a local campaign given two
+    workers or more (a pool, or a helper process beside a campaign of one task), which
+    compile part of the kernels at the same time.
     """
     from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
@@ -682,7 +683,7 @@ def _campaign(
             # forgets it): it may be the target
             recorded = () if opts.force else pairs_recorded_at(out / MANIFEST)
             remembered = [p for p in recorded if p not in pairs and set(p) <= set(archs)]
-            target = sequential.parse_until(opts.until, [*pairs, *remembered])
+            target = sequential.parse_until(opts.until, [*pairs, *remembered], archs, recorded)
             if opts.max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []

@@ -187,6 +187,38 @@ class _References:
         self.calls.append(("references", task))
 
 
+def test_the_switching_newton_compiled_ahead_is_the_one_the_solver_calls() -> None:
+    from numba import njit
+
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    # an uncached copy of the solver types its call of the switching-time Newton here
+    copy = njit(_switching_kernels.bang_bang_ascent.py_func)
+    campaign.run_case(config_from_dict({}), (ARCHITECTURES["mtf_fixed"],), 0)
+    for sig in _switching_kernels.bang_bang_ascent.signatures:
+        copy.compile(sig)
+    before = _switching_kernels.switching_newton.signatures
+    _switching_kernels.compile_switching_newton()
+    assert _switching_kernels.switching_newton.signatures == before  # no signature of its own
+
+
+@pytest.mark.parametrize("cold", [True, False])
+def test_a_one_task_campaign_compiles_ahead_in_a_helper_process(
+    cold: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from contextlib import contextmanager
+
+    from cwrend_cli.campaign import driver, worker
+
+    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
+    helper = _Submitted()
+    monkeypatch.setattr(driver, "helper_process", contextmanager(lambda: iter([helper])))
+    task = object()
+    # no pool (the task runs in this process): a helper process compiles ahead meanwhile
+    driver._compile_first_run(None, [task], _References(helper.calls))  # type: ignore[arg-type]
+    assert helper.calls == ([(worker.compile_ahead, task), ("references", task)] if cold else [])
+
+
 @pytest.mark.parametrize("cold", [True, False])
 def test_a_first_campaign_compiles_the_step_loop_in_a_worker_while_it_computes_the_references(
     cold: bool, monkeypatch: pytest.MonkeyPatch

@@ -296,3 +296,36 @@ def test_the_applied_delta_v_changes_no_row_of_a_pair_across_campaigns() -> None
     kept = after[after["metric"] != "delta_v_applied_km_s"].reset_index(drop=True)
     pd.testing.assert_frame_equal(kept, before, check_exact=True)
     assert (after["metric"] == "delta_v_applied_km_s").sum() == 4  # 2 pairs × 2 points
+
+
+def _until_on(tmp_path: Path, archs: str, recorded: list[str]) -> str:
+    """stderr of an ``--until`` on the pair ``plain_adaptive-mtf_fixed`` by a command running
+    ``archs`` in a campaign whose manifest records the pairs ``recorded`` (refused before any
+    run: the manifest holds only them)."""
+    out = tmp_path / "results" / "p"
+    out.mkdir(parents=True)
+    (out / "manifest.json").write_text(json.dumps({"pairs": recorded}), encoding="utf-8")
+    args = ["ablate", str(_config(tmp_path)), "--name", "p", "--arch", archs, "-q", "--no-rrd",
+            "--until", "miss_km@plain_adaptive-mtf_fixed:1"]  # fmt: skip
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 2, result.output
+    return " ".join(result.stderr.split())
+
+
+def test_an_until_on_a_pair_not_compared_lists_only_the_pairs_of_the_campaign(
+    tmp_path: Path,
+) -> None:
+    text = _until_on(tmp_path, "mtf_adaptive,plain_adaptive", [])
+    assert "pairs compared are mtf_adaptive-plain_adaptive" in text
+    assert "mtf_fixed-plain_fixed" not in text and "socp" not in text
+
+
+def test_an_until_on_a_remembered_pair_one_of_whose_architectures_is_not_run_says_so(
+    tmp_path: Path,
+) -> None:
+    """The pair an earlier ``--pair`` added is compared only when both its architectures run:
+    the refusal names it and the architecture to add, not every default pair."""
+    text = _until_on(tmp_path, "mtf_adaptive,plain_adaptive", ["plain_adaptive:mtf_fixed"])
+    assert "pairs compared are mtf_adaptive-plain_adaptive;" in text
+    assert "plain_adaptive-mtf_fixed (added by an earlier --pair) is compared" in text
+    assert "add mtf_fixed to --arch" in text

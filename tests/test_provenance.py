@@ -281,3 +281,38 @@ def test_points_parquet_joins_every_step_to_its_swept_values(tmp_path: Path) -> 
     assert (joined["param.schedule.beta"] == joined["run_key"].map(by_run)).all()
     unit = pq.read_schema(out / "points.parquet").field("param.schedule.beta").metadata[b"unit"]
     assert unit == b"-"
+
+
+# --- the architectures of a campaign that a resume widens ----------------------------
+
+
+def test_the_manifest_names_every_architecture_the_campaigns_runs_hold(tmp_path: Path) -> None:
+    """A resume that adds an architecture keeps the earlier one's runs (the campaign hash does
+    not cover the architectures): the manifest's ``archs`` names both, not only the last's."""
+    cfg = _write_config(tmp_path / "c.toml", "widened")
+    out = tmp_path / "results" / "widened"
+    for arch in ("plain_fixed", "mtf_fixed"):
+        result = runner.invoke(
+            app, ["ablate", str(cfg), "--arch", arch, "--seeds", "1", "-w", "1", "-q", "--no-rrd"]
+        )
+        assert result.exit_code == 0, result.output
+    held = pd.read_parquet(out / "runs.parquet")["arch"]
+    assert _manifest(out)["archs"] == ["plain_fixed", "mtf_fixed"]
+    assert set(held) == {"plain_fixed", "mtf_fixed"}
+
+
+def test_the_manifest_names_every_seed_the_campaigns_runs_hold(tmp_path: Path) -> None:
+    """A resume with fewer seeds keeps the runs of the others (the campaign hash does not
+    cover the seeds): the manifest's ``seeds`` names every seed the files hold."""
+    cfg = _write_config(tmp_path / "c.toml", "narrowed")
+    out = tmp_path / "results" / "narrowed"
+    for seeds in ("3", "2"):
+        result = runner.invoke(
+            app,
+            ["ablate", str(cfg), "--arch", "plain_fixed", "--seeds", seeds, "-w", "1", "-q",
+             "--no-rrd"],
+        )  # fmt: skip
+        assert result.exit_code == 0, result.output
+    held = pd.read_parquet(out / "runs.parquet")["seed"]
+    assert _manifest(out)["seeds"] == [0, 1, 2]
+    assert set(held) == {0, 1, 2}

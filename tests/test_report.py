@@ -839,6 +839,19 @@ def test_thrust_limit_is_the_reported_points(tmp_path: Path) -> None:
     assert load_results(root, point="p_hi").u_max_km_s2 == 1e-3
 
 
+@pytest.mark.parametrize(("given", "offset"), [(False, 2.0), (True, 3.0)])
+def test_the_nis_offset_of_a_point_of_a_sensor_sweep_is_the_one_its_runs_used(
+    tmp_path: Path, given: bool, offset: float
+) -> None:
+    """Fig. 4's dotted offset at a point that sets ``sensor.model`` = angles (base: position):
+    the angles' m = 2 (paper Eq. 24) when the base did not give the offset (its manifest says
+    so; the stored config is resolved, its 3 looks given), the base's 3 when it did."""
+    points = [("p_ang", {"sensor.model": "angles"})]  # --param sensor.model=angles
+    root = _write_campaign(tmp_path, points, seeds=(0,), with_refs=False, with_stats=False)
+    _set_manifest(root, nis_offset_given=given)
+    assert load_results(root).nis_offset == offset
+
+
 def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
     """Issue 37: a figure over the grid names the world of each point it shows."""
     from cwrend_cli.report import figures
@@ -848,6 +861,15 @@ def test_figure_of_every_point_names_every_world(truth_sweep_dir: Path) -> None:
     worlds = "one per point: truth: cw (the design model); truth: two_body"
     assert sweep.caption.endswith(f"Simulated world: {worlds}."), sweep.caption
     assert sweep.draw().get_suptitle().split("\n")[-1] == worlds
+
+
+def test_compare_names_the_worlds_of_a_sweeps_points_not_its_base(truth_sweep_dir: Path) -> None:
+    """``cwrend compare``'s world of a sweep over ``truth.model`` (base: CW) is its points'
+    (as the report's figures over every point name them), not the base configuration's."""
+    from cwrend_cli.report.load import results_world
+
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert results_world(truth_sweep_dir) == worlds
 
 
 # ---------------------------------------------------------------------------

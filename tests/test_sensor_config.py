@@ -155,3 +155,17 @@ def test_a_given_nis_offset_is_kept_at_every_point_of_a_sensor_sweep(offset: flo
 def test_a_swept_nis_offset_is_kept_with_the_sensor_swept_in_the_file() -> None:
     table = {"sweep": {"sensor.model": ["angles"]}}
     assert _offsets(table, "schedule.nis_offset=2.5") == {"angles": 2.5}
+
+
+@pytest.mark.parametrize(
+    ("table", "given"), [({}, False), ({"schedule": {"nis_offset": 3.0}}, True)]
+)
+def test_the_manifest_records_whether_the_nis_offset_was_given(table: dict, given: bool) -> None:
+    """The manifest's ``config`` is resolved (its offset looks given): ``nis_offset_given``,
+    outside it, lets a report fill in each point's offset as the campaign did."""
+    from cwrend_cli.campaign.journal import new_manifest
+    from cwrend_cli.campaign.plan import plan
+
+    planned = plan(config_from_dict(table), ["mtf_adaptive"], [0], ["sensor.model=angles"])
+    manifest = new_manifest(planned, command="sweep", executor={}, started=0.0)
+    assert manifest["nis_offset_given"] is given

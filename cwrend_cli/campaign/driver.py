@@ -46,6 +46,7 @@ from cwrend_cli.campaign.executors import (
     default_workers,
     executor_alive,
     executor_workers,
+    helper_process,
     open_executor,
     run_signals,
 )
@@ -455,9 +456,12 @@ def _run_locked(
     try:
         if tasks:
             _check_room(out_dir, plan_, tasks[0])
+            beside = False  # one task in-process on a machine of several cores
             if executor_kind == "local":  # no pool larger than the work (one task: in-process)
-                workers = min(workers or default_workers(), len(tasks))
-            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address)
+                cores = workers or default_workers()
+                workers = min(cores, len(tasks))
+                beside = workers == 1 < cores
+            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside)
     except KeyboardInterrupt:
         interrupted = True
     except _StopError as stop:
@@ -495,6 +499,8 @@ def _run_locked(
                     computed=computed,
                     skipped=skipped,
                     counts={"ok": ok, "failed": failed, "runs": len(records)},
+                    archs=(str(r["arch"]) for r in records),
+                    seeds=(int(r["seed"]) for r in records),
                 )
                 write_json(manifest, out_dir / MANIFEST)
             except OSError as exc:
@@ -598,8 +604,13 @@ def _execute(
     kind: ExecutorKind,
     workers: int | None,
     address: str | None,
+    beside: bool = False,
 ) -> None:
     """Run ``tasks`` on an executor, reopening it after an infrastructure fault.
+
+    ``beside``: the tasks run in-process although more cores are free (one
+    task); a first run then compiles in a helper process too
+    (:func:`_compile_first_run`).
 
     A task whose execution did not come back (its worker died, the pool
     broke, the scheduler was lost, the task was cancelled) is submitted again
@@ -620,8 +631,8 @@ def _execute(
             time.sleep(RETRY_BACKOFF_S * 2 ** min(reopened - 1, 4))
         try:
             with open_executor(kind, workers, address) as (pool, parallel):
-                if kind == "local" and parallel > 1 and not reopened:
-                    _compile_first_run(pool, pending, references)
+                if kind == "local" and (parallel > 1 or beside) and not reopened:
+                    _compile_first_run(pool if parallel > 1 else None, pending, references)
                 pending = _drive(
                     pool, parallel, pending, plan_, out_dir, progress, references, attempts
                 )
@@ -635,7 +646,7 @@ def _execute(
 
 
 def _compile_first_run(
-    executor: Executor, tasks: Sequence[Task], references: _PointReferences
+    executor: Executor | None, tasks: Sequence[Task], references: _PointReferences
 ) -> None:
     """On a first run, compile in two processes at once before the first task (issue 37 item 12).
 
@@ -643,18 +654,30 @@ def _compile_first_run(
     after an install or upgrade; :mod:`cwrend_cli.physics.compiled`). This
     process computes the first point's references, which compiles the
     shooting solver (about half of the compile), while a pool worker
-    compiles the closed loop's step kernels, which do not depend on it
+    compiles what does not depend on it, the closed loop's step kernels, and
+    then the solver's switching-time Newton
     (:func:`~cwrend_cli.physics.compiled.compile_ahead`); the first task
     waits for it, so that whichever worker runs it loads them rather than
-    compiling them a second time.
+    compiling them a second time. ``executor`` ``None``: the tasks run
+    in-process (one task, the paper ablation's), and a helper process does
+    the worker's part (:func:`~cwrend_cli.campaign.executors.helper_process`).
     """
     from cwrend_cli.physics import compiled
 
     if not tasks or not compiled.references_cold():
         return
-    ahead = executor.submit(compile_ahead, tasks[0])
+    if executor is None:
+        with helper_process() as helper:
+            _compile_beside(helper, tasks[0], references)
+    else:
+        _compile_beside(executor, tasks[0], references)
+
+
+def _compile_beside(executor: Executor, task: Task, references: _PointReferences) -> None:
+    """The references here while ``executor`` compiles ahead for ``task``; then wait for it."""
+    ahead = executor.submit(compile_ahead, task)
     with contextlib.suppress(OSError):  # the first task's own call reports it
-        references.of(tasks[0])
+        references.of(task)
     while not ahead.done():  # waiting on a state: short polls stay interruptible
         wait([ahead], timeout=_POLL_S)
 

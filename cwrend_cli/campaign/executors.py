@@ -353,6 +353,29 @@ def run_signals(executor: Executor, listener: RunListener) -> RunSignals:
 
 
 @contextmanager
+def helper_process() -> Iterator[ProcessPoolExecutor]:
+    """One spawned process that works beside an in-process campaign, shut down on leaving.
+
+    For a first run's compile when the campaign has one task (it runs
+    in-process, ``--workers`` not 1: issue 37 item 12,
+    :func:`cwrend_cli.campaign.driver._compile_first_run`). Started as a pool's
+    workers are (:func:`_stop_signals_blocked`, :func:`_worker_init`: a Ctrl-C
+    prints no traceback there) and terminated when the campaign stops.
+    """
+    context = multiprocessing.get_context("spawn")
+    with _stop_signals_blocked():
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=context, initializer=_worker_init)
+        pool.submit(_started)  # start it now, while the campaign process prepares
+    try:
+        yield pool
+    except BaseException:
+        _terminate_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextmanager
 def open_executor(
     kind: ExecutorKind = "local", workers: int | None = None, address: str | None = None
 ) -> Iterator[tuple[Executor, int]]:

@@ -44,7 +44,7 @@ from datetime import UTC, datetime
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -658,6 +658,18 @@ def new_manifest(
     ``previous`` manifest recorded, so that a later command that rewrites the
     statistics compares them again (:func:`~cwrend_cli.output.manifest.recorded_pairs`).
     Absent when no command added a pair.
+
+    ``archs``, ``seeds``: every architecture and seed the campaign's files hold,
+    in order of first use (the ``previous`` manifest's, then this invocation's): a
+    resume may add architectures or run fewer seeds (the campaign hash covers
+    neither) and keeps the runs of the earlier ones; :func:`finish_manifest` adds
+    those of the journal's runs (a manifest rebuilt by ``--repair-manifest`` has no
+    ``previous``).
+
+    ``nis_offset_given``: the base config's ``schedule.nis_offset`` was given by
+    the user (:attr:`CampaignPlan.nis_offset_given`); ``config`` is a resolved
+    tree, which has lost that, and a point that sets the sensor fills the offset
+    in for its sensor only when it was not. Outside ``config``: no hash changes.
     """
     sessions = _earlier_sessions(previous or {})
     earlier_hash = (previous or {}).get("config_hash")
@@ -693,9 +705,10 @@ def new_manifest(
         "config_hashes": list(dict.fromkeys(h for h in hashes if isinstance(h, str))),
         "grid": {k: list(v) for k, v in plan_.grid},
         "design": _design_record(plan_),
-        "seeds": list(plan_.seeds),
+        "seeds": _union((previous or {}).get("seeds"), plan_.seeds, int),
         "root_seed": plan_.root_seed,
-        "archs": list(plan_.archs),
+        "archs": _union((previous or {}).get("archs"), plan_.archs, str),
+        "nis_offset_given": plan_.nis_offset_given,
         "executor": dict(executor),
         "started_at": sessions[0].get("started_at", iso(started)) if sessions else iso(started),
         "status": "running",
@@ -703,11 +716,30 @@ def new_manifest(
     }
 
 
+_Item = TypeVar("_Item", str, int)
+
+
+def _union(earlier: object, later: Iterable[_Item], kind: type[_Item]) -> list[_Item]:
+    """The ``kind`` items of the list ``earlier`` (anything else: none), then the new ones
+    of ``later``, in order of first use."""
+    kept: list[_Item] = []
+    if isinstance(earlier, list):
+        kept = [a for a in earlier if isinstance(a, kind) and not isinstance(a, bool)]
+    kept.extend(later)
+    return list(dict.fromkeys(kept))
+
+
 def finish_manifest(
     manifest: dict[str, Any], *, finished: float, status: str, computed: int, skipped: int,
-    counts: Mapping[str, int],
+    counts: Mapping[str, int], archs: Iterable[str] = (), seeds: Iterable[int] = (),
 ) -> None:  # fmt: skip
-    """Record the end of this invocation in ``manifest`` (its last session) and the counts."""
+    """Record the end of this invocation in ``manifest`` (its last session) and the counts.
+
+    ``archs``, ``seeds``: the architectures and seeds of the runs the campaign's
+    files now hold, added to the manifest's ``archs`` and ``seeds`` (:func:`new_manifest`).
+    """
+    manifest["archs"] = _union(manifest.get("archs"), archs, str)
+    manifest["seeds"] = _union(manifest.get("seeds"), seeds, int)
     end = iso(finished)
     manifest["sessions"][-1].update(
         finished_at=end, status=status, runs_computed=computed, runs_skipped=skipped

@@ -51,7 +51,7 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
-from cwrend_cli.config.overrides import apply, expand_grid, get_dotted
+from cwrend_cli.config.overrides import expand_grid, get_dotted, point_tree
 from cwrend_cli.config.schema import nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -189,6 +189,9 @@ class CampaignPlan:
     design: DesignSpec | None = None  # a sampled design instead of a grid (``grid`` is then empty)
     #: output.design_steps_points: the points with per-step data and recordings (None: all)
     steps_points: frozenset[str] | None = None
+    #: the base's schedule.nis_offset was given (else each point's sensor fills it in; the
+    #: resolved ``base`` has lost that: the manifest records it, outside the hashed config)
+    nis_offset_given: bool = True
 
     @property
     def runs(self) -> tuple[RunSpec, ...]:
@@ -346,19 +349,10 @@ def _validated(
 ) -> CwrendConfig:
     """The config ``base`` + ``assignment``, validated; errors name ``what`` and the values.
 
-    ``offset_given``: the base's ``schedule.nis_offset`` was given by the user. If
-    not, and ``assignment`` sets the sensor but not the offset, the offset is
-    filled in again for the point's sensor (its m, paper Eq. 24), not kept at
-    the base's resolved value.
+    ``offset_given``: the base's ``schedule.nis_offset`` was given by the user
+    (:func:`~cwrend_cli.config.overrides.point_tree`).
     """
-    tree = apply(base, assignment)
-    keys = [k for k, _ in assignment]
-    if (
-        not offset_given
-        and any(k == "sensor" or k.startswith("sensor.") for k in keys)
-        and not any(k in ("schedule", "schedule.nis_offset") for k in keys)
-    ):
-        tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
+    tree = point_tree(base, assignment, offset_given)
     try:
         return config_from_dict(tree, source=what)
     except ConfigError as exc:
@@ -577,6 +571,7 @@ def plan(
         no_worker_timeout_s=cfg.output.dask_no_worker_timeout_s,
         design=spec,
         steps_points=_steps_points(spec, cfg.output.design_steps_points),
+        nis_offset_given=offset_given,
     )
 
 

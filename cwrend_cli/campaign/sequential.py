@@ -78,10 +78,19 @@ class Target:
     pair: tuple[str, str] | None = None  # a paired difference A − B, else every architecture
 
 
-def parse_until(text: str, pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS) -> Target:
+def parse_until(
+    text: str,
+    pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS,
+    archs: Sequence[str] | None = None,
+    remembered: Sequence[tuple[str, str]] = (),
+) -> Target:
     """Parse ``--until``; :class:`ConfigError` with the syntax on a bad target.
 
-    A paired target names one of ``pairs``, those the campaign compares.
+    A paired target names one of ``pairs`` whose architectures are all in
+    ``archs`` (those the command runs; ``None``: any), the pairs the campaign
+    compares; the refusal lists only those. ``remembered``: pairs earlier
+    commands added (``--pair``, in the manifest), named with the architecture
+    to add when the target is one of them that ``archs`` do not make.
     """
     syntax = (
         "[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%], e.g. miss_km:0.0005, median.miss_km:5% or "
@@ -106,9 +115,17 @@ def parse_until(text: str, pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS) -> 
             raise ConfigError(f"--until {text!r}: statistic must be one of {', '.join(STATISTICS)}")
         return Target(metric, statistic, width / 100 if relative else width, relative)
     pair = (m["a"], m["b"])
-    if pair not in pairs:
-        known = ", ".join(f"{a}-{b}" for a, b in pairs)
-        raise ConfigError(f"--until {text!r}: pairs compared are {known}")
+    compared = [p for p in pairs if archs is None or set(p) <= set(archs)]
+    if pair not in compared:
+        known = ", ".join(f"{a}-{b}" for a, b in compared) or "none (--pair A:B adds one)"
+        why = ""
+        if pair in remembered and archs is not None:
+            missing = " and ".join(a for a in pair if a not in archs)
+            why = (
+                f"; {pair[0]}-{pair[1]} (added by an earlier --pair) is compared when both its "
+                f"architectures run: add {missing} to --arch"
+            )
+        raise ConfigError(f"--until {text!r}: pairs compared are {known}{why}")
     if metric not in _PAIRED_STATISTIC:
         raise ConfigError(f"--until {text!r}: a paired target is on miss_km or delta_v_km_s")
     statistic = m["stat"] or _PAIRED_STATISTIC[metric]

@@ -221,6 +221,30 @@ def apply(base: Mapping[str, Any], assignment: Iterable[tuple[str, Any]]) -> dic
     return tree
 
 
+def point_tree(
+    base: Mapping[str, Any], assignment: Sequence[tuple[str, Any]], offset_given: bool = True
+) -> dict[str, Any]:
+    """The config tree of a campaign's point or run: ``base`` with ``assignment`` set.
+
+    ``base`` is a resolved tree (the manifest's ``config``); ``offset_given``: the
+    user gave its ``schedule.nis_offset`` (:func:`~cwrend_cli.config.schema.nis_offset_given`
+    of the base config; a resolved tree has lost that). If not, and ``assignment``
+    sets the sensor but not the offset, the offset is left out so that validation
+    fills it in for the point's sensor (its measurement dimension m, paper Eq. 24),
+    not kept at the base's resolved value (:func:`apply` otherwise). One place for
+    the campaign that runs the point and the report that draws it.
+    """
+    tree = apply(base, assignment)
+    keys = [k for k, _ in assignment]
+    if (
+        not offset_given
+        and any(k == "sensor" or k.startswith("sensor.") for k in keys)
+        and not any(k in ("schedule", "schedule.nis_offset") for k in keys)
+    ):
+        tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
+    return tree
+
+
 # ---------------------------------------------------------------------------
 # Campaign grids (``--param`` and the ``[sweep]`` table)
 # ---------------------------------------------------------------------------

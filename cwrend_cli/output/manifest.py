@@ -25,6 +25,7 @@ __all__ = [
     "REPAIR_HINT",
     "ManifestError",
     "damaged",
+    "nis_offset_given",
     "pair_texts",
     "read_manifest",
     "recorded_pairs",
@@ -54,6 +55,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "sessions": (list,),
     "status": (str,),
     "pairs": (list,),  # the pairs added by --pair A:B, as "A:B" (pair_texts)
+    "nis_offset_given": (bool,),  # the base's schedule.nis_offset was given (absent: true)
 }
 
 
@@ -90,7 +92,10 @@ def _problem(path: Path) -> tuple[dict[str, Any] | None, str]:
     if not isinstance(value, dict):
         return None, f"not a JSON object (a manifest is a table; found {_kind(value)})"
     for name, types in _FIELDS.items():
-        if name in value and (not isinstance(value[name], types) or isinstance(value[name], bool)):
+        field = value.get(name)
+        if name in value and (
+            not isinstance(field, types) or (isinstance(field, bool) and bool not in types)
+        ):
             expected = " or ".join("null" if t is type(None) else _JSON_NAMES[t] for t in types)
             return None, f'"{name}" is {_kind(value[name])}, not {expected}'
     pairs = value.get("pairs", [])
@@ -152,6 +157,16 @@ def recorded_pairs(manifest: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
     """
     pairs = manifest.get("pairs", [])
     return tuple((a, b) for a, b in (str(p).split(":") for p in pairs))
+
+
+def nis_offset_given(manifest: Mapping[str, Any]) -> bool:
+    """Whether the campaign's base config gave ``schedule.nis_offset`` (``nis_offset_given``).
+
+    ``manifest`` as :func:`read_manifest` returns it; true when it does not say
+    (written before manifests recorded it): its ``config``'s offset is then kept
+    at every point, as reports read it before.
+    """
+    return bool(manifest.get("nis_offset_given", True))
 
 
 def pairs_recorded_at(path: Path) -> tuple[tuple[str, str], ...]:

@@ -58,6 +58,8 @@ from cwrend_cli.physics.guidance._kernels import (
     Workspace,
     arc_bounds,
     control_from_costate,
+    copy_into,
+    copy_matrix_into,
     costate_at,
     model_costate_stm,
     n_cells,
@@ -250,14 +252,15 @@ def advance(
     and so does the position sensor (``sensor`` None: the paper's measurement,
     compiled without the extended update; a nonlinear sensor of issue 35 is a
     :class:`~cwrend_cli.physics.measurement_models.SensorModel`), and so do a
-    linear filter (``ekf`` None: :func:`_optional_ekf`) and the fixed process noise
+    linear filter (``ekf`` None: :func:`_optional_ekf`), the fixed process noise
     ``pn`` (``None``: ``model.q`` at every step; else
-    :mod:`cwrend_cli.physics.process_noise`).
+    :mod:`cwrend_cli.physics.process_noise`) and the sample hold
+    (:func:`_optional_hold`).
     """
     out = _advance(
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
-        tuple(state), tuple(scalars), tuple(log), None if sensor is None else tuple(sensor),
-        _optional_ekf(ekf), _optional_noise(pn),
+        tuple(state), tuple(scalars), tuple(log), _optional_hold(model),
+        None if sensor is None else tuple(sensor), _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
     return LoopScalars(*out)
 
@@ -288,6 +291,17 @@ def _optional_ekf(ekf: EkfModel | None) -> tuple[tuple[Any, ...], np.ndarray] | 
     return None if ekf is None else (tuple(ekf.tm), ekf.chief)
 
 
+def _optional_hold(model: LoopModel) -> bool | None:
+    """The step-mean control as the compiled loop takes it: ``None`` for the sample hold.
+
+    As :func:`_optional`: with ``None`` numba prunes the step-mean branch of
+    :func:`_steps`, so a loop that samples the control (``guidance.hold =
+    "sample"``, the paper's) never compiles :func:`mean_control` and the
+    switching-time search below it (issue 37 item 12); ``True`` for the mean hold.
+    """
+    return True if model.hold_mean else None
+
+
 def _optional_noise(pn: ProcessNoiseModel | None) -> tuple[Any, ...] | None:
     """The process noise as the compiled loop takes it: ``None`` when fixed (``model.q``).
 
@@ -311,9 +325,9 @@ def compile_steps(
     """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
 
     Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
-    tuples; the CW truth, the ideal actuator, the position sensor, a linear
-    filter and a fixed process noise as ``None``, :func:`_optional`,
-    :func:`_optional_ekf`, :func:`_optional_noise`).
+    tuples; the CW truth, the ideal actuator, the sample hold, the position
+    sensor, a linear filter and a fixed process noise as ``None``, :func:`_optional`,
+    :func:`_optional_hold`, :func:`_optional_ekf`, :func:`_optional_noise`).
     A campaign's first run compiles this in a pool worker while the campaign
     process compiles the re-solves (issue 37 item 12); the compiled loop then
     loads it from numba's cache instead of compiling it again.
@@ -326,7 +340,8 @@ def compile_steps(
         for m in (*models, sensor, ekf, pn)
     )
     plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
-    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], *chosen[2:]))
+    hold = types.none if _optional_hold(model) is None else types.boolean
+    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], hold, *chosen[2:]))
 
 
 @njit(cache=True)
@@ -341,6 +356,7 @@ def _advance(
     state_t: tuple[Any, ...],
     scalars_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
+    mean_hold: bool | None,
     sensor_t: tuple[Any, ...] | None,
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
     pn_t: tuple[Any, ...] | None,
@@ -355,7 +371,7 @@ def _advance(
     return _steps(
         k_start, k_stop, n_steps, LoopModel(*model_t), truth, act, ScheduleParams(*sched_t),
         LoopState(*state_t), scalars.eps, scalars.score_filtered, scalars.first, StepLog(*log_t),
-        sensor, ekf, pn,
+        mean_hold, sensor, ekf, pn,
     )  # fmt: skip
 
 
@@ -373,6 +389,7 @@ def _steps(
     sbar: float,
     first: bool,
     log: StepLog,
+    mean_hold: bool | None,
     sensor: SensorModel | None,
     ekf: EkfModel | None,
     pn: ProcessNoiseModel | None,
@@ -380,12 +397,16 @@ def _steps(
     """The steps of :func:`advance` from the scalar state ``(ε, s̄, first)``; returns the new one.
 
     ``truth`` ``None``: the CW truth; ``act`` ``None``: the ideal actuator
-    (:func:`_optional`); ``sensor`` ``None``: the position sensor (paper
+    (:func:`_optional`); ``mean_hold`` ``None``: the control sampled at the
+    step's start, else averaged over the step (:func:`_optional_hold`);
+    ``sensor`` ``None``: the position sensor (paper
     Eq. 13), else a nonlinear sensor measured and updated by the extended
     filter (:mod:`cwrend_cli.physics.measurement_models`; ``log.y`` then holds
     its m components in its own units, NaN after them); ``ekf`` ``None``: the
     linear filter of ``m.filter_phi`` (:func:`_optional_ekf`); ``pn`` ``None``: the
-    fixed process noise ``model.q`` (:func:`_optional_noise`).
+    fixed process noise ``model.q`` (:func:`_optional_noise`). Arrays are
+    copied element by element (:func:`~cwrend_cli.physics.guidance._kernels.copy_into`):
+    a slice assignment would compile numba's shape-mismatch message into the loop.
     """
     m = model
     ws = workspace()
@@ -398,28 +419,28 @@ def _steps(
         eps_k = eps
         # control from the current costate and ε (Eqs. 8–10), held over the step
         if m.override[k]:
-            u[:] = m.u_override[k]
-        elif m.hold_mean:
+            copy_into(m.u_override[k], u)
+        elif mean_hold is not None:
             mean_control(m.n, lam, m.dt, eps_k, m.u_max, m.gl_x, m.gl_w, ws, u)
         else:
             control_from_costate(lam[3:6], eps_k, m.u_max, u)
-        log.u_cmd[k] = u
+        copy_into(u, log.u_cmd[k])
         # the actuator: what the truth receives (the command delayed by act.delay steps,
         # then its errors); an ideal actuator applies the command itself
         if act is None:
-            u_applied[:] = u
+            copy_into(u, u_applied)
         elif k >= act.delay:
             actuate(act, k, log.u_cmd[k - act.delay], u_applied)
         else:
             u_applied[:] = 0.0
-        log.u[k] = u_applied
+        copy_into(u_applied, log.u[k])
         # truth step with zero-order hold: CW x_{k+1} = Φ x_k + Γ u_k (exact), or the
         # nonlinear truth integrated over the step (truth.py)
         if truth is None:
             x_next = zoh_step(m.phi, m.gam, x_true, u_applied)
         else:
             x_next = truth_step(truth, state.chief, x_true, u_applied)
-        x_true[:] = x_next
+        copy_into(x_next, x_true)
         # measurement of the new position with the noise of the window at t_k
         if sensor is None:  # noqa: SIM108 (an if statement: numba prunes the untaken branch)
             y = x_next[:3] + m.noise[k]
@@ -439,11 +460,11 @@ def _steps(
         )  # fmt: skip
         if m.dropout[k]:
             # no measurement: predict only; no NIS, MTF or score; s̄ and ε held
-            x_hat[:] = x_pred
-            p[:, :] = p_pred
+            copy_into(x_pred, x_hat)
+            copy_matrix_into(p_pred, p)
             row = k + 1
-            log.x[row] = x_next
-            log.x_hat[row] = x_pred
+            copy_into(x_next, log.x[row])
+            copy_into(x_pred, log.x_hat[row])
             log.y[row] = np.nan
             log.nis[row] = np.nan
             log.mtf_ratio[row] = np.nan
@@ -463,8 +484,8 @@ def _steps(
             x_post, p_post, nis, rho = kf_update(x_pred, p_pred, y, m.r_nominal, m.estimator)
         else:
             x_post, p_post, nis, rho = sensor_update(sensor, x_pred, p_pred, y, m.estimator)
-        x_hat[:] = x_post
-        p[:, :] = p_post
+        copy_into(x_post, x_hat)
+        copy_matrix_into(p_post, p)
         if pn is not None:
             adapt(pn, m.filter_gam[k], x_pred, x_post, p_pred, p_post, q_k)
         # score and homotopy parameter (Eqs. 24–26)
@@ -482,9 +503,9 @@ def _steps(
             )
             eps = eps_blend(eps_k, target, sched.alpha_eps)
         row = k + 1
-        log.x[row] = x_next
-        log.x_hat[row] = x_post
-        log.y[row] = y
+        copy_into(x_next, log.x[row])
+        copy_into(x_post, log.x_hat[row])
+        copy_into(y, log.y[row])
         log.nis[row] = nis
         log.mtf_ratio[row] = rho
         log.score[row] = score
@@ -508,7 +529,7 @@ def _propagate_costate(lam_step: np.ndarray, lam: np.ndarray, scratch: np.ndarra
         for j in range(6):
             acc += lam_step[i, j] * lam[j]
         scratch[i] = acc
-    lam[:] = scratch
+    copy_into(scratch, lam)
 
 
 # ---------------------------------------------------------------------------
@@ -593,7 +614,7 @@ def resolve_loop(
     i, eps, sbar, first = _resolve_loop(
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
-        None if sensor is None else tuple(sensor),
+        _optional_hold(model), None if sensor is None else tuple(sensor),
         _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
     return i, LoopScalars(eps, sbar, first)
@@ -614,6 +635,7 @@ def _resolve_loop(
     carry_t: tuple[Any, ...],
     log_t: tuple[Any, ...],
     solves_t: tuple[Any, ...],
+    mean_hold: bool | None,
     sensor_t: tuple[Any, ...] | None,
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
     pn_t: tuple[Any, ...] | None,
@@ -640,7 +662,7 @@ def _resolve_loop(
         k = rs.steps[i]
         eps, sbar, first = _steps(
             k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-            sensor, ekf, pn,
+            mean_hold, sensor, ekf, pn,
         )  # fmt: skip
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -649,10 +671,10 @@ def _resolve_loop(
         lam_next = np.dot(m.lam_step, lam)
         with_older = eps < EPS_BANG_BANG and carry.k_older[0] >= 0
         starts = np.empty((2 if with_older else 1, 6))
-        starts[0] = lam_next if rs.correct else lam
+        copy_into(lam_next if rs.correct else lam, starts[0])
         if with_older:
             back = model_costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
-            starts[1] = np.dot(back, carry.older)
+            copy_into(np.dot(back, carry.older), starts[1])
         t0 = monotonic_s()
         status, iters, rp, rv = bang_bang_ascent(
             m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
@@ -660,7 +682,7 @@ def _resolve_loop(
         )  # fmt: skip
         wall = monotonic_s() - t0
         residual = np.hypot(rp, rv)
-        carry.starts[: starts.shape[0]] = starts
+        copy_matrix_into(starts, carry.starts[: starts.shape[0]])
         carry.n_starts[0] = starts.shape[0]
         ok = status == STATUS_CONVERGED and residual < rs.success_residual and not rs.stop_every
         solves.t_s[i] = (k + 1) * m.dt
@@ -673,15 +695,15 @@ def _resolve_loop(
         solves.success[i] = ok
         if not ok:
             return i, eps, sbar, first  # the caller ends this re-solve
-        carry.older[:] = lam_next
+        copy_into(lam_next, carry.older)
         carry.k_older[0] = k + 1
         if rs.correct:
-            lam[:] = carry.warm
+            copy_into(carry.warm, lam)
         else:
-            lam[:] = np.dot(m.lam_step, carry.warm)
+            copy_into(np.dot(m.lam_step, carry.warm), lam)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
     eps, sbar, first = _steps(
         k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-        sensor, ekf, pn,
+        mean_hold, sensor, ekf, pn,
     )  # fmt: skip
     return n_resolves, eps, sbar, first

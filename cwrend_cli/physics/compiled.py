@@ -24,24 +24,25 @@ if TYPE_CHECKING:
     from cwrend_cli.physics.params import Architecture, FloatArray, Problem
 
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls.
-#: Measured on an idle 2-core AMD EPYC (znver4, 2026-12-02, ``NUMBA_CACHE_DIR`` empty,
-#: interleaved with the code before issue 37 item 12): the paper ablation's first run took
-#: 50.7-51.4 s wall and 49.4-49.7 CPU s (55.3-56.4 s before); on a 2-core Intel Xeon
-#: (Sapphire Rapids) it compiled in 24-28 CPU s: machines differ by about 2x, and the
-#: notice is the slower machine's figure. The parts keep the shares measured one after
-#: the other in one process (references : each method's loop about 4 : 3).
-#: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
-#: actuator with errors, a nonlinear sensor, an EKF) move it.
+#: Measured in one process (``python -m benchmarks.compile_costs``: the paper ablation with
+#: ``--workers 1`` into an empty ``NUMBA_CACHE_DIR``) on a 2-core AMD EPYC (znver4,
+#: 2026-12-02, loaded by other jobs): the solver 19.9 CPU s, the compiled loop 13.2 s with
+#: its step loop, 37.6 CPU s for the whole command (47.8 s before issue 37 item 12's third
+#: step, same measurement; 51 s wall on that machine idle). Machines differ by about 2x:
+#: the notice is the slower machine's figure. The cone program's part was not measured
+#: again. An estimate for the notice only: the machine and the scenario (a nonlinear truth,
+#: an actuator with errors, a nonlinear sensor, an EKF) move it.
 _COMPILE_CPU_S = {
-    "references": 30.0,  # bang_bang_ascent: the open-loop references and every first plan
-    "shooting": 24.0,  # _resolve_loop: the closed loop with its compiled re-solves
+    "references": 20.0,  # bang_bang_ascent: the open-loop references and every first plan
+    "shooting": 17.0,  # _resolve_loop: the closed loop with its compiled re-solves
     "socp": 24.0,  # _advance and the cone program's grid kernels
 }
-#: Of each method's part, the CPU seconds a campaign's pool worker compiles while the
-#: campaign process compiles the references (:func:`compile_ahead`: the step loop below
-#: the re-solves); on 2 cores or more they overlap the references. Measured on the idle
-#: AMD EPYC above, the overlap shortened the first campaign by about 4 s of wall time.
-_AHEAD_CPU_S = {"shooting": 4.0, "socp": 4.0}
+#: Of each part, the CPU seconds a second process compiles while the campaign process
+#: compiles the references (:func:`compile_ahead`: the solver's switching-time Newton and
+#: the step loop below the re-solves); on 2 cores or more they overlap the references. On
+#: the loaded AMD EPYC above the campaign process's compile ended at 24.0 CPU s, the
+#: helper's at 20.5 s: the parts' 37 s less these.
+_AHEAD_CPU_S = {"references": 5.0, "shooting": 4.0, "socp": 4.0}
 
 
 def _entry_points(part: str) -> tuple[Any, ...]:
@@ -78,9 +79,10 @@ def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
 
     ``methods``: ``"shooting"`` and/or ``"socp"``. 0 when every kernel they
     need is in numba's cache (the usual case: everything but the first run).
-    ``fan_out``: a campaign on a local pool of two workers or more, whose
-    workers compile :data:`_AHEAD_CPU_S` while the campaign process compiles
-    the references (:func:`compile_ahead`), so those seconds overlap.
+    ``fan_out``: a local campaign given two workers or more (its pool, or a
+    helper process beside a campaign of one task), whose second process
+    compiles :data:`_AHEAD_CPU_S` while the campaign process compiles the
+    references (:func:`compile_ahead`), so those seconds overlap.
     """
     parts = ["references", *sorted(set(methods))]
     cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
@@ -117,23 +119,31 @@ def compile_ahead(
 
     On a first run the campaign process compiles the shooting solver
     (``bang_bang_ascent``, for the references: about half of a first
-    compile) before any run can start, one core busy. Meanwhile a pool
-    worker compiles, into numba's cache, what does not depend on it: the
-    step loop of the first of ``archs`` of each guidance method
-    (:func:`cwrend_cli.physics.simulation.compile_loop`), which the first
-    runs then load. What is left for the runs is the compiled loop's top
-    (``_resolve_loop``, which carries the solver, and the cone program's grid
-    kernels). ``problem`` and the draws: those of the campaign's first run,
-    so that the argument types are the runs' own.
+    compile) before any run can start, one core busy. Meanwhile a second
+    process (a pool worker, or a helper beside an in-process campaign)
+    compiles into numba's cache, for the campaign process and the first runs
+    to load:
 
-    Only the step loop: the solver's switching-time Newton, compiled in a
-    second worker, was ready only about when the campaign process reached it
-    (measured: 13 of the solver's 27 CPU s, reached after 15), so it was as
-    often compiled twice, and three compiling processes on two cores slowed
-    the solver's own compile.
+    - the solver's switching-time Newton
+      (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
+      which the campaign process reaches last, after the dual ascent;
+    - the step loop of the first of ``archs`` of each guidance method
+      (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
+      depend on the solver.
+
+    The Newton first, so that it is cached before the campaign process
+    reaches it (the switching-time search below both then compiles in both
+    processes, at the same time, on two cores): after the step loop it was
+    ready only about when the campaign process reached it (seen on a loaded
+    2-core AMD EPYC). What is left for the runs is the compiled
+    loop's top (``_resolve_loop``, which carries the solver, and the cone
+    program's grid kernels). ``problem`` and the draws: those of the
+    campaign's first run, so that the argument types are the runs' own.
     """
     from cwrend_cli.physics import simulation
+    from cwrend_cli.physics.guidance import _switching_kernels
 
+    _switching_kernels.compile_switching_newton()
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)

@@ -45,6 +45,7 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -71,7 +72,15 @@ from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.estimation import ESTIMATOR_KINDS
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
-from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
+from cwrend_cli.physics.params import (
+    Architecture,
+    DesignModelName,
+    FloatArray,
+    Problem,
+    Scenario,
+    Schedule,
+    Truth,
+)
 
 
 @dataclass(frozen=True)
@@ -376,7 +385,7 @@ def simulate(
             result = scp[0]
         else:
             result = convex.solve(
-                _grid(sc, x_hat0, sc.horizon_s, _guidance_tables(problem)), eps0, n
+                _grid(sc, x_hat0, sc.horizon_s, _guidance_condensed(problem)), eps0, n
             )
         solves.append(
             _record("initial", -1, 0.0, result, settings.success_residual, scp and scp[1])
@@ -807,6 +816,7 @@ def _cone_resolves(
     correct = problem.guidance.resolve_timing == "correct"
     threshold = problem.solver.success_residual
     tables = _guidance_tables(problem)
+    condensed = _guidance_condensed(problem)
     lam = state.lam
     records: list[SolveRecord] = []
     k_next, k_plan = 0, 0
@@ -823,7 +833,7 @@ def _cone_resolves(
             result = scp[0]
         else:
             warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
-            grid = _grid(sc, state.x_hat, horizon, tables)
+            grid = _grid(sc, state.x_hat, horizon, condensed)
             result = convex.solve(grid, scalars.eps, n, warm=warm)
         rec = _record("resolve", k, (k + 1) * dt, result, threshold, scp and scp[1])
         records.append(rec)
@@ -940,7 +950,7 @@ def _min_miss_if_infeasible(
         stop,
         model.u_override,
         model.override,
-        _guidance_tables(problem),
+        _guidance_condensed(problem),
     )
 
 
@@ -948,21 +958,22 @@ def _grid(
     sc: Scenario,
     x_hat: FloatArray,
     horizon_s: float,
-    tables: design_models.StepTables | None = None,
+    condensed: feasibility.CondensedSteps | None = None,
 ) -> feasibility.GridProblem:
     """One re-solve of the scenario on its zero-order-hold grid (the loop's Δt).
 
-    ``tables``: the guidance's design model other than CW (issue 33), whose
-    last ``horizon_s/Δt`` steps are the grid's; None: CW (Eq. 11).
+    ``condensed``: the guidance's design model other than CW (issue 33,
+    :func:`_guidance_condensed`), whose last ``horizon_s/Δt`` steps are the
+    grid's; None: CW (Eq. 11).
     """
     xf = np.asarray(sc.xf, dtype=float)
-    if tables is None:
+    if condensed is None:
         return feasibility.grid_problem(
             sc.mean_motion_rad_s, x_hat, xf, horizon_s, sc.dt_s, sc.u_max_km_s2
         )
-    k0 = tables.phi.shape[0] - max(1, round(horizon_s / sc.dt_s))
-    return feasibility.grid_problem_from_steps(
-        tables.phi[k0:], tables.gam[k0:], x_hat, xf, sc.dt_s, sc.u_max_km_s2
+    steps = max(1, round(horizon_s / sc.dt_s))
+    return feasibility.grid_problem_from_condensed(
+        condensed, steps, x_hat, xf, sc.dt_s, sc.u_max_km_s2
     )
 
 
@@ -972,6 +983,28 @@ def _guidance_tables(problem: Problem) -> design_models.StepTables | None:
     if name == "cw":
         return None
     return design_models.step_tables(name, problem.scenario, problem.truth)
+
+
+def _guidance_condensed(problem: Problem) -> feasibility.CondensedSteps | None:
+    """The guidance's design model condensed onto the final time; None for CW (issue 33).
+
+    Every re-solve's grid ends at t_N, so one condensation
+    (:func:`feasibility.condense`) serves every re-solve of every run on
+    this scenario and truth: each slices it (:func:`_grid`).
+    """
+    name = problem.model.guidance
+    if name == "cw":
+        return None
+    return _condensed(name, problem.scenario, problem.truth)
+
+
+@functools.lru_cache(maxsize=16)
+def _condensed(
+    name: DesignModelName, scenario: Scenario, truth: Truth
+) -> feasibility.CondensedSteps:
+    """:func:`feasibility.condense` of :func:`design_models.step_tables` (cached as they are)."""
+    tables = design_models.step_tables(name, scenario, truth)
+    return feasibility.condense(tables.phi, tables.gam)
 
 
 def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
@@ -1039,10 +1072,10 @@ def _apply_min_miss(
     k_last: int,
     u_override: FloatArray,
     override: npt.NDArray[np.bool_],
-    tables: design_models.StepTables | None = None,
+    condensed: feasibility.CondensedSteps | None = None,
 ) -> None:
     """Hold the bounded controls minimising the terminal miss for steps ``k_first … k_last``."""
-    g = _grid(sc, x_hat, sc.horizon_s - t_est, tables)
+    g = _grid(sc, x_hat, sc.horizon_s - t_est, condensed)
     controls = feasibility.min_miss_controls(g, velocity_weight_s=sc.dt_s)
     if controls is None:
         return

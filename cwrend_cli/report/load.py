@@ -48,13 +48,13 @@ import pyarrow.dataset as ds
 from cwrend_cli.config import (
     ALL_ARCHITECTURES,
     CwrendConfig,
-    apply,
     config_from_dict,
     get_dotted,
     resolved_dict,
     set_dotted,
 )
 from cwrend_cli.config.adapt import constraints_of, problem_of, windows_of
+from cwrend_cli.config.overrides import point_tree
 from cwrend_cli.errors import ConfigError, CwrendError
 from cwrend_cli.output.files import refuse_links
 from cwrend_cli.output.layout import (
@@ -75,7 +75,7 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     references_path,
 )
-from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
+from cwrend_cli.output.manifest import REPAIR_HINT, nis_offset_given, read_manifest
 from cwrend_cli.output.tables import (
     PARAM_PREFIX,
     REFERENCE_SCHEMA,
@@ -137,6 +137,9 @@ class ReportData:
     #: rows of ``sensitivity.parquet`` (arch, metric, parameter, statistic S1/ST, value,
     #: ci_low, ci_high, n_seeds), a ``sobol`` design's indices, if stored
     sensitivity: pd.DataFrame | None = None
+    #: the campaign's base config gave ``schedule.nis_offset`` (its manifest's
+    #: ``nis_offset_given``; else a point that sets the sensor has its sensor's offset)
+    nis_offset_given: bool = True
 
     @property
     def world(self) -> str:
@@ -157,7 +160,7 @@ class ReportData:
         What the per-seed figures were simulated with (:func:`with_swept_values`);
         :attr:`config` itself for a run or an ablation.
         """
-        return with_swept_values(self.config, self.ok_runs())
+        return with_swept_values(self.config, self.ok_runs(), self.nis_offset_given)
 
     @property
     def worlds(self) -> str:
@@ -165,16 +168,9 @@ class ReportData:
 
         The world of each point (:attr:`world`); when they differ (a sweep over
         ``truth.model``, say), ``one per point:`` and each distinct world once,
-        sorted, separated by ``;``.
+        sorted, separated by ``;`` (:func:`worlds_of`).
         """
-        ok = self.runs[self.runs["status"] == "ok"]
-        if "point" not in ok.columns or ok["point"].nunique() <= 1:
-            return self.world
-        found = {
-            world_of(with_swept_values(self.config, runs))
-            for _, runs in ok.groupby(ok["point"].astype(str), sort=False)
-        }
-        return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
+        return worlds_of(self.config, self.runs, self.nis_offset_given)
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -257,13 +253,36 @@ def world_of(config: CwrendConfig | None) -> str:
     return " · ".join(parts)
 
 
-def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> CwrendConfig | None:
+def worlds_of(config: CwrendConfig | None, runs: pd.DataFrame, offset_given: bool = True) -> str:
+    """The simulated worlds of every point of ``runs`` (rows of ``runs.parquet``).
+
+    The world of each point's successful runs, ``config`` with their swept values
+    set (:func:`with_swept_values`); when they differ (a sweep over ``truth.model``,
+    say), ``one per point:`` and each distinct world once, sorted, separated by
+    ``;``. ``config``'s own world without runs (a single run's directory).
+    """
+    ok = runs[runs["status"] == "ok"] if "status" in runs.columns else runs
+    if "point" not in ok.columns or ok["point"].nunique() <= 1:
+        return world_of(with_swept_values(config, ok, offset_given))
+    found = {
+        world_of(with_swept_values(config, point, offset_given))
+        for _, point in ok.groupby(ok["point"].astype(str), sort=False)
+    }
+    return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
+
+
+def with_swept_values(
+    config: CwrendConfig | None, runs: pd.DataFrame, offset_given: bool = True
+) -> CwrendConfig | None:
     """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
 
     ``runs`` are one point's rows of ``runs.parquet``; every ``param.<key>``
     column with a single value over them is set at ``key``, as the campaign set
-    it on the base configuration. ``config`` itself when nothing was swept;
-    ``None`` without a configuration or when the result does not validate.
+    it on the base configuration (:func:`~cwrend_cli.config.overrides.point_tree`,
+    ``offset_given`` as the manifest records it: a point that sets the sensor has
+    its sensor's NIS offset unless the base gave one). ``config`` itself when
+    nothing was swept; ``None`` without a configuration or when the result does
+    not validate.
     """
     if config is None:
         return None
@@ -275,16 +294,18 @@ def with_swept_values(config: CwrendConfig | None, runs: pd.DataFrame) -> Cwrend
     if not assignment:
         return config
     try:
-        return config_from_dict(apply(resolved_dict(config), assignment))
+        return config_from_dict(point_tree(resolved_dict(config), assignment, offset_given))
     except ConfigError:
         return None
 
 
 def results_world(results_dir: Path) -> str:
-    """The simulated world of a run or campaign directory, from its stored configuration.
+    """The simulated worlds of a run or campaign directory (:func:`worlds_of`).
 
-    For figures that are not part of a report (``cwrend compare``'s): reads
-    ``manifest.json`` (campaign) or ``config.json`` (run) only;
+    For figures that are not part of a report (``cwrend compare``'s): the stored
+    configuration of ``manifest.json`` (campaign) or ``config.json`` (run), with
+    the swept values of each point of a campaign's ``runs.parquet`` set (a sweep
+    over ``truth.model`` names each point's world, not the base's);
     ``truth model not stored`` when neither holds a configuration that validates.
     """
     root = Path(results_dir)
@@ -292,10 +313,12 @@ def results_world(results_dir: Path) -> str:
         path = root / name
         if path.exists():
             try:
-                raw = _read_json(path).get("config")
+                stored = _read_json(path)
+                runs = _read_parquet(root / RUNS) if (root / RUNS).exists() else pd.DataFrame()
             except ReportError:
                 break
-            return world_of(_stored_config(raw, path, []))
+            config = _stored_config(stored.get("config"), path, [])
+            return worlds_of(config, runs, nis_offset_given(stored))
     return world_of(None)
 
 
@@ -715,6 +738,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         nees=_campaign_nees(steps_dir, point),
         design=design,
         sensitivity=sensitivity,
+        nis_offset_given=nis_offset_given(meta),
     )
 
 

@@ -241,6 +241,14 @@ def copy_into(src: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
+def copy_matrix_into(src: np.ndarray, out: np.ndarray) -> None:
+    """``out[:, :] = src`` for 2-D arrays of one shape, element by element (:func:`copy_into`)."""
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = src[i, j]
+
+
+@njit(cache=True)
 def sort_prefix(a: np.ndarray, count: int) -> None:
     """Sort ``a[:count]`` in place, ascending with NaN last: ``np.sort``'s order.
 
@@ -554,10 +562,9 @@ def quadrature_breaks(
     """
     minima = np.empty(MAX_BREAKS // 4 + 2)
     n_sw, n_min = find_switches(n, lam0, t0, t1, eps, n_cells, switches, minima, ws)
-    nb = 0
     for i in range(n_sw):
-        breaks[nb] = switches[i]
-        nb += 1
+        breaks[i] = switches[i]
+    nb = n_sw  # an int64, not Literal[int](0): sort_prefix is compiled once (module docstring)
     # the ends are minima of ‖λ_v‖ on the interval when it grows away from them
     _, f1, _, _ = _switch_derivs(n, lam0, t0, ws)
     if f1 > 0.0:

@@ -47,7 +47,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from cwrend_cli.physics.guidance import _kernels as kern
 from cwrend_cli.physics.lti_kernels import KernelModel
@@ -439,6 +439,19 @@ def switching_newton(
                     k += 1
         it += 1
         kern.copy_into(lam, lam_out)
+
+
+def compile_switching_newton() -> None:
+    """Compile (or load) :func:`switching_newton` for the argument types
+    :func:`bang_bang_ascent` calls it with; runs nothing.
+
+    A campaign's first run compiles it in a second process while the campaign
+    process compiles the rest of the solver, which then loads it from numba's
+    cache (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
+    """
+    vec = types.float64[::1]
+    f, i = types.float64, types.int64
+    switching_newton.compile((f, vec, vec, f, f, vec, vec, i, f, f, i, vec))
 
 
 @njit(cache=True)
