@@ -59,8 +59,7 @@ import numpy as np
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.physics import measurement_models as mm
-from cwrend_cli.physics.attitude import rotation_matrices
-from cwrend_cli.physics.constraints import ellipsoids
+from cwrend_cli.physics.constraints import ellipsoids, rotation_matrices
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import ALL_ARCHITECTURES, Window
 from cwrend_cli.physics.sensors import in_window

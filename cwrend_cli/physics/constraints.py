@@ -115,6 +115,7 @@ __all__ = [
     "measure_safety",
     "rate_bounds",
     "rotate_to_body",
+    "rotation_matrices",
     "signed_distance",
     "step_excursion_km",
     "tangent_planes",
@@ -219,6 +220,21 @@ def to_body(motion: BodyMotion | None, r_km: FloatArray) -> FloatArray:
     if motion is None:
         return r_km
     return rotate_to_body(motion.rotation, r_km)
+
+
+def rotation_matrices(q: FloatArray) -> FloatArray:
+    """The rotation matrices (M, 3, 3) of unit scalar-first quaternions (M, 4).
+
+    ``R(q) v = q ⊗ (0, v) ⊗ q*`` (Diebel 2006: the rotation matrix of a unit
+    quaternion, written for Hamilton's product).
+    """
+    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    rows = [
+        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+        [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
+        [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
+    ]
+    return np.asarray(np.moveaxis(np.array(rows), (0, 1), (-2, -1)), dtype=np.float64)
 
 
 def rotate_to_body(rotation: FloatArray, r_km: FloatArray) -> FloatArray:

@@ -72,8 +72,12 @@ from cwrend_cli.output.recording import (
     port_path,
 )
 from cwrend_cli.output.tables import PARAM_PREFIX
-from cwrend_cli.physics.attitude import rotation_matrices
-from cwrend_cli.physics.constraints import Geometry, ellipsoids, rotate_to_body
+from cwrend_cli.physics.constraints import (
+    Geometry,
+    ellipsoids,
+    rotate_to_body,
+    rotation_matrices,
+)
 from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, chi2_band, cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.consistency import step_ensembles
