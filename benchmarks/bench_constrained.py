@@ -9,17 +9,25 @@ removed and ``scenario.xf`` the port at rest (what the corridor makes it), so
 that the two differ only by the path constraints. Targets (issue 32): a
 constrained re-solve ≤ 3× the unconstrained one, median SCP iterations ≤ 3.
 
-Run alone: ``python -m benchmarks.bench_constrained [--seeds S]``.
+Turning constraints (issue 34): the same per ``*_socp`` architecture on
+campaigns/tumbling_target.toml (a bus and two panels, a corridor, a tumble of
+about 2 °/s) over seeds 0…T−1, T = ``tumbling_seeds`` (a tumbling run takes
+about ten times a fixed one's re-solve time), beside its fixed-target twin
+(``[target]`` removed: the same bodies and corridor standing still, the same
+seeds), so that the two differ only by the tumble.
+
+Run alone: ``python -m benchmarks.bench_constrained [--seeds S] [--tumbling-seeds T]``.
 """
 
 from __future__ import annotations
 
+import argparse
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import Row, seeds_main
+from benchmarks.common import Row
 from cwrend_cli import campaign
 from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig, config_from_dict
 from cwrend_cli.config.adapt import problem_of
@@ -28,6 +36,8 @@ from cwrend_cli.physics import simulation
 
 SECTION = "constrained cone program"
 CAMPAIGN = Path(__file__).resolve().parents[1] / "campaigns" / "safe_approach.toml"
+TUMBLING = CAMPAIGN.with_name("tumbling_target.toml")
+TUMBLING_SECTION = "turning constraints (tumbling target)"
 
 
 def configs() -> tuple[CwrendConfig, CwrendConfig]:
@@ -37,6 +47,13 @@ def configs() -> tuple[CwrendConfig, CwrendConfig]:
     data.pop("constraints")
     data.setdefault("scenario", {})["xf"] = list(constrained.scenario.xf)
     return constrained, config_from_dict(data)
+
+
+def tumbling_configs() -> tuple[CwrendConfig, CwrendConfig]:
+    """(tumbling, fixed-target twin) of campaigns/tumbling_target.toml."""
+    data = tomllib.loads(TUMBLING.read_text(encoding="utf-8"))
+    data.pop("target")
+    return load_config(TUMBLING), config_from_dict(data)
 
 
 def _loops(cfg: CwrendConfig, slug: str, seeds: int) -> tuple[np.ndarray, np.ndarray, int]:
@@ -56,50 +73,87 @@ def _loops(cfg: CwrendConfig, slug: str, seeds: int) -> tuple[np.ndarray, np.nda
     return np.array(times), np.array(scp), softened
 
 
-def run(seeds: int = 20, bases: tuple[str, ...] = tuple(ARCHITECTURES)) -> list[Row]:
+def run(
+    seeds: int = 20,
+    bases: tuple[str, ...] = tuple(ARCHITECTURES),
+    tumbling_seeds: int | None = None,
+) -> list[Row]:
     """Per ``*_socp`` architecture (of ``bases``, the shooting slugs): constrained re-solve
-    time and SCP iterations."""
-    constrained, free = configs()
+    time and SCP iterations, then the same on a tumbling target over ``tumbling_seeds``
+    seeds (default ``seeds // 10``, at least 1)."""
+    rows = _rows(SECTION, configs(), seeds, bases, "constrained", "unconstrained", 3.0)
+    t_seeds = max(1, seeds // 10) if tumbling_seeds is None else tumbling_seeds
+    return rows + _rows(TUMBLING_SECTION, tumbling_configs(), t_seeds, bases, "turning-constraint",
+                        "fixed-target constrained", None)  # fmt: skip
+
+
+def _rows(
+    section: str,
+    pair: tuple[CwrendConfig, CwrendConfig],
+    seeds: int,
+    bases: tuple[str, ...],
+    what: str,
+    versus: str,
+    factor: float | None,
+) -> list[Row]:
+    """Re-solve time (mean, p95, max; baseline: the same of ``pair[1]``) and SCP iterations
+    of ``pair[0]``; a target of ``factor`` times the baseline's mean (None: no target)."""
+    measured, reference = pair
     rows = []
     for base in bases:
         slug = f"{base}_socp"
-        t, scp, softened = _loops(constrained, slug, seeds)
-        t0, _, _ = _loops(free, slug, seeds)
-        label = f"{slug}: constrained re-solve, seeds 0–{seeds - 1}"
+        t, scp, softened = _loops(measured, slug, seeds)
+        t0, scp0, _ = _loops(reference, slug, seeds)
+        label = f"{slug}: {what} re-solve, seeds 0–{seeds - 1}"
         for stat, value, ref in (
             ("mean", t.mean(), t0.mean()),
             ("p95", np.percentile(t, 95), np.percentile(t0, 95)),
             ("max", t.max(), t0.max()),
         ):
+            target = f"<= {factor * ref:.3g}" if stat == "mean" and factor is not None else ""
+            note = f"{t.size} re-solves; baseline: {versus} {stat}"
             rows.append(
                 Row(
-                    SECTION,
+                    section,
                     f"{label}: {stat}",
                     float(value),
                     "ms",
                     baseline=float(ref),
-                    target=f"<= {3.0 * ref:.3g}" if stat == "mean" else "",
-                    note=f"{t.size} re-solves; baseline: unconstrained {stat}, target 3× it"
+                    target=target,
+                    note=(f"{note}, target {factor:g}× it" if target else note)
                     if stat == "mean"
                     else "",
                 )
             )
+        # against the unconstrained loops (no SCP: 0 iterations) no baseline; against the
+        # fixed target's constrained ones, theirs
+        versus_scp = factor is None
         rows.append(
             Row(
-                SECTION,
+                section,
                 f"{slug}: SCP iterations a re-solve, seeds 0–{seeds - 1}: median",
                 float(np.median(scp)),
                 "",
-                target="<= 3",
-                note=f"mean {scp.mean():.2f}, max {scp.max()}, histogram "
-                f"{np.bincount(scp).tolist()}; {softened} softened (slack > 0)",
+                baseline=float(np.median(scp0)) if versus_scp else None,
+                target="" if versus_scp else "<= 3",
+                note=f"mean {scp.mean():.2f}"
+                + (f" ({versus}: {scp0.mean():.2f})" if versus_scp else "")
+                + f", max {scp.max()}, histogram {np.bincount(scp).tolist()}; "
+                f"{softened} softened (slack > 0)",
             )
         )
     return rows
 
 
 def main() -> None:
-    seeds_main(__doc__, run)
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--tumbling-seeds", type=int, default=None)
+    parser.add_argument("--arch", default=",".join(ARCHITECTURES), help="shooting slugs")
+    args = parser.parse_args()
+    from benchmarks.__main__ import print_rows
+
+    print_rows(run(args.seeds, tuple(args.arch.split(",")), args.tumbling_seeds))
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
@@ -71,3 +72,36 @@ def test_a_tumbling_targets_constraints_are_drawn_in_its_turning_body(tmp_path: 
     table = chunks["/target/body/constraints/keep_out"][0].to_record_batch()
     sizes = [c for c in table.schema.names if "half_size" in c.lower()]
     assert len(table.column(sizes[0])[0]) == 2  # the centred ellipsoid and the panel
+
+
+def test_a_tumbling_targets_port_path_is_drawn_where_its_attitude_puts_the_port(
+    tmp_path: Path,
+) -> None:
+    """Issue 34 item 5: ``/target/port`` holds the port R(t_k) p at every step in the
+    relative frame, turned here independently by scipy's ``Rotation`` (scalar-last)."""
+    from scipy.spatial.transform import Rotation
+
+    tree = {
+        **SHORT,
+        "target": {"attitude": "tumbling", "body_rates_deg_s": [0.5, 0.3, 2.0]},
+        "constraints": CONSTRAINTS,
+    }
+    cfg = config_from_dict(tree)
+    case = campaign.run_case(cfg, (ARCHITECTURES["mtf_fixed"],), 0)
+    path = recording.record_case(tmp_path / "case.rrd", case.runs, case.references, windows_of(cfg))
+    port = [c for c in RrdReader(path).stream() if c.entity_path == "/target/port"]
+    assert port
+    attitude = case.runs[0].target_attitude
+    assert attitude is not None
+    q_hb, _ = attitude.at_steps()
+    expected = Rotation.from_quat(q_hb[:, [1, 2, 3, 0]]).apply(CONSTRAINTS["corridor"]["port_km"])
+    drawn = []
+    for chunk in port:
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if "Points3D:positions" in name:
+                drawn += [list(p) for row in batch.column(name).to_pylist() for p in row or []]
+    # Rerun stores positions as float32: half a unit in the last place of 0.25 km is
+    # 2⁻²·2⁻²⁴ ≈ 1.5e-8 km; 3e-8 km allows that and the float64 rotation's rounding
+    assert np.allclose(np.array(drawn), expected, rtol=0.0, atol=3e-8)
+    assert np.ptp(expected, axis=0).max() > 0.01  # the port moves (2 deg/s over 200 s)

@@ -65,6 +65,9 @@ def test_a_constrained_report_holds_the_two_safety_figures(constrained_report: P
         assert f"![{Path(name).stem}]({name})" in md
     html = (constrained_report / "report.html").read_text(encoding="utf-8")
     assert "safety_trajectories" in html and "safety_distance" in html
+    # a fixed target: no body-frame view (issue 34), no docking-error columns
+    assert not (constrained_report / "safety_body_frame.png").exists()
+    assert "dock position error" not in md
 
 
 def test_the_paths_are_drawn_with_the_keep_out_zone_and_corridor_in_three_planes(

@@ -25,6 +25,9 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
                                        (body to relative frame; with target.attitude =
                                        "tumbling", issue 34)
     /target/body/axes                  Arrows3D: the body's x, y, z axes (red, green, blue)
+    /target/port                       LineStrips3D + Points3D over time: a tumbling target's
+                                       docking port in the relative frame, its whole path
+                                       and where it is (with a corridor, issue 34)
     /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
     /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static;
                                        a tumbling target's under /target/body, turning)
@@ -56,7 +59,7 @@ import numpy as np
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.physics import measurement_models as mm
-from cwrend_cli.physics.constraints import ellipsoids
+from cwrend_cli.physics.constraints import ellipsoids, rotation_matrices
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import ALL_ARCHITECTURES, Window
 from cwrend_cli.physics.sensors import in_window
@@ -280,7 +283,7 @@ def build_blueprint(
             *[f"/arch/{s}/thrust" for s in slugs],
             *[f"/reference/{r}/trajectory" for r in reference_names],
             "/target",
-            *(["/target/body/**"] if tumbling else []),
+            *(["/target/body/**", "/target/port"] if tumbling else []),
             "/constraints/**",
         ],
         eye_controls=_eye(rrb, bounds) if bounds is not None else None,
@@ -510,6 +513,10 @@ def _log_case(
         _log_constraints(rec, geo, line_r, "/target/body" if tumble is not None else "")
     if tumble is not None:  # issue 34: the same for every architecture of the case
         _log_target_attitude(rec, tumble, TARGET_AXES_SHARE * extent, line_r)
+        if geo is not None and geo.port_km is not None and tumble.target_attitude is not None:
+            port = port_path(tumble.target_attitude.at_steps()[0], geo.port_km)
+            _send_path(rec, "/target/port", tumble.t_s, port, colour=PORT_COLOUR,
+                       line_radius=0.5 * line_r, point_radius=0.5 * point_r)  # fmt: skip
     rec.log(
         "/about",
         rr.TextDocument(
@@ -670,6 +677,17 @@ def _log_constraints(
 TARGET_AXES_SHARE = 0.05
 #: Colours of the body's x, y and z axes (RGB).
 BODY_AXIS_COLOURS = ((214, 39, 40), (44, 160, 44), (31, 119, 180))
+
+
+#: Colour of a tumbling target's docking port and its path (hex).
+PORT_COLOUR = "#f0f0f0"
+
+
+def port_path(q_hb: np.ndarray, port_km: np.ndarray) -> np.ndarray:
+    """The port's positions R(q_k) p in the relative frame (M, 3) [km]: the body-frame port
+    ``port_km`` turned by a tumbling target's attitudes body → relative frame ``q_hb``
+    (M, 4), scalar-first (issue 34)."""
+    return np.asarray(rotation_matrices(q_hb) @ port_km, dtype=float)
 
 
 def _log_target_attitude(

@@ -69,7 +69,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.constraints import SAFETY_SUBSTEPS, BodyMotion, rate_bounds
+from cwrend_cli.physics.constraints import (  # rotation_matrices: re-exported here
+    SAFETY_SUBSTEPS,
+    BodyMotion,
+    rate_bounds,
+    rotation_matrices,
+)
 from cwrend_cli.physics.params import FloatArray, Target
 
 __all__ = [
@@ -167,21 +172,6 @@ def target_attitude(
     q_ib, w = propagate(model, h_out, per, count)
     t = np.arange(count + 1, dtype=np.float64) * h_out
     return TargetAttitude(t, hill_from_inertial(q_ib, t, model.n_rad_s), w, substeps)
-
-
-def rotation_matrices(q: FloatArray) -> FloatArray:
-    """The rotation matrices (M, 3, 3) of unit scalar-first quaternions (M, 4).
-
-    ``R(q) v = q ⊗ (0, v) ⊗ q*`` (Diebel 2006: the rotation matrix of a unit
-    quaternion, written for Hamilton's product).
-    """
-    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
-    rows = [
-        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
-        [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
-        [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
-    ]
-    return np.asarray(np.moveaxis(np.array(rows), (0, 1), (-2, -1)), dtype=np.float64)
 
 
 def body_motion(model: AttitudeModel, q_hb: FloatArray, w_rad_s: FloatArray) -> BodyMotion:

@@ -114,6 +114,8 @@ __all__ = [
     "linearise_keep_out",
     "measure_safety",
     "rate_bounds",
+    "rotate_to_body",
+    "rotation_matrices",
     "signed_distance",
     "step_excursion_km",
     "tangent_planes",
@@ -217,7 +219,28 @@ def to_body(motion: BodyMotion | None, r_km: FloatArray) -> FloatArray:
     """Body-frame coordinates ``ρ_i = R_iᵀ r_i`` of Hill positions (M, 3); ``r`` without motion."""
     if motion is None:
         return r_km
-    return np.asarray(np.einsum("mji,mj->mi", motion.rotation, r_km), dtype=np.float64)
+    return rotate_to_body(motion.rotation, r_km)
+
+
+def rotation_matrices(q: FloatArray) -> FloatArray:
+    """The rotation matrices (M, 3, 3) of unit scalar-first quaternions (M, 4).
+
+    ``R(q) v = q ⊗ (0, v) ⊗ q*`` (Diebel 2006: the rotation matrix of a unit
+    quaternion, written for Hamilton's product).
+    """
+    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    rows = [
+        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+        [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
+        [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
+    ]
+    return np.asarray(np.moveaxis(np.array(rows), (0, 1), (-2, -1)), dtype=np.float64)
+
+
+def rotate_to_body(rotation: FloatArray, r_km: FloatArray) -> FloatArray:
+    """``ρ_i = R_iᵀ r_i`` [km]: Hill positions (M, 3) in the body frame of the rotations
+    body→Hill (M, 3, 3) at their times."""
+    return np.asarray(np.einsum("mji,mj->mi", rotation, r_km), dtype=np.float64)
 
 
 def rate_bounds(omega_max_rad_s: float, n_rad_s: float) -> tuple[float, float]:

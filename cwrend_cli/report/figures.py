@@ -27,7 +27,9 @@ both the drawing and the figure list of ``report.md``:
   ``safety_trajectories.png`` (the reported seed's paths near the target in
   the x–y, x–z and y–z planes with the keep-out zone and the corridor, unsafe
   nodes marked) and ``safety_distance.png`` (the signed distance to the unsafe
-  set against time, degradation windows shaded).
+  set against time, degradation windows shaded); for a tumbling target
+  (issue 34) also ``safety_body_frame.png`` (the same paths in the target's
+  body frame, where the zone and the corridor stand still).
 
 Every figure names the simulated world it shows (:attr:`ReportData.world`:
 the truth model, and actuator errors and sensor faults when configured) in
@@ -43,7 +45,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, cast
 
@@ -67,9 +69,15 @@ from cwrend_cli.output.recording import (
     UNSAFE_COLOUR,
     arch_colour,
     inflation_ratio_names,
+    port_path,
 )
 from cwrend_cli.output.tables import PARAM_PREFIX
-from cwrend_cli.physics.constraints import Geometry
+from cwrend_cli.physics.constraints import (
+    Geometry,
+    ellipsoids,
+    rotate_to_body,
+    rotation_matrices,
+)
 from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, chi2_band, cumulative_delta_v
 from cwrend_cli.physics.params import Window
 from cwrend_cli.report.consistency import step_ensembles
@@ -823,36 +831,101 @@ def _unsafe_steps(g: pd.DataFrame) -> pd.DataFrame:
     return g[g["safety_distance_km"].to_numpy(dtype=float) < 0.0]
 
 
-def fig_safety_trajectories(data: ReportData) -> Figure:
-    """The reported seed's true paths near the target with the constraints, in three planes.
+#: The steps columns of a tumbling target's attitude (issue 34): the quaternion body →
+#: relative frame at each step, scalar-first.
+_ATTITUDE_COLUMNS = ("target_q0", "target_q1", "target_q2", "target_q3")
+_BODY_AXIS_NAMES = ("x_b (body)", "y_b (body)", "z_b (body)")
 
-    x–y, x–z and y–z of the relative frame (km), each a projection: the
-    keep-out ellipsoid's (its section through the target too, its axes being
-    the frame's), the corridor cone's (apex at the port, cut beyond the view)
-    and each architecture's path; its nodes inside the unsafe set (per-step
-    ``safety_distance_km`` < 0) marked. The views span ±:data:`_SAFETY_VIEW`
-    times the constraints' size around the target. Raises ``ValueError``
-    without constraints (see :data:`FIGURES`).
+
+def _rotations(g: pd.DataFrame) -> np.ndarray:
+    """The rotations body → relative frame (M, 3, 3) at one run's steps (their attitude)."""
+    return rotation_matrices(g[list(_ATTITUDE_COLUMNS)].to_numpy(dtype=float))
+
+
+def body_frame_steps(g: pd.DataFrame) -> pd.DataFrame:
+    """One run's steps with the true positions in the tumbling target's body frame (issue 34).
+
+    ``x_km``, ``y_km``, ``z_km`` replaced by ``ρ_k = R(q_k)ᵀ r_k``, each step's
+    position turned by the truth's attitude at that step (the stored
+    ``target_q*`` columns); the other columns unchanged.
+    """
+    out = g.copy()
+    r = g[list(_POSITION_COLUMNS)].to_numpy(dtype=float)
+    out[list(_POSITION_COLUMNS)] = rotate_to_body(_rotations(g), r)
+    return out
+
+
+#: The body-frame view draws the path only within this many view half-widths of the target
+#: [-]: farther out the body's turn sweeps the path's projection across the view between
+#: two steps (its chords would cross the view as straight lines that were never flown).
+_BODY_VIEW_CUT = 2.0
+
+
+def _near(g: pd.DataFrame, radius_km: float) -> pd.DataFrame:
+    """``g`` with the positions farther than ``radius_km`` from the target set to NaN (the
+    line is broken there)."""
+    r = g[list(_POSITION_COLUMNS)].to_numpy(dtype=float)
+    out = g.copy()
+    out.loc[np.linalg.norm(r, axis=1) > radius_km, list(_POSITION_COLUMNS)] = np.nan
+    return out
+
+
+def _tumbling(data: ReportData) -> bool:
+    return set(_ATTITUDE_COLUMNS) <= set(data.steps.columns)
+
+
+def _ellipse(centre: np.ndarray, axes: np.ndarray, turn: np.ndarray | None,
+             plane: tuple[int, int], **style: Any) -> Ellipse:  # fmt: skip
+    """The projection on ``plane`` of the ellipsoid of semi-axes ``axes`` along the frame's
+    axes around ``centre``, turned by ``turn`` (3, 3) about the origin (``None``: not)."""
+    i, j = plane
+    if turn is None:
+        return Ellipse((centre[i], centre[j]), 2 * axes[i], 2 * axes[j], **style)
+    # {x: xᵀ M⁻¹ x ≤ 1}, M = R diag(a²) Rᵀ, projects on (i, j) to the ellipse of M's block
+    shape = (turn * axes**2) @ turn.T
+    values, vectors = np.linalg.eigh(shape[np.ix_(plane, plane)])
+    c = turn @ centre
+    angle = float(np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1])))
+    width, height = 2 * np.sqrt(np.maximum(values[::-1], 0.0))
+    return Ellipse((c[i], c[j]), width, height, angle=angle, **style)
+
+
+def _safety_planes(
+    data: ReportData,
+    paths: Sequence[tuple[str, pd.DataFrame]],
+    turn: np.ndarray | None,
+    names: Sequence[str],
+    port_path: np.ndarray | None = None,
+) -> tuple[Figure, list[Any]]:
+    """The three planes of a safety figure and its legend handles.
+
+    ``paths``: (architecture, steps) with the positions to draw in ``x_km`` …;
+    the keep-out ellipsoids and the corridor as given in the configuration,
+    turned by ``turn`` (``None``: as given); ``port_path`` (M, 3): the moving
+    port's positions, drawn as a dotted line.
     """
     geo = data.constraints
-    if geo is None:
-        raise ValueError("no path constraints configured")
+    assert geo is not None
     half = _SAFETY_VIEW * _constraint_size(geo)
     unsafe, corridor = _rgb(UNSAFE_COLOUR), _rgb(CORRIDOR_COLOUR)
+    shown = geo if turn is None or geo.port_km is None or geo.axis is None else replace(
+        geo, port_km=turn @ geo.port_km, axis=turn @ geo.axis)  # fmt: skip
     fig = _figure(16, 6.6)
     axes = fig.subplots(1, 3)
     marked = False
     for ax, plane in zip(axes, _PLANES, strict=True):
         i, j = plane
-        if geo.semi_axes_km is not None:
-            a = geo.semi_axes_km
-            ax.add_patch(Ellipse((0.0, 0.0), 2 * a[i], 2 * a[j], facecolor=(*unsafe, 0.22),
-                                 edgecolor=unsafe, lw=1.6, zorder=1))  # fmt: skip
-        outline = _cone_outline(geo, plane, half)
+        for centre, a in ellipsoids(geo):
+            ax.add_patch(_ellipse(np.zeros(3) if centre is None else centre, a, turn, plane,
+                                  facecolor=(*unsafe, 0.22), edgecolor=unsafe, lw=1.6,
+                                  zorder=1))  # fmt: skip
+        outline = _cone_outline(shown, plane, half)
         if outline is not None:
             ax.add_patch(Polygon(outline, closed=True, facecolor=(*corridor, 0.15),
                                  edgecolor=corridor, lw=1.6, ls="--", zorder=1))  # fmt: skip
-        for arch, g in _by_arch(data.steps, data.archs):
+        if port_path is not None:
+            ax.plot(port_path[:, i], port_path[:, j], color="black", lw=1.0, ls=":", zorder=2)
+        for arch, g in paths:
             ax.plot(g[_POSITION_COLUMNS[i]], g[_POSITION_COLUMNS[j]],
                     **_arch_style(arch, data.archs), zorder=3)  # fmt: skip
             bad = _unsafe_steps(g)
@@ -861,16 +934,16 @@ def fig_safety_trajectories(data: ReportData) -> Figure:
                 ax.scatter(bad[_POSITION_COLUMNS[i]], bad[_POSITION_COLUMNS[j]], s=16,
                            marker="x", color=unsafe, lw=1.0, zorder=4,
                            gid=f"unsafe:{arch}")  # fmt: skip
-        if geo.port_km is not None:  # under the target, which it may hide in projection
-            ax.scatter(geo.port_km[i], geo.port_km[j], marker="D", s=90, facecolor="white",
+        if shown.port_km is not None:  # under the target, which it may hide in projection
+            ax.scatter(shown.port_km[i], shown.port_km[j], marker="D", s=90, facecolor="white",
                        edgecolor="black", zorder=5)  # fmt: skip
         ax.scatter(0.0, 0.0, marker="*", s=150, color="black", zorder=6)
         ax.set_xlim(-half, half)
         ax.set_ylim(-half, half)
         ax.set_aspect("equal")
-        ax.set_xlabel(f"{_AXIS_NAMES[i]} [km]")
-        ax.set_ylabel(f"{_AXIS_NAMES[j]} [km]")
-        ax.set_title(f"{_AXIS_NAMES[i][0]}–{_AXIS_NAMES[j][0]} plane")
+        ax.set_xlabel(f"{names[i]} [km]")
+        ax.set_ylabel(f"{names[j]} [km]")
+        ax.set_title(f"{names[i].split(' ')[0]}–{names[j].split(' ')[0]} plane")
     handles: list[Any] = _arch_handles(data.archs)
     if geo.semi_axes_km is not None:
         handles.append(Patch(facecolor=(*unsafe, 0.22), edgecolor=unsafe, label="keep-out zone"))
@@ -883,10 +956,65 @@ def fig_safety_trajectories(data: ReportData) -> Figure:
     handles.append(Line2D([], [], marker="*", ls="", ms=12, color="black", label="target"))
     if geo.port_km is not None:
         handles.append(Line2D([], [], marker="D", ls="", ms=7, mfc="white", mec="black",
-                              label="docking port"))  # fmt: skip
+                              label="docking port" if port_path is None
+                              else "docking port at t = 0"))  # fmt: skip
+    if port_path is not None:
+        handles.append(Line2D([], [], color="black", lw=1.0, ls=":", label="docking port's path"))
+    return fig, handles
+
+
+def fig_safety_trajectories(data: ReportData) -> Figure:
+    """The reported seed's true paths near the target with the constraints, in three planes.
+
+    x–y, x–z and y–z of the relative frame (km), each a projection: the
+    keep-out ellipsoids' (their sections through their centres too, their axes
+    being the frame's), the corridor cone's (apex at the port, cut beyond the
+    view) and each architecture's path; its nodes inside the unsafe set
+    (per-step ``safety_distance_km`` < 0) marked. The views span
+    ±:data:`_SAFETY_VIEW` times the constraints' size around the target.
+    For a tumbling target (issue 34) the zone and the corridor are drawn as
+    they stood at t = 0 (turned by the first step's attitude) and the moving
+    port's path is drawn; :func:`fig_safety_body_frame` shows them fixed.
+    Raises ``ValueError`` without constraints (see :data:`FIGURES`).
+    """
+    geo = data.constraints
+    if geo is None:
+        raise ValueError("no path constraints configured")
+    paths = list(_by_arch(data.steps, data.archs))
+    turn = port = None
+    if _tumbling(data) and paths:
+        q_hb = paths[0][1][list(_ATTITUDE_COLUMNS)].to_numpy(dtype=float)
+        turn = rotation_matrices(q_hb[:1])[0]
+        if geo.port_km is not None:
+            port = port_path(q_hb, geo.port_km)
+    fig, handles = _safety_planes(data, paths, turn, _AXIS_NAMES, port)
     _legend_below(fig, handles, ncol=4)
-    fig.suptitle(f"Safe approach: true paths near the target, keep-out zone and corridor "
-                 f"({_title(data)})")  # fmt: skip
+    what = "keep-out zone and corridor" if turn is None else (
+        "keep-out zone and corridor at t = 0 (they turn with the target)")  # fmt: skip
+    fig.suptitle(f"Safe approach: true paths near the target, {what} ({_title(data)})")
+    return _finished(fig)
+
+
+def fig_safety_body_frame(data: ReportData) -> Figure:
+    """A tumbling target's approach in its body frame (issue 34), in three planes.
+
+    Each step's true position turned into the target's body frame at that
+    step's attitude (:func:`body_frame_steps`), with the keep-out ellipsoids,
+    the corridor and the port fixed there as configured: a good approach ends
+    down the corridor into the port. The path is drawn within :data:`_BODY_VIEW_CUT`
+    view half-widths of the target only. Otherwise as :func:`fig_safety_trajectories`.
+    Raises ``ValueError`` without constraints or a stored attitude (see :data:`FIGURES`).
+    """
+    if data.constraints is None or not _tumbling(data):
+        raise ValueError("no tumbling target with path constraints")
+    far = _BODY_VIEW_CUT * _SAFETY_VIEW * _constraint_size(data.constraints)
+    paths = [
+        (arch, _near(body_frame_steps(g), far)) for arch, g in _by_arch(data.steps, data.archs)
+    ]
+    fig, handles = _safety_planes(data, paths, None, _BODY_AXIS_NAMES)
+    _legend_below(fig, handles, ncol=4)
+    fig.suptitle(f"Safe approach in the tumbling target's body frame: true paths turned with "
+                 f"the target, keep-out zone and corridor fixed ({_title(data)})")  # fmt: skip
     return _finished(fig)
 
 
@@ -948,6 +1076,10 @@ def fig_safety_distance(data: ReportData) -> Figure:
 
 def _has_constraints(data: ReportData) -> bool:
     return data.constraints is not None
+
+
+def _has_body_frame(data: ReportData) -> bool:
+    return data.constraints is not None and _tumbling(data)
 
 
 def _has_safety_distance(data: ReportData) -> bool:
@@ -1502,6 +1634,15 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
         "unsafe set.",
         fig_safety_trajectories,
         _has_constraints,
+    ),
+    FigureEntry(
+        "safety_body_frame.png",
+        "Tumbling target: the same true paths in the target's body frame, each step's position "
+        "turned by the target's attitude at that step, with the keep-out zone, the corridor "
+        "and the docking port fixed there (a good approach ends down the corridor); in the "
+        "relative-frame figure above they are drawn as they stood at t = 0.",
+        fig_safety_body_frame,
+        _has_body_frame,
     ),
     FigureEntry(
         "safety_distance.png",

@@ -228,9 +228,15 @@ def safety_table(data: ReportData) -> str | None:
     header = ["architecture", "runs", "violated (share) [95 % Wilson]",
               "median min distance [m]", "p1 min distance [m]",
               "mean unsafe time [s]"]  # fmt: skip
+<<<<<<< HEAD
     if abort:
         header += ["abort-unsafe (share) [95 % Wilson]", "median worst drift distance [m]",
                    "p1 worst drift distance [m]"]  # fmt: skip
+=======
+    runs = data.ok_runs()
+    docking = [c for c in DOCKING_COLUMNS if c in runs.columns]
+    header += [DOCKING_COLUMNS[c][0] for c in docking]
+>>>>>>> tumbleview
     rows = []
     for a in data.archs:
         get = _lookup(rows_of[rows_of["arch"] == a])
@@ -244,12 +250,14 @@ def safety_table(data: ReportData) -> str | None:
             _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
             _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
             _ci(get.get(("safety_unsafe_time_s", "mean")), UNSAFE_TIME),
+            *[_median_max(runs[runs["arch"] == a], c) for c in docking],
         ])  # fmt: skip
         if abort:
             rows[-1] += _abort_cells(get)
     return markdown_table(header, rows) if rows else None
 
 
+<<<<<<< HEAD
 def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
     """The abort-safety cells of an architecture's safety row (issue 34 item 4)."""
     share = get.get(("abort_unsafe", "share"))
@@ -261,6 +269,23 @@ def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
         _ci(get.get(("abort_min_distance_km", "median")), MISS, M_PER_KM),
         _ci(get.get(("abort_min_distance_km", "p1")), MISS, M_PER_KM),
     ]
+=======
+#: A tumbling target's docking errors (issue 34; runs.parquet, with a corridor): column →
+#: (table header, scale to the header's unit, format).
+DOCKING_COLUMNS: dict[str, tuple[str, float, str]] = {
+    "safety_dock_position_error_km": ("dock position error [m], median (max)", M_PER_KM, ".2f"),
+    "safety_dock_velocity_error_km_s": ("dock velocity error [mm/s], median (max)", 1e6, ".2f"),
+}
+
+
+def _median_max(runs: pd.DataFrame, column: str) -> str:
+    """``median (max)`` of a docking-error column over the runs, scaled (``–``: none stored)."""
+    _, scale, spec = DOCKING_COLUMNS[column]
+    values = pd.to_numeric(runs[column], errors="coerce").dropna() * scale
+    if values.empty:
+        return "–"
+    return f"{_fmt(values.median(), spec)} ({_fmt(values.max(), spec)})"
+>>>>>>> tumbleview
 
 
 def _safety_lines(data: ReportData) -> list[str]:
@@ -277,10 +302,16 @@ def _safety_lines(data: ReportData) -> list[str]:
         "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
         "(95 % bootstrap interval)."
         + (
+<<<<<<< HEAD
             " Abort-unsafe (constraints.abort_safe_s): a step before the final approach whose "
             "free drift (CW, no thrust) enters the keep-out zone within that time; worst drift "
             "distance: the run's smallest signed distance of those drifts to the zone."
             if "abort-unsafe" in table
+=======
+            " Dock errors (a tumbling target): the distance to the moving port and the "
+            "speed relative to it at the end, over the seeds (runs.parquet)."
+            if any(c in data.ok_runs().columns for c in DOCKING_COLUMNS)
+>>>>>>> tumbleview
             else ""
         ),
         "",
