@@ -228,15 +228,12 @@ def safety_table(data: ReportData) -> str | None:
     header = ["architecture", "runs", "violated (share) [95 % Wilson]",
               "median min distance [m]", "p1 min distance [m]",
               "mean unsafe time [s]"]  # fmt: skip
-<<<<<<< HEAD
-    if abort:
-        header += ["abort-unsafe (share) [95 % Wilson]", "median worst drift distance [m]",
-                   "p1 worst drift distance [m]"]  # fmt: skip
-=======
     runs = data.ok_runs()
     docking = [c for c in DOCKING_COLUMNS if c in runs.columns]
     header += [DOCKING_COLUMNS[c][0] for c in docking]
->>>>>>> tumbleview
+    if abort:
+        header += ["abort-unsafe (share) [95 % Wilson]", "median worst drift distance [m]",
+                   "p1 worst drift distance [m]"]  # fmt: skip
     rows = []
     for a in data.archs:
         get = _lookup(rows_of[rows_of["arch"] == a])
@@ -257,7 +254,6 @@ def safety_table(data: ReportData) -> str | None:
     return markdown_table(header, rows) if rows else None
 
 
-<<<<<<< HEAD
 def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
     """The abort-safety cells of an architecture's safety row (issue 34 item 4)."""
     share = get.get(("abort_unsafe", "share"))
@@ -269,7 +265,8 @@ def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
         _ci(get.get(("abort_min_distance_km", "median")), MISS, M_PER_KM),
         _ci(get.get(("abort_min_distance_km", "p1")), MISS, M_PER_KM),
     ]
-=======
+
+
 #: A tumbling target's docking errors (issue 34; runs.parquet, with a corridor): column →
 #: (table header, scale to the header's unit, format).
 DOCKING_COLUMNS: dict[str, tuple[str, float, str]] = {
@@ -285,7 +282,6 @@ def _median_max(runs: pd.DataFrame, column: str) -> str:
     if values.empty:
         return "–"
     return f"{_fmt(values.median(), spec)} ({_fmt(values.max(), spec)})"
->>>>>>> tumbleview
 
 
 def _safety_lines(data: ReportData) -> list[str]:
@@ -302,16 +298,16 @@ def _safety_lines(data: ReportData) -> list[str]:
         "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
         "(95 % bootstrap interval)."
         + (
-<<<<<<< HEAD
             " Abort-unsafe (constraints.abort_safe_s): a step before the final approach whose "
             "free drift (CW, no thrust) enters the keep-out zone within that time; worst drift "
             "distance: the run's smallest signed distance of those drifts to the zone."
             if "abort-unsafe" in table
-=======
+            else ""
+        )
+        + (
             " Dock errors (a tumbling target): the distance to the moving port and the "
             "speed relative to it at the end, over the seeds (runs.parquet)."
             if any(c in data.ok_runs().columns for c in DOCKING_COLUMNS)
->>>>>>> tumbleview
             else ""
         ),
         "",
