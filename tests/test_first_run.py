@@ -117,8 +117,10 @@ for f in (k._bracketed_root, k._g, k._primer, k.add_control_node):
 """
 
 
-def test_no_kernel_is_compiled_once_per_literal_argument(tmp_path: Path) -> None:
-    out = " ".join(_in_empty_cache(_LITERALS, tmp_path)).split()
+def test_no_kernel_is_compiled_once_per_literal_argument(
+    compiled_in_empty_cache: dict[str, list[str]],
+) -> None:
+    out = " ".join(compiled_in_empty_cache["literals"]).split()
     assert out == [
         "_bracketed_root", "1", "False", "_g", "1", "False",
         "_primer", "1", "False", "add_control_node", "1", "False",
@@ -284,5 +286,22 @@ print("quicksort" in ir, "raise_with_shape_context" in ir, len(ir) > 10_000)
 """
 
 
-def test_the_solver_compiles_no_sort_or_slice_error_message(tmp_path: Path) -> None:
-    assert _in_empty_cache(_SHRUNK, tmp_path) == ["False False True"]
+def test_the_solver_compiles_no_sort_or_slice_error_message(
+    compiled_in_empty_cache: dict[str, list[str]],
+) -> None:
+    assert compiled_in_empty_cache["shrunk"] == ["False False True"]
+
+
+@pytest.fixture(scope="module")
+def compiled_in_empty_cache(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
+    """What :data:`_LITERALS`, then :data:`_SHRUNK`, print in one fresh interpreter with an
+    empty numba cache (one compile of the kernels both reach; each was a process of its own).
+
+    Order-proof for both: the literal check types the callees before anything else
+    compiles them, and :data:`_SHRUNK` reads the code of the start selection with every
+    callee linked in, whichever compile met the callee first."""
+    marker = "--- shrunk ---"
+    code = f"{_LITERALS}\nprint({marker!r})\n{_SHRUNK}"
+    out = _in_empty_cache(code, tmp_path_factory.mktemp("numba-cache"))
+    cut = out.index(marker)
+    return {"literals": out[:cut], "shrunk": out[cut + 1 :]}
