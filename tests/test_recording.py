@@ -305,3 +305,30 @@ def test_every_architecture_has_its_own_fixed_colour() -> None:
 def test_no_viewer_without_display(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setattr(recording.shutil, "which", lambda name: None)
     assert recording.open_in_viewer(tmp_path / "x.rrd") is False
+
+
+def _view_names(container: object, names: list[str]) -> list[str]:
+    """Names of every view and container under ``container`` of a blueprint, depth first."""
+    name = getattr(container, "name", None)
+    if name:
+        names.append(name)
+    for sub in getattr(container, "contents", None) or []:
+        _view_names(sub, names)
+    return names
+
+
+@pytest.mark.parametrize(
+    ("slugs", "title"),
+    [
+        (["mtf_fixed", "plain_fixed"], "MTF ratio ρ [-]"),
+        (["stf_adaptive"], "single-factor ratio ρ [-]"),
+        (["stf_fixed", "mtf_adaptive"], "inflation ratio ρ [-]"),
+    ],
+)
+def test_ratio_view_names_the_ratio_its_estimators_log(slugs: list[str], title: str) -> None:
+    """The steps' ``mtf_ratio`` of a single-factor run is (λ − 1) tr(R)/tr(S), not the MTF
+    ratio of paper Eq. 23: the recording's view says which ratio it shows, as Fig. 4 does."""
+    from cwrend_cli.output.recording import build_blueprint
+
+    names = _view_names(build_blueprint(slugs, [], 0).root_container, [])
+    assert title in names

@@ -1162,10 +1162,10 @@ def test_the_paired_miss_figure_pairs_the_single_factor_with_mtf() -> None:
 def test_fig4_names_the_ratio_it_plots() -> None:
     """The steps' ``mtf_ratio`` of an stf run is (λ − 1) tr(R)/tr(S) (docs/method.md,
     "The single-factor baseline"), not tr(S_MTF)/tr(S): Fig. 4 says which it plots."""
-    from cwrend_cli.report.figures import _ratio_names
+    from cwrend_cli.output.recording import inflation_ratio_names as names
 
-    assert _ratio_names(["mtf_fixed", "mtf_adaptive_socp"]) == ("MTF ratio", "tr(S_MTF)/tr(S)")
-    assert _ratio_names(["stf_adaptive"]) == ("single-factor ratio", "(λ − 1) tr(R)/tr(S)")
-    name, definition = _ratio_names(["stf_fixed", "mtf_fixed"])
+    assert names(["mtf_fixed", "mtf_adaptive_socp"]) == ("MTF ratio", "tr(S_MTF)/tr(S)")
+    assert names(["stf_adaptive"]) == ("single-factor ratio", "(λ − 1) tr(R)/tr(S)")
+    name, definition = names(["stf_fixed", "mtf_fixed"])
     assert name == "inflation ratio"
     assert "tr(S_MTF)/tr(S)" in definition and "(λ − 1) tr(R)/tr(S)" in definition

@@ -56,7 +56,7 @@ from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.physics import measurement_models as mm
 from cwrend_cli.physics.metrics import cumulative_delta_v
-from cwrend_cli.physics.params import Window
+from cwrend_cli.physics.params import ALL_ARCHITECTURES, Window
 from cwrend_cli.physics.sensors import in_window
 
 if TYPE_CHECKING:
@@ -129,11 +129,26 @@ ARCH_SERIES: Mapping[str, tuple[str, str]] = {
     "score": ("score s", "-"),
     "score_filtered": ("filtered score s̄", "-"),
     "nis": ("NIS", "-"),
-    "mtf_ratio": ("MTF ratio ρ", "-"),
+    "mtf_ratio": ("inflation ratio ρ (MTF: paper Eq. 23)", "-"),
     "pos_err_km": ("position error ‖r‖", "km"),
     "est_err_km": ("estimation error ‖r̂ − r‖", "km"),
 }
 REFERENCE_SERIES = ("u_norm", "dv_cum", "pos_err_km")
+
+
+def inflation_ratio_names(slugs: Sequence[str]) -> tuple[str, str]:
+    """Name and definition of the inflation ratio ρ that the ``mtf_ratio`` column holds.
+
+    For MTF it is the MTF ratio tr(S_MTF)/tr(S) (paper Eq. 23); for a single-factor
+    (``stf``) run it is (λ − 1) tr(R)/tr(S), the same definition applied to the single
+    factor (docs/method.md, "The single-factor baseline"); both when both are shown.
+    """
+    estimators = {ALL_ARCHITECTURES[s].estimator for s in slugs if s in ALL_ARCHITECTURES}
+    if "stf" not in estimators:
+        return "MTF ratio", "tr(S_MTF)/tr(S)"
+    if "mtf" not in estimators:
+        return "single-factor ratio", "(λ − 1) tr(R)/tr(S)"
+    return "inflation ratio", "MTF tr(S_MTF)/tr(S), single factor (λ − 1) tr(R)/tr(S)"
 
 
 def arch_colour(slug: str, index: int = 0) -> str:
@@ -285,7 +300,7 @@ def build_blueprint(
         _series_view(rrb, "position error ‖r‖ [km]", arch("pos_err_km") + ref("pos_err_km")),
         _series_view(rrb, "estimation error [km]", arch("est_err_km")),
         _series_view(rrb, "NIS [-]", arch("nis")),
-        _series_view(rrb, "MTF ratio ρ [-]", arch("mtf_ratio")),
+        _series_view(rrb, f"{inflation_ratio_names(slugs)[0]} ρ [-]", arch("mtf_ratio")),
         *(
             [_series_view(rrb, "distance to the unsafe set [km]", arch("safety_distance_km"))]
             if safety

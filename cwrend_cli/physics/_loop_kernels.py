@@ -46,7 +46,7 @@ from numba import njit, typeof, types
 
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
-from cwrend_cli.physics.dynamics import costate_stm, zoh_step
+from cwrend_cli.physics.dynamics import zoh_step
 from cwrend_cli.physics.ekf import EkfModel, ekf_predict
 from cwrend_cli.physics.estimation import kf_predict, kf_update
 from cwrend_cli.physics.guidance._kernels import (
@@ -59,11 +59,13 @@ from cwrend_cli.physics.guidance._kernels import (
     arc_bounds,
     control_from_costate,
     costate_at,
+    model_costate_stm,
     n_cells,
     quadrature_breaks,
     workspace,
 )
 from cwrend_cli.physics.guidance._switching_kernels import bang_bang_ascent
+from cwrend_cli.physics.lti_kernels import KernelModel
 from cwrend_cli.physics.measurement_models import SensorModel, measure_truth, sensor_update
 from cwrend_cli.physics.process_noise import ProcessNoiseModel, adapt, step_q
 from cwrend_cli.physics.scheduling import composite_score, eps_blend, eps_target, lowpass_score
@@ -79,7 +81,7 @@ class LoopModel(NamedTuple):
     q: np.ndarray  # (6, 6) process-noise covariance Q
     r_nominal: np.ndarray  # (3, 3) nominal measurement covariance R [km²]
     noise: np.ndarray  # (N, 3) measurement noise of each step [km]
-    n: float  # mean motion [rad/s]
+    n: KernelModel  # mean motion [rad/s] (CW), or the ss model's LtiKernel tuple (issue 33)
     u_max: float  # [km/s²]
     dt: float  # step Δt [s]
     gl_x: np.ndarray  # Gauss–Legendre nodes on [−1, 1] (step-mean control)
@@ -177,7 +179,7 @@ def nees(p: np.ndarray, x_hat: np.ndarray, x_true: np.ndarray, scratch: np.ndarr
 
 @njit(cache=True)
 def mean_control(
-    n: float,
+    n: KernelModel,
     lam: np.ndarray,
     dt: float,
     eps: float,
@@ -649,7 +651,7 @@ def _resolve_loop(
         starts = np.empty((2 if with_older else 1, 6))
         starts[0] = lam_next if rs.correct else lam
         if with_older:
-            back = costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
+            back = model_costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
             starts[1] = np.dot(back, carry.older)
         t0 = monotonic_s()
         status, iters, rp, rv = bang_bang_ascent(

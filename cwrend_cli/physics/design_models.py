@@ -93,6 +93,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cwrend_cli.physics.dynamics import discretize, one_minus_cos, x_minus_sin
+from cwrend_cli.physics.lti_kernels import LtiKernel, transition
 from cwrend_cli.physics.params import (
     Architecture,
     DesignModel,
@@ -152,6 +153,10 @@ class LinearTimeInvariant:
         b[3:6, :] = np.eye(3)
         return a, b
 
+    def kernel(self) -> LtiKernel:
+        """The coefficients as the compiled kernels take them (:mod:`.lti_kernels`)."""
+        return LtiKernel(alpha=self.alpha, beta=self.beta, q=self.q, omega=self.omega)
+
 
 @dataclass(frozen=True)
 class SchweighartSedwick:
@@ -183,41 +188,14 @@ def schweighart_sedwick(
 
 
 def lti_stm(m: LinearTimeInvariant, t: float) -> FloatArray:
-    """``Φ(t) = e^{At}`` of :class:`LinearTimeInvariant` in closed form (6×6).
+    """``Φ(t) = e^{At}`` of :class:`LinearTimeInvariant` in closed form (6×6); valid for t < 0.
 
-    With θ = ωt (1 − cos θ and θ − sin θ computed without cancellation, as
-    CW's Eq. 11 in :func:`cwrend_cli.physics.dynamics.stm`)::
-
-        x = x₀ (1 + α/ω² (1 − cos θ)) + ẋ₀ sin θ/ω + ẏ₀ β/ω² (1 − cos θ)
-        y = y₀ − x₀ βα/ω³ (θ − sin θ) − ẋ₀ β/ω² (1 − cos θ) + ẏ₀ (t − β²/ω³ (θ − sin θ))
-
-    and their derivatives; z = z₀ cos qt + ż₀ sin(qt)/q. Valid for t < 0.
+    :func:`cwrend_cli.physics.lti_kernels.transition` (its docstring has the
+    formulas; 1 − cos θ and θ − sin θ without cancellation, as CW's Eq. 11 in
+    :func:`cwrend_cli.physics.dynamics.stm`), the one the compiled shooting
+    kernels use.
     """
-    w, al, be = m.omega, m.alpha, m.beta
-    th = w * t
-    s, c = math.sin(th), math.cos(th)
-    omc, xms = one_minus_cos(th), x_minus_sin(th)
-    w2, w3 = w * w, w * w * w
-    p = np.zeros((6, 6))
-    p[0, 0] = 1.0 + al / w2 * omc
-    p[0, 3] = s / w
-    p[0, 4] = be / w2 * omc
-    p[1, 0] = -be * al / w3 * xms
-    p[1, 1] = 1.0
-    p[1, 3] = -be / w2 * omc
-    p[1, 4] = t - be * be / w3 * xms
-    p[3, 0] = al / w * s
-    p[3, 3] = c
-    p[3, 4] = be / w * s
-    p[4, 0] = -be * al / w2 * omc
-    p[4, 3] = -be / w * s
-    p[4, 4] = 1.0 - be * be / w2 * omc
-    qt = m.q * t
-    p[2, 2] = math.cos(qt)
-    p[2, 5] = math.sin(qt) / m.q
-    p[5, 2] = -m.q * math.sin(qt)
-    p[5, 5] = math.cos(qt)
-    return p
+    return np.asarray(transition(m.kernel(), t))
 
 
 def lti_input_matrix(m: LinearTimeInvariant, t: float) -> FloatArray:
@@ -457,19 +435,25 @@ def unsupported(
 
     The cone-program re-solve (``socp``) takes any model (it needs Φ_k, Γ_k
     only) when unconstrained; the constrained cone program
-    (:mod:`cwrend_cli.physics.guidance.constrained`, with ``[constraints]``) and the
-    shooting re-solve's compiled kernels plan with CW (Eq. 11) so far.
+    (:mod:`cwrend_cli.physics.guidance.constrained`, with ``[constraints]``) plans
+    with CW (Eq. 11) so far. The shooting re-solve's compiled kernels take CW and
+    the time-invariant ``ss`` (:mod:`cwrend_cli.physics.lti_kernels`), not the
+    time-varying ``ya``: they evaluate the primer vector Bᵀ Φ(T, t)ᵀ ν and its
+    time derivatives in closed form at any time of the horizon (quadrature nodes,
+    switching-time roots), and YA's Φ(T, t) needs Kepler's equation and a 6×6
+    solve at each of those times; a table on the 1 s grid would not do.
     """
     if model.guidance == "cw":
         return None
     method = arch.resolved_method(guidance)
-    if method == "shooting":
+    if method == "shooting" and model.guidance == "ya":
         return (
-            f"model.guidance = '{model.guidance}' with architecture {arch.slug}: its shooting "
-            "re-solve supports only 'cw' so far; use the cone-program architectures "
-            "(--arch all_socp, or guidance.method = 'socp')"
+            f"model.guidance = 'ya' with architecture {arch.slug}: its shooting re-solve "
+            "takes 'cw' and 'ss' only (the compiled kernels need the transition in closed "
+            "form at any time; Yamanaka–Ankersen's is time-varying); use the cone-program "
+            "architectures (--arch all_socp, or guidance.method = 'socp')"
         )
-    if constrained:
+    if constrained and method != "shooting":
         return (
             f"model.guidance = '{model.guidance}' with [constraints] and architecture "
             f"{arch.slug}: the constrained cone program plans with 'cw' only so far; set "

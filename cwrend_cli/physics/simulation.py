@@ -180,9 +180,16 @@ def solver_settings(problem: Problem) -> guidance.SolverSettings:
 
 
 def _shooting(
-    sc: Scenario, x0: FloatArray, horizon_s: float, eps: float
+    sc: Scenario,
+    x0: FloatArray,
+    horizon_s: float,
+    eps: float,
+    design: design_models.LinearTimeInvariant | None = None,
 ) -> guidance.ShootingProblem:
-    """One re-solve of the scenario: reach ``sc.xf`` from ``x0`` in ``horizon_s`` at ``eps``."""
+    """One re-solve of the scenario: reach ``sc.xf`` from ``x0`` in ``horizon_s`` at ``eps``.
+
+    ``design``: the guidance's design model other than CW (:func:`_shooting_design`).
+    """
     return guidance.ShootingProblem(
         np.asarray(x0, dtype=float),
         float(horizon_s),
@@ -190,7 +197,21 @@ def _shooting(
         sc.mean_motion_rad_s,
         sc.u_max_km_s2,
         np.asarray(sc.xf, dtype=float),
+        design,
     )
+
+
+def _shooting_design(problem: Problem, socp: bool) -> design_models.LinearTimeInvariant | None:
+    """The time-invariant design model of the shooting re-solves; None for CW (issue 33).
+
+    ``model.guidance = "ss"`` with the shooting method: Schweighart–Sedwick
+    (:func:`~cwrend_cli.physics.design_models.ss_model`). The cone-program method
+    plans with the per-step tables instead (:func:`_guidance_tables`), and its
+    costate fallback stays CW's as before (``socp``: None).
+    """
+    if socp or problem.model.guidance != "ss":
+        return None
+    return design_models.ss_model(problem.truth, problem.scenario)
 
 
 def open_loop_references(problem: Problem) -> References:
@@ -320,12 +341,20 @@ def simulate(
     solves: list[SolveRecord] = []
     socp = arch.resolved_method(gd) == "socp"
     eps0 = sch.eps_max if arch.adaptive else sch.eps_fixed
+    design = _shooting_design(problem, socp)
     if arch.adaptive and not socp:
         # initial solve at ε_max from the energy costate; on failure keep it (not in the paper)
-        first = _shooting(sc, x_hat0, sc.horizon_s, eps0)
+        first = _shooting(sc, x_hat0, sc.horizon_s, eps0, design)
         result = guidance.solve(first, refs.energy.costate, settings)
         solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
         lam = result.costate.copy() if solves[-1].success else refs.energy.costate.copy()
+    elif design is not None:
+        # the references are CW's: the first plan in the guidance's own model, at ε0 from the
+        # fuel reference's costate; on failure keep that (issue 33)
+        first = _shooting(sc, x_hat0, sc.horizon_s, eps0, design)
+        result = guidance.solve(first, refs.fuel.costate, settings)
+        solves.append(_record("initial", -1, 0.0, result, settings.success_residual))
+        lam = result.costate.copy() if solves[-1].success else refs.fuel.costate.copy()
     else:
         lam = refs.fuel.costate.copy()
 
@@ -445,14 +474,21 @@ def _loop_parts(
     gl_x, gl_w = solver_settings(problem).quadrature()
     phi, gam = discretize(n, dt)
     filter_phi, filter_gam = _filter_tables(problem)
+    # the shooting guidance's design model (issue 33): its own costate step and kernels
+    design = _shooting_design(problem, arch.resolved_method(gd) == "socp")
+    lam_step = (
+        costate_stm(n, dt)
+        if design is None
+        else np.ascontiguousarray(design_models.lti_stm(design, -dt).T)
+    )
     model = sk.LoopModel(
         phi=phi,
         gam=gam,
-        lam_step=costate_stm(n, dt),
+        lam_step=lam_step,
         q=est.q_matrix(),
         r_nominal=est.r_nominal_matrix(),
         noise=noise,
-        n=n,
+        n=guidance.kernel_model(n, design),
         u_max=sc.u_max_km_s2,
         dt=dt,
         gl_x=gl_x,
@@ -592,6 +628,7 @@ def _shooting_resolves(
     correct = problem.guidance.resolve_timing == "correct"
     xf = np.asarray(sc.xf, dtype=float)
     count = len(schedule)
+    design = _shooting_design(problem, socp=False)
     resolve = sk.ResolveModel(
         steps=np.asarray(schedule, dtype=np.int64),
         xf=xf,
@@ -634,7 +671,7 @@ def _shooting_resolves(
         if observe is not None:
             starts = [carry.starts[r].copy() for r in range(int(carry.n_starts[0]))]
             shooting = guidance.ShootingProblem(
-                state.x_hat, horizon, float(rows.eps[i]), n, sc.u_max_km_s2, xf
+                state.x_hat, horizon, float(rows.eps[i]), n, sc.u_max_km_s2, xf, design
             )
             observe(ResolveInput(k, shooting, starts[0], tuple(starts[1:])))
         lam_next = model.lam_step @ lam
@@ -647,8 +684,9 @@ def _shooting_resolves(
         )
         began = time.perf_counter() - float(rows.wall_time_ms[i]) * 1e-3
         result = guidance.after_warm(
-            n, sc.u_max_km_s2, state.x_hat, xf, horizon, scalars.eps, guess, settings, warm, began
-        )
+            n, sc.u_max_km_s2, state.x_hat, xf, horizon, scalars.eps, guess, settings, warm, began,
+            design,
+        )  # fmt: skip
         rec = ended[i] = _record("resolve", k, (k + 1) * dt, result, settings.success_residual)
         if rec.success:
             carry.older[:] = lam_next

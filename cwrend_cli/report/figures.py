@@ -59,13 +59,14 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter
 from matplotlib.typing import RcKeyType
 from scipy.spatial import ConvexHull
 
-from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES
+from cwrend_cli.config import ARCHITECTURES
 from cwrend_cli.output.recording import (
     CORRIDOR_COLOUR,
     DEGRADATION_COLOUR,
     REFERENCE_COLOURS,
     UNSAFE_COLOUR,
     arch_colour,
+    inflation_ratio_names,
 )
 from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.constraints import Geometry
@@ -437,24 +438,9 @@ def fig_eps_score(data: ReportData) -> Figure:
     return _finished(fig)
 
 
-def _ratio_names(slugs: Sequence[str]) -> tuple[str, str]:
-    """Name and definition of the inflation ratio ρ that the ``mtf_ratio`` column holds.
-
-    For MTF it is the MTF ratio tr(S_MTF)/tr(S) (paper Eq. 23); for a single-factor
-    (``stf``) run it is (λ − 1) tr(R)/tr(S), the same definition applied to the single
-    factor (docs/method.md, "The single-factor baseline"); both when both are plotted.
-    """
-    estimators = {ALL_ARCHITECTURES[s].estimator for s in slugs if s in ALL_ARCHITECTURES}
-    if "stf" not in estimators:
-        return "MTF ratio", "tr(S_MTF)/tr(S)"
-    if "mtf" not in estimators:
-        return "single-factor ratio", "(λ − 1) tr(R)/tr(S)"
-    return "inflation ratio", "MTF tr(S_MTF)/tr(S), single factor (λ − 1) tr(R)/tr(S)"
-
-
 def fig_nis_mtf(data: ReportData) -> Figure:
     """Fig. 4: NIS and the inflation ratio ρ, degradation windows shaded; close-up of the
-    windows (ρ named for the estimators plotted: :func:`_ratio_names`).
+    windows (ρ named for the estimators plotted: :func:`inflation_ratio_names`).
 
     The dotted line is the NIS offset ``m`` of the score (not drawn without a
     stored configuration).
@@ -470,7 +456,7 @@ def fig_nis_mtf(data: ReportData) -> Figure:
         for members, g in _groups(data.steps, data.archs, ["mtf_ratio"])
         if g["mtf_ratio"].fillna(0.0).abs().max() > 0
     ]
-    ratio, definition = _ratio_names([a for members, _ in mtf_groups for a in members])
+    ratio, definition = inflation_ratio_names([a for members, _ in mtf_groups for a in members])
     for col in range(2):
         ax_n, ax_r = axes[0, col], axes[1, col]
         for members, g in nis_groups:

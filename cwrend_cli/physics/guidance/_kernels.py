@@ -34,6 +34,20 @@ Kernels hand other kernels flags and small integers as runtime values
 compiles a callee once per literal value it is called with (a ``Literal[int](2)``
 signature beside the ``int64`` one), which was about 10 % of a first compile
 (issue 37 item 12). Same arithmetic, so the same numbers.
+
+The design model (issue 33). ``n`` is CW's mean motion [rad/s] (paper Eqs.
+4, 11), or an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel` of another
+time-invariant model as a plain tuple (Schweighart–Sedwick's J2 model,
+``model.guidance = "ss"``; numba's ``isinstance`` takes no NamedTuple, and a
+plain tuple crosses from Python faster, so the leaves name it again): then
+``Φ``, ``W`` and the primer are that model's
+(:mod:`cwrend_cli.physics.lti_kernels`) and everything above holds as
+written, since it needs only ``Φ(T)Φ(−τ) = Φ(T − τ)``. Only the leaves
+:func:`model_input_kernel`, :func:`model_primer`, :func:`model_stm` and
+:func:`model_costate_stm` look at the type (``isinstance``, resolved when
+numba compiles), so a float ``n`` compiles CW's closed forms exactly as
+before, with the same signatures, and another model compiles its own
+specialisation of the same kernels.
 """
 
 from __future__ import annotations
@@ -43,7 +57,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.dynamics import one_minus_cos, stm, x_minus_sin
+from cwrend_cli.physics import lti_kernels as lti
+from cwrend_cli.physics.dynamics import costate_stm, one_minus_cos, stm, x_minus_sin
+from cwrend_cli.physics.lti_kernels import KernelModel
 
 #: ε below this is exactly bang-bang (paper Eq. 10 as ε → 0; the threshold is not in the paper).
 EPS_BANG_BANG = 1e-12
@@ -151,9 +167,34 @@ def input_kernel(n: float, tau: float, w: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def costate_at(n: float, tau: float, lam0: np.ndarray, out: np.ndarray) -> None:
+def model_input_kernel(n: KernelModel, tau: float, w: np.ndarray) -> None:
+    """:func:`input_kernel` of the design model ``n`` (module docstring): ``W(τ) = Φ(−τ) B``."""
+    if isinstance(n, float):
+        input_kernel(n, tau, w)
+    else:
+        lti.velocity_columns(lti.LtiKernel(*n), -tau, w)
+
+
+@njit(cache=True)
+def model_stm(n: KernelModel, t: float) -> np.ndarray:
+    """``Φ(t)`` (6×6) of the design model ``n`` (module docstring)."""
+    if isinstance(n, float):
+        return stm(n, t)
+    return lti.transition(lti.LtiKernel(*n), t)
+
+
+@njit(cache=True)
+def model_costate_stm(n: KernelModel, t: float) -> np.ndarray:
+    """``e^{−Aᵀt} = Φ(−t)ᵀ`` (6×6) of the design model ``n`` (module docstring)."""
+    if isinstance(n, float):
+        return costate_stm(n, t)
+    return lti.transition(lti.LtiKernel(*n), -t).T.copy()
+
+
+@njit(cache=True)
+def costate_at(n: KernelModel, tau: float, lam0: np.ndarray, out: np.ndarray) -> None:
     """Write ``λ(τ) = Φ(−τ)ᵀ λ₀`` into ``out`` (closed-form costate, from paper Eq. 7)."""
-    p = stm(n, -tau)
+    p = model_stm(n, -tau)
     for j in range(6):
         acc = 0.0
         for i in range(6):
@@ -260,12 +301,27 @@ def _primer(n: float, lam0: np.ndarray, tau: float, order: int, q: np.ndarray) -
 
 
 @njit(cache=True)
+def model_primer(
+    n: KernelModel, lam0: np.ndarray, tau: float, order: int, q: np.ndarray, ws: Workspace
+) -> None:
+    """:func:`_primer` of the design model ``n`` (module docstring).
+
+    Another model's primer (:func:`cwrend_cli.physics.lti_kernels.primer`) builds
+    ``W(τ)`` in ``ws[WS_PRIMER, 12:30]``.
+    """
+    if isinstance(n, float):
+        _primer(n, lam0, tau, order, q)
+    else:
+        lti.primer(lti.LtiKernel(*n), lam0, tau, order, q, ws[WS_PRIMER, 12:30].reshape((6, 3)))
+
+
+@njit(cache=True)
 def _speed_and_rate(
-    n: float, t: float, lam0: np.ndarray, ws: Workspace
+    n: KernelModel, t: float, lam0: np.ndarray, ws: Workspace
 ) -> tuple[float, float, float]:
     """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM, 3:6]`` holds λ_v(t) afterwards."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
-    _primer(n, lam0, t, int(np.int64(1)), q)  # runtime ints (module docstring)
+    model_primer(n, lam0, t, int(np.int64(1)), q, ws)  # runtime ints (module docstring)
     lam = ws[WS_LAM]
     lam[3] = q[0, 0]
     lam[4] = q[0, 1]
@@ -278,11 +334,11 @@ def _speed_and_rate(
 
 @njit(cache=True)
 def _switch_derivs(
-    n: float, lam0: np.ndarray, t: float, ws: Workspace
+    n: KernelModel, lam0: np.ndarray, t: float, ws: Workspace
 ) -> tuple[float, float, float, float]:
     """``f = ‖λ_v(t)‖²`` and its first three time derivatives."""
     q = ws[WS_PRIMER, :12].reshape((4, 3))
-    _primer(n, lam0, t, int(np.int64(3)), q)
+    model_primer(n, lam0, t, int(np.int64(3)), q, ws)
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
@@ -297,7 +353,7 @@ def _switch_derivs(
 
 @njit(cache=True)
 def _g(
-    n: float, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace
+    n: KernelModel, lam0: np.ndarray, t: float, order: int, level: float, ws: Workspace
 ) -> tuple[float, float]:
     """Value and derivative of ``f⁽ᵒʳᵈᵉʳ⁾(t) − level`` (level only for order 0)."""
     f0, f1, f2, f3 = _switch_derivs(n, lam0, t, ws)
@@ -310,7 +366,7 @@ def _g(
 
 @njit(cache=True)
 def _bracketed_root(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     a: float,
     b: float,
@@ -359,7 +415,7 @@ def _bracketed_root(
 
 @njit(cache=True)
 def find_switches(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     t0: float,
     t1: float,
@@ -473,7 +529,7 @@ MAX_QUAD_BREAKS = 4 * MAX_BREAKS
 
 @njit(cache=True)
 def quadrature_breaks(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     t0: float,
     t1: float,
@@ -609,9 +665,9 @@ def add_control_node(
 
 
 @njit(cache=True)
-def terminal_offset(n: float, x0: np.ndarray, xf: np.ndarray, horizon: float) -> np.ndarray:
+def terminal_offset(n: KernelModel, x0: np.ndarray, xf: np.ndarray, horizon: float) -> np.ndarray:
     """``d = Φ(−T) x_f − x₀``: the target in the initial frame (module docstring)."""
-    pf = stm(n, -horizon)
+    pf = model_stm(n, -horizon)
     d = np.empty(6)
     for i in range(6):
         acc = 0.0
@@ -623,7 +679,7 @@ def terminal_offset(n: float, x0: np.ndarray, xf: np.ndarray, horizon: float) ->
 
 @njit(cache=True)
 def dual_evaluate(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -667,7 +723,7 @@ def dual_evaluate(
         for k in range(n_nodes):
             tau = mid + half * gl_x[k]
             wk = half * gl_w[k]
-            input_kernel(n, tau, w)
+            model_input_kernel(n, tau, w)
             q0, q1, q2, p = node_primer(lam0, w)
             int_p += wk * p
             phi, dphi, psi = _regime_terms(p, eps)
@@ -682,7 +738,7 @@ def dual_evaluate(
             ts = switches[s]
             p, pdot, _ = _speed_and_rate(n, ts, lam0, ws)
             rate = max(abs(pdot), MIN_SWITCH_RATE)
-            input_kernel(n, ts, w)
+            model_input_kernel(n, ts, w)
             for i in range(6):
                 wq[i] = (w[i, 0] * lam[3] + w[i, 1] * lam[4] + w[i, 2] * lam[5]) / p
             for i in range(6):
@@ -779,10 +835,10 @@ def step_accepted(
 
 @njit(cache=True)
 def terminal_residual(
-    n: float, horizon: float, grad: np.ndarray, out: np.ndarray
+    n: KernelModel, horizon: float, grad: np.ndarray, out: np.ndarray
 ) -> tuple[float, float]:
     """``x(T) − x_f = Φ(T) G``; returns (‖Δr‖ [km], ‖Δv‖ [km/s])."""
-    p = stm(n, horizon)
+    p = model_stm(n, horizon)
     for i in range(6):
         acc = 0.0
         for j in range(6):
@@ -795,7 +851,7 @@ def terminal_residual(
 
 @njit(cache=True)
 def best_start(
-    n: float,
+    n: KernelModel,
     starts: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -839,7 +895,7 @@ def best_start(
 
 @njit(cache=True)
 def newton_ascent(
-    n: float,
+    n: KernelModel,
     x0: np.ndarray,
     xf: np.ndarray,
     horizon: float,

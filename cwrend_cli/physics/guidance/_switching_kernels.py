@@ -50,6 +50,7 @@ import numpy as np
 from numba import njit
 
 from cwrend_cli.physics.guidance import _kernels as kern
+from cwrend_cli.physics.lti_kernels import KernelModel
 
 #: An end of a burn fixed at 0 or at the horizon.
 END_FIXED = 0
@@ -66,7 +67,7 @@ MAX_CHANGES = 4
 
 @njit(cache=True)
 def burn_integral(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     a: float,
     b: float,
@@ -93,7 +94,7 @@ def burn_integral(
         mid = a + arc * h + half
         for k in range(gl_x.shape[0]):
             tau = mid + half * gl_x[k]
-            kern.input_kernel(n, tau, w)
+            kern.model_input_kernel(n, tau, w)
             q0, q1, q2, p = kern.node_primer(lam0, w)
             wk = half * gl_w[k]
             kern.add_control_node(w, q0, q1, q2, p, wk, 1.0, 0.0, u_max, with_hess, grad, hess, wq)
@@ -101,7 +102,12 @@ def burn_integral(
 
 @njit(cache=True)
 def initial_burns(
-    n: float, lam0: np.ndarray, horizon: float, n_cells: int, times: np.ndarray, kinds: np.ndarray
+    n: KernelModel,
+    lam0: np.ndarray,
+    horizon: float,
+    n_cells: int,
+    times: np.ndarray,
+    kinds: np.ndarray,
 ) -> int:
     """The burns of ``λ₀`` (rows of ``times``/``kinds``), plus one of zero length at τ = 0.
 
@@ -150,7 +156,7 @@ def initial_burns(
 
 @njit(cache=True)
 def joint_system(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     d: np.ndarray,
     u_max: float,
@@ -195,7 +201,7 @@ def joint_system(
                 continue
             t = times[b, e]
             p, pdot, _ = kern._speed_and_rate(n, t, lam0, ws)
-            kern.input_kernel(n, t, w)
+            kern.model_input_kernel(n, t, w)
             sign = 1.0 if e == 1 else -1.0
             for i in range(6):
                 wqi = (w[i, 0] * lam[3] + w[i, 1] * lam[4] + w[i, 2] * lam[5]) / p
@@ -244,7 +250,7 @@ def solve_dense(a: np.ndarray, b: np.ndarray, m: int, out: np.ndarray) -> bool:
 
 @njit(cache=True)
 def update_structure(
-    n: float, lam0: np.ndarray, horizon: float, nb: int, times: np.ndarray, kinds: np.ndarray
+    n: KernelModel, lam0: np.ndarray, horizon: float, nb: int, times: np.ndarray, kinds: np.ndarray
 ) -> tuple[int, bool]:
     """At a solution of the joint system, change the most violated boundary condition.
 
@@ -307,7 +313,7 @@ def update_structure(
 
 @njit(cache=True)
 def predicted_length(
-    n: float,
+    n: KernelModel,
     lam0: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -346,7 +352,7 @@ def predicted_length(
 
 @njit(cache=True)
 def switching_newton(
-    n: float,
+    n: KernelModel,
     lam_start: np.ndarray,
     d: np.ndarray,
     horizon: float,
@@ -437,7 +443,7 @@ def switching_newton(
 
 @njit(cache=True)
 def bang_bang_ascent(
-    n: float,
+    n: KernelModel,
     x0: np.ndarray,
     xf: np.ndarray,
     horizon: float,

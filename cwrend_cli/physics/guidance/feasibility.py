@@ -26,6 +26,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
+from cwrend_cli.physics.design_models import LinearTimeInvariant, lti_stm
 from cwrend_cli.physics.dynamics import cw_system, input_matrix, stm
 
 
@@ -223,7 +224,23 @@ def _affine_norm_integral(a: np.ndarray, b: np.ndarray, r: float) -> np.ndarray:
     return result
 
 
-def _support_upper_bound(n: float, lam: np.ndarray, horizon_s: float, half_s: float) -> float:
+def _system(n: float, design: LinearTimeInvariant | None) -> tuple[np.ndarray, np.ndarray]:
+    """``A``, ``B`` of CW (mean motion ``n``) or of ``design`` (issue 33)."""
+    return cw_system(n) if design is None else design.system()
+
+
+def _stm(n: float, design: LinearTimeInvariant | None, t: float) -> np.ndarray:
+    """``Φ(t)`` of CW (mean motion ``n``) or of ``design`` (issue 33)."""
+    return stm(n, t) if design is None else lti_stm(design, t)
+
+
+def _support_upper_bound(
+    n: float,
+    lam: np.ndarray,
+    horizon_s: float,
+    half_s: float,
+    design: LinearTimeInvariant | None = None,
+) -> float:
     """A rigorous upper bound of ``∫₀^T ‖W(τ)ᵀλ‖ dτ`` (up to rounding).
 
     ``f(τ) = W(τ)ᵀλ = Bᵀμ(τ)`` with ``μ(τ) = e^{−Aᵀτ}λ``, so ``f^{(k)} = Bᵀ(−Aᵀ)^k μ``.
@@ -232,12 +249,12 @@ def _support_upper_bound(n: float, lam: np.ndarray, horizon_s: float, half_s: fl
     is integrated exactly (:func:`_affine_norm_integral`), the rest gives
     ``M₂ r³/3``.
     """
-    a_mat, b_mat = cw_system(n)
+    a_mat, b_mat = _system(n, design)
     at = -a_mat.T
     cells = max(1, int(np.ceil(horizon_s / (2.0 * half_s))))
     r = 0.5 * horizon_s / cells
     centres = (np.arange(cells) + 0.5) * 2.0 * r
-    mu = np.stack([stm(n, -c).T @ lam for c in centres])  # μ(c) = e^{−Aᵀc} λ
+    mu = np.stack([_stm(n, design, -c).T @ lam for c in centres])  # μ(c) = e^{−Aᵀc} λ
     bt = b_mat.T
     f0 = mu @ bt.T
     f1 = mu @ (bt @ at).T
@@ -248,7 +265,13 @@ def _support_upper_bound(n: float, lam: np.ndarray, horizon_s: float, half_s: fl
 
 
 def continuous_peak_thrust(
-    n: float, x0: np.ndarray, xf: np.ndarray, horizon_s: float, cells: int = 0, nodes: int = 8
+    n: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    cells: int = 0,
+    nodes: int = 8,
+    design: LinearTimeInvariant | None = None,
 ) -> float:
     """Certified lower bound of the smallest ``max_t ‖u(t)‖`` reaching ``x_f`` [km/s²].
 
@@ -273,7 +296,8 @@ def continuous_peak_thrust(
     ``x_f``, and a feasible problem, however close to the boundary, is never
     labelled infeasible. Unlike :func:`min_peak_thrust` it does not depend on
     a control grid (whose held controls overstate the bound). Returns 0 when
-    the cone program fails (no certificate).
+    the cone program fails (no certificate). ``design``: a time-invariant design
+    model other than CW (issue 33; None: CW of mean motion ``n``).
     """
     cells = cells or max(64, int(np.ceil(horizon_s / 10.0)))
     gx, gw = np.polynomial.legendre.leggauss(nodes)
@@ -284,8 +308,8 @@ def continuous_peak_thrust(
     m = tau.size
     # λ = diag(1/T, 1/T, 1/T, 1, 1, 1) λ̃: both halves of Wᵀλ are then O(1)
     scale = np.array([1.0 / horizon_s] * 3 + [1.0] * 3)
-    wt = np.stack([stm(n, -t)[:, 3:].T * scale[None, :] for t in tau])  # (m, 3, 6)
-    d = np.linalg.solve(stm(n, horizon_s), xf) - x0
+    wt = np.stack([_stm(n, design, -t)[:, 3:].T * scale[None, :] for t in tau])  # (m, 3, 6)
+    d = np.linalg.solve(_stm(n, design, horizon_s), xf) - x0
     n_vars = 6 + m  # λ̃, then t_i ≥ ‖W_iᵀλ̃‖
     mean_row = sp.csc_matrix((w, (np.zeros(m, dtype=int), 6 + np.arange(m))), shape=(1, n_vars))
     body_rows = (4 * np.arange(m)[:, None, None] + 1 + np.arange(3)[None, :, None]).repeat(6, 2)
@@ -306,7 +330,7 @@ def continuous_peak_thrust(
     gain = float(lam @ d)
     if gain <= 0.0:
         return 0.0
-    return gain / _support_upper_bound(n, lam, horizon_s, 0.25)
+    return gain / _support_upper_bound(n, lam, horizon_s, 0.25, design)
 
 
 def min_fuel_costate(g: GridProblem, n: float) -> np.ndarray | None:

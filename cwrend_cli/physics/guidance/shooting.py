@@ -33,6 +33,14 @@ no failed re-solve, total re-solve time 12.0 s and mean miss 1.080 m (max
 cone program's costate then warm-starts the next re-solve, which mostly
 converges again at once (seed 262: 5 plans instead of 24).
 
+Design model (issue 33): CW (paper Eqs. 4, 11) unless the problem carries
+another time-invariant model (``ShootingProblem.design``: Schweighart–Sedwick's
+J2 model, ``model.guidance = "ss"``). Then the kernels, the energy-optimal
+start, the cone program's grid and the dual bound all use that model; the
+primer vector is ``λ_v(t) = Bᵀ Φ(T, t)ᵀ ν`` with ``Φ(T, t) = e^{A(T − t)}``
+(Lawden's primer vector of a linear system), and the control law, the
+shooting residual and the fallback chain are the same.
+
 Units: km, s, km/s, km/s², rad/s.
 """
 
@@ -47,11 +55,13 @@ from typing import Any, Literal
 import numpy as np
 import scipy.linalg
 
+from cwrend_cli.physics.design_models import LinearTimeInvariant, lti_input_matrix, lti_stm
 from cwrend_cli.physics.dynamics import cw_system, stm
 from cwrend_cli.physics.guidance import _kernels as kern
 from cwrend_cli.physics.guidance import _switching_kernels as switching
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveResult, SolveStatus
+from cwrend_cli.physics.lti_kernels import KernelModel
 
 EPS_BANG_BANG = kern.EPS_BANG_BANG
 
@@ -74,6 +84,9 @@ class ShootingProblem:
     mean_motion_rad_s: float
     u_max_km_s2: float
     xf: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    #: the guidance's time-invariant design model other than CW (issue 33); None: CW of
+    #: ``mean_motion_rad_s``
+    design: LinearTimeInvariant | None = None
 
     def __post_init__(self) -> None:
         # Own read-only copies: callers often pass views of arrays they keep mutating.
@@ -83,6 +96,28 @@ class ShootingProblem:
                 raise ValueError(f"{name} must have shape (6,), got {arr.shape}")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
+
+    @property
+    def kernel_model(self) -> KernelModel:
+        """The design model as the compiled kernels take it (:mod:`._kernels`' docstring)."""
+        return kernel_model(self.mean_motion_rad_s, self.design)
+
+    def transition(self, t: float) -> np.ndarray:
+        """``Φ(t)`` (6×6) of the design model."""
+        return stm(self.mean_motion_rad_s, t) if self.design is None else lti_stm(self.design, t)
+
+    def system(self) -> tuple[np.ndarray, np.ndarray]:
+        """``A`` (6×6) and ``B`` (6×3) of the design model."""
+        return cw_system(self.mean_motion_rad_s) if self.design is None else self.design.system()
+
+
+def kernel_model(n: float, design: LinearTimeInvariant | None) -> KernelModel:
+    """The model the kernels take: CW's mean motion ``n`` [rad/s], or ``design``'s coefficients.
+
+    The coefficients as the plain tuple of an :class:`~cwrend_cli.physics.lti_kernels.LtiKernel`
+    (:mod:`._kernels`' docstring).
+    """
+    return n if design is None else tuple(design.kernel())
 
 
 @dataclass(frozen=True)
@@ -151,7 +186,7 @@ def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
     ``d/dt [x; λ] = [[A, −BBᵀ], [0, −Aᵀ]] [x; λ]``; its 12×12 matrix exponential
     over the horizon gives ``x(T) = E₁₁ x₀ + E₁₂ λ(0)``, solved for ``λ(0)``.
     """
-    a, b = cw_system(problem.mean_motion_rad_s)
+    a, b = problem.system()
     z = np.zeros((12, 12))
     z[:6, :6] = a
     z[:6, 6:] = -b @ b.T
@@ -161,7 +196,7 @@ def energy_optimal_costate(problem: ShootingProblem) -> np.ndarray:
 
 
 def warm_attempt(
-    n: float,
+    n: KernelModel,
     u_max_km_s2: float,
     x0: np.ndarray,
     xf: np.ndarray,
@@ -178,6 +213,7 @@ def warm_attempt(
     (``settings.switching_max_iter`` steps; its answer confirmed by the full
     dual evaluation, else the damped ascent goes on; the iterations are the
     sum of both). ``residual`` is ``hypot(‖Δr(T)‖, ‖Δv(T)‖)`` [km, km/s].
+    ``n``: the design model as the kernels take it (:func:`kernel_model`).
     ``starts`` must be float64 and C-contiguous; ``x0`` and ``xf`` are made
     so, and writable: numba compiles a read-only array (a ShootingProblem's)
     as another type, so a read-only state here made the closed loop's first
@@ -216,7 +252,7 @@ def _newton(
     problem: ShootingProblem, eps: float, guess: np.ndarray, settings: SolverSettings
 ) -> tuple[SolveStatus, np.ndarray, int, float]:
     return warm_attempt(
-        problem.mean_motion_rad_s,
+        problem.kernel_model,
         problem.u_max_km_s2,
         problem.x0,
         problem.xf,
@@ -265,7 +301,18 @@ def _continuation(
 
 
 def _grid(problem: ShootingProblem, settings: SolverSettings) -> feasibility.GridProblem:
-    """The re-solve transcribed on the zero-order-hold grid of the convex checks."""
+    """The re-solve transcribed on the zero-order-hold grid of the convex checks.
+
+    Another design model's grid is its steps' ``Φ(Δt)``, ``Γ(Δt)`` (issue 33).
+    """
+    if problem.design is not None:
+        dt = settings.dt_grid_s
+        steps = max(1, round(problem.horizon_s / dt))
+        phi = np.broadcast_to(lti_stm(problem.design, dt), (steps, 6, 6))
+        gam = np.broadcast_to(lti_input_matrix(problem.design, dt), (steps, 6, 3))
+        return feasibility.grid_problem_from_steps(
+            phi, gam, problem.x0, problem.xf, dt, problem.u_max_km_s2
+        )
     return feasibility.grid_problem(
         problem.mean_motion_rad_s,
         problem.x0,
@@ -309,6 +356,7 @@ def solve(
         guess,
         settings or SolverSettings(),
         alternatives,
+        problem.design,
     )
 
 
@@ -322,8 +370,11 @@ def solve_state(
     guess: np.ndarray,
     settings: SolverSettings,
     alternatives: Sequence[np.ndarray] = (),
+    design: LinearTimeInvariant | None = None,
 ) -> SolveResult:
     """:func:`solve` on plain values: the closed loop's re-solve (issue 17).
+
+    ``design``: the design model other than CW (:attr:`ShootingProblem.design`).
 
     The warm attempt runs straight on the arrays given; the validated
     :class:`ShootingProblem` (copies) is built only when the fallback chain
@@ -333,7 +384,7 @@ def solve_state(
     start = time.perf_counter()
     guess = np.array(guess, dtype=float)
     warm = warm_attempt(
-        n,
+        kernel_model(n, design),
         u_max_km_s2,
         x0,
         xf,
@@ -342,7 +393,7 @@ def solve_state(
         warm_starts(guess, alternatives, eps),
         settings,
     )
-    return after_warm(n, u_max_km_s2, x0, xf, horizon_s, eps, guess, settings, warm, start)
+    return after_warm(n, u_max_km_s2, x0, xf, horizon_s, eps, guess, settings, warm, start, design)
 
 
 def after_warm(
@@ -356,6 +407,7 @@ def after_warm(
     settings: SolverSettings,
     warm: tuple[SolveStatus, np.ndarray, int, float],
     start: float,
+    design: LinearTimeInvariant | None = None,
 ) -> SolveResult:
     """How a re-solve ends once its warm attempt ``warm`` (:func:`warm_attempt`) is known.
 
@@ -366,7 +418,7 @@ def after_warm(
     """
     status, lam, iters, res = warm
     if status is SolveStatus.FAILED and settings.fallback == "chain":
-        problem = ShootingProblem(x0, float(horizon_s), float(eps), n, u_max_km_s2, xf)
+        problem = ShootingProblem(x0, float(horizon_s), float(eps), n, u_max_km_s2, xf, design)
         return _fallback_chain(problem, guess, settings, iters, res, start)
     return SolveResult(
         costate=lam if status is SolveStatus.CONVERGED else guess,
@@ -457,7 +509,7 @@ def _evaluate(
     hess = np.empty((6, 6))
     ws = kern.workspace()
     kern.dual_evaluate(
-        problem.mean_motion_rad_s,
+        problem.kernel_model,
         np.ascontiguousarray(costate, dtype=float),
         -np.asarray(problem.x0, dtype=float),  # d = −x₀ makes G = x₀ + ∫ W u dτ
         float(problem.horizon_s),
@@ -471,7 +523,7 @@ def _evaluate(
         hess,
         ws,
     )
-    phi = stm(problem.mean_motion_rad_s, problem.horizon_s)
+    phi = problem.transition(problem.horizon_s)
     return phi @ grad, phi @ hess
 
 
@@ -494,7 +546,7 @@ def switching_times(
     minima = np.empty(kern.MAX_BREAKS)
     ws = kern.workspace()
     count, _ = kern.find_switches(
-        problem.mean_motion_rad_s,
+        problem.kernel_model,
         np.ascontiguousarray(costate, dtype=float),
         float(t0),
         float(t1),
@@ -519,6 +571,7 @@ def classify_failure(problem: ShootingProblem) -> SolveStatus:
     overstates it by up to ~8e-4 relative).
     """
     peak = feasibility.continuous_peak_thrust(
-        problem.mean_motion_rad_s, problem.x0, problem.xf, problem.horizon_s
-    )
+        problem.mean_motion_rad_s, problem.x0, problem.xf, problem.horizon_s,
+        design=problem.design,
+    )  # fmt: skip
     return SolveStatus.INFEASIBLE if peak > problem.u_max_km_s2 else SolveStatus.FAILED
