@@ -238,3 +238,62 @@ def test_without_a_keep_out_zone_the_plan_is_the_unconstrained_one() -> None:
     res = cp.plan(N_MOTION, DT, U_MAX, x0, np.array([0, 0, -0.25, 0, 0, 0]), 100.0, 1.0, geo)
     assert res.scp_iterations == 0 and not res.modes.any()
     assert res.status is SolveStatus.CONVERGED
+
+
+def _far_problem(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, cg.Geometry]:
+    """A start 2–3 km out in a random direction, a 200 m sphere and a corridor to a port on
+    the far side (so the straight path crosses the zone), for a 300 s horizon: most nodes
+    are far from the zone (their rows are left out) and at ε = 0 most steps coast."""
+    axes, axis = np.array([0.2, 0.2, 0.2]), rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    port = 0.25 * axis
+    x0 = np.r_[-axis * rng.uniform(2.0, 3.0) + rng.normal(size=3) * 0.1, np.zeros(3)]
+    return x0, np.r_[port, 0, 0, 0], _geometry(axes, port, axis, 30.0)
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.5, 1.0])
+def test_the_reduced_programs_give_the_whole_programs_plans(eps: float) -> None:
+    """The reductions (left-out rows, substituted states, coasting steps held at zero; each
+    checked on the answer) change the program Clarabel sees, not its answer: on random
+    problems, cold and warm-started from the whole program's plan shifted by 5 steps (a
+    switch that moved), the plan of every SCP iteration, hence the result, is the whole
+    program's: same status, SCP iterations, modes and slack; controls within 1e-4 u_max
+    and positions within 1e-6 km (1 mm). Clarabel stops at a 1e-10 relative gap; at ε = 0
+    the cost is linear in ‖u‖ but for the regularisation 1e-6 ‖ũ‖², so the size of a
+    step's control at a switch is fixed only loosely: measured 2.8e-5 u_max (ε = 0),
+    8.6e-7 (0.5), 6.1e-10 (1); positions within 8.5e-8 km."""
+    rng = np.random.default_rng(3200 + round(10 * eps))
+    for _ in range(3):
+        x0, xf, geo = _far_problem(rng)
+        whole = cp.plan(N_MOTION, DT, U_MAX, x0, xf, 300.0, eps, geo, reduce=False)
+        shifted = np.vstack([whole.controls[5:], np.zeros((5, 3))])
+        x1 = cp.node_positions(N_MOTION, DT, x0, whole.controls[:10])[0][-1]
+        cases = [(x0, 300.0, None), (x1, 290.0, shifted[5:])]
+        for start, horizon, warm in cases:
+            ref = cp.plan(N_MOTION, DT, U_MAX, start, xf, horizon, eps, geo, None, 0.0, warm, False)
+            red = cp.plan(N_MOTION, DT, U_MAX, start, xf, horizon, eps, geo, None, 0.0, warm)
+            assert ref.status is SolveStatus.CONVERGED and red.status is ref.status
+            assert red.scp_iterations == ref.scp_iterations and red.slack_km == ref.slack_km
+            np.testing.assert_array_equal(red.modes, ref.modes)
+            np.testing.assert_allclose(red.controls, ref.controls, rtol=0, atol=1e-4 * U_MAX)
+            np.testing.assert_allclose(red.positions, ref.positions, rtol=0, atol=1e-6)
+
+
+def test_a_left_out_half_space_row_holds_on_the_whole_trust_box() -> None:
+    """A half-space row is left out only when every corner of its node's trust box (so,
+    the box being convex, every point of it) satisfies it with 1 mm to spare; and the
+    far problem leaves most rows out."""
+    rng = np.random.default_rng(3201)
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+    for _ in range(5):
+        x0, _, geo = _far_problem(rng)
+        r_bar = x0[:3] + np.linspace(0.0, 1.0, 301)[:, None] * (-1.9 * x0[:3])
+        modes = cp._modes(geo, r_bar, None)
+        trust = cp.TRUST_RADIUS_FACTOR * 0.2
+        half_spaces = cp._half_spaces(geo, modes, r_bar, np.full(modes.size, 1e-4), None, 0.0)
+        kept, left_out = cp._pairs(modes, r_bar, half_spaces, trust)
+        assert left_out.shape[0] > kept.shape[0] > 0
+        for k, j, b in left_out:  # (node, half-space, ellipsoid: issue 34)
+            box = r_bar[k] + trust * corners
+            h = half_spaces[int(b)][int(j)]
+            assert np.all(h.residual_km(box) >= cp.SCP_TOL_KM * (1 - 1e-9))

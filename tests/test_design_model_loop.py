@@ -127,6 +127,54 @@ def test_ya_tables_are_the_transition_of_each_step() -> None:
     assert np.array_equal(tables.gam[417], dm.ya_input_matrix(chief, 417.0, 418.0))
 
 
+def _own_steps_grid(
+    phi: np.ndarray, gam: np.ndarray, k0: int, x0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A re-solve from step k0 condensed from its own steps alone (blocks, b, Φ(t_N, t_k0)).
+
+    What every re-solve did before the condensation onto t_N was shared:
+    ``M_j = Φ_{N−1} ⋯ Φ_{j+1} Γ_j``, the product grown on the right from t_N back to t_k0.
+    """
+    steps = phi.shape[0]
+    blocks = np.empty((steps - k0, 6, 3))
+    acc = np.eye(6)
+    for j in range(steps - 1, k0 - 1, -1):
+        blocks[j - k0] = acc @ gam[j]
+        acc = acc @ phi[j]
+    return blocks, XF - acc @ x0, acc
+
+
+@pytest.mark.parametrize(("name", "tr"), [("ss", J2_TRUTH), ("ya", ECCENTRIC)])
+def test_a_resolve_slices_the_shared_condensation_bit_for_bit(
+    name: DesignModelName, tr: Truth
+) -> None:
+    """Each re-solve's grid (simulation._grid) equals its own steps' condensation exactly.
+
+    Exact, not to a tolerance: the shared condensation forms the same products
+    in the same order (from t_N backwards, growing on the right), so its row j
+    and its Φ(t_N, t_k0) do not depend on where the grid starts. Horizons: the
+    whole, a remainder that rounds to 537 steps, and the last step.
+    """
+    problem = Problem(truth=tr, model=DesignModel(guidance=name))
+    condensed = simulation._guidance_condensed(problem)
+    assert condensed is not None
+    assert simulation._guidance_condensed(Problem(truth=tr)) is None  # CW: Eq. 11's powers
+    tables = dm.step_tables(name, SC, tr)
+    x_hat = X0 + np.array([1e-3, -2e-3, 5e-4, 1e-6, -2e-6, 3e-6])
+    for horizon_s, steps in ((SC.horizon_s, SC.n_steps), (537.0000001, 537), (1.0, 1)):
+        g = simulation._grid(SC, x_hat, horizon_s, condensed)
+        blocks, rhs, transition = _own_steps_grid(tables.phi, tables.gam, SC.n_steps - steps, x_hat)
+        assert g.blocks.shape == (steps, 6, 3)
+        assert np.array_equal(g.blocks, blocks)
+        assert np.array_equal(g.rhs, rhs)
+        assert g.transition is not None and np.array_equal(g.transition, transition)
+        ref = feasibility.grid_problem_from_steps(
+            tables.phi[-steps:], tables.gam[-steps:], x_hat, XF, SC.dt_s, SC.u_max_km_s2
+        )
+        assert np.array_equal(g.row_scale, ref.row_scale)
+        assert np.array_equal(g.blocks, ref.blocks) and np.array_equal(g.rhs, ref.rhs)
+
+
 #: Combinations not flown yet: (campaign, architectures, --set, what the refusal says).
 _REFUSED = {
     # the shooting kernels need the transition in closed form at any time: not 'ya' (issue 33)

@@ -53,3 +53,21 @@ def test_a_recording_without_constraints_draws_none(tmp_path: Path) -> None:
     chunks = _chunks(tmp_path, SHORT)
     assert not [p for p in chunks if p.startswith("/constraints") or "safety" in p]
     assert "/arch/mtf_fixed/trajectory/unsafe" not in chunks
+
+
+def test_a_tumbling_targets_constraints_are_drawn_in_its_turning_body(tmp_path: Path) -> None:
+    """Issue 34: the bodies and the corridor under ``/target/body`` (which carries the
+    attitude), every ellipsoid drawn, none left still in the relative frame."""
+    bodies = [{"centre_km": [0.0, 0.3, 0.0], "semi_axes_km": [0.01, 0.08, 0.05]}]
+    tree = {
+        **SHORT,
+        "target": {"attitude": "tumbling", "body_rates_deg_s": [0.0, 0.0, 2.0]},
+        "constraints": {**CONSTRAINTS, "keep_out": {**CONSTRAINTS["keep_out"], "bodies": bodies}},
+    }
+    chunks = _chunks(tmp_path, tree)
+    assert "/target/body/constraints/keep_out" in chunks
+    assert "/target/body/constraints/corridor" in chunks
+    assert not [p for p in chunks if p.startswith("/constraints")]
+    table = chunks["/target/body/constraints/keep_out"][0].to_record_batch()
+    sizes = [c for c in table.schema.names if "half_size" in c.lower()]
+    assert len(table.column(sizes[0])[0]) == 2  # the centred ellipsoid and the panel

@@ -3,8 +3,8 @@
 Fixed, the section leaves no trace: the resolved tree, the config hash and the typed
 problem are those of a config without it. Tumbling, every field is checked at
 validation (exit 2 naming the field), is shown, ``--set``, swept and dispersed like
-any other, and the combination with ``[constraints]`` (which do not rotate yet) is
-refused.
+any other. With ``[constraints]`` it is accepted: they are given in the body frame
+(``test_tumbling_config``).
 """
 
 from __future__ import annotations
@@ -74,10 +74,6 @@ REFUSED = {
     "tumbling fields on a fixed target": (
         "target.attitude='fixed'",
         "target.initial_quaternion = [1.0, 0.0, 0.0, 0.2]: applies to a tumbling target only",
-    ),
-    "constraints with a tumbling target": (
-        "constraints.keep_out.semi_axes_km=[0.1, 0.1, 0.1]",
-        'target.attitude = "tumbling": rotating constraints are not supported yet',
     ),
     "an unknown key": ("target.spin_deg_s=1", "target.spin_deg_s"),
 }

@@ -85,6 +85,7 @@ __all__ = [
     "TaskOutcome",
     "actuator_draws",
     "actuator_seed_sequence",
+    "attitude_draws",
     "execute_task",
     "fault_draws",
     "fault_seed_sequence",
@@ -153,6 +154,20 @@ def fault_draws(problem: Problem, root_seed: int, seed: int) -> sensors.FaultDra
     )
 
 
+def attitude_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
+    """Stream of the attitude-knowledge error of realisation ``seed`` (issue 34; independent of
+    every other)."""
+    return np.random.SeedSequence(root_seed, spawn_key=(seed, 4))
+
+
+def attitude_draws(problem: Problem, root_seed: int, seed: int) -> FloatArray | None:
+    """The 6 standard normals of realisation ``seed``'s attitude-knowledge error
+    (:func:`cwrend_cli.physics.attitude.knowledge_error`), or ``None`` when it is off."""
+    if not problem.target.knowledge_error:
+        return None
+    return np.random.default_rng(attitude_seed_sequence(root_seed, seed)).standard_normal(6)
+
+
 def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
     """The standard-normal realisation (N, 3) of ``seed`` from ``noise``.
 
@@ -210,9 +225,17 @@ def run_case(
     refs = refs if refs is not None else simulation.open_loop_references(problem)
     draws = actuator_draws(problem, cfg.noise.seed, seed)
     faults = fault_draws(problem, cfg.noise.seed, seed)
+    knowledge = attitude_draws(problem, cfg.noise.seed, seed)
     runs = tuple(
         simulation.simulate(
-            problem, a, noise, refs, seed=seed, actuator_draws=draws, fault_draws=faults
+            problem,
+            a,
+            noise,
+            refs,
+            seed=seed,
+            actuator_draws=draws,
+            fault_draws=faults,
+            attitude_draws=knowledge,
         )
         for a in archs
     )
@@ -486,6 +509,7 @@ def execute_task(
                         spec.seed,
                         actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
                         fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
+                        attitude_draws=attitude_draws(problem, task.noise.root_seed, spec.seed),
                     )
                 guards.check_finite(result)
                 metrics = summary_row(result, run_refs.fuel)

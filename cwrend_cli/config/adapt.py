@@ -62,7 +62,12 @@ def constraints_of(cfg: CwrendConfig) -> params.Constraints | None:
     if c.keep_out is None and c.corridor is None:  # a margin alone constrains nothing
         return None
     return params.Constraints(
-        keep_out=None if c.keep_out is None else _mirror(params.KeepOut, c.keep_out),
+        keep_out=None
+        if c.keep_out is None
+        else params.KeepOut(
+            c.keep_out.semi_axes_km,
+            tuple(_mirror(params.KeepOutBody, b) for b in c.keep_out.bodies),
+        ),
         corridor=None if c.corridor is None else _mirror(params.Corridor, c.corridor),
         sigma_margin=c.sigma_margin,
     )

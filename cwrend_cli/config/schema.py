@@ -68,6 +68,7 @@ __all__ = [
     "Dispersion",
     "EstimatorConfig",
     "GuidanceConfig",
+    "KeepOutBodyConfig",
     "KeepOutConfig",
     "NoiseConfig",
     "OutputConfig",
@@ -1029,18 +1030,72 @@ AxisEntry = Annotated[float, Strict(), Field(ge=-GAIN_MAX, le=GAIN_MAX)]
 SIGMA_MARGIN_MAX = 100.0
 
 
+#: Most extra keep-out bodies (``[[constraints.keep_out.bodies]]``) [-]: a bus and its
+#: appendages; every body adds one row per node to the constrained program.
+KEEP_OUT_BODIES_MAX = 16
+
+
+class KeepOutBodyConfig(_FrozenModel):
+    """One more keep-out ellipsoid (issue 34; ``[[constraints.keep_out.bodies]]``).
+
+    Axis-aligned in the target's body frame (the relative frame for a fixed
+    target), centred at ``centre_km``: ``Σ ((r_i − c_i)/a_i)² < 1``.
+    """
+
+    centre_km: tuple[PositionKm, PositionKm, PositionKm] = Field(
+        description="centre c of the ellipsoid in the target's body frame (the relative frame "
+        "for a fixed target); each within ±1e4 km [km]",
+    )
+    semi_axes_km: tuple[SemiAxisKm, SemiAxisKm, SemiAxisKm] = Field(
+        description="semi-axes (a, b, c) along the body axes x, y, z; each in (0, 1e4] [km]",
+    )
+
+    @field_validator("centre_km", "semi_axes_km", mode="before")
+    @classmethod
+    def _three_entries(cls, value: Any) -> Any:
+        return _check_length(value, 3)
+
+
 class KeepOutConfig(_FrozenModel):
-    """A keep-out ellipsoid centred on the target (issue 32; ``[constraints.keep_out]``)."""
+    """The keep-out zone (issue 32; ``[constraints.keep_out]``): an ellipsoid centred on the
+    target, and optionally more ellipsoids (issue 34: a bus and its panels).
+
+    For a tumbling target (``[target]``) every axis is a body axis and the zone
+    turns with the body. Without ``bodies`` the section is written as before, so
+    the hashes of existing configs do not change.
+    """
 
     semi_axes_km: tuple[SemiAxisKm, SemiAxisKm, SemiAxisKm] = Field(
         description="semi-axes (a, b, c) of the ellipsoid (x/a)² + (y/b)² + (z/c)² < 1 along x "
-        "radial, y along-track, z cross-track; each in (0, 1e4] [km]",
+        "radial, y along-track, z cross-track (the body axes of a tumbling target); each in "
+        "(0, 1e4] [km]",
+    )
+    bodies: tuple[KeepOutBodyConfig, ...] = Field(
+        (),
+        max_length=KEEP_OUT_BODIES_MAX,
+        description="more keep-out ellipsoids, each a [[constraints.keep_out.bodies]] table "
+        "with centre_km and semi_axes_km in the body frame; the zone is their union with the "
+        "one above; at most 16 [-]",
     )
 
     @field_validator("semi_axes_km", mode="before")
     @classmethod
     def _three_axes(cls, value: Any) -> Any:
         return _check_length(value, 3)
+
+    @model_serializer(mode="wrap")
+    def _without_empty_bodies(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # no extra body: written as before issue 34 (same config and campaign hashes)
+        out: dict[str, Any] = handler(self)
+        if not self.bodies:
+            out.pop("bodies", None)
+        return out
+
+    def ellipsoids(self) -> list[tuple[tuple[float, float, float], tuple[float, float, float]]]:
+        """``(centre_km, semi_axes_km)`` of every ellipsoid, the centred one first."""
+        return [((0.0, 0.0, 0.0), self.semi_axes_km)] + [
+            (b.centre_km, b.semi_axes_km) for b in self.bodies
+        ]
 
 
 class CorridorConfig(_FrozenModel):
@@ -1109,18 +1164,25 @@ class ConstraintsConfig(_FrozenModel):
     @model_validator(mode="after")
     def _port_outside_keep_out(self) -> Self:
         if self.keep_out is not None and self.corridor is not None:
-            level = sum(
-                (p / a) ** 2
-                for p, a in zip(self.corridor.port_km, self.keep_out.semi_axes_km, strict=True)
-            )
-            if level < 1.0 - PORT_SURFACE_TOL:
+            for i, (centre, axes) in enumerate(self.keep_out.ellipsoids()):
+                level = sum(
+                    ((p - c) / a) ** 2
+                    for p, c, a in zip(self.corridor.port_km, centre, axes, strict=True)
+                )
+                if level >= 1.0 - PORT_SURFACE_TOL:
+                    continue
+                where = (
+                    "(x/a)² + (y/b)² + (z/c)² = "
+                    f"{level:.6g} < 1 with (a, b, c) = keep_out.semi_axes_km"
+                    if i == 0
+                    else f"it is inside keep_out.bodies.{i - 1} (level {level:.6g} < 1)"
+                )
                 raise rules_error(
                     [
                         (
                             "corridor.port_km",
                             list(self.corridor.port_km),
-                            "must lie on or outside the keep-out zone: (x/a)² + (y/b)² + "
-                            f"(z/c)² = {level:.6g} < 1 with (a, b, c) = keep_out.semi_axes_km",
+                            f"must lie on or outside the keep-out zone: {where}",
                         )
                     ]
                 )
@@ -1148,6 +1210,10 @@ BodyRateDegS = Annotated[float, Strict(), Field(ge=-BODY_RATE_MAX_DEG_S, le=BODY
 InertiaRatio = Annotated[float, Strict(), Field(gt=0, le=GAIN_MAX)]
 
 
+#: Largest attitude-knowledge error σ [deg]: beyond 30° per axis the prediction is noise.
+KNOWLEDGE_SIGMA_MAX_DEG = 30.0
+
+
 class TargetConfig(_FrozenModel):
     """The target's attitude (issue 34; ``[target]``); ``fixed`` by default.
 
@@ -1156,8 +1222,8 @@ class TargetConfig(_FrozenModel):
     rigid body (:mod:`cwrend_cli.physics.attitude`). The tumbling fields are
     refused with ``fixed`` (they would do nothing). Fixed, the section is left out
     of the resolved config, so the config hash and every number are as without
-    it. Path constraints do not rotate with a tumbling target yet: ``tumbling``
-    with ``[constraints]`` is refused.
+    it. With a tumbling target the keep-out ellipsoids, the port and the corridor
+    axis of ``[constraints]`` are given in the target's body frame and turn with it.
     """
 
     attitude: Literal["fixed", "tumbling"] = Field(
@@ -1184,6 +1250,30 @@ class TargetConfig(_FrozenModel):
         description="tumbling: principal moments of inertia (I1, I2, I3) about the body axes, "
         "as ratios; each in (0, 1e6], no one above the sum of the other two [-]",
     )
+
+    knowledge_sigma_deg: Float = Field(
+        0.0,
+        ge=0,
+        le=KNOWLEDGE_SIGMA_MAX_DEG,
+        description="tumbling: the constrained guidance's attitude-knowledge error, σ of a "
+        "rotation about each body axis drawn once a run from its own stream; in [0, 30] [deg]",
+    )
+    knowledge_sigma_deg_s: Float = Field(
+        0.0,
+        ge=0,
+        le=BODY_RATE_MAX_DEG_S,
+        description="tumbling: the constrained guidance's body-rate knowledge error, σ per "
+        "axis drawn once a run from its own stream; in [0, 60] [deg/s]",
+    )
+
+    @model_serializer(mode="wrap")
+    def _without_perfect_knowledge(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # perfect attitude knowledge (the default) is written as before the fields existed
+        out: dict[str, Any] = handler(self)
+        for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
+            if getattr(self, name) == 0.0:
+                out.pop(name, None)
+        return out
 
     @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
     @classmethod
@@ -1217,7 +1307,13 @@ class TargetConfig(_FrozenModel):
         if self.attitude == "fixed":
             unused = [
                 (name, getattr(self, name))
-                for name in ("initial_quaternion", "body_rates_deg_s", "inertia")
+                for name in (
+                    "initial_quaternion",
+                    "body_rates_deg_s",
+                    "inertia",
+                    "knowledge_sigma_deg",
+                    "knowledge_sigma_deg_s",
+                )
                 if getattr(self, name) != type(self).model_fields[name].default
             ]
             if unused:
@@ -1226,7 +1322,7 @@ class TargetConfig(_FrozenModel):
                     [
                         (
                             name,
-                            list(value),
+                            list(value) if isinstance(value, tuple) else value,
                             "applies to a tumbling target only: set target.attitude = "
                             "'tumbling', or leave it out",
                         )
@@ -1477,16 +1573,30 @@ class CwrendConfig(_FrozenModel):
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
                 )
             )
-        if self.target.attitude == "tumbling" and self.constraints.active:
+        if (
+            self.target.attitude == "tumbling"
+            and self.constraints.corridor is not None
+            and self.constraints.keep_out is None
+        ):
             problems.append(
                 (
-                    "target.attitude",
-                    self.target.attitude,
-                    "rotating constraints are not supported yet: [constraints] are given in "
-                    "the relative frame and would not turn with a tumbling target; use "
-                    "target.attitude = 'fixed' or leave out [constraints]",
+                    "constraints.corridor",
+                    "set",
+                    "a tumbling target's moving port is flown to by the constrained cone "
+                    "program, which needs a keep-out zone: add [constraints.keep_out] or "
+                    "leave out the corridor",
                 )
             )
+        for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
+            if getattr(self.target, name) > 0.0 and self.constraints.keep_out is None:
+                problems.append(
+                    (
+                        f"target.{name}",
+                        getattr(self.target, name),
+                        "the attitude knowledge is used by the constrained guidance only, "
+                        "which needs a keep-out zone: add [constraints.keep_out] or leave it 0",
+                    )
+                )
         corridor = self.constraints.corridor
         if corridor is not None and tuple(sc.xf) != (*corridor.port_km, 0.0, 0.0, 0.0):
             problems.append(

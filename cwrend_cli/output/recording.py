@@ -26,7 +26,8 @@ Entity paths (``<slug>`` is an architecture slug, e.g. ``mtf_adaptive``)::
                                        "tumbling", issue 34)
     /target/body/axes                  Arrows3D: the body's x, y, z axes (red, green, blue)
     /degradation/<i>                   Scalars 0/1 (window i active) + TextLog at start/end
-    /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static)
+    /constraints/{keep_out, corridor}  Ellipsoids3D, LineStrips3D (with [constraints], static;
+                                       a tumbling target's under /target/body, turning)
     /arch/<slug>/safety_distance_km    Scalars: φ to the unsafe set (with [constraints])
     /arch/<slug>/trajectory/unsafe     Points3D: the nodes inside the unsafe set (static)
     /about                             TextDocument: what is in the recording, arrow scale
@@ -55,6 +56,7 @@ import numpy as np
 from cwrend_cli.errors import CwrendError
 from cwrend_cli.output.files import atomic_path
 from cwrend_cli.physics import measurement_models as mm
+from cwrend_cli.physics.constraints import ellipsoids
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import ALL_ARCHITECTURES, Window
 from cwrend_cli.physics.sensors import in_window
@@ -503,9 +505,9 @@ def _log_case(
         static=True,
     )
     geo = next((r.safety.geometry for r in runs if r.safety is not None), None)
-    if geo is not None:  # issue 32: the keep-out zone and the corridor
-        _log_constraints(rec, geo, line_r)
     tumble = next((r for r in runs if r.target_attitude is not None), None)
+    if geo is not None:  # issue 32: the keep-out zone and the corridor (34: in the body)
+        _log_constraints(rec, geo, line_r, "/target/body" if tumble is not None else "")
     if tumble is not None:  # issue 34: the same for every architecture of the case
         _log_target_attitude(rec, tumble, TARGET_AXES_SHARE * extent, line_r)
     rec.log(
@@ -621,17 +623,23 @@ CORRIDOR_COLOUR = (90, 200, 120)
 _CONE_LINES = 12
 
 
-def _log_constraints(rec: rr.RecordingStream, geo: Geometry, line_radius: float) -> None:
-    """The keep-out ellipsoid (``/constraints/keep_out``) and the corridor cone
-    (``/constraints/corridor``: generator lines and two rings, out to twice the largest
-    semi-axis or port distance), static."""
+def _log_constraints(
+    rec: rr.RecordingStream, geo: Geometry, line_radius: float, root: str = ""
+) -> None:
+    """The keep-out ellipsoids (``<root>/constraints/keep_out``) and the corridor cone
+    (``<root>/constraints/corridor``: generator lines and two rings, out to twice the
+    largest semi-axis or port distance), static; a tumbling target's under
+    ``/target/body`` (issue 34), so that they turn with it."""
     import rerun as rr
 
     if geo.semi_axes_km is not None:
+        parts = [(np.zeros(3) if c is None else c, a) for c, a in ellipsoids(geo)]
         rec.log(
-            "/constraints/keep_out",
+            f"{root}/constraints/keep_out",
             rr.Ellipsoids3D(
-                half_sizes=[geo.semi_axes_km], centers=[[0.0, 0.0, 0.0]], colors=[UNSAFE_COLOUR]
+                half_sizes=[a for _, a in parts],
+                centers=[c for c, _ in parts],
+                colors=[UNSAFE_COLOUR],
             ),
             static=True,
         )
@@ -652,7 +660,7 @@ def _log_constraints(rec: rr.RecordingStream, geo: Geometry, line_radius: float)
     strips = [np.stack([geo.port_km, geo.port_km + length * d]) for d in rim[::4][:-1]]
     strips += [geo.port_km + f * length * rim for f in (0.5, 1.0)]
     rec.log(
-        "/constraints/corridor",
+        f"{root}/constraints/corridor",
         rr.LineStrips3D(strips, colors=[CORRIDOR_COLOUR], radii=[0.5 * line_radius]),
         static=True,
     )

@@ -260,6 +260,15 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "down the corridor; NaN: no corridor or at rest)"
     ),
     "safety_violated": _col("the true trajectory entered the unsafe set (min distance < 0)", "-"),
+    # a tumbling target (issue 34): the docking state error against the moving port
+    "safety_dock_position_error_km": _col(
+        "distance of the true position at T to the tumbling target's port ||r(T) - R(T) p|| "
+        "(NaN without a corridor)"
+    ),
+    "safety_dock_velocity_error_km_s": _col(
+        "difference of the true velocity at T and the tumbling target's port velocity "
+        "||v(T) - Omega(T) x R(T) p|| (NaN without a corridor)"
+    ),
     "scp_iterations": _col(
         "convex programs the constrained cone program solved (sequential convex "
         "programming); 0: not a constrained solve",
@@ -702,6 +711,12 @@ SAFETY_RUN_FIELDS = [
     pa.field("safety_approach_angle_deg", pa.float64()),
     pa.field("safety_violated", pa.bool_()),
 ]
+#: The runs' docking-state columns (issue 34), written after :data:`SAFETY_RUN_FIELDS` only
+#: for a tumbling target (its measures are against the turning set).
+DOCK_RUN_FIELDS = [
+    pa.field("safety_dock_position_error_km", pa.float64()),
+    pa.field("safety_dock_velocity_error_km_s", pa.float64()),
+]
 #: The steps' safety columns (issue 32), written only when the runs have constraints.
 SAFETY_STEP_FIELDS = [
     pa.field("safety_distance_km", pa.float64()),
@@ -734,6 +749,9 @@ def summary_row(result: RunResult, fuel: OpenLoopResult) -> dict[str, Any]:
         row["safety_approach_speed_km_s"] = sf.approach_speed_km_s
         row["safety_approach_angle_deg"] = sf.approach_angle_deg
         row["safety_violated"] = sf.violated
+        if sf.rotating:
+            row["safety_dock_position_error_km"] = sf.dock_position_error_km
+            row["safety_dock_velocity_error_km_s"] = sf.dock_velocity_error_km_s
     return row
 
 
@@ -760,6 +778,7 @@ def summary_table(
     """Table of summary rows (see :func:`summary_row`)."""
     safety = any(SAFETY_RUN_FIELDS[0].name in r for r in rows)
     schema = _with_fields(SUMMARY_SCHEMA, SAFETY_RUN_FIELDS, safety)
+    schema = _with_fields(schema, DOCK_RUN_FIELDS, any(DOCK_RUN_FIELDS[0].name in r for r in rows))
     table = pa.Table.from_pylist([dict(r) for r in rows], schema=schema)
     return _conventional(table, metadata)
 
@@ -881,7 +900,10 @@ def runs_table(records: Sequence[Mapping[str, Any]], metadata: Mapping[str, Any]
         pa.field("duration_s", pa.float64()),
     ]
     safety = any(SAFETY_RUN_FIELDS[0].name in r.get("metrics", {}) for r in records)
-    for f in _RUN_METRICS + (SAFETY_RUN_FIELDS if safety else []):
+    dock = any(DOCK_RUN_FIELDS[0].name in r.get("metrics", {}) for r in records)
+    for f in (
+        _RUN_METRICS + (SAFETY_RUN_FIELDS if safety else []) + (DOCK_RUN_FIELDS if dock else [])
+    ):
         cols[f.name] = [r.get("metrics", {}).get(f.name) for r in records]
         fields.append(f)
     for prefix, key in ((PARAM_PREFIX, "params"), ("disp.", "dispersed")):

@@ -69,7 +69,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.constraints import SAFETY_SUBSTEPS
+from cwrend_cli.physics.constraints import SAFETY_SUBSTEPS, BodyMotion, rate_bounds
 from cwrend_cli.physics.params import FloatArray, Target
 
 __all__ = [
@@ -78,11 +78,15 @@ __all__ = [
     "AttitudeModel",
     "TargetAttitude",
     "attitude_model",
+    "body_motion",
     "euler_rates",
     "hill_from_inertial",
+    "knowledge_error",
     "max_rate_rad_s",
+    "predict",
     "propagate",
     "quat_multiply",
+    "rotation_matrices",
     "target_attitude",
 ]
 
@@ -163,6 +167,90 @@ def target_attitude(
     q_ib, w = propagate(model, h_out, per, count)
     t = np.arange(count + 1, dtype=np.float64) * h_out
     return TargetAttitude(t, hill_from_inertial(q_ib, t, model.n_rad_s), w, substeps)
+
+
+def rotation_matrices(q: FloatArray) -> FloatArray:
+    """The rotation matrices (M, 3, 3) of unit scalar-first quaternions (M, 4).
+
+    ``R(q) v = q ⊗ (0, v) ⊗ q*`` (Diebel 2006: the rotation matrix of a unit
+    quaternion, written for Hamilton's product).
+    """
+    q0, q1, q2, q3 = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    rows = [
+        [1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
+        [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
+        [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)],
+    ]
+    return np.asarray(np.moveaxis(np.array(rows), (0, 1), (-2, -1)), dtype=np.float64)
+
+
+def body_motion(model: AttitudeModel, q_hb: FloatArray, w_rad_s: FloatArray) -> BodyMotion:
+    """The turn of the body frame relative to the Hill frame at the given samples (M rows).
+
+    ``R`` body→Hill from ``q_hb``; the body's angular velocity relative to the
+    Hill frame in Hill axes ``Ω = R ω − n ẑ`` (module docstring: ω is relative
+    to inertial space, the Hill frame turns at n about its z); the bounds of ‖Ω‖
+    and ‖Ω̇‖ from the largest rate the body reaches
+    (:func:`~cwrend_cli.physics.constraints.rate_bounds`).
+    """
+    rot = rotation_matrices(q_hb)
+    rate = np.einsum("mij,mj->mi", rot, w_rad_s)
+    rate[:, 2] -= model.n_rad_s
+    bound, bound_dot = rate_bounds(max_rate_rad_s(model), model.n_rad_s)
+    return BodyMotion(rot, np.asarray(rate, dtype=np.float64), bound, bound_dot)
+
+
+def knowledge_error(target: Target, draws: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The attitude-knowledge error of a run (issue 34 item 3) from 6 standard normals.
+
+    ``(δθ [rad], δω [rad/s])``: a rotation vector in body axes with σ =
+    ``knowledge_sigma_deg`` per axis and a body-rate error with σ =
+    ``knowledge_sigma_deg_s`` per axis. The guidance believes the attitude
+    ``q ⊗ q(δθ)`` and the rates ``ω + δω``.
+    """
+    d = np.asarray(draws, dtype=np.float64)
+    return (
+        math.radians(target.knowledge_sigma_deg) * d[:3],
+        math.radians(target.knowledge_sigma_deg_s) * d[3:6],
+    )
+
+
+def predict(
+    model: AttitudeModel,
+    q_hb: FloatArray,
+    w_rad_s: FloatArray,
+    t_s: float,
+    n_steps: int,
+    dt_s: float,
+    error: tuple[FloatArray, FloatArray],
+    substeps: int = SAFETY_SUBSTEPS,
+) -> tuple[AttitudeModel, FloatArray, FloatArray]:
+    """The attitude the guidance predicts at ``t_s + k·dt_s``, k = 0 … ``n_steps`` (issue 34).
+
+    From the known attitude at ``t_s``: the truth's ``q_hb`` (body→Hill),
+    ``w_rad_s`` turned by the knowledge ``error`` (δθ, δω of
+    :func:`knowledge_error`): ``q ⊗ q(δθ)``, ``ω + δω``; propagated by the same
+    torque-free model and integrator as the truth (:func:`target_attitude`, on
+    the same sub-samples). Returns the believed body's model (its rates at
+    ``t_s``, for the rate bounds), ``q_hb`` (n_steps+1, 4) and ``ω`` (n_steps+1, 3).
+    """
+    d_theta, d_w = error
+    angle = float(np.linalg.norm(d_theta))
+    turn = np.array([1.0, 0.0, 0.0, 0.0])
+    if angle > 0.0:
+        turn = np.r_[math.cos(0.5 * angle), math.sin(0.5 * angle) * d_theta / angle]
+    to_inertial = np.array([math.cos(0.5 * model.n_rad_s * t_s), 0.0, 0.0,
+                            math.sin(0.5 * model.n_rad_s * t_s)])  # fmt: skip
+    q_ib = quat_multiply(quat_multiply(to_inertial, np.asarray(q_hb, dtype=np.float64)), turn)
+    believed = model._replace(
+        q0=q_ib / np.linalg.norm(q_ib), w0_rad_s=np.asarray(w_rad_s, dtype=np.float64) + d_w
+    )
+    h_out = dt_s / substeps
+    per = max(1, math.ceil(max_rate_rad_s(believed) * h_out / MAX_ANGLE_PER_STEP_RAD))
+    q, w = propagate(believed, h_out, per, n_steps * substeps)
+    t = t_s + np.arange(n_steps * substeps + 1, dtype=np.float64) * h_out
+    q_h = hill_from_inertial(q, t, model.n_rad_s)
+    return believed, q_h[::substeps], w[::substeps]
 
 
 # ---------------------------------------------------------------------------

@@ -48,37 +48,76 @@ whenever the denominator is positive (nΔt < 0.39; the paper's is 1e-3):
 **Covariance margin.** :func:`covariance_margin_km` gives ``k √(nᵀ P_pos n)``:
 k standard deviations of the position estimate along a constraint's unit
 normal n (``constraints.sigma_margin`` = k).
+
+**Several bodies** (issue 34 item 2). The keep-out zone may be a union of
+axis-aligned ellipsoids E_j, centre c_j, semi-axes a_j (a bus and its panels):
+E = ∪ E_j, d_E = min_j d_Ej (the distance to a union is the smallest of the
+distances; inside, −min_j d_Ej is the depth in the deepest body, a lower bound
+of the depth in the union), still 1-Lipschitz. The corridor waives every body.
+
+**A tumbling target** (issue 34 items 1b and 3). The ellipsoids, the port and
+the corridor axis are given in the target's body frame B, which turns relative
+to the Hill frame H: ``r_H = R(t) ρ_B`` with R body→Hill, ``Ṙ = [Ω×] R``, Ω the
+body's angular velocity relative to H in H axes (:class:`BodyMotion`). In B
+the unsafe set is fixed, and the chaser's body-frame position ρ = Rᵀ r obeys
+(differentiating ρ = Rᵀ r twice)
+
+    ρ̈ = Rᵀ (r̈ − 2 Ω × ṙ − Ω̇ × r + Ω × (Ω × r)),
+
+so ``‖ρ̈‖ ≤ A + (‖Ω̇‖ + ‖Ω‖²) R + 2‖Ω‖ V`` with A, R, V the bounds of ‖r̈‖,
+‖r‖, ‖v‖ over the step (:func:`body_acceleration_bound`). Everything above
+then holds in B with that bound in place of A: the body-frame arc stays within
+``‖ρ̈‖Δt²/8`` of the body-frame chord, so a convex body-frame set (a half-space
+of one ellipsoid, the corridor cone) tightened by it at both nodes holds along
+the arc; a point's excursion within a step gains the rotation's share: a body
+point at distance R from the centre moves by ‖Ω‖RΔt (the ω × r of the port),
+and the bound above is the second-order form of the same fact. With
+``Ω_H = R ω_B − n ẑ`` (ω_B the inertial body rates, n the Hill frame's rate),
+``‖Ω‖ ≤ ω + n`` and ``Ω̇ = −n ẑ × R ω_B + R ω̇_B``, so ``‖Ω̇‖ ≤ nω + ‖ω̇_B‖ ≤
+nω + ω²`` (Euler's torque-free equations with |I_j − I_k| ≤ I_i give
+|ω̇_i| ≤ |ω_j ω_k|, whose norm is at most ω²/√3), ω the largest inertial rate
+the body reaches (energy bound): :func:`rate_bounds`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from cwrend_cli.physics.params import Constraints, Corridor, FloatArray, KeepOut
 
 __all__ = [
     "SAFETY_SUBSTEPS",
+    "BodyMotion",
     "Geometry",
     "HalfSpace",
     "Safety",
     "SecondOrderCone",
     "acceleration_bound",
+    "body_acceleration_bound",
     "chord_margin_km",
     "cone_signed_distance",
     "corridor_angle_deg",
     "corridor_cone",
     "covariance_margin_km",
+    "covariance_margins_km",
     "ellipsoid_level",
     "ellipsoid_signed_distance",
+    "ellipsoids",
     "geometry",
     "hermite_arcs",
+    "keep_out_distance",
     "linearise_keep_out",
     "measure_safety",
+    "rate_bounds",
     "signed_distance",
     "step_excursion_km",
+    "tangent_planes",
+    "to_body",
 ]
 
 #: Bisection steps of the ellipsoid distance (geometric, on a range of at most 1e40):
@@ -96,12 +135,16 @@ class Geometry:
 
     ``semi_axes_km`` (3,) [km] or None; ``port_km`` (3,) [km], ``axis`` (3,) unit
     vector [-] and ``half_angle_rad`` [rad] of the corridor, or None.
+    ``bodies_centre_km``, ``bodies_semi_axes_km`` (M, 3) [km]: the extra ellipsoids
+    (issue 34), or None. For a tumbling target every vector is in body axes.
     """
 
     semi_axes_km: FloatArray | None
     port_km: FloatArray | None
     axis: FloatArray | None
     half_angle_rad: float | None
+    bodies_centre_km: FloatArray | None = None
+    bodies_semi_axes_km: FloatArray | None = None
 
 
 def geometry(constraints: Constraints) -> Geometry:
@@ -109,15 +152,99 @@ def geometry(constraints: Constraints) -> Geometry:
     ko: KeepOut | None = constraints.keep_out
     co: Corridor | None = constraints.corridor
     axes = None if ko is None else np.array(ko.semi_axes_km, dtype=np.float64)
+    centres = sizes = None
+    if ko is not None and ko.bodies:
+        centres = np.array([b.centre_km for b in ko.bodies], dtype=np.float64)
+        sizes = np.array([b.semi_axes_km for b in ko.bodies], dtype=np.float64)
     if co is None:
-        return Geometry(axes, None, None, None)
+        return Geometry(axes, None, None, None, centres, sizes)
     axis = np.array(co.axis, dtype=np.float64)
     return Geometry(
         axes,
         np.array(co.port_km, dtype=np.float64),
         axis / np.linalg.norm(axis),
         math.radians(co.half_angle_deg),
+        centres,
+        sizes,
     )
+
+
+def ellipsoids(geo: Geometry) -> list[tuple[FloatArray | None, FloatArray]]:
+    """``(centre_km, semi_axes_km)`` of every keep-out ellipsoid, the centred one first (its
+    centre None: the origin); empty without a keep-out zone."""
+    if geo.semi_axes_km is None:
+        return []
+    out: list[tuple[FloatArray | None, FloatArray]] = [(None, geo.semi_axes_km)]
+    if geo.bodies_centre_km is not None and geo.bodies_semi_axes_km is not None:
+        out += list(zip(geo.bodies_centre_km, geo.bodies_semi_axes_km, strict=True))
+    return out
+
+
+def keep_out_distance(r_km: FloatArray, geo: Geometry) -> FloatArray:
+    """d_E [km]: signed distance of positions (..., 3) to the keep-out zone, the smallest over
+    its ellipsoids (module docstring); +∞ without a zone."""
+    r = np.asarray(r_km, dtype=np.float64)
+    d = np.full(r.shape[:-1], np.inf)
+    for centre, axes in ellipsoids(geo):
+        d = np.minimum(d, ellipsoid_signed_distance(r if centre is None else r - centre, axes))
+    return d
+
+
+def _inside_keep_out(r_km: FloatArray, geo: Geometry) -> npt.NDArray[np.bool_]:
+    """True where positions (..., 3) lie inside some ellipsoid of the zone (level < 1)."""
+    inside = np.zeros(np.asarray(r_km).shape[:-1], dtype=bool)
+    for centre, axes in ellipsoids(geo):
+        inside |= ellipsoid_level(r_km if centre is None else r_km - centre, axes) < 1.0
+    return inside
+
+
+class BodyMotion(NamedTuple):
+    """How the target's body frame turns over a sequence of times (issue 34).
+
+    ``rotation`` (M, 3, 3) body→Hill, ``rate_rad_s`` (M, 3) its angular velocity
+    relative to the Hill frame in Hill axes (Ω of the module docstring), and
+    bounds over every time: ``rate_bound_rad_s`` ≥ ‖Ω‖,
+    ``rate_dot_bound_rad_s2`` ≥ ‖Ω̇‖ (:func:`rate_bounds`).
+    """
+
+    rotation: FloatArray
+    rate_rad_s: FloatArray
+    rate_bound_rad_s: float
+    rate_dot_bound_rad_s2: float
+
+
+def to_body(motion: BodyMotion | None, r_km: FloatArray) -> FloatArray:
+    """Body-frame coordinates ``ρ_i = R_iᵀ r_i`` of Hill positions (M, 3); ``r`` without motion."""
+    if motion is None:
+        return r_km
+    return np.asarray(np.einsum("mji,mj->mi", motion.rotation, r_km), dtype=np.float64)
+
+
+def rate_bounds(omega_max_rad_s: float, n_rad_s: float) -> tuple[float, float]:
+    """``(ω + n, nω + ω²)``: bounds of ‖Ω‖ [rad/s] and ‖Ω̇‖ [rad/s²] from the largest inertial
+    body rate ω and the mean motion n (module docstring)."""
+    w = omega_max_rad_s
+    return w + n_rad_s, n_rad_s * w + w * w
+
+
+def body_acceleration_bound(
+    accel_km_s2: float,
+    r_km: float,
+    v_km_s: float,
+    rate_rad_s: float,
+    rate_dot_rad_s2: float,
+    dt_s: float,
+) -> float:
+    """A bound on ‖ρ̈‖, the body-frame acceleration, over a step [km/s²] (module docstring).
+
+    ``A + (‖Ω̇‖ + ‖Ω‖²) R + 2‖Ω‖ V`` with A = ``accel_km_s2`` (a bound of ‖r̈‖ over
+    the step, :func:`acceleration_bound` from ‖r_k‖ = ``r_km``, ‖v_k‖ =
+    ``v_km_s``), ``R = ‖r_k‖ + ‖v_k‖Δt + AΔt²`` and ``V = ‖v_k‖ + AΔt``.
+    """
+    r_step = r_km + v_km_s * dt_s + accel_km_s2 * dt_s**2
+    v_step = v_km_s + accel_km_s2 * dt_s
+    spin = rate_dot_rad_s2 + rate_rad_s**2
+    return accel_km_s2 + spin * r_step + 2.0 * rate_rad_s * v_step
 
 
 def ellipsoid_level(r_km: FloatArray, semi_axes_km: FloatArray) -> FloatArray:
@@ -198,7 +325,7 @@ def signed_distance(r_km: FloatArray, geo: Geometry) -> FloatArray:
     r = np.asarray(r_km, dtype=np.float64)
     if geo.semi_axes_km is None:
         return np.full(r.shape[:-1], np.inf)
-    d_e = ellipsoid_signed_distance(r, geo.semi_axes_km)
+    d_e = keep_out_distance(r, geo)
     if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
         return d_e
     d_c = cone_signed_distance(r, geo.port_km, geo.axis, geo.half_angle_rad)
@@ -228,13 +355,20 @@ def linearise_keep_out(
     raised by ``margin_km``, so every point of the returned half-space has its
     ball of radius ``margin_km`` outside the zone (d_E ≥ margin). r̄ ≠ 0.
     """
+    normals, offsets = tangent_planes(semi_axes_km, np.reshape(r_bar_km, (1, 3)))
+    return HalfSpace(normals[0], float(offsets[0]) + margin_km)
+
+
+def tangent_planes(semi_axes_km: FloatArray, r_bar_km: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`linearise_keep_out` at K points at once, untightened: (unit normals (K, 3),
+    offsets (K,) [km]) of the half-spaces ``nᵀ r ≥ offset``; rows r̄ ≠ 0."""
     a = np.asarray(semi_axes_km, dtype=np.float64)
     r_bar = np.asarray(r_bar_km, dtype=np.float64)
     grad = 2.0 * r_bar / a**2
-    size = float(np.linalg.norm(grad))
-    normal = grad / size
-    g = float(ellipsoid_level(r_bar, a))
-    return HalfSpace(normal, float(normal @ r_bar) + (1.0 - g) / size + margin_km)
+    size = np.sqrt(np.sum(grad * grad, axis=1))
+    normals = grad / size[:, None]
+    g = ellipsoid_level(r_bar, a)
+    return normals, np.sum(normals * r_bar, axis=1) + (1.0 - g) / size
 
 
 @dataclass(frozen=True)
@@ -300,8 +434,14 @@ def chord_margin_km(accel_km_s2: float, dt_s: float) -> float:
 
 def covariance_margin_km(normal: FloatArray, p_pos_km2: FloatArray, k: float) -> float:
     """``k √(nᵀ P_pos n)`` [km]: k σ of the position estimate along the unit normal n."""
-    n = np.asarray(normal, dtype=np.float64)
-    return k * math.sqrt(max(float(n @ p_pos_km2 @ n), 0.0))
+    return float(covariance_margins_km(np.reshape(normal, (1, 3)), p_pos_km2, k)[0])
+
+
+def covariance_margins_km(normals: FloatArray, p_pos_km2: FloatArray, k: float) -> FloatArray:
+    """:func:`covariance_margin_km` of K unit normals (K, 3) at once [km]."""
+    n = np.asarray(normals, dtype=np.float64)
+    quad = np.einsum("ki,ij,kj->k", n, np.asarray(p_pos_km2, dtype=np.float64), n)
+    return np.asarray(k * np.sqrt(np.maximum(quad, 0.0)), dtype=np.float64)
 
 
 # ---------------------------------------------------------------------------
@@ -355,6 +495,11 @@ class Safety:
     violated: bool  # min_distance_km < 0
     step_distance_km: FloatArray  # (N+1,) φ at the nodes t_k [km]
     geometry: Geometry  # what was measured against (drawn by the recordings)
+    #: a tumbling target (issue 34): measured against the turning set, and the docking
+    #: state error at T relative to the moving port (NaN without a corridor)
+    rotating: bool = False
+    dock_position_error_km: float = math.nan  # ‖r(T) − R(T) p‖ [km]
+    dock_velocity_error_km_s: float = math.nan  # ‖v(T) − Ω(T) × R(T) p‖ [km/s]
 
 
 def _ellipsoid_distance_bounds(
@@ -381,9 +526,12 @@ def _min_signed_distance(points: FloatArray, geo: Geometry, d_c: FloatArray | No
 
     φ's bounds from :func:`_ellipsoid_distance_bounds` (d_C is exact and cheap):
     only the points whose lower bound is at most the smallest upper bound can
-    hold the minimum.
+    hold the minimum. With several bodies, d_E of every point (exact).
     """
     assert geo.semi_axes_km is not None
+    if geo.bodies_centre_km is not None:
+        d_e = keep_out_distance(points, geo)
+        return float(np.min(d_e if d_c is None else np.maximum(d_e, -d_c)))
     low, high = _ellipsoid_distance_bounds(points, geo.semi_axes_km)
     if d_c is not None:
         low, high = np.maximum(low, -d_c), np.maximum(high, -d_c)
@@ -398,7 +546,11 @@ def _min_signed_distance(points: FloatArray, geo: Geometry, d_c: FloatArray | No
 
 
 def measure_safety(
-    x: FloatArray, dt_s: float, geo: Geometry, substeps: int = SAFETY_SUBSTEPS
+    x: FloatArray,
+    dt_s: float,
+    geo: Geometry,
+    substeps: int = SAFETY_SUBSTEPS,
+    motion: BodyMotion | None = None,
 ) -> Safety:
     """The :class:`Safety` of the trajectory ``x`` (N+1, 6) [km, km/s] on a grid of step Δt.
 
@@ -409,13 +561,34 @@ def measure_safety(
     inside the keep-out zone (where the corridor is what makes a position safe):
     0 when the path never enters it; NaN without a corridor or without a
     keep-out zone. The approach angle is NaN without a corridor or at rest.
+
+    ``motion`` (a tumbling target, issue 34): the body frame's turn at every
+    sub-sample (N·substeps + 1 rows). Every sub-sample is then measured in the
+    body frame at its own time, the approach speed and angle are those of the
+    velocity relative to the body at T (ρ̇ = Rᵀ(v − Ω × r)), and the docking
+    state error is taken against the moving port (R p, Ω × R p).
     """
     x = np.asarray(x, dtype=np.float64)
     arcs = hermite_arcs(x, dt_s, substeps)
     points = np.concatenate([arcs[:, :-1].reshape(-1, 3), x[-1:, :3]])  # every Δt/substeps
-    nodes = signed_distance(x[:, :3], geo)
-    corridor = geo.port_km is not None and geo.axis is not None and geo.half_angle_rad is not None
     v_end = x[-1, 3:]
+    dock = (math.nan, math.nan)
+    if motion is not None:
+        points = to_body(motion, points)
+        rot_end, rate_end = motion.rotation[-1], motion.rate_rad_s[-1]
+        v_end = rot_end.T @ (v_end - np.cross(rate_end, x[-1, :3]))
+        nodes = signed_distance(points[::substeps], geo)
+        if geo.port_km is not None:
+            port = rot_end @ geo.port_km
+            dock = (
+                float(np.linalg.norm(x[-1, :3] - port)),
+                float(np.linalg.norm(x[-1, 3:] - np.cross(rate_end, port))),
+            )
+    else:
+        nodes = signed_distance(x[:, :3], geo)
+        if geo.port_km is not None:
+            dock = (float(np.linalg.norm(x[-1, :3] - geo.port_km)), float(np.linalg.norm(v_end)))
+    corridor = geo.port_km is not None and geo.axis is not None and geo.half_angle_rad is not None
     speed = float(np.linalg.norm(v_end))
     violation, angle = math.nan, math.nan
     if corridor and speed > 0.0:
@@ -430,7 +603,7 @@ def measure_safety(
             assert geo.half_angle_rad is not None
             d_c = cone_signed_distance(points, geo.port_km, geo.axis, geo.half_angle_rad)
         min_distance = _min_signed_distance(points, geo, d_c)
-        inside = ellipsoid_level(points, geo.semi_axes_km) < 1.0
+        inside = _inside_keep_out(points, geo)
         unsafe = inside if d_c is None else inside & (d_c > 0.0)
         unsafe_time = float(np.count_nonzero(unsafe)) * dt_s / substeps
         if corridor:
@@ -448,4 +621,7 @@ def measure_safety(
         violated=bool(min_distance < 0.0),
         step_distance_km=np.asarray(nodes, dtype=np.float64),
         geometry=geo,
+        rotating=motion is not None,
+        dock_position_error_km=dock[0],
+        dock_velocity_error_km_s=dock[1],
     )

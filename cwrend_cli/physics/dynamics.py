@@ -155,3 +155,13 @@ def zoh_step(phi: np.ndarray, gam: np.ndarray, x: np.ndarray, u: np.ndarray) -> 
             acc += phi[i, j] * x[j]
         out[i] = acc
     return out
+
+
+@njit(cache=True)
+def zoh_rollout(phi: np.ndarray, gam: np.ndarray, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """States ``(N + 1, 6)`` of held controls ``u`` (N, 3) from ``x0`` by :func:`zoh_step`."""
+    x = np.empty((u.shape[0] + 1, 6))
+    x[0] = x0
+    for k in range(u.shape[0]):
+        x[k + 1] = zoh_step(phi, gam, x[k], u[k])
+    return x

@@ -367,14 +367,26 @@ class Actuator:
 
 
 @dataclass(frozen=True)
+class KeepOutBody:
+    """One more keep-out ellipsoid ``Σ ((r_i − c_i)/a_i)² < 1`` (issue 34), axis-aligned in
+    the target's body frame (the relative frame for a fixed target)."""
+
+    centre_km: Vec3  # centre c [km]
+    semi_axes_km: Vec3  # semi-axes (a, b, c) [km]
+
+
+@dataclass(frozen=True)
 class KeepOut:
     """A keep-out ellipsoid centred on the target (the relative frame's origin).
 
     The zone is ``(x/a)² + (y/b)² + (z/c)² < 1`` with ``semi_axes_km = (a, b, c)``
-    along x (radial), y (along-track), z (cross-track) [km].
+    along x (radial), y (along-track), z (cross-track) [km], united with the
+    ellipsoids of ``bodies`` (issue 34). For a tumbling target every axis is a
+    body axis.
     """
 
     semi_axes_km: Vec3  # ellipsoid semi-axes (a, b, c) [km]
+    bodies: tuple[KeepOutBody, ...] = ()  # more ellipsoids (issue 34)
 
 
 @dataclass(frozen=True)
@@ -419,18 +431,30 @@ class Target:
     ``initial_quaternion`` (body→Hill at t = 0, scalar-first, normalised at use),
     the initial ``body_rates_deg_s`` (angular velocity relative to inertial
     space, in body axes) and the principal moments of inertia ``inertia``
-    (ratios).
+    (ratios). The constrained guidance predicts the attitude from the truth's,
+    with a knowledge error of σ ``knowledge_sigma_deg`` and
+    ``knowledge_sigma_deg_s`` per axis drawn once a run
+    (:func:`cwrend_cli.physics.attitude.knowledge_error`).
     """
 
     attitude: Literal["fixed", "tumbling"] = "fixed"
     initial_quaternion: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # [-]
     body_rates_deg_s: Vec3 = (0.0, 0.0, 0.0)  # ω(0), inertial, body axes [deg/s]
     inertia: Vec3 = (1.0, 1.0, 1.0)  # principal moments (I₁, I₂, I₃), ratios [-]
+    knowledge_sigma_deg: float = 0.0  # guidance's attitude-knowledge error, σ per axis [deg]
+    knowledge_sigma_deg_s: float = 0.0  # its body-rate knowledge error, σ per axis [deg/s]
 
     @property
     def tumbling(self) -> bool:
         """True for a torque-free tumbling target."""
         return self.attitude == "tumbling"
+
+    @property
+    def knowledge_error(self) -> bool:
+        """True when the guidance's attitude knowledge has an error (a per-run draw)."""
+        return self.tumbling and (
+            self.knowledge_sigma_deg > 0.0 or self.knowledge_sigma_deg_s > 0.0
+        )
 
 
 @dataclass(frozen=True)

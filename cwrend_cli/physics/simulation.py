@@ -45,6 +45,7 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -71,7 +72,15 @@ from cwrend_cli.physics.dynamics import costate_stm, discretize
 from cwrend_cli.physics.estimation import ESTIMATOR_KINDS
 from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
-from cwrend_cli.physics.params import Architecture, FloatArray, Problem, Scenario, Schedule
+from cwrend_cli.physics.params import (
+    Architecture,
+    DesignModelName,
+    FloatArray,
+    Problem,
+    Scenario,
+    Schedule,
+    Truth,
+)
 
 
 @dataclass(frozen=True)
@@ -310,6 +319,7 @@ def simulate(
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
     observe: ResolveObserver | None = None,
+    attitude_draws: FloatArray | None = None,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
 
@@ -317,7 +327,9 @@ def simulate(
     errors (required when ``problem.actuator`` has per-step noise; ignored
     where its σ is zero). ``fault_draws``: the draws of the degradation
     windows' sensor faults (required for the kinds some window switches on,
-    :func:`cwrend_cli.physics.sensors.draw_faults`).
+    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the 6
+    standard normals of the guidance's attitude-knowledge error (a tumbling target
+    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`).
 
     ``observe`` (tests, benchmarks): called with the input of every shooting
     re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
@@ -334,6 +346,7 @@ def simulate(
 
     # torque-free, so nothing the chaser does changes it: the whole run's, before the loop
     target_attitude = _target_attitude(problem)
+    known = _Knowledge(target_attitude, _knowledge_error(problem, attitude_draws))
     x0 = np.asarray(sc.x0, dtype=float)
     # the filter starts at the true initial state (a convention of cwrend; not in the paper)
     # unless an initial error is set
@@ -365,12 +378,14 @@ def simulate(
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
-        scp = _constrained_plan(problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0)
+        scp = _constrained_plan(
+            problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, known
+        )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
             result = convex.solve(
-                _grid(sc, x_hat0, sc.horizon_s, _guidance_tables(problem)), eps0, n
+                _grid(sc, x_hat0, sc.horizon_s, _guidance_condensed(problem)), eps0, n
             )
         solves.append(
             _record("initial", -1, 0.0, result, settings.success_residual, scp and scp[1])
@@ -383,11 +398,15 @@ def simulate(
 
     schedule = resolve_steps(problem)
     if socp:
-        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate)
+        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, known)
     else:
         solves += _shooting_resolves(problem, settings, schedule, loop, scalars, observe)
 
-    miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
+    safety = _safety(problem, log.x, target_attitude)
+    if safety is not None and safety.rotating and not math.isnan(safety.dock_position_error_km):
+        miss = safety.dock_position_error_km  # a tumbling target: the moving port (issue 34)
+    else:
+        miss = float(np.linalg.norm(log.x[-1, :3] - np.asarray(sc.xf[:3])))
     window = np.full(n_steps + 1, -1, dtype=np.int64)
     window[1:] = active
     dropout = np.concatenate(([False], dropout_steps))
@@ -415,7 +434,7 @@ def simulate(
         nees=log.nees,
         dropout=dropout,
         outlier=outlier,
-        safety=_safety(problem, log.x),
+        safety=safety,
         trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
@@ -570,12 +589,75 @@ def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
     return attitude.target_attitude(model, sc.n_steps, sc.dt_s)
 
 
-def _safety(problem: Problem, x_true: FloatArray) -> safety_geometry.Safety | None:
-    """The safety of the true trajectory (issue 32 item 3); None without constraints."""
+def _body_motion(
+    problem: Problem, att: attitude.TargetAttitude, start: int, stop: int, stride: int
+) -> safety_geometry.BodyMotion:
+    """The tumbling target's turn at its samples ``start:stop:stride`` (issue 34)."""
+    model = attitude.attitude_model(problem.target, problem.scenario.mean_motion_rad_s)
+    rows = slice(start, stop, stride)
+    return attitude.body_motion(model, att.q_hb[rows], att.w_rad_s[rows])
+
+
+@dataclass(frozen=True)
+class _Knowledge:
+    """What the guidance knows of a tumbling target's attitude (issue 34): the truth's
+    attitude (None for a fixed target) and the run's knowledge error (None: exact)."""
+
+    truth: attitude.TargetAttitude | None
+    error: tuple[FloatArray, FloatArray] | None
+
+
+def _knowledge_error(
+    problem: Problem, draws: FloatArray | None
+) -> tuple[FloatArray, FloatArray] | None:
+    """The run's attitude-knowledge error (δθ, δω), None when the guidance knows exactly."""
+    if not problem.target.knowledge_error:
+        return None
+    if draws is None:
+        raise ValueError("target.knowledge_sigma_*: the run needs its attitude draws")
+    return attitude.knowledge_error(problem.target, draws)
+
+
+def _predicted_motion(
+    problem: Problem, known: _Knowledge, k_from: int, steps: int
+) -> safety_geometry.BodyMotion:
+    """The body's turn the guidance predicts at the nodes k_from … k_from + steps."""
+    truth = known.truth
+    assert truth is not None
+    every = truth.substeps
+    if known.error is None:  # exact: the truth's own attitude at the nodes
+        return _body_motion(problem, truth, k_from * every, (k_from + steps) * every + 1, every)
+    sc = problem.scenario
+    model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+    i = k_from * every
+    believed, q_hb, w = attitude.predict(
+        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s, known.error,
+        every,
+    )  # fmt: skip
+    return attitude.body_motion(believed, q_hb, w)
+
+
+def _safety(
+    problem: Problem, x_true: FloatArray, att: attitude.TargetAttitude | None
+) -> safety_geometry.Safety | None:
+    """The safety of the true trajectory (issue 32 item 3); None without constraints.
+
+    A tumbling target (``att``): against the set turning with the true attitude at
+    every sub-sample (issue 34).
+    """
     if problem.constraints is None:
         return None
     geo = safety_geometry.geometry(problem.constraints)
-    return safety_geometry.measure_safety(x_true, problem.scenario.dt_s, geo)
+    motion = None
+    if att is not None:
+        motion = _body_motion(problem, att, 0, att.t_s.size, 1)
+    return safety_geometry.measure_safety(
+        x_true,
+        problem.scenario.dt_s,
+        geo,
+        att.substeps if att else safety_geometry.SAFETY_SUBSTEPS,
+        motion,
+    )
 
 
 @dataclass(frozen=True)
@@ -719,6 +801,7 @@ def _cone_resolves(
     loop: _Loop,
     scalars: sk.LoopScalars,
     plan_costate: FloatArray | None,
+    known: _Knowledge | None = None,
 ) -> list[SolveRecord]:
     """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
 
@@ -733,6 +816,7 @@ def _cone_resolves(
     correct = problem.guidance.resolve_timing == "correct"
     threshold = problem.solver.success_residual
     tables = _guidance_tables(problem)
+    condensed = _guidance_condensed(problem)
     lam = state.lam
     records: list[SolveRecord] = []
     k_next, k_plan = 0, 0
@@ -742,12 +826,14 @@ def _cone_resolves(
         k_from = k + 1 if correct else k
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
-        scp = _constrained_plan(problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from)
+        scp = _constrained_plan(
+            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, known
+        )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
             warm = _warm_costate(plan_costate, k_plan, k_from, n, dt, tables)
-            grid = _grid(sc, state.x_hat, horizon, tables)
+            grid = _grid(sc, state.x_hat, horizon, condensed)
             result = convex.solve(grid, scalars.eps, n, warm=warm)
         rec = _record("resolve", k, (k + 1) * dt, result, threshold, scp and scp[1])
         records.append(rec)
@@ -768,6 +854,7 @@ def _constrained_plan(
     p: FloatArray,
     model: sk.LoopModel | None,
     k_from: int,
+    known: _Knowledge | None = None,
 ) -> tuple[guidance.SolveResult, tuple[int, float]] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
 
@@ -777,6 +864,15 @@ def _constrained_plan(
     ``k_from`` on (``model``'s override), else from the unconstrained plan.
     Returns the result (its plan the held controls; no costate) and
     (SCP iterations, slack [km]).
+
+    A tumbling target (``known``, issue 34): the attitude predicted over the
+    horizon from the one known at ``k_from`` turns the keep-out bodies and the
+    corridor at every node, and with a corridor the terminal state is the port's
+    predicted position and velocity at the horizon's end, ``(R p, Ω × R p)`` in
+    the relative frame. Known exactly, the prediction is the truth's attitude
+    (torque-free motion predicted by the same model is the truth's own); with a
+    knowledge error, :func:`cwrend_cli.physics.attitude.predict` from the truth's
+    attitude at ``k_from`` turned by it.
     """
     c = problem.constraints
     if c is None or c.keep_out is None:
@@ -788,6 +884,13 @@ def _constrained_plan(
     if model is not None and held and bool(np.all(model.override[k_from : k_from + steps])):
         warm = model.u_override[k_from : k_from + steps].copy()
     xf = np.asarray(sc.xf, dtype=float)
+    geo = safety_geometry.geometry(c)
+    motion = None
+    if known is not None and known.truth is not None:
+        motion = _predicted_motion(problem, known, k_from, steps)
+        if geo.port_km is not None:
+            port = motion.rotation[-1] @ geo.port_km
+            xf = np.concatenate([port, np.cross(motion.rate_rad_s[-1], port)])
     ans = constrained.plan(
         sc.mean_motion_rad_s,
         sc.dt_s,
@@ -796,10 +899,11 @@ def _constrained_plan(
         xf,
         horizon_s,
         eps,
-        safety_geometry.geometry(c),
+        geo,
         np.asarray(p)[:3, :3],
         c.sigma_margin,
         warm,
+        motion=motion,
     )
     converged = ans.status is guidance.SolveStatus.CONVERGED
     miss = math.nan
@@ -846,7 +950,7 @@ def _min_miss_if_infeasible(
         stop,
         model.u_override,
         model.override,
-        _guidance_tables(problem),
+        _guidance_condensed(problem),
     )
 
 
@@ -854,21 +958,22 @@ def _grid(
     sc: Scenario,
     x_hat: FloatArray,
     horizon_s: float,
-    tables: design_models.StepTables | None = None,
+    condensed: feasibility.CondensedSteps | None = None,
 ) -> feasibility.GridProblem:
     """One re-solve of the scenario on its zero-order-hold grid (the loop's Δt).
 
-    ``tables``: the guidance's design model other than CW (issue 33), whose
-    last ``horizon_s/Δt`` steps are the grid's; None: CW (Eq. 11).
+    ``condensed``: the guidance's design model other than CW (issue 33,
+    :func:`_guidance_condensed`), whose last ``horizon_s/Δt`` steps are the
+    grid's; None: CW (Eq. 11).
     """
     xf = np.asarray(sc.xf, dtype=float)
-    if tables is None:
+    if condensed is None:
         return feasibility.grid_problem(
             sc.mean_motion_rad_s, x_hat, xf, horizon_s, sc.dt_s, sc.u_max_km_s2
         )
-    k0 = tables.phi.shape[0] - max(1, round(horizon_s / sc.dt_s))
-    return feasibility.grid_problem_from_steps(
-        tables.phi[k0:], tables.gam[k0:], x_hat, xf, sc.dt_s, sc.u_max_km_s2
+    steps = max(1, round(horizon_s / sc.dt_s))
+    return feasibility.grid_problem_from_condensed(
+        condensed, steps, x_hat, xf, sc.dt_s, sc.u_max_km_s2
     )
 
 
@@ -878,6 +983,28 @@ def _guidance_tables(problem: Problem) -> design_models.StepTables | None:
     if name == "cw":
         return None
     return design_models.step_tables(name, problem.scenario, problem.truth)
+
+
+def _guidance_condensed(problem: Problem) -> feasibility.CondensedSteps | None:
+    """The guidance's design model condensed onto the final time; None for CW (issue 33).
+
+    Every re-solve's grid ends at t_N, so one condensation
+    (:func:`feasibility.condense`) serves every re-solve of every run on
+    this scenario and truth: each slices it (:func:`_grid`).
+    """
+    name = problem.model.guidance
+    if name == "cw":
+        return None
+    return _condensed(name, problem.scenario, problem.truth)
+
+
+@functools.lru_cache(maxsize=16)
+def _condensed(
+    name: DesignModelName, scenario: Scenario, truth: Truth
+) -> feasibility.CondensedSteps:
+    """:func:`feasibility.condense` of :func:`design_models.step_tables` (cached as they are)."""
+    tables = design_models.step_tables(name, scenario, truth)
+    return feasibility.condense(tables.phi, tables.gam)
 
 
 def _filter_tables(problem: Problem) -> tuple[FloatArray, FloatArray]:
@@ -945,10 +1072,10 @@ def _apply_min_miss(
     k_last: int,
     u_override: FloatArray,
     override: npt.NDArray[np.bool_],
-    tables: design_models.StepTables | None = None,
+    condensed: feasibility.CondensedSteps | None = None,
 ) -> None:
     """Hold the bounded controls minimising the terminal miss for steps ``k_first … k_last``."""
-    g = _grid(sc, x_hat, sc.horizon_s - t_est, tables)
+    g = _grid(sc, x_hat, sc.horizon_s - t_est, condensed)
     controls = feasibility.min_miss_controls(g, velocity_weight_s=sc.dt_s)
     if controls is None:
         return

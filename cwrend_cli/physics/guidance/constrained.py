@@ -42,13 +42,54 @@ the cone.
 :data:`SCP_TOL_KM` between iterates or the cost falls by less than
 :data:`SCP_COST_RTOL` of itself, with no slack and the modes unchanged, at most
 :data:`SCP_MAX_ITER` iterations; at the cap the last iterate is returned (safe,
-see above) with its status converged if its terminal and path rows hold.
+see above) with its status converged if its terminal and path rows hold. The
+cost before the first iterate counts as infinite, so its fall is infinite too
+and meets the test: **the first program is the last** whenever it needs no
+slack, leaves every node's mode as it found it and its own chord bound holds
+(a warm re-solve, from the previous plan shifted to the current step, nearly
+always: one iteration in 776 of the 780 re-solves of seeds 0–4 of
+campaigns/safe_approach.toml, MTF architectures).
+
+**Reductions.** Each iteration's program is solved smaller, with the same
+answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
+cannot reach its plane is left out (:func:`_pairs`: implied by the trust rows,
+exactly); (ii) the states before the first node that carries a path row are
+substituted by the dynamics, their trust rows left out (:func:`_first_node`);
+(iii) the steps that the previous iterate leaves coasting (but for their
+neighbours) are held at zero (:func:`_thrust_guess`). (ii) and (iii) relax the
+program, so the answer is checked: every left-out trust row within
+:data:`SLACK_TOL_KM` and every left-out half-space row held exactly
+(:func:`_broken_rows`), every held step passing the screen of the unconstrained
+program, ``‖A_jᵀ z‖ ≤ 1 − ε`` (:func:`_coasting_broken`: its KKT conditions with
+the step free); whatever fails is put back and the program solved again, the
+whole program after :data:`REDUCED_ROUNDS` reduced ones (seed 0 of
+campaigns/safe_approach.toml: a second program in 3 of 78 warm re-solves at
+ε = 0, in 15 of 78 adaptive ones, whose far nodes move by up to 10 trust radii
+from the shifted plan: there the trust rows are active). A relaxation's answer
+that is feasible for the whole program is its answer (the relaxation's cost is
+no higher, and the whole program's optimum is unique in the controls, which
+fix the states), so every iterate keeps the safety argued above. In
+campaigns/safe_approach.toml a re-solve's program has path rows on about the
+last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 
 **Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
 cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
 an exact (ℓ∞) penalty, so s = 0 whenever a safe plan exists and its multiplier
 is below the price; s > 0 says by how much the plan had to enter the unsafe
 set (returned as ``slack_km``).
+
+**Several bodies, a tumbling target** (issue 34). Every ellipsoid of the zone
+gets its own half-space at each keep-out node (one row each; the zone's outside
+is their intersection, convex). For a tumbling target (``motion``: the body
+frame's predicted turn R_k at every node) the geometry is given in the body
+frame: each ellipsoid is linearised at the iterate's body-frame position
+R_kᵀ r̄_k, and a body-frame row ``nᵀ ρ ≥ d`` binds node k as ``(R_k n)ᵀ r_k ≥ d``;
+the corridor cone likewise. The chord argument above holds in the body frame
+with the body-frame acceleration bound
+(:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows
+with the distance from the target, so each step has its own margin and each
+node takes the larger of its two steps'. The terminal state (the caller's
+``xf``) is then the port's predicted position and velocity.
 
 Units: km, s, km/s, km/s².
 """
@@ -57,6 +98,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,12 +107,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from cwrend_cli.physics import constraints as cg
-from cwrend_cli.physics.dynamics import discretize
+from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
 from cwrend_cli.physics.guidance import convex, feasibility
 from cwrend_cli.physics.guidance.results import SolveStatus
 
 __all__ = [
     "ACCEL_FACTOR",
+    "COAST_TOL",
+    "REDUCED_ROUNDS",
     "SCP_COST_RTOL",
     "SCP_MAX_ITER",
     "SCP_TOL_KM",
@@ -99,6 +143,10 @@ SLACK_PENALTY = 1e6
 SLACK_TOL_KM = 1e-9
 #: Safety factor on the acceleration bound of the chord margin [-].
 ACCEL_FACTOR = 1.5
+#: A step of the previous iterate with ‖u‖ ≤ this × u_max is guessed coasting [-].
+COAST_TOL = 1e-6
+#: Reduced programs of one SCP iteration before the whole program is solved [-].
+REDUCED_ROUNDS = 4
 
 _CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
 
@@ -129,14 +177,16 @@ def node_positions(
 ) -> tuple[np.ndarray, np.ndarray]:
     """States (N+1, 6) of held ``controls`` from x0 under the exact ZOH dynamics (Eq. 11)."""
     phi, gam = discretize(n, dt_s)
-    x = np.empty((controls.shape[0] + 1, 6))
-    x[0] = x0
-    for k, u in enumerate(controls):
-        x[k + 1] = phi @ x[k] + gam @ u
+    x = zoh_rollout(
+        phi,
+        gam,
+        np.ascontiguousarray(x0, dtype=np.float64),
+        np.ascontiguousarray(controls, dtype=np.float64),
+    )
     return x, x[:, :3]
 
 
-def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
+def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) -> np.ndarray:
     """Each node's constraint set from the previous iterate (module docstring)."""
     steps = r_bar.shape[0] - 1
     modes = np.zeros(steps + 1, dtype=np.int8)
@@ -145,7 +195,7 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    inside = cg.corridor_cone(geo, 0.0).residual_km(r_bar) >= -SCP_TOL_KM
+    inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
     first = steps  # the terminal node is the apex
     while first - 1 >= 1 and inside[first - 1]:
         first -= 1
@@ -153,6 +203,29 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray) -> np.ndarray:
     if first < steps:
         modes[first] = _BOTH
     return modes
+
+
+class HalfSpaces(Mapping[int, cg.HalfSpace]):
+    """The half-spaces H_j of the nodes j that have one: node j → :class:`.HalfSpace`, kept
+    as arrays (``normals`` (K, 3), ``offsets`` (K,) [km] of ``nodes`` (K,); ``index``
+    (N + 1,): a node's row, −1 for none) so that the program reads them at once."""
+
+    def __init__(self, nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray, size: int):
+        self.nodes, self.normals, self.offsets = nodes, normals, offsets
+        self.index = np.full(size, -1, dtype=np.int64)
+        self.index[nodes] = np.arange(nodes.size)
+
+    def __getitem__(self, j: int) -> cg.HalfSpace:
+        i = int(self.index[j]) if 0 <= j < self.index.size else -1
+        if i < 0:
+            raise KeyError(j)
+        return cg.HalfSpace(self.normals[i], float(self.offsets[i]))
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(self.nodes.tolist())
+
+    def __len__(self) -> int:
+        return int(self.nodes.size)
 
 
 def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
@@ -177,38 +250,242 @@ def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
     return np.asarray(side / np.linalg.norm(side), dtype=np.float64)
 
 
-def _tangent_point(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """The point whose tangent plane bounds node r: r itself outside the zone; inside, the
-    radial projection onto the surface of r moved by the largest semi-axis towards ``side``
-    (so the nodes of a crossing iterate all go round on one side)."""
-    level = float(cg.ellipsoid_level(r, semi_axes))
-    if level >= 1.0:
-        return r
-    shifted = r + float(np.max(semi_axes)) * side
-    return shifted / math.sqrt(float(cg.ellipsoid_level(shifted, semi_axes)))
+def _tangent_points(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """The points (K, 3) whose tangent planes bound the nodes r (K, 3): r itself outside the
+    zone; inside, the radial projection onto the surface of r moved by the largest
+    semi-axis towards ``side`` (so the nodes of a crossing iterate all go round on one
+    side)."""
+    out = np.array(r, dtype=np.float64)
+    inside = cg.ellipsoid_level(out, semi_axes) < 1.0
+    shifted = out[inside] + float(np.max(semi_axes)) * side
+    out[inside] = shifted / np.sqrt(cg.ellipsoid_level(shifted, semi_axes))[:, None]
+    return out
 
 
 def _half_spaces(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
+    margins_km: np.ndarray,
     p_pos_km2: np.ndarray | None,
     sigma_margin: float,
-) -> dict[int, cg.HalfSpace]:
-    """The tightened keep-out half-space H_k of every keep-out node (and of node 0)."""
-    assert geo.semi_axes_km is not None
-    axes = geo.semi_axes_km
-    side = _detour_side(axes, r_bar)
-    out: dict[int, cg.HalfSpace] = {}
-    for k in [0, *np.flatnonzero(modes >= _KEEP_OUT).tolist()]:
-        point = _tangent_point(axes, r_bar[k], side)
-        extra = margin_km
+    motion: cg.BodyMotion | None = None,
+) -> list[HalfSpaces]:
+    """The tightened keep-out half-spaces H_k,b of every keep-out node k (and of node 0), one
+    :class:`HalfSpaces` per ellipsoid b of the zone, in the body frame (the relative frame
+    without ``motion``).
+
+    Each ellipsoid is linearised at the iterate's body-frame position at the node's time
+    (issue 34). ``margins_km`` (N+1,): each node's between-node margin. With ``motion``
+    the covariance margin is taken along the half-space's normal in the relative frame at
+    the two nodes it binds (k and k+1), the larger.
+    """
+    rho_bar = cg.to_body(motion, r_bar)
+    nodes = np.r_[0, np.flatnonzero(modes >= _KEEP_OUT)]
+    out = []
+    for centre, axes in cg.ellipsoids(geo):
+        local = rho_bar if centre is None else rho_bar - centre
+        side = _detour_side(axes, local)
+        normals, offsets = cg.tangent_planes(axes, _tangent_points(axes, local[nodes], side))
+        offsets = offsets + margins_km[nodes]
         if sigma_margin > 0.0 and p_pos_km2 is not None:
-            normal = cg.linearise_keep_out(axes, point, 0.0).normal
-            extra += cg.covariance_margin_km(normal, p_pos_km2, sigma_margin)
-        out[int(k)] = cg.linearise_keep_out(axes, point, extra)
+            if motion is None:
+                offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
+            else:
+                after = np.minimum(nodes + 1, modes.size - 1)
+                turned = [
+                    np.einsum("kij,kj->ki", motion.rotation[at], normals) for at in (nodes, after)
+                ]
+                offsets = offsets + np.maximum(
+                    cg.covariance_margins_km(turned[0], p_pos_km2, sigma_margin),
+                    cg.covariance_margins_km(turned[1], p_pos_km2, sigma_margin),
+                )
+        if centre is not None:  # nᵀ(ρ − c) ≥ offset ⇔ nᵀρ ≥ offset + nᵀc
+            offsets = offsets + normals @ centre
+        out.append(HalfSpaces(nodes, normals, offsets, modes.size))
     return out
+
+
+def _pairs(
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    half_spaces: list[HalfSpaces],
+    trust_km: float,
+    motion: cg.BodyMotion | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The half-space rows (node k, half-space j, ellipsoid b) of the program, and those
+    left out, each (P, 3).
+
+    Node k lies in its own half-space and in its predecessor's: the chord
+    k−1 → k then lies in H_k−1 (convex), the arc within the chord margin of it.
+    A row is **left out** when the trust box of its node cannot reach the
+    plane: ``nᵀ r̄_k − trust ‖n‖₁ ≥ offset + SCP_TOL_KM`` (the smallest nᵀr over
+    the box ``‖r − r̄_k‖_∞ ≤ trust``, with a millimetre to spare over the
+    solver's feasibility tolerance), so the trust rows imply it: the program,
+    and its answer, are the same with and without it.
+    """
+    k = np.arange(1, modes.size - 1)
+    has = half_spaces[0].index >= 0  # every ellipsoid has the same nodes
+    own = k[has[k]]
+    before = k[has[k - 1] & (modes[k] != 0)]
+    bodies = range(len(half_spaces))
+    pairs = np.concatenate(
+        [np.column_stack([own, own, np.full(own.size, b)]) for b in bodies]
+        + [np.column_stack([before, before - 1, np.full(before.size, b)]) for b in bodies]
+    ).astype(np.int64)
+    # node by node, own plane first, ellipsoid by ellipsoid
+    pairs = pairs[np.lexsort((pairs[:, 2], -pairs[:, 1], pairs[:, 0]))]
+    normals, offsets = _planes(half_spaces, pairs, motion)
+    low = np.sum(normals * r_bar[pairs[:, 0]], axis=1) - trust_km * np.sum(np.abs(normals), axis=1)
+    left_out = low >= offsets + SCP_TOL_KM
+    return pairs[~left_out], pairs[left_out]
+
+
+def _planes(
+    half_spaces: list[HalfSpaces], rows: np.ndarray, motion: cg.BodyMotion | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (P, 3), offsets (P,) [km]) of the rows (node k, half-space j, ellipsoid b):
+    H_j,b, its normal turned to node k's time with ``motion`` (nᵀ ρ_k = (R_k n)ᵀ r_k)."""
+    if len(half_spaces) == 1:  # one ellipsoid (issue 32's arithmetic)
+        i = half_spaces[0].index[rows[:, 1]]
+        normals = half_spaces[0].normals[i].reshape(-1, 3)
+        offsets = half_spaces[0].offsets[i]
+    else:
+        normals = np.empty((rows.shape[0], 3))
+        offsets = np.empty(rows.shape[0])
+        for b, hs in enumerate(half_spaces):
+            sel = rows[:, 2] == b
+            i = hs.index[rows[sel, 1]]
+            normals[sel] = hs.normals[i].reshape(-1, 3)
+            offsets[sel] = hs.offsets[i]
+    if motion is not None:
+        normals = np.einsum("pij,pj->pi", motion.rotation[rows[:, 0]], normals)
+    return normals, offsets
+
+
+def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
+    """The first node that carries a half-space or a corridor row (N when none does)."""
+    corridor = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    return int(np.min(np.r_[pairs[:, 0], corridor, modes.size - 1]))
+
+
+def _broken_rows(
+    x: np.ndarray,
+    r_bar: np.ndarray,
+    modes: np.ndarray,
+    first: int,
+    half_spaces: list[HalfSpaces],
+    dropped: np.ndarray,
+    trust_km: float,
+    slack_km: float,
+    motion: cg.BodyMotion | None = None,
+) -> np.ndarray:
+    """The nodes whose left-out rows fail at the answer ``x`` (N + 1, 6) of :func:`_program`.
+
+    The program left out the trust rows of the constrained nodes before
+    ``first`` and the half-space rows ``dropped`` by :func:`_pairs` (their
+    trust box implied them). The answer of the relaxed program is that of the
+    whole one when it satisfies what was left out (the relaxation is convex
+    and its cost strictly convex in the controls, which fix the states): every
+    such node within ``trust + SLACK_TOL_KM`` of r̄_k (the solver's tolerance),
+    and, so that every iterate stays safe whatever that tolerance, every
+    left-out half-space row held exactly (with the answer's slack, as written).
+    """
+    r = x[:, :3]
+    normals, offsets = _planes(half_spaces, dropped, motion)
+    residual = np.sum(normals * r[dropped[:, 0]], axis=1) - offsets + slack_km
+    prefix = np.flatnonzero(modes[:first] > 0)
+    moved = np.max(np.abs(r[prefix] - r_bar[prefix]), axis=1, initial=0.0)
+    return np.union1d(dropped[residual < 0.0, 0], prefix[moved > trust_km + SLACK_TOL_KM])
+
+
+def _thrust_guess(u_bar: np.ndarray, u_max: float, eps: float) -> np.ndarray:
+    """The steps whose control the next program leaves free: those of the iterate ``u_bar``
+    (N, 3) [km/s²] above :data:`COAST_TOL` u_max, and their neighbours (a switch moves by
+    a step between re-solves); every step when ε ≥ 1 (no step coasts: the cost is then
+    quadratic) or when the iterate never thrusts."""
+    steps = u_bar.shape[0]
+    on = np.linalg.norm(u_bar, axis=1) > COAST_TOL * u_max
+    if eps >= 1.0 or not np.any(on):
+        return np.arange(steps)
+    on[1:] |= on[:-1].copy()
+    on[:-1] |= on[1:].copy()
+    return np.flatnonzero(on)
+
+
+def _reduced_solve(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    eps: float,
+    geo: cg.Geometry,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    u_bar: np.ndarray,
+    margins_km: np.ndarray,
+    half_spaces: list[HalfSpaces],
+    trust_km: float,
+    reduce: bool = True,
+    motion: cg.BodyMotion | None = None,
+) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
+    """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
+    (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
+    slack [km]) or None when unsolved).
+
+    Starts without the left-out rows of :func:`_pairs`, without the states before
+    :func:`_first_node` and with the controls of :func:`_thrust_guess` only; puts back
+    whatever the answer breaks (:func:`_broken_rows`, :func:`_coasting_broken`) and
+    solves again, at most :data:`REDUCED_ROUNDS` times, then the whole program.
+    Unsolved with every row that could make it infeasible: so is the whole program.
+    ``reduce=False``: the whole program at once, every row written (the reference).
+    """
+    steps = modes.size - 1
+    pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km, motion)
+    first = _first_node(modes, pairs)
+    thrust = _thrust_guess(u_bar, u_max, eps)
+    if not reduce:
+        pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
+    used = 0
+    for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
+        if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
+            first, thrust = 1, np.arange(steps)
+        sol, iterations = _program(
+            n,
+            dt_s,
+            u_max,
+            x0,
+            xf,
+            eps,
+            geo,
+            modes,
+            r_bar,
+            margins_km,
+            half_spaces,
+            trust_km,
+            pairs,
+            first,
+            thrust,
+            motion,
+        )
+        used += iterations
+        if not feasibility.solved(sol):
+            if thrust.size == steps:
+                return sol, used, None
+            thrust = np.arange(steps)  # the held steps may be why: free them
+            continue
+        u, x, slack = _answer(n, dt_s, u_max, x0, sol, steps, first, thrust)
+        broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack, motion)
+        wake = _coasting_broken(n, dt_s, u_max, x0, xf, eps, sol, steps, first, thrust)
+        if attempt == REDUCED_ROUNDS or (broken.size == 0 and wake.size == 0):
+            return sol, used, (u, x, slack)
+        if broken.size:
+            first = min(first, int(broken[0]))
+            back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
+            pairs, dropped = np.concatenate([pairs, dropped[back]]), dropped[~back]
+        thrust = np.union1d(thrust, wake)
+    raise AssertionError("unreachable")  # the last attempt returns
 
 
 def _program(
@@ -221,19 +498,48 @@ def _program(
     geo: cg.Geometry,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    margin_km: float,
-    half_spaces: dict[int, cg.HalfSpace],
+    margins_km: np.ndarray,
+    half_spaces: list[HalfSpaces],
     trust_km: float,
+    pairs: np.ndarray,
+    first: int,
+    thrust: np.ndarray,
+    motion: cg.BodyMotion | None = None,
 ) -> tuple[Any, int]:
-    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps)."""
+    """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
+
+    ``pairs``: the half-space rows (node k, half-space j) to write
+    (:func:`_pairs`); ``first``: the first node whose state is a variable
+    (:func:`_first_node`): the nodes before it carry no row, so their states
+    are substituted (x_first = Φ^first x0 + Σ_j<first Φ^(first−1−j) Γ u_j, one
+    block of 6 rows) and the trust region of constrained nodes before it is
+    left to :func:`_broken_rows`, checked on the answer; ``thrust``: the steps
+    whose control is a variable (sorted), the others held at zero
+    (:func:`_coasting_broken` checks that on the answer). Variables: ũ_j and
+    t̃_j of the ``thrust`` steps, x_first … x_N, s. With ``motion`` (a tumbling
+    target) every body-frame half-space and the corridor cone bind node k through
+    its body-frame position R_kᵀ r_k (issue 34).
+    """
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
-    iu, it, ix, i_s = 0, 3 * steps, 4 * steps, 10 * steps
-    n_vars = 10 * steps + 1
+    powers = _powers(n, dt_s, x0, xf, u_max, first)
+    n_x = steps - first + 1  # states x_first … x_N
+    n_u = thrust.size
+    iu, it, ix, i_s = 0, 3 * n_u, 4 * n_u, 4 * n_u + 6 * n_x
+    n_vars = i_s + 1
+    ucol = np.full(steps, -1, dtype=np.int64)
+    ucol[thrust] = iu + 3 * np.arange(n_u)
 
-    def xcol(k: int) -> int:  # first column of x_k, k = 1 … N
-        return ix + 6 * (k - 1)
+    def xcol(k: int) -> int:  # first column of x_k, k = first … N
+        return ix + 6 * (k - first)
+
+    def xcols(nodes: np.ndarray) -> np.ndarray:
+        """First columns of the states of ``nodes``: a path row on a node before ``first``
+        (not a variable) is a bug: every row block names its nodes in :func:`_first_node`."""
+        if np.any(nodes < first):
+            raise ValueError(f"a path row on node {int(np.min(nodes))} < first = {first}")
+        return np.asarray(ix + 6 * (nodes - first), dtype=np.int64)
 
     # Every block as (row, column, value) triplets, rows counted from the block's first,
     # assembled at once (a sparse row at a time cost 5× the solve); explicit zeros are
@@ -250,50 +556,49 @@ def _program(
         v = np.broadcast_to(m, (r0.size, p_, q_))
         return r.ravel(), c.ravel(), v.ravel()
 
-    # dynamics: x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 (x_0 = x0 given), and x_N = x_f
-    k_all = np.arange(steps)
+    # dynamics: x_first − Σ_j<first Φ^(first−1−j) Γ̃ ũ_j = Φ^first x0 (x_1 − Γ̃ ũ_0 = Φ x0 when
+    # first = 1), x_{k+1} − Φ x_k − Γ̃ ũ_k = 0 for k ≥ first, and x_N = x_f
+    k_dyn = np.arange(first, steps)
+    rows_dyn = 6 * (k_dyn - first + 1)
+    pre, dyn_u = thrust[thrust < first], k_dyn[ucol[k_dyn] >= 0]
     parts = [
-        dense_block(6 * k_all, ix + 6 * k_all, np.eye(6)),
-        dense_block(6 * k_all, iu + 3 * k_all, -gam_u),
-        dense_block(6 * k_all[1:], ix + 6 * (k_all[1:] - 1), -phi),
-        dense_block(np.array([6 * steps]), np.array([xcol(steps)]), np.eye(6)),
+        dense_block(np.zeros(pre.size, np.int64), ucol[pre], -powers[pre]),
+        dense_block(np.zeros(1, np.int64), np.array([xcol(first)]), np.eye(6)),
+        dense_block(rows_dyn, ix + 6 * (k_dyn + 1 - first), np.eye(6)),
+        dense_block(6 * (dyn_u - first + 1), ucol[dyn_u], -gam_u),
+        dense_block(rows_dyn, ix + 6 * (k_dyn - first), -phi),
+        dense_block(np.array([6 * n_x]), np.array([xcol(steps)]), np.eye(6)),
     ]
-    b_eq = np.zeros(6 * steps + 6)
-    b_eq[0:6] = phi @ x0
-    b_eq[6 * steps :] = xf
-    blocks.append((*_cat(parts), 6 * steps + 6))
+    b_eq = np.zeros(6 * n_x + 6)
+    b_eq[0:6] = stm(n, first * dt_s) @ x0
+    b_eq[6 * n_x :] = xf
+    blocks.append((*_cat(parts), 6 * n_x + 6))
     rhs = [b_eq]
-    cones.append(clarabel.ZeroConeT(6 * steps + 6))
+    cones.append(clarabel.ZeroConeT(6 * n_x + 6))
     # ‖ũ_j‖ ≤ t̃_j ≤ 1
-    soc_u = feasibility.cone_rows(steps, n_vars, it + np.arange(steps)).tocoo()
-    blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * steps))
-    rhs.append(np.zeros(4 * steps))
-    cones += [clarabel.SecondOrderConeT(4)] * steps
+    soc_u = feasibility.cone_rows(n_u, n_vars, it + np.arange(n_u)).tocoo()
+    blocks.append((soc_u.row, soc_u.col, soc_u.data, 4 * n_u))
+    rhs.append(np.zeros(4 * n_u))
+    cones += [clarabel.SecondOrderConeT(4)] * n_u
     # nonnegative rows: t̃ ≤ 1, s ≥ 0, half-spaces, trust region
-    parts = [(k_all, it + k_all, np.ones(steps)), (np.array([steps]), np.array([i_s]), -np.ones(1))]
-    b_nonneg = [np.ones(steps), np.zeros(1)]
-    # node k in its own half-space and in its predecessor's: the chord k−1 → k then lies in
-    # H_k−1 (convex), the arc within the chord margin of it; nᵀ r_k + s ≥ offset ⇔
-    # −nᵀ r_k − s ≤ −offset
-    pairs = [
-        (k, j)
-        for k in range(1, steps)
-        for j in (k, k - 1)
-        if j in half_spaces and not (j == k - 1 and modes[k] == 0)
-    ]
-    row0 = steps + 1
-    if pairs:
-        node = np.array([k for k, _ in pairs])
-        normals = np.array([half_spaces[j].normal for _, j in pairs], dtype=np.float64)
-        rows_hs = row0 + np.arange(len(pairs))
-        parts.append(dense_block(rows_hs, ix + 6 * (node - 1), -normals[:, None, :]))
-        parts.append((rows_hs, np.full(len(pairs), i_s), -np.ones(len(pairs))))
-        b_nonneg.append(-np.array([half_spaces[j].offset_km for _, j in pairs]))
-        row0 += len(pairs)
+    j_u = np.arange(n_u)
+    parts = [(j_u, it + j_u, np.ones(n_u)), (np.array([n_u]), np.array([i_s]), -np.ones(1))]
+    b_nonneg = [np.ones(n_u), np.zeros(1)]
+    # nᵀ r_k + s ≥ offset ⇔ −nᵀ r_k − s ≤ −offset
+    row0 = n_u + 1
+    if pairs.size:
+        node = pairs[:, 0]
+        normals, offsets = _planes(half_spaces, pairs, motion)
+        rows_hs = row0 + np.arange(node.size)
+        parts.append(dense_block(rows_hs, xcols(node), -normals[:, None, :]))
+        parts.append((rows_hs, np.full(node.size, i_s), -np.ones(node.size)))
+        b_nonneg.append(-offsets)
+        row0 += node.size
     constrained = np.flatnonzero(modes > 0)
+    constrained = constrained[constrained >= first]
     if constrained.size:  # ±(r_k − r̄_k) ≤ trust
         rows_tr = row0 + 6 * np.arange(constrained.size)
-        cols_tr = ix + 6 * (constrained - 1)
+        cols_tr = xcols(constrained)
         parts.append(dense_block(rows_tr, cols_tr, np.eye(3)))
         parts.append(dense_block(rows_tr + 3, cols_tr, -np.eye(3)))
         b_nonneg.append(
@@ -306,16 +611,27 @@ def _program(
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
     corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
     if corridor_nodes.size:
-        soc = cg.corridor_cone(geo, margin_km)
-        a_body, b_body, c_head, d_head = soc.rows()
         rows_c = 4 * np.arange(corridor_nodes.size)
-        head = np.vstack([-c_head, -a_body])
+        if motion is None:  # one margin, one cone for every node
+            soc = cg.corridor_cone(geo, float(margins_km[corridor_nodes[0]]))
+            a_body, b_body, c_head, d_head = soc.rows()
+            head = np.vstack([-c_head, -a_body])[None]
+            cone_rhs = np.tile(np.r_[d_head, b_body], corridor_nodes.size)
+        else:  # ‖P(R_kᵀ r − p)‖ ≤ (R_k c)ᵀ r + d_k: each node's turn and margin
+            heads, cone_rhs_k = [], []
+            for k in corridor_nodes:
+                a_body, b_body, c_head, d_head = cg.corridor_cone(geo, margins_km[k]).rows()
+                rot = motion.rotation[k]
+                heads.append(np.vstack([-(rot @ c_head), -(a_body @ rot.T)]))
+                cone_rhs_k.append(np.r_[d_head, b_body])
+            head = np.array(heads)
+            cone_rhs = np.concatenate(cone_rhs_k)
         parts = [
-            dense_block(rows_c, ix + 6 * (corridor_nodes - 1), head[None]),
+            dense_block(rows_c, xcols(corridor_nodes), head),
             (rows_c, np.full(rows_c.size, i_s), -np.ones(rows_c.size)),
         ]
         blocks.append((*_cat(parts), 4 * corridor_nodes.size))
-        rhs.append(np.tile(np.r_[d_head, b_body], corridor_nodes.size))
+        rhs.append(cone_rhs)
         cones += [clarabel.SecondOrderConeT(4)] * corridor_nodes.size
     offset = 0
     r_all, c_all, v_all = [], [], []
@@ -332,10 +648,10 @@ def _program(
     b = np.concatenate(rhs)
     weight = max(float(eps), convex.REGULARISATION)
     q = np.zeros(n_vars)
-    q[it : it + steps] = 1.0 - min(float(eps), 1.0)
+    q[it : it + n_u] = 1.0 - min(float(eps), 1.0)
     q[i_s] = SLACK_PENALTY
     diag = np.zeros(n_vars)
-    diag[: 3 * steps] = 2.0 * weight
+    diag[: 3 * n_u] = 2.0 * weight
     p = sp.diags(diag, format="csc")
     sol = feasibility.solve_cone(p, q, a, b, cones)
     return sol, int(sol.iterations)
@@ -350,11 +666,133 @@ def _cat(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray, n
     )
 
 
+def _powers(
+    n: float, dt_s: float, x0: np.ndarray, xf: np.ndarray, u_max: float, first: int
+) -> np.ndarray:
+    """``Φ^(first−1−j) Γ u_max`` (first, 6, 3): how ũ_j moves x_first (Eq. 11)."""
+    return feasibility.grid_problem(n, x0, xf, first * dt_s, dt_s, u_max).blocks * u_max
+
+
+def _coasting_broken(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    eps: float,
+    sol: Any,
+    steps: int,
+    first: int,
+    thrust: np.ndarray,
+) -> np.ndarray:
+    """The steps held at zero by :func:`_program` for which zero is not optimal.
+
+    With the multipliers z of the dynamics rows at the answer, ũ_j = 0 (and
+    t̃_j = 0) is optimal in the program with ũ_j free iff ``‖A_jᵀ z‖ ≤ 1 − ε``
+    (A_j the rows' columns of ũ_j: minimising ``(1 − ε)‖ũ‖ + w‖ũ‖² + (A_jᵀz)ᵀũ``
+    over the ball, zero wins iff the linear term cannot beat the norm); the
+    same screen as the unconstrained program's (:func:`.convex.plan_controls`).
+    When every held step passes, the answer satisfies the optimality
+    conditions of the program with every step free, to Clarabel's tolerance.
+    """
+    linear = 1.0 - min(float(eps), 1.0)
+    coast = np.setdiff1d(np.arange(steps), thrust)
+    z = np.asarray(sol.z)
+    z_first = z[0:6]
+    pre, late = coast[coast < first], coast[coast >= first]
+    _, gam = discretize(n, dt_s)
+    rows = 6 * (late - first + 1)
+    z_late = z[rows[:, None] + np.arange(6)]
+    norms = np.r_[
+        np.linalg.norm(
+            np.einsum("kij,i->kj", _powers(n, dt_s, x0, xf, u_max, first)[pre], z_first), axis=1
+        ),
+        np.linalg.norm(z_late @ (gam * u_max), axis=1),
+    ]
+    return np.asarray(np.r_[pre, late][norms > linear], dtype=np.int64)
+
+
+def _answer(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    sol: Any,
+    steps: int,
+    first: int,
+    thrust: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(controls (N, 3) [km/s²], states (N + 1, 6), slack [km]) of a solved :func:`_program`.
+
+    Interior-point controls may exceed u_max by the solver tolerance: they are
+    projected onto the ball. The states before ``first`` (not variables of the
+    program) follow from the controls by the dynamics (Eq. 11).
+    """
+    x_sol = np.asarray(sol.x)
+    u = np.zeros((steps, 3))
+    u[thrust] = x_sol[: 3 * thrust.size].reshape(-1, 3)
+    norms = np.linalg.norm(u, axis=1)
+    u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max
+    head, _ = node_positions(n, dt_s, x0, u[: first - 1])
+    x = np.vstack([head, x_sol[4 * thrust.size : -1].reshape(steps - first + 1, 6)])
+    return u, x, float(x_sol[-1])
+
+
 def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
     """The acceleration bound of the chord margin over a plan's states (module docstring)."""
     r = float(np.max(np.linalg.norm(x[:, :3], axis=1))) + extra_km
     v = float(np.max(np.linalg.norm(x[:, 3:], axis=1)))
     return cg.acceleration_bound(r, v, u_max, n, dt_s)
+
+
+def _step_margins(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x: np.ndarray,
+    extra_km: float,
+    factor: float,
+    motion: cg.BodyMotion | None,
+) -> np.ndarray:
+    """The chord margin of every step of a plan's states (N,) [km] (module docstring).
+
+    Fixed target: one margin, from the plan's largest ‖r‖ (+ ``extra_km``) and ‖v‖.
+    Turning body (issue 34): each step's own, from its two nodes' ‖r‖ (+ ``extra_km``)
+    and ‖v‖ and the body-frame acceleration bound
+    (:func:`~cwrend_cli.physics.constraints.body_acceleration_bound`), which grows with
+    the distance from the target's centre. ``factor`` multiplies the acceleration.
+    """
+    steps = x.shape[0] - 1
+    if motion is None:
+        return np.full(
+            steps, cg.chord_margin_km(factor * _accel(n, dt_s, u_max, x, extra_km), dt_s)
+        )
+    r = np.linalg.norm(x[:, :3], axis=1)
+    v = np.linalg.norm(x[:, 3:], axis=1)
+    r_step = np.maximum(r[:-1], r[1:]) + extra_km
+    v_step = np.maximum(v[:-1], v[1:])
+    rate, rate_dot = motion.rate_bound_rad_s, motion.rate_dot_bound_rad_s2
+    return np.array(
+        [
+            cg.chord_margin_km(
+                factor
+                * cg.body_acceleration_bound(
+                    cg.acceleration_bound(ri, vi, u_max, n, dt_s), ri, vi, rate, rate_dot, dt_s
+                ),
+                dt_s,
+            )
+            for ri, vi in zip(r_step.tolist(), v_step.tolist(), strict=True)
+        ]
+    )
+
+
+def _node_margins(step_margins: np.ndarray) -> np.ndarray:
+    """Each node's margin (N+1,) [km]: the larger of its two steps' (a node's constraints
+    bind the chords on both sides of it; the end nodes have one step)."""
+    out = np.empty(step_margins.size + 1)
+    out[0], out[-1] = step_margins[0], step_margins[-1]
+    out[1:-1] = np.maximum(step_margins[:-1], step_margins[1:])
+    return out
 
 
 def plan(
@@ -369,13 +807,19 @@ def plan(
     p_pos_km2: np.ndarray | None = None,
     sigma_margin: float = 0.0,
     warm_controls: np.ndarray | None = None,
+    reduce: bool = True,
+    motion: cg.BodyMotion | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
     The first iterate is ``warm_controls`` (an earlier plan's remaining controls,
     N × 3) or the unconstrained plan of :func:`.convex.plan_controls`.
     ``p_pos_km2``: the filter's position covariance (3 × 3), for
-    ``sigma_margin``.
+    ``sigma_margin``. ``reduce=False`` solves every SCP iteration's whole
+    program, every row written (the reference the reductions are tested
+    against; module docstring, *Reductions*). ``motion`` (a tumbling target,
+    issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
+    ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
     """
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
@@ -389,10 +833,10 @@ def plan(
         if status is not SolveStatus.CONVERGED:
             warm_controls = np.zeros((steps, 3))
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
-    trust = TRUST_RADIUS_FACTOR * (
-        float(np.max(geo.semi_axes_km)) if geo.semi_axes_km is not None else 1.0
-    )
-    modes = _modes(geo, r_bar)
+    u_bar = warm_controls
+    sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
+    trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
+    modes = _modes(geo, r_bar, motion)
     failed = ConstrainedPlan(
         SolveStatus.FAILED,
         np.zeros((steps, 3)),
@@ -417,13 +861,29 @@ def plan(
     result = failed
     cost = math.inf
     for scp in range(1, SCP_MAX_ITER + 1):
-        margin = cg.chord_margin_km(ACCEL_FACTOR * _accel(n, dt_s, u_max_km_s2, x_bar, trust), dt_s)
-        half_spaces = _half_spaces(geo, modes, r_bar, margin, p_pos_km2, sigma_margin)
-        sol, iterations = _program(
-            n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, margin, half_spaces, trust
+        margins = _node_margins(
+            _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
+        )
+        half_spaces = _half_spaces(geo, modes, r_bar, margins, p_pos_km2, sigma_margin, motion)
+        sol, iterations, answer = _reduced_solve(
+            n,
+            dt_s,
+            u_max_km_s2,
+            x0,
+            xf,
+            eps,
+            geo,
+            modes,
+            r_bar,
+            u_bar,
+            margins,
+            half_spaces,
+            trust,
+            reduce,
+            motion,
         )
         used += iterations
-        if not feasibility.solved(sol):
+        if answer is None:
             status = (
                 SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
             )
@@ -437,15 +897,17 @@ def plan(
                 used,
                 time.perf_counter() - start,
             )
-        u = np.asarray(sol.x[: 3 * steps]).reshape(steps, 3)
-        norms = np.linalg.norm(u, axis=1)
-        u = np.where(norms[:, None] > 1.0, u / np.maximum(norms, 1.0)[:, None], u) * u_max_km_s2
-        x_new = np.vstack([x0, np.asarray(sol.x[4 * steps : 10 * steps]).reshape(steps, 6)])
-        slack = float(sol.x[10 * steps])
+        u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
         moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
-        new_modes = _modes(geo, x_new[:, :3])
-        bound_ok = cg.chord_margin_km(_accel(n, dt_s, u_max_km_s2, x_new, 0.0), dt_s) <= margin
+        new_modes = _modes(geo, x_new[:, :3], motion)
+        # each step's own bound within what both its nodes' constraints were tightened by
+        bound_ok = bool(
+            np.all(
+                _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion)
+                <= np.minimum(margins[:-1], margins[1:])
+            )
+        )
         result = ConstrainedPlan(
             SolveStatus.CONVERGED if bound_ok else SolveStatus.FAILED,
             u,
@@ -456,7 +918,7 @@ def plan(
             used,
             time.perf_counter() - start,
         )
-        x_bar, r_bar = x_new, x_new[:, :3]
+        x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:

@@ -43,6 +43,64 @@ class GridProblem:
     transition: np.ndarray | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class CondensedSteps:
+    """The steps of a linear design model condensed onto their common end t_K (issue 33).
+
+    Every re-solve's grid ends at the loop's final time t_K and starts at some
+    step k0, so its blocks are the last ``K − k0`` rows of ``blocks`` and its
+    transition is ``to_end[k0]``: condensed once per design model and
+    scenario, sliced per re-solve (as :func:`_power_blocks` does for CW).
+    """
+
+    blocks: np.ndarray  # (K, 6, 3): M_j = Φ_{K−1} ⋯ Φ_{j+1} Γ_j [s, s²]
+    to_end: np.ndarray  # (K + 1, 6, 6): Φ(t_K, t_j) = Φ_{K−1} ⋯ Φ_j; to_end[K] = I
+
+
+def condense(phi: np.ndarray, gam: np.ndarray) -> CondensedSteps:
+    """Condense the steps ``phi`` (K, 6, 6), ``gam`` (K, 6, 3) onto t_K (read-only arrays).
+
+    Any linear design model (time-varying too): step j maps
+    ``x_{j+1} = Φ_j x_j + Γ_j u_j``, so ``x_K = Φ(t_K, t_{k0}) x_{k0} + Σ_{j ≥ k0} M_j u_j``
+    with ``M_j = Φ_{K−1} ⋯ Φ_{j+1} Γ_j``. One backward pass from t_K (the
+    product grows on the right), so that row j does not depend on where a
+    grid starts.
+    """
+    steps = phi.shape[0]
+    blocks = np.empty((steps, 6, 3))
+    to_end = np.empty((steps + 1, 6, 6))
+    acc = np.eye(6)
+    to_end[steps] = acc
+    for j in range(steps - 1, -1, -1):
+        blocks[j] = acc @ gam[j]
+        acc = acc @ phi[j]
+        to_end[j] = acc
+    blocks.flags.writeable = False
+    to_end.flags.writeable = False
+    return CondensedSteps(blocks, to_end)
+
+
+def grid_problem_from_condensed(
+    c: CondensedSteps,
+    steps: int,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    dt_s: float,
+    u_max_km_s2: float,
+) -> GridProblem:
+    """Transcribe a re-solve over the last ``steps`` steps of ``c``: from x̂ = ``x0`` to t_K.
+
+    ``b = x_f − Φ(t_K, t_{k0}) x̂``, ``k0 = K − steps``; the transition is kept for
+    the costate (:func:`costate_from_multiplier`). Row scaling as :func:`grid_problem`.
+    """
+    k0 = c.blocks.shape[0] - steps
+    transition = c.to_end[k0]
+    row_scale = _row_scale(steps * dt_s, u_max_km_s2)
+    return GridProblem(
+        c.blocks[k0:], xf - transition @ x0, row_scale, dt_s, u_max_km_s2, transition=transition
+    )
+
+
 def grid_problem_from_steps(
     phi: np.ndarray,
     gam: np.ndarray,
@@ -51,21 +109,12 @@ def grid_problem_from_steps(
     dt_s: float,
     u_max_km_s2: float,
 ) -> GridProblem:
-    """Transcribe a re-solve over the steps of ``phi`` (K, 6, 6) and ``gam`` (K, 6, 3).
+    """Transcribe a re-solve over all the steps of ``phi`` (K, 6, 6) and ``gam`` (K, 6, 3).
 
-    Any linear design model (issue 33; time-varying too): step j maps
-    ``x_{j+1} = Φ_j x_j + Γ_j u_j``, so ``M_j = Φ_{K−1} ⋯ Φ_{j+1} Γ_j`` and
-    ``b = x_f − Φ_{K−1} ⋯ Φ_0 x̂``; the transition Φ(t_K, t_0) is kept for the
-    costate (:func:`costate_from_multiplier`). Row scaling as :func:`grid_problem`.
+    :func:`condense` then :func:`grid_problem_from_condensed`; a loop that
+    re-solves many times condenses once and slices instead.
     """
-    steps = phi.shape[0]
-    blocks = np.empty((steps, 6, 3))
-    acc = np.eye(6)
-    for j in range(steps - 1, -1, -1):
-        blocks[j] = acc @ gam[j]
-        acc = acc @ phi[j]
-    row_scale = _row_scale(steps * dt_s, u_max_km_s2)
-    return GridProblem(blocks, xf - acc @ x0, row_scale, dt_s, u_max_km_s2, transition=acc)
+    return grid_problem_from_condensed(condense(phi, gam), phi.shape[0], x0, xf, dt_s, u_max_km_s2)
 
 
 def _row_scale(t: float, u_max_km_s2: float) -> np.ndarray:
