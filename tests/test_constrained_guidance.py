@@ -27,6 +27,7 @@ U_MAX = 8e-4  # km/s²
 DT = 1.0
 
 
+@functools.cache
 def _zoh(n: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Φ(h), Γ(h) of ẋ = A x + B u with u held: expm of [[A, B], [0, 0]] h."""
     a = np.zeros((9, 9))
@@ -107,32 +108,34 @@ def test_the_corridor_holds_at_every_corridor_node() -> None:
 
 @pytest.mark.slow
 def test_random_constrained_plans_never_enter_the_unsafe_set_between_nodes() -> None:
-    """An independent dense check of planned ZOH arcs (40 sub-samples a step) on 1,000
-    random problems (issue 32's "done when"): ellipsoids of 100–300 m semi-axes, a corridor
-    of random axis and half-angle with its port 0–20 % outside the surface, a start 400 m
-    out in a random direction, an 80 s horizon (short, so that 1,000 plans take about a
-    minute), ε ∈ {0, 0.5, 1}. A softened plan (slack > 0, 2 % of them) claims no safety and
-    is not checked: problems are drawn until 1,000 plans are checked (at most 1,100)."""
+    """An independent dense check of planned ZOH arcs (40 sub-samples a step of the 1 s grid)
+    on 1,000 random problems (issue 32's "done when"): ellipsoids of 25–75 m semi-axes, a
+    corridor of random axis and half-angle with its port 0–20 % outside the surface, a start
+    100 m out in a random direction, a 40 s horizon, ε ∈ {0, 0.5, 1}. At the paper's thrust
+    this is 100–300 m zones and 400 m in 80 s scaled together (distance ∝ u_max t²) with half
+    the nodes (1,000 plans take about 20 CPU s, were 35), so a step's arc is longer against
+    the zone. A softened plan (slack > 0, 6 of the 1,006 drawn) claims no safety and is not
+    checked: problems are drawn until 1,000 plans are checked (at most 1,100)."""
     rng = np.random.default_rng(32)
     checked = 0
     for _ in range(1100):
         if checked == 1000:
             break
-        axes = rng.uniform(0.1, 0.3, 3)
+        axes = rng.uniform(0.025, 0.075, 3)
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
         surface = axis / math.sqrt(float(np.sum((axis / axes) ** 2)))
         port = surface * rng.uniform(1.0, 1.2)
         deg = float(rng.uniform(10, 45))
         start = rng.normal(size=3)
-        x0 = np.r_[0.4 * start / np.linalg.norm(start), rng.normal(size=3) * 1e-4]
+        x0 = np.r_[0.1 * start / np.linalg.norm(start), rng.normal(size=3) * 2.5e-5]
         res = cp.plan(
             N_MOTION,
             DT,
             U_MAX,
             x0,
             np.r_[port, 0, 0, 0],
-            80.0,
+            40.0,
             float(rng.choice([0.0, 0.5, 1.0])),
             _geometry(axes, port, axis, deg),
         )

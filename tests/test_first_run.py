@@ -20,6 +20,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from numba.core import compiler
+from numba.core.compiler import CompilerBase, DefaultPassBuilder, _EarlyPipelineCompletion
+from numba.core.compiler_machinery import FunctionPass, register_pass
+from numba.core.typed_passes import NopythonTypeInference
 from rich.console import Console
 from typer.testing import CliRunner
 
@@ -113,8 +117,10 @@ for f in (k._bracketed_root, k._g, k._primer, k.add_control_node):
 """
 
 
-def test_no_kernel_is_compiled_once_per_literal_argument(tmp_path: Path) -> None:
-    out = " ".join(_in_empty_cache(_LITERALS, tmp_path)).split()
+def test_no_kernel_is_compiled_once_per_literal_argument(
+    compiled_in_empty_cache: dict[str, list[str]],
+) -> None:
+    out = " ".join(compiled_in_empty_cache["literals"]).split()
     assert out == [
         "_bracketed_root", "1", "False", "_g", "1", "False",
         "_primer", "1", "False", "add_control_node", "1", "False",
@@ -135,6 +141,44 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
 # ---------------------------------------------------------------------------
 
 
+@register_pass(mutates_CFG=False, analysis_only=True)
+class _StopAfterTyping(FunctionPass):  # type: ignore[misc]
+    """The last pass of :class:`_TypeOnly`: the pipeline ends with the types, no code."""
+
+    _name = "cwrend_tests_stop_after_typing"
+
+    def __init__(self) -> None:
+        FunctionPass.__init__(self)
+
+    def run_pass(self, state: Any) -> bool:
+        raise _EarlyPipelineCompletion(state.typemap)
+
+
+class _TypeOnly(CompilerBase):  # type: ignore[misc]
+    """numba's nopython pipeline up to type inference (its untyped passes, the dead-branch
+    pruning of ``None`` arguments included), then :class:`_StopAfterTyping`."""
+
+    def define_pipelines(self) -> list[Any]:
+        pm = DefaultPassBuilder.define_nopython_pipeline(self.state)
+        pm.passes = pm.passes[: [p for p, _ in pm.passes].index(NopythonTypeInference) + 1]
+        pm.add_pass(_StopAfterTyping, "end after type inference")
+        pm.finalize()
+        return [pm]
+
+
+def _type_calls(kernel: Any, sig: tuple[Any, ...]) -> None:
+    """Types ``kernel``'s Python function for ``sig`` with the kernel's own flags, generating
+    no code: typing a call of another kernel compiles that kernel (or loads it from numba's
+    cache) for the call's argument types, as compiling the caller would (an uncached copy of
+    the step loop's caller compiled in 11-45 s, this types it in about 1 s)."""
+    flags = compiler.Flags()
+    kernel.targetdescr.options.parse_as_flags(flags, kernel.targetoptions)
+    target = kernel.targetdescr
+    contexts = (target.typing_context, target.target_context)
+    args = (kernel.py_func, tuple(sig), None, flags, kernel.locals)
+    compiler.compile_extra(*contexts, *args, pipeline_class=_TypeOnly)
+
+
 @pytest.mark.parametrize(
     "tree",
     [{}, {"sensor": {"model": "range_bearing"}}, {"truth": {"model": "two_body"}}],
@@ -143,8 +187,6 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
 def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use(
     tree: dict[str, Any],
 ) -> None:
-    from numba import njit
-
     from cwrend_cli.campaign import worker
     from cwrend_cli.config.adapt import problem_of
     from cwrend_cli.physics import _loop_kernels, simulation
@@ -153,10 +195,9 @@ def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use(
     cfg = config_from_dict(tree)
     campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)
     # the compiled loop types its call of the step loop here, whatever numba's cache holds:
-    # an uncached copy of it, compiled for each signature the runs gave it
-    copy = njit(_loop_kernels._resolve_loop.py_func)
+    # typed again for each signature the runs gave it
     for sig in _loop_kernels._resolve_loop.signatures:
-        copy.compile(sig)
+        _type_calls(_loop_kernels._resolve_loop, sig)
     before = _loop_kernels._steps.signatures
     simulation.compile_loop(
         problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0)
@@ -277,5 +318,22 @@ print("quicksort" in ir, "raise_with_shape_context" in ir, len(ir) > 10_000)
 """
 
 
-def test_the_solver_compiles_no_sort_or_slice_error_message(tmp_path: Path) -> None:
-    assert _in_empty_cache(_SHRUNK, tmp_path) == ["False False True"]
+def test_the_solver_compiles_no_sort_or_slice_error_message(
+    compiled_in_empty_cache: dict[str, list[str]],
+) -> None:
+    assert compiled_in_empty_cache["shrunk"] == ["False False True"]
+
+
+@pytest.fixture(scope="module")
+def compiled_in_empty_cache(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
+    """What :data:`_LITERALS`, then :data:`_SHRUNK`, print in one fresh interpreter with an
+    empty numba cache (one compile of the kernels both reach; each was a process of its own).
+
+    Order-proof for both: the literal check types the callees before anything else
+    compiles them, and :data:`_SHRUNK` reads the code of the start selection with every
+    callee linked in, whichever compile met the callee first."""
+    marker = "--- shrunk ---"
+    code = f"{_LITERALS}\nprint({marker!r})\n{_SHRUNK}"
+    out = _in_empty_cache(code, tmp_path_factory.mktemp("numba-cache"))
+    cut = out.index(marker)
+    return {"literals": out[:cut], "shrunk": out[cut + 1 :]}

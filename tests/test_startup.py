@@ -11,6 +11,7 @@ wall times are measured by ``python -m benchmarks.bench_startup``.
 
 from __future__ import annotations
 
+import functools
 import json
 import subprocess
 import sys
@@ -21,28 +22,35 @@ import pytest
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 #: What every command paid at start-up before issue 17 (about 1.5–4 s together).
 HEAVY = ("numba", "pandas", "scipy", "matplotlib", "rerun", "pyarrow")
-#: Run a command line in-process as ``cwrend`` does, then print the heavy modules loaded.
+#: Run a command line in-process as ``cwrend`` does, then print the top-level modules loaded.
 SCRIPT = """
 import json, sys
 from cwrend_cli.__main__ import main
-args, watched = json.loads(sys.argv[1]), set(json.loads(sys.argv[2]))
-sys.argv = ["cwrend", *args]
+sys.argv = ["cwrend", *json.loads(sys.argv[1])]
 try:
     main()
 except SystemExit as exc:
     code = exc.code
-heavy = sorted({m.split(".")[0] for m in sys.modules} & watched)
-print(json.dumps({"code": code, "heavy": heavy}), file=sys.stderr)
+print(json.dumps({"code": code, "loaded": sorted({m.split(".")[0] for m in sys.modules})}),
+      file=sys.stderr)
 """
 
 
-def _loaded(args: list[str], watched: tuple[str, ...] = HEAVY) -> dict[str, object]:
+@functools.cache
+def _run(args: tuple[str, ...]) -> tuple[object, frozenset[str]]:
+    """Exit code and top-level modules of ``cwrend *args`` in a fresh interpreter, run once
+    per command line for every test that asks (the tests below share several)."""
     proc = subprocess.run(
-        [sys.executable, "-c", SCRIPT, json.dumps(args), json.dumps(watched)],
-        capture_output=True, text=True, timeout=120,
+        [sys.executable, "-c", SCRIPT, json.dumps(args)], capture_output=True, text=True,
+        timeout=120,
     )  # fmt: skip
-    result: dict[str, object] = json.loads(proc.stderr.strip().splitlines()[-1])
-    return result
+    result = json.loads(proc.stderr.strip().splitlines()[-1])
+    return result["code"], frozenset(result["loaded"])
+
+
+def _loaded(args: list[str], watched: tuple[str, ...] = HEAVY) -> dict[str, object]:
+    code, loaded = _run(tuple(args))
+    return {"code": code, "heavy": sorted(loaded & set(watched))}
 
 
 @pytest.mark.parametrize(
