@@ -125,3 +125,19 @@ def test_cumulative_delta_v_ends_at_the_delta_v(paper_refs) -> None:
         assert dv[0] == 0.0 and np.all(np.diff(dv) >= 0)
         # summation order differs from np.trapezoid: rounding only
         assert dv[-1] == pytest.approx(ref.delta_v_km_s, rel=1e-12)
+
+
+def test_a_rest_to_rest_transfer_along_one_axis_has_a_fuel_reference() -> None:
+    """From rest 1 km cross-track to the target in 400 s: the primer vector is along z only
+    and antisymmetric about T/2, so ‖λ_v‖ = 0 exactly at its minimum (found by the switch
+    search). The fuel-optimal reference is solved and reaches x_f (it raised
+    ZeroDivisionError from the primer's rate at ‖λ_v‖ = 0)."""
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.config.io import config_from_dict
+    from cwrend_cli.physics import simulation
+
+    cfg = config_from_dict({"scenario": {"x0": [0, 0, 1, 0, 0, 0], "horizon_s": 400.0}})
+    refs = simulation.open_loop_references(problem_of(cfg))
+    assert refs.fuel.miss_km < TOL_MISS_KM
+    assert np.all(np.isfinite(refs.fuel.u))
+    assert refs.fuel.delta_v_km_s <= refs.energy.delta_v_km_s

@@ -327,7 +327,12 @@ def model_primer(
 def _speed_and_rate(
     n: KernelModel, t: float, lam0: np.ndarray, ws: Workspace
 ) -> tuple[float, float, float]:
-    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM, 3:6]`` holds λ_v(t) afterwards."""
+    """``(‖λ_v(t)‖, λ_v·λ̇_v / ‖λ_v‖, ‖λ̇_v‖)``; ``ws[WS_LAM, 3:6]`` holds λ_v(t) afterwards.
+
+    Where ``λ_v(t) = 0`` (a primer that passes through zero: a rest-to-rest transfer along
+    one axis is antisymmetric about its midpoint) ``‖λ_v‖`` has a kink at its minimum
+    and the middle value is 0: its one-sided slopes are ``∓‖λ̇_v‖``.
+    """
     q = ws[WS_PRIMER, :12].reshape((4, 3))
     model_primer(n, lam0, t, int(np.int64(1)), q, ws)  # runtime ints (module docstring)
     lam = ws[WS_LAM]
@@ -335,7 +340,7 @@ def _speed_and_rate(
     lam[4] = q[0, 1]
     lam[5] = q[0, 2]
     p = np.sqrt(q[0, 0] ** 2 + q[0, 1] ** 2 + q[0, 2] ** 2)
-    pdot = (q[0, 0] * q[1, 0] + q[0, 1] * q[1, 1] + q[0, 2] * q[1, 2]) / p
+    pdot = (q[0, 0] * q[1, 0] + q[0, 1] * q[1, 1] + q[0, 2] * q[1, 2]) / p if p > 0.0 else 0.0
     r = np.sqrt(q[1, 0] ** 2 + q[1, 1] ** 2 + q[1, 2] ** 2)
     return p, pdot, r
 
