@@ -434,23 +434,36 @@ def _thrust_guess(u_bar: np.ndarray, u_max: float, eps: float) -> np.ndarray:
     return np.flatnonzero(on)
 
 
+@dataclass(frozen=True)
+class _Subproblem:
+    """What one SCP iteration's convex program is built from (module docstring).
+
+    The problem (mean motion n [rad/s], step Δt [s], u_max [km/s²], x0, x_f, ε),
+    the geometry, and the previous iterate's modes, positions r̄ (N+1, 3) [km] and
+    controls ū (N, 3) [km/s²], the nodes' chord margins [km], their linearised
+    half-spaces, the trust radius [km], the turning body frame of a tumbling
+    target (``None``: fixed) and the abort-safety rows (``None``: off).
+    """
+
+    n: float
+    dt_s: float
+    u_max: float
+    x0: np.ndarray
+    xf: np.ndarray
+    eps: float
+    geo: cg.Geometry
+    modes: np.ndarray
+    r_bar: np.ndarray
+    u_bar: np.ndarray
+    margins_km: np.ndarray
+    half_spaces: list[HalfSpaces]
+    trust_km: float
+    motion: cg.BodyMotion | None = None
+    abort_rows: ab.AbortRows | None = None
+
+
 def _reduced_solve(
-    n: float,
-    dt_s: float,
-    u_max: float,
-    x0: np.ndarray,
-    xf: np.ndarray,
-    eps: float,
-    geo: cg.Geometry,
-    modes: np.ndarray,
-    r_bar: np.ndarray,
-    u_bar: np.ndarray,
-    margins_km: np.ndarray,
-    half_spaces: list[HalfSpaces],
-    trust_km: float,
-    reduce: bool = True,
-    motion: cg.BodyMotion | None = None,
-    abort_rows: ab.AbortRows | None = None,
+    sub: _Subproblem, reduce: bool = True
 ) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
     """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
     (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
@@ -463,6 +476,9 @@ def _reduced_solve(
     Unsolved with every row that could make it infeasible: so is the whole program.
     ``reduce=False``: the whole program at once, every row written (the reference).
     """
+    n, dt_s, u_max, x0, xf, eps = sub.n, sub.dt_s, sub.u_max, sub.x0, sub.xf, sub.eps
+    modes, r_bar, u_bar, half_spaces = sub.modes, sub.r_bar, sub.u_bar, sub.half_spaces
+    trust_km, motion, abort_rows = sub.trust_km, sub.motion, sub.abort_rows
     steps = modes.size - 1
     pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km, motion)
     first = _first_node(modes, pairs)
@@ -475,25 +491,7 @@ def _reduced_solve(
     for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
         if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
             first, thrust = 1, np.arange(steps)
-        sol, iterations = _program(
-            n,
-            dt_s,
-            u_max,
-            x0,
-            xf,
-            eps,
-            geo,
-            modes,
-            r_bar,
-            margins_km,
-            half_spaces,
-            trust_km,
-            pairs,
-            first,
-            thrust,
-            motion,
-            abort_rows,
-        )
+        sol, iterations = _program(sub, pairs, first, thrust)
         used += iterations
         if not feasibility.solved(sol):
             if thrust.size == steps:
@@ -514,23 +512,7 @@ def _reduced_solve(
 
 
 def _program(
-    n: float,
-    dt_s: float,
-    u_max: float,
-    x0: np.ndarray,
-    xf: np.ndarray,
-    eps: float,
-    geo: cg.Geometry,
-    modes: np.ndarray,
-    r_bar: np.ndarray,
-    margins_km: np.ndarray,
-    half_spaces: list[HalfSpaces],
-    trust_km: float,
-    pairs: np.ndarray,
-    first: int,
-    thrust: np.ndarray,
-    motion: cg.BodyMotion | None = None,
-    abort_rows: ab.AbortRows | None = None,
+    sub: _Subproblem, pairs: np.ndarray, first: int, thrust: np.ndarray
 ) -> tuple[Any, int]:
     """One convex subproblem (module docstring) solved by Clarabel; (solution, steps).
 
@@ -546,6 +528,11 @@ def _program(
     target) every body-frame half-space and the corridor cone bind node k through
     its body-frame position R_kᵀ r_k (issue 34).
     """
+    n, dt_s, u_max, x0, xf, eps = sub.n, sub.dt_s, sub.u_max, sub.x0, sub.xf, sub.eps
+    geo, modes, r_bar, margins_km = sub.geo, sub.modes, sub.r_bar, sub.margins_km
+    half_spaces, trust_km, motion, abort_rows = (
+        sub.half_spaces, sub.trust_km, sub.motion, sub.abort_rows,
+    )  # fmt: skip
     steps = modes.size - 1
     phi, gam = discretize(n, dt_s)
     gam_u = gam * u_max
@@ -931,10 +918,11 @@ def plan(
             rows = None
             if chords is not None and drift is not None and axes is not None:
                 rows = ab.rows_of(axes, drift, chords)
-            sol, iterations, answer = _reduced_solve(
+            sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
-                half_spaces, trust, reduce, motion, rows,
+                half_spaces, trust, motion, rows,
             )  # fmt: skip
+            sol, iterations, answer = _reduced_solve(sub, reduce)
             used += iterations
             if rows is None or answer is None:
                 break
