@@ -234,14 +234,10 @@ def half_space_rows(
 ) -> AbortRows:
     """The rows of the ``chords`` (K, M) of ``nodes`` (K,): both ends of chord j of node k in
     the half-space tangent to E at ``points[k, j]`` raised by ``margin_km``
-    (:func:`~cwrend_cli.physics.constraints.linearise_keep_out`, evaluated for all at once)."""
+    (:func:`~cwrend_cli.physics.constraints.tangent_planes`, raised by the margin)."""
     k, j = np.nonzero(chords)
-    a = np.asarray(semi_axes_km, dtype=np.float64)
-    p = points[k, j]
-    grad = 2.0 * p / a**2
-    size = np.linalg.norm(grad, axis=1)
-    normal = grad / size[:, None]
-    offset = np.sum(normal * p, axis=1) + (1.0 - cg.ellipsoid_level(p, a)) / size + margin_km
+    normal, offset = cg.tangent_planes(semi_axes_km, points[k, j])
+    offset = offset + margin_km
     # nᵀ C Φ(t) x_k for the chord's two samples t_j, t_j+1
     first = np.einsum("ra,rab->rb", normal, table.phis[j, :3, :])
     second = np.einsum("ra,rab->rb", normal, table.phis[j + 1, :3, :])
@@ -340,14 +336,10 @@ def final_approach_start(geo: cg.Geometry, r_km: FloatArray) -> int:
     before it inside the corridor cone (to 1 mm): module docstring. N without
     a corridor.
     """
-    last = int(r_km.shape[0]) - 1
     if geo.port_km is None:
-        return last
+        return int(r_km.shape[0]) - 1
     inside = cg.corridor_cone(geo, 0.0).residual_km(r_km) >= -_CORRIDOR_TOL_KM
-    first = last
-    while first - 1 >= 0 and inside[first - 1]:
-        first -= 1
-    return int(first)
+    return cg.approach_start(inside, 0)
 
 
 @dataclass(frozen=True)

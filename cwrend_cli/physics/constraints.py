@@ -98,6 +98,7 @@ __all__ = [
     "Safety",
     "SecondOrderCone",
     "acceleration_bound",
+    "approach_start",
     "body_acceleration_bound",
     "chord_margin_km",
     "cone_signed_distance",
@@ -428,6 +429,17 @@ def corridor_cone(geo: Geometry, margin_km: float) -> SecondOrderCone:
         raise ValueError("no corridor")
     theta = geo.half_angle_rad
     return SecondOrderCone(geo.port_km, geo.axis, math.tan(theta), margin_km / math.cos(theta))
+
+
+def approach_start(inside: npt.NDArray[np.bool_], lowest: int) -> int:
+    """The first node of the final approach: the last contiguous stretch of nodes before
+    the terminal one (the port, the corridor's apex) that lie ``inside`` the corridor
+    (N + 1,), not below node ``lowest``; the terminal node N when the one before it is
+    outside. Shared by the SCP's modes and the abort-safety exemption."""
+    first = int(inside.shape[0]) - 1
+    while first - 1 >= lowest and inside[first - 1]:
+        first -= 1
+    return first
 
 
 def acceleration_bound(

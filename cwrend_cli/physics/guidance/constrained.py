@@ -217,9 +217,7 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     if geo.port_km is None:
         return modes
     inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
-    first = steps  # the terminal node is the apex
-    while first - 1 >= 1 and inside[first - 1]:
-        first -= 1
+    first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
     modes[first:steps] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
