@@ -11,6 +11,8 @@ problem at the homotopy parameters the guidance tests use, obtained by
 from __future__ import annotations
 
 import concurrent.futures
+import fcntl
+import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +25,88 @@ import pytest
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """The whole suite (``pytest`` with no paths: the ``testpaths``) runs on one pytest-xdist
+    worker per usable CPU, tests of one :func:`pytest.mark.xdist_group` on one worker
+    (``--dist loadgroup``); a run given paths (``pytest tests/test_x.py``) stays in one
+    process, as does a run given ``-n`` (``-n 0``: in one process), ``--pdb`` or
+    ``-p no:xdist``. Most of a cold run is numba compiling the step loop once per feature
+    combination, on one core: two workers compile two at once (docs/development.md)."""
+    opt = config.option
+    if (
+        hasattr(config, "workerinput")  # an xdist worker
+        or getattr(opt, "numprocesses", 0) is not None  # no xdist, or -n given
+        or config.args_source is not pytest.Config.ArgsSource.TESTPATHS
+        or opt.usepdb
+        or opt.collectonly
+    ):
+        return
+    cpus = len(os.sched_getaffinity(0))
+    if cpus > 1:
+        opt.numprocesses = cpus
+        if opt.dist == "no":
+            opt.dist = "loadgroup"
+            opt.loadscopereorder = False  # the order of pytest_collection_modifyitems
+
+
+#: The groups of a whole-suite run on xdist workers (``--dist loadgroup``), in the order
+#: they start: the test modules whose tests take longest first (so that no long one is left
+#: for the end of the run: their cold-cache times, docs/development.md), and modules that
+#: compile the same step-loop specialisations together, one after the other on one worker,
+#: so that the second loads from numba's cache what the first compiled instead of
+#: compiling it at the same time on the other worker. Every other module is a group of its
+#: own, after these, in file order.
+GROUPS: dict[str, tuple[str, ...]] = {
+    name: (name,)
+    for name in (
+        "test_report", "test_first_run", "test_interrupt", "test_distributed", "test_ekf",
+        "test_abort_safety", "test_campaign", "test_tumbling_guidance", "test_report_safety",
+        "test_ss_shooting", "test_startup", "test_report_tumbling", "test_table",
+        "test_process_noise", "test_constrained_guidance", "test_compare", "test_progress",
+    )
+}  # fmt: skip
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On an xdist worker with ``--dist loadgroup``: each test in its module's group
+    (:data:`GROUPS`), the groups in its order, each module's tests in file order."""
+    if not (hasattr(config, "workerinput") and config.getvalue("loadgroup")):
+        return
+    group_of = {m: g for g, modules in GROUPS.items() for m in modules}
+    order = {g: i for i, g in enumerate(GROUPS)}
+    for item in items:
+        module = item.path.stem
+        item.add_marker(pytest.mark.xdist_group(group_of.get(module, module)))
+    items.sort(key=lambda item: order.get(group_of.get(item.path.stem, ""), len(order)))
+
+
+def _lock_numba_cache_saves() -> None:
+    """Serialise numba's cache writes across the test processes (xdist workers).
+
+    Numba saves a specialisation by reading a function's cache index, adding the entry
+    (with the first data-file number the index does not use) and writing index and data
+    back, with no lock: two processes saving two specialisations of one function at once
+    can pick the same data file, so one index entry may name the other's code. Each save
+    here holds an exclusive ``flock`` on a file in that cache directory.
+    """
+    from numba.core import caching
+
+    save = caching.IndexDataCacheFile.save
+
+    def locked_save(self: Any, key: Any, data: Any) -> None:
+        with open(os.path.join(self._cache_path, "cwrend-tests.lock"), "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            save(self, key, data)
+
+    caching.IndexDataCacheFile.save = locked_save
+
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    _lock_numba_cache_saves()
 
 #: Homotopy parameters of the guidance tests, in continuation order (1 → 0).
 EPS_CONTINUATION = (1.0, 0.3, 0.05, 0.0)
