@@ -26,15 +26,43 @@ from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
 
+#: Set on the controller of a whole-suite run on xdist workers (:func:`pytest_cmdline_main`).
+_DISTRIBUTED = pytest.StashKey[bool]()
+
+#: The groups of a whole-suite run on xdist workers, in the order they start: the test
+#: modules whose tests take longest first (so that no long one is left for the end of the
+#: run; their cold-cache times: docs/development.md), and modules that compile the same
+#: step-loop specialisations together, one after the other on one worker, so that the
+#: second loads from numba's cache what the first compiled instead of compiling it at the
+#: same time on the other worker. Every other module is a group of its own, after these,
+#: in file order. A group's tests run on one worker in file order, as in one process.
+GROUPS: dict[str, tuple[str, ...]] = {
+    name: (name,)
+    for name in (
+        "test_report", "test_first_run", "test_interrupt", "test_distributed", "test_ekf",
+        "test_abort_safety", "test_campaign", "test_tumbling_guidance", "test_report_safety",
+        "test_ss_shooting", "test_startup", "test_report_tumbling", "test_table",
+        "test_process_noise", "test_constrained_guidance", "test_compare", "test_progress",
+    )
+}  # fmt: skip
+_GROUP_OF = {module: group for group, modules in GROUPS.items() for module in modules}
+_ORDER = {group: i for i, group in enumerate(GROUPS)}
+
+
+def _group(path: str) -> str:
+    """The group of a test module (its path or node id, ``tests/test_x.py::…``)."""
+    module = Path(path.split("::", 1)[0]).stem
+    return _GROUP_OF.get(module, module)
+
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_cmdline_main(config: pytest.Config) -> None:
     """The whole suite (``pytest`` with no paths: the ``testpaths``) runs on one pytest-xdist
-    worker per usable CPU, tests of one :func:`pytest.mark.xdist_group` on one worker
-    (``--dist loadgroup``); a run given paths (``pytest tests/test_x.py``) stays in one
-    process, as does a run given ``-n`` (``-n 0``: in one process), ``--pdb`` or
-    ``-p no:xdist``. Most of a cold run is numba compiling the step loop once per feature
-    combination, on one core: two workers compile two at once (docs/development.md)."""
+    worker per usable CPU, each of :data:`GROUPS` on one worker; a run given paths
+    (``pytest tests/test_x.py``) stays in one process, as does a run given ``-n`` (``-n 0``:
+    in one process), ``--pdb`` or ``-p no:xdist``. Most of a cold run is numba compiling
+    the step loop once per feature combination, on one core: two workers compile two at
+    once (docs/development.md)."""
     opt = config.option
     if (
         hasattr(config, "workerinput")  # an xdist worker
@@ -45,43 +73,41 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
     ):
         return
     cpus = len(os.sched_getaffinity(0))
-    if cpus > 1:
+    if cpus > 1 and opt.dist == "no":
         opt.numprocesses = cpus
-        if opt.dist == "no":
-            opt.dist = "loadgroup"
-            opt.loadscopereorder = False  # the order of pytest_collection_modifyitems
+        opt.dist = "loadscope"  # scheduled by pytest_xdist_make_scheduler
+        opt.loadscopereorder = False  # in the order of pytest_collection_modifyitems
+        config.stash[_DISTRIBUTED] = True
 
 
-#: The groups of a whole-suite run on xdist workers (``--dist loadgroup``), in the order
-#: they start: the test modules whose tests take longest first (so that no long one is left
-#: for the end of the run: their cold-cache times, docs/development.md), and modules that
-#: compile the same step-loop specialisations together, one after the other on one worker,
-#: so that the second loads from numba's cache what the first compiled instead of
-#: compiling it at the same time on the other worker. Every other module is a group of its
-#: own, after these, in file order.
-GROUPS: dict[str, tuple[str, ...]] = {
-    name: (name,)
-    for name in (
-        "test_report", "test_first_run", "test_interrupt", "test_distributed", "test_ekf",
-        "test_abort_safety", "test_campaign", "test_tumbling_guidance", "test_report_safety",
-        "test_ss_shooting", "test_startup", "test_report_tumbling", "test_table",
-        "test_process_noise", "test_constrained_guidance", "test_compare", "test_progress",
-    )
-}  # fmt: skip
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """xdist's scheduler of whole work units (``--dist loadscope``) with :data:`GROUPS` as
+    the units: a unit starts on the first worker free, its tests in order."""
+    if not config.stash.get(_DISTRIBUTED, False):
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleGroups(LoadScopeScheduling):  # type: ignore[misc]
+        def _split_scope(self, nodeid: str) -> str:
+            return _group(nodeid)
+
+    return ModuleGroups(config, log)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: Any) -> None:
+    """Tells each xdist worker of a whole-suite run to order its tests by :data:`GROUPS`."""
+    if node.config.stash.get(_DISTRIBUTED, False):
+        node.workerinput["cwrend_groups"] = True
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """On an xdist worker with ``--dist loadgroup``: each test in its module's group
-    (:data:`GROUPS`), the groups in its order, each module's tests in file order."""
-    if not (hasattr(config, "workerinput") and config.getvalue("loadgroup")):
-        return
-    group_of = {m: g for g, modules in GROUPS.items() for m in modules}
-    order = {g: i for i, g in enumerate(GROUPS)}
-    for item in items:
-        module = item.path.stem
-        item.add_marker(pytest.mark.xdist_group(group_of.get(module, module)))
-    items.sort(key=lambda item: order.get(group_of.get(item.path.stem, ""), len(order)))
+    """On an xdist worker of a whole-suite run: the tests in the order of :data:`GROUPS`
+    (each module's in file order), which the scheduler starts the groups in."""
+    if getattr(config, "workerinput", {}).get("cwrend_groups"):
+        items.sort(key=lambda item: _ORDER.get(_group(item.nodeid), len(_ORDER)))
 
 
 def _lock_numba_cache_saves() -> None:
