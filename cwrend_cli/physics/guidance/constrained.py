@@ -119,7 +119,7 @@ import scipy.sparse as sp
 from cwrend_cli.physics import abort_safety as ab
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
-from cwrend_cli.physics.guidance import convex, feasibility
+from cwrend_cli.physics.guidance import convex, feasibility, path_dual
 from cwrend_cli.physics.guidance.results import SolveStatus
 
 __all__ = [
@@ -191,6 +191,7 @@ class ConstrainedPlan:
     solver_iterations: int
     wall_time_s: float
     abort_slack_km: float = 0.0  # the abort rows' softening (0: every drift covered) [km]
+    fallbacks: int = 0  # programs the dual solver left to Clarabel (module docstring) [-]
 
 
 def node_positions(
@@ -458,11 +459,156 @@ class _Subproblem:
     trust_km: float
     motion: cg.BodyMotion | None = None
     abort_rows: ab.AbortRows | None = None
+    first_order: bool = True  # try the dual solver (:func:`_dual_solve`) before Clarabel
+
+
+@dataclass(frozen=True)
+class _DualSolution:
+    """What :func:`plan` reads of a program's solution when the dual solver answered:
+    its scaled cost and (last entry of ``x``) the abort slack, zero."""
+
+    obj_val: float
+    x: np.ndarray
+    status: Any = None
+
+
+#: Tolerance of every row of the dual solver: the terminal state within 1e-12 km and
+#: 1e-15 km/s (the unconstrained ascent's, :data:`.convex._NEWTON`), every path, trust and
+#: abort row within 1e-12 km (a thousandth of Clarabel's feasibility, which reaches ~1e-9
+#: km on these programs) [km, km/s].
+DUAL_TOL_KM = 1e-9
+DUAL_TOL_KM_S = 1e-12
+
+
+def _dual_rows(
+    sub: _Subproblem, pairs: np.ndarray, row_scale: np.ndarray
+) -> tuple[path_dual.DualRows, np.ndarray]:
+    """The linear rows of the whole program of ``sub`` (module docstring; the corridor cones
+    aside) for :func:`.path_dual.solve`, sorted by node, and each row's kind
+    (0 terminal, 1 half-space, 2 trust, 3 abort). Rows scaled as the terminal position rows
+    (``row_scale``: :func:`.feasibility.grid_problem`)."""
+    steps = sub.modes.size - 1
+    s_p = float(row_scale[0])
+    nodes, coeffs, offsets, tol, kinds = [], [], [], [], []
+    # terminal state: x_N = x_f
+    nodes.append(np.full(6, steps))
+    coeffs.append(np.diag(row_scale))
+    offsets.append(row_scale * sub.xf)
+    tol.append(row_scale * np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)])
+    kinds.append(np.zeros(6, np.int64))
+    if pairs.size:  # nᵀ r_k ≥ offset
+        normals, offs = _planes(sub.half_spaces, pairs, sub.motion)
+        nodes.append(pairs[:, 0])
+        coeffs.append(np.hstack([normals, np.zeros_like(normals)]) * s_p)
+        offsets.append(offs * s_p)
+        tol.append(np.full(pairs.shape[0], DUAL_TOL_KM * s_p))
+        kinds.append(np.ones(pairs.shape[0], np.int64))
+    boxed = np.flatnonzero(sub.modes > 0)
+    if boxed.size:  # r_k,i ≥ r̄_k,i − T and −r_k,i ≥ −r̄_k,i − T
+        eye = np.hstack([np.eye(3), np.zeros((3, 3))]) * s_p
+        nodes.append(np.repeat(boxed, 6))
+        coeffs.append(np.tile(np.vstack([eye, -eye]), (boxed.size, 1)))
+        low = sub.r_bar[boxed] - sub.trust_km
+        high = -sub.r_bar[boxed] - sub.trust_km
+        offsets.append(np.hstack([low, high]).ravel() * s_p)
+        tol.append(np.full(6 * boxed.size, DUAL_TOL_KM * s_p))
+        kinds.append(np.full(6 * boxed.size, 2, np.int64))
+    if sub.abort_rows is not None and sub.abort_rows.nodes.size:  # cᵀ x_k ≥ o
+        count = sub.abort_rows.nodes.size
+        nodes.append(sub.abort_rows.nodes)
+        coeffs.append(sub.abort_rows.coeffs * s_p)
+        offsets.append(sub.abort_rows.offsets_km * s_p)
+        tol.append(np.full(count, DUAL_TOL_KM * s_p))
+        kinds.append(np.full(count, 3, np.int64))
+    node = np.concatenate(nodes).astype(np.int64)
+    order = np.argsort(node, kind="stable")
+    kind = np.concatenate(kinds)[order]
+    rows = path_dual.DualRows(
+        node[order],
+        np.ascontiguousarray(np.concatenate(coeffs)[order]),
+        np.concatenate(offsets)[order],
+        kind == 0,
+        np.concatenate(tol)[order],
+    )
+    return rows, kind
+
+
+#: A half-space row whose plane passes within this of the previous iterate's node starts
+#: in the dual solver's working set (a plan that touches the zone lies on its planes, and
+#: the next linearisation's plane passes through it to second order) [km].
+GUESS_KM = 1e-3
+
+
+def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
+    """Starting multipliers of the dual solver: a positive speck (1e-300: it only marks the
+    row as in the working set) on the half-space rows that the previous iterate ``r_bar``
+    nearly touches (within :data:`GUESS_KM`), one per run of consecutive such nodes (the
+    closest: a state constraint touched over a stretch is held by a few of its rows);
+    zero elsewhere."""
+    y = np.zeros(rows.nodes.size)
+    hs = np.flatnonzero(kind == 1)
+    if hs.size == 0:
+        return y
+    residual = (
+        np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
+    ) / np.linalg.norm(rows.coeffs[hs, :3], axis=1)
+    close = hs[residual <= GUESS_KM]
+    if close.size == 0:
+        return y
+    y[close] = 1e-300
+    return y
+
+
+def _cone_residuals(sub: _Subproblem, r: np.ndarray) -> np.ndarray:
+    """The tightened corridor cone's residual [km] (≥ 0 inside) at every corridor node of
+    ``r`` (N + 1, 3), in the body frame with ``motion``."""
+    nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
+    rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
+    return np.array(
+        [
+            float(cg.corridor_cone(sub.geo, float(sub.margins_km[k])).residual_km(rho[i]))
+            for i, k in enumerate(nodes.tolist())
+        ]
+    )
+
+
+def _motion_at(motion: cg.BodyMotion, nodes: np.ndarray) -> cg.BodyMotion:
+    """``motion`` at ``nodes`` only (its rotations; what :func:`.constraints.to_body` reads)."""
+    return motion._replace(rotation=motion.rotation[nodes])
+
+
+def _dual_solve(
+    sub: _Subproblem, pairs: np.ndarray
+) -> tuple[_DualSolution, int, tuple[np.ndarray, np.ndarray, float]] | tuple[None, int, None]:
+    """The whole program of ``sub`` by the projected dual Newton method of
+    :mod:`.path_dual` (module docstring, *Solvers*): (solution, iterations, (controls, states,
+    slack 0)), or (None, iterations, None) when its answer is not certified optimal for the
+    whole program (not converged, a corridor cone broken, or a path or abort multiplier sum
+    above its slack's price: then the program needs its slack) — Clarabel then solves it."""
+    steps = sub.modes.size - 1
+    g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
+    rows, kind = _dual_rows(sub, pairs, g.row_scale)
+    weight = max(float(sub.eps), convex.REGULARISATION)
+    warm = _guess_active(rows, kind, sub.r_bar)
+    ans = path_dual.solve(
+        sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
+    )
+    if not ans.converged:
+        return None, ans.iterations, None
+    s_p = float(g.row_scale[0])
+    if float(np.sum(ans.multipliers[kind == 1])) * s_p > SLACK_PENALTY:
+        return None, ans.iterations, None
+    if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+        return None, ans.iterations, None
+    if np.any(_cone_residuals(sub, ans.states[:, :3]) < -DUAL_TOL_KM):
+        return None, ans.iterations, None
+    sol = _DualSolution(ans.cost, np.zeros(1))
+    return sol, ans.iterations, (ans.controls, ans.states, 0.0)
 
 
 def _reduced_solve(
     sub: _Subproblem, reduce: bool = True
-) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
+) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None, int]:
     """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
     (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
     slack [km]) or None when unsolved).
@@ -485,7 +631,12 @@ def _reduced_solve(
     thrust = _thrust_guess(u_bar, u_max, eps)
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
-    used = 0
+    used, fallback = 0, 0
+    if reduce and sub.first_order and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT:
+        dual, used, dual_answer = _dual_solve(sub, pairs)
+        if dual is not None:
+            return dual, used, dual_answer, 0
+        fallback = 1
     for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
         if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
             first, thrust = 1, np.arange(steps)
@@ -493,14 +644,14 @@ def _reduced_solve(
         used += iterations
         if not feasibility.solved(sol):
             if thrust.size == steps:
-                return sol, used, None
+                return sol, used, None, fallback
             thrust = np.arange(steps)  # the held steps may be why: free them
             continue
         u, x, slack = _answer(n, dt_s, u_max, x0, sol, steps, first, thrust)
         broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack, motion)
         wake = _coasting_broken(n, dt_s, u_max, x0, xf, eps, sol, steps, first, thrust)
         if attempt == REDUCED_ROUNDS or (broken.size == 0 and wake.size == 0):
-            return sol, used, (u, x, slack)
+            return sol, used, (u, x, slack), fallback
         if broken.size:
             first = min(first, int(broken[0]))
             back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
@@ -850,6 +1001,7 @@ def plan(
     reduce: bool = True,
     motion: cg.BodyMotion | None = None,
     abort_safe_s: float | None = None,
+    solver: str = "auto",
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
@@ -862,7 +1014,13 @@ def plan(
     against; module docstring, *Reductions*). ``motion`` (a tumbling target,
     issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
     ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
+    ``solver``: ``"auto"`` tries the dual solver of :mod:`.path_dual` on every program
+    whose quadratic weight is at least :data:`.convex.DUAL_MIN_WEIGHT`, Clarabel on the
+    others and whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
+    (module docstring, *Solvers*).
     """
+    if solver not in ("auto", "clarabel"):
+        raise ValueError(f"solver must be 'auto' or 'clarabel', not {solver!r}")
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
     x0 = np.asarray(x0, dtype=np.float64)
@@ -902,6 +1060,7 @@ def plan(
         )
     result = failed
     cost = math.inf
+    fallbacks = 0
     drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
         margins = _node_margins(
@@ -918,10 +1077,11 @@ def plan(
                 rows = ab.rows_of(axes, drift, chords)
             sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
-                half_spaces, trust, motion, rows,
+                half_spaces, trust, motion, rows, solver == "auto",
             )  # fmt: skip
-            sol, iterations, answer = _reduced_solve(sub, reduce)
+            sol, iterations, answer, fell_back = _reduced_solve(sub, reduce)
             used += iterations
+            fallbacks += fell_back
             if rows is None or answer is None:
                 break
             assert chords is not None and drift is not None and axes is not None
@@ -943,6 +1103,7 @@ def plan(
                 scp,
                 used,
                 time.perf_counter() - start,
+                fallbacks=fallbacks,
             )
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
@@ -967,6 +1128,7 @@ def plan(
             used,
             time.perf_counter() - start,
             abort_slack if abort_slack > SLACK_TOL_KM else 0.0,
+            fallbacks,
         )
         x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)

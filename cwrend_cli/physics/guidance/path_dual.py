@@ -1,0 +1,450 @@
+"""A projected dual Newton solver for the smoothed minimum-fuel program with linear path rows.
+
+Issue 32: the constrained cone program's SCP subproblem at adaptive ε (quadratic
+weight ``c₂ = max(ε, ρ) ≥ 1e-3``). The program, in the scaled controls
+``ũ_j = u_j/u_max`` (N × 3) on the zero-order-hold grid (exact CW dynamics,
+paper Eq. 11: ``x_k = Φᵏ x₀ + Σ_{j<k} Φ^{k−1−j} Γ u_max ũ_j``):
+
+    ``min Σ_j c₁‖ũ_j‖ + c₂‖ũ_j‖²``  s.t. ``‖ũ_j‖ ≤ 1``,
+    ``g_iᵀ x_{k_i} = f_i`` (equality rows: the terminal state),
+    ``g_iᵀ x_{k_i} ≥ f_i`` (inequality rows: keep-out half-spaces, trust box, abort rows),
+
+``c₁ = 1 − ε``. It is the program of :mod:`.convex` (whose dual ascent,
+:mod:`._grid_kernels`, is this solver's special case with the six terminal rows
+only) with any number of rows, each a linear function of one node's state.
+
+**Dual.** With ``L = Σ f(ũ_j) − Σ_i y_i (g_iᵀ x_{k_i} − f_i)`` (``y_i ≥ 0`` on
+inequality rows) and ``A_j = Φ^{N−1−j} Γ u_max`` (the terminal blocks), a row
+at node k acts on ũ_j (j < k) through ``g_iᵀ Φ^{k−1−j} Γ u_max = h_iᵀ A_j`` with
+``h_i = (Φ^{k−N})ᵀ g_i``. So each step minimises ``f(ũ) − (A_jᵀ λ_j)ᵀ ũ`` with
+the piecewise-constant ``λ_j = Σ_{i: k_i > j} y_i h_i`` — in closed form, the
+smoothed law of paper Eq. 10 on the grid (:mod:`._grid_kernels`): ``ũ_j = a_j ŷ_j``,
+``a_j = clip((‖y_j‖ − c₁)/(2c₂), 0, 1)``, ``y_j = A_jᵀ λ_j``. The dual function
+``D(y) = yᵀ f' − Σ_j f*(y_j)`` (``f'_i = f_i − g_iᵀ Φ^{k_i} x₀``) is concave with
+gradient ``f'_i − h_iᵀ Σ_{j<k_i} A_j ũ_j`` (the row's residual, negated) and
+Hessian ``−h_aᵀ Q_{min(k_a,k_b)} h_b``, ``Q_k = Σ_{j<k} A_j J_j A_jᵀ``,
+``J_j = ∂ũ_j/∂y_j`` (prefix sums: one pass over the steps whatever the rows).
+
+**Method.** ``max D`` over ``y`` with ``y_i ≥ 0`` on inequality rows by the
+projected Newton method of Bertsekas (1982, "Projected Newton methods for
+optimization problems with simple constraints", SIAM J. Control Optim. 20(2)):
+the inequality rows at their bound whose gradient points outward are held at 0
+(a scaled-gradient step), a Levenberg–Marquardt Newton step on the others
+(:data:`ENTER` violated rows at most join a step, the most violated first), an
+Armijo search along the projection arc. **Certificate:** it stops only when
+``ũ(y)`` — the Lagrangian's minimiser, so stationary by construction — meets
+every equality row within its tolerance, every inequality row within its
+tolerance, and every row with ``y_i > 0`` within its tolerance of equality
+(complementarity); with ``c₂ > 0`` these KKT conditions make ``ũ(y)`` the
+program's unique minimiser (to the tolerances). Otherwise the status is
+failed and the caller solves the program with Clarabel (its reference).
+
+Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
+tolerances in the same scaled units).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
+from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
+
+__all__ = ["ENTER", "MAX_ITER", "DualRows", "DualAnswer", "solve"]
+
+#: Newton iterations at most [-]; the warm re-solves of campaigns/safe_approach.toml need
+#: far fewer (docs/solvers.md).
+MAX_ITER = 150
+#: Violated inequality rows that may join the free set in one iteration, the most violated
+#: first [-] (a cold plan that crosses the zone violates the rows of tens of nodes, nearly
+#: dependent on one another; a handful at a time keeps the Newton system small and well
+#: posed).
+ENTER = 1
+_ARMIJO = 1e-4
+_HALVINGS = 4
+_DAMPING_TRIES = 30
+
+
+class DualRows(NamedTuple):
+    """Rows ``g_iᵀ x_{k_i} (= or ≥) f_i`` of the program, sorted by node.
+
+    ``nodes`` (R,) int64 in 1 … N; ``coeffs`` (R, 6) g_i; ``offsets`` (R,) f_i;
+    ``equality`` (R,) bool; ``tol`` (R,) each row's tolerance; all in the
+    caller's scaled units (a row and its tolerance multiplied by one factor).
+    """
+
+    nodes: np.ndarray
+    coeffs: np.ndarray
+    offsets: np.ndarray
+    equality: np.ndarray
+    tol: np.ndarray
+
+
+class DualAnswer(NamedTuple):
+    """``converged``; ``controls`` (N, 3) [km/s²]; ``states`` (N + 1, 6); ``multipliers``
+    (R,) of the rows (≥ 0 on inequality rows; in the rows' scaled units); ``cost`` the
+    scaled cost ``Σ c₁‖ũ‖ + c₂‖ũ‖²``; ``iterations`` the Newton iterations."""
+
+    converged: bool
+    controls: np.ndarray
+    states: np.ndarray
+    multipliers: np.ndarray
+    cost: float
+    iterations: int
+
+
+@njit(cache=True)
+def _evaluate(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    y: np.ndarray,
+    c1: float,
+    c2: float,
+    u: np.ndarray,
+    curv: np.ndarray,
+    grad: np.ndarray,
+) -> float:
+    """``D(y)``; writes ``ũ(y)`` (N, 3), the gradient (R,) and per step the curvature
+    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring)."""
+    steps = a.shape[0]
+    count = nodes.size
+    lam = np.zeros(6)
+    p = count - 1
+    conj = 0.0
+    for j in range(steps - 1, -1, -1):
+        while p >= 0 and nodes[p] > j:
+            if y[p] != 0.0:
+                for i in range(6):
+                    lam[i] += y[p] * h[p, i]
+            p -= 1
+        y0 = 0.0
+        y1 = 0.0
+        y2 = 0.0
+        for i in range(6):
+            y0 += a[j, i, 0] * lam[i]
+            y1 += a[j, i, 1] * lam[i]
+            y2 += a[j, i, 2] * lam[i]
+        ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        level = (ny - c1) / (2.0 * c2)
+        if level <= 0.0:
+            u[j, 0] = 0.0
+            u[j, 1] = 0.0
+            u[j, 2] = 0.0
+            curv[j, 0] = 0.0
+            curv[j, 1] = 0.0
+            continue
+        ramp = level < 1.0
+        if not ramp:
+            level = 1.0
+        conj += ny * level - c1 * level - c2 * level * level
+        h0 = y0 / ny
+        h1 = y1 / ny
+        h2 = y2 / ny
+        u[j, 0] = level * h0
+        u[j, 1] = level * h1
+        u[j, 2] = level * h2
+        iso = level / ny
+        curv[j, 0] = iso
+        curv[j, 1] = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
+        for i in range(6):
+            curv[j, 2 + i] = a[j, i, 0] * h0 + a[j, i, 1] * h1 + a[j, i, 2] * h2
+    s = np.zeros(6)
+    p = 0
+    value = 0.0
+    for j in range(steps):
+        for i in range(6):
+            s[i] += a[j, i, 0] * u[j, 0] + a[j, i, 1] * u[j, 1] + a[j, i, 2] * u[j, 2]
+        while p < count and nodes[p] == j + 1:
+            acc = 0.0
+            for i in range(6):
+                acc += h[p, i] * s[i]
+            grad[p] = f[p] - acc
+            value += y[p] * f[p]
+            p += 1
+    return value - conj
+
+
+@njit(cache=True)
+def _hessian(
+    aat: np.ndarray,
+    h: np.ndarray,
+    nodes: np.ndarray,
+    curv: np.ndarray,
+    free: np.ndarray,
+    n_free: int,
+    out: np.ndarray,
+) -> None:
+    """``−H`` on the rows ``free[:n_free]`` (sorted by node): ``h_aᵀ Q_{min(k_a,k_b)} h_b``."""
+    q = np.zeros((6, 6))
+    qh = np.empty((n_free, 6))  # Q_{k_a} h_a
+    p = 0
+    last = nodes[free[n_free - 1]]
+    for j in range(last):
+        iso = curv[j, 0]
+        rad = curv[j, 1]
+        if iso != 0.0 or rad != 0.0:
+            for r in range(6):
+                ar = rad * curv[j, 2 + r]
+                for c in range(6):
+                    q[r, c] += iso * aat[j, r, c] + ar * curv[j, 2 + c]
+        while p < n_free and nodes[free[p]] == j + 1:
+            row = free[p]
+            for r in range(6):
+                acc = 0.0
+                for c in range(6):
+                    acc += q[r, c] * h[row, c]
+                qh[p, r] = acc
+            p += 1
+    for a_ in range(n_free):
+        for b_ in range(a_, n_free):  # k_a ≤ k_b: Q_{min} = Q_{k_a}
+            acc = 0.0
+            for c in range(6):
+                acc += qh[a_, c] * h[free[b_], c]
+            out[a_, b_] = acc
+            out[b_, a_] = acc
+
+
+@njit(cache=True)
+def _kkt_error(
+    y: np.ndarray, grad: np.ndarray, equality: np.ndarray, tol: np.ndarray
+) -> tuple[bool, int]:
+    """(every row within its tolerance, the most violated inequality row at 0 or −1)."""
+    ok = True
+    worst = -1
+    worst_v = 0.0
+    for i in range(y.size):
+        g = grad[i]
+        if equality[i] or y[i] > 0.0:
+            if abs(g) > tol[i]:
+                ok = False
+        elif g > tol[i]:
+            ok = False
+            if g / tol[i] > worst_v:
+                worst_v = g / tol[i]
+                worst = i
+    return ok, worst
+
+
+@njit(cache=True)
+def projected_newton(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    equality: np.ndarray,
+    tol: np.ndarray,
+    metric: np.ndarray,
+    c1: float,
+    c2: float,
+    y: np.ndarray,
+    u: np.ndarray,
+    max_iter: int,
+    enter: int,
+) -> tuple[int, int]:
+    """Maximise ``D`` over ``y`` (inequality entries ≥ 0) from ``y`` in place; writes ``ũ``.
+
+    Returns ``(status, iterations)``: ``STATUS_CONVERGED`` when the KKT
+    conditions hold to ``tol`` (module docstring), else ``STATUS_FAILED``.
+    ``metric`` (R,): the Levenberg–Marquardt metric, ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i``.
+    """
+    steps = a.shape[0]
+    count = nodes.size
+    aat = np.empty((steps, 6, 6))
+    for j in range(steps):
+        for r in range(6):
+            for c in range(6):
+                aat[j, r, c] = a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[
+                    j, c, 2
+                ]
+    for i in range(count):
+        if not equality[i] and y[i] < 0.0:
+            y[i] = 0.0
+    curv = np.empty((steps, 8))
+    grad = np.empty(count)
+    u_t = np.empty((steps, 3))
+    curv_t = np.empty((steps, 8))
+    grad_t = np.empty(count)
+    y_t = np.empty(count)
+    free = np.empty(count, dtype=np.int64)
+    bound = np.empty(count, dtype=np.int64)
+    in_free = np.zeros(count, dtype=np.bool_)
+    value = _evaluate(a, h, f, nodes, y, c1, c2, u, curv, grad)
+    damping = 0.0
+    for it in range(max_iter + 1):
+        ok, _ = _kkt_error(y, grad, equality, tol)
+        if ok:
+            return STATUS_CONVERGED, it
+        if it == max_iter:
+            break
+        # free set: equality rows, inequality rows away from their bound or violated
+        # (at most ``enter`` of the violated rows at 0 join, the most violated first)
+        n_free = 0
+        n_bound = 0
+        settled = True  # the rows already free hold: only then may violated rows join
+        # Bertsekas's binding set: positive multipliers within δ (the projected scaled
+        # gradient's size) of 0 whose gradient pushes them there take a scaled-gradient
+        # step instead of a Newton step
+        delta = 0.0
+        for i in range(count):
+            if not equality[i] and y[i] > 0.0:
+                delta = max(delta, y[i] - max(0.0, y[i] + grad[i] / metric[i]))
+        for i in range(count):
+            in_free[i] = equality[i] or y[i] > 0.0
+            if in_free[i] and abs(grad[i]) > tol[i]:
+                settled = False
+            if not equality[i] and 0.0 < y[i] <= delta and grad[i] < 0.0:
+                in_free[i] = False
+                bound[n_bound] = i
+                n_bound += 1
+        for _e in range(enter if settled else 0):
+            best = -1
+            best_v = 0.0
+            for i in range(count):
+                if not in_free[i] and grad[i] > tol[i] and grad[i] / tol[i] > best_v:
+                    best_v = grad[i] / tol[i]
+                    best = i
+            if best < 0:
+                break
+            in_free[best] = True
+        for i in range(count):
+            if in_free[i]:
+                free[n_free] = i
+                n_free += 1
+        if n_free == 0 and n_bound == 0:
+            break
+        hess = np.empty((n_free, n_free))
+        _hessian(aat, h, nodes, curv, free, n_free, hess)
+        g_f = np.empty(n_free)
+        for p in range(n_free):
+            g_f[p] = grad[free[p]]
+        step = np.empty(n_free)
+        mat = np.empty((n_free, n_free))
+        accepted = False
+        for _try in range(_DAMPING_TRIES):
+            for r in range(n_free):
+                for c in range(n_free):
+                    mat[r, c] = hess[r, c]
+                mat[r, r] += max(damping, 1e-12) * metric[free[r]]
+            if not _cholesky_solve(mat, g_f, step):
+                damping = max(10.0 * damping, 1e-4)
+                continue
+            alpha = 1.0
+            for _ls in range(_HALVINGS):
+                y_t[:] = y
+                gain = 0.0
+                for p in range(n_free):
+                    i = free[p]
+                    y_t[i] = y[i] + alpha * step[p]
+                    if not equality[i] and y_t[i] < 0.0:
+                        y_t[i] = 0.0
+                    gain += grad[i] * (y_t[i] - y[i])
+                for p in range(n_bound):
+                    i = bound[p]
+                    y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
+                    gain += grad[i] * (y_t[i] - y[i])
+                value_t = _evaluate(a, h, f, nodes, y_t, c1, c2, u_t, curv_t, grad_t)
+                if gain > 0.0 and value_t >= value + _ARMIJO * gain:
+                    accepted = True
+                    break
+                if alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300):
+                    ok_t, _ = _kkt_error(y_t, grad_t, equality, tol)
+                    if ok_t:
+                        accepted = True
+                        break
+                alpha *= 0.5
+            if accepted:
+                if alpha == 1.0:
+                    damping = 0.0 if damping < 1e-6 else damping * 0.01
+                break
+            damping = max(10.0 * damping, 1e-4)
+        if not accepted:
+            break
+        y[:] = y_t
+        u[:, :] = u_t
+        curv[:, :] = curv_t
+        grad[:] = grad_t
+        value = value_t
+    return STATUS_FAILED, it
+
+
+@njit(cache=True)
+def _row_vectors(
+    n: float, dt_s: float, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
+) -> None:
+    """``h_i = (Φ^{k_i−N})ᵀ g_i`` (module docstring), one closed-form Φ a distinct node."""
+    last = -1
+    back = np.eye(6)
+    for i in range(nodes.size):
+        if nodes[i] != last:
+            last = nodes[i]
+            back = stm(n, (last - steps) * dt_s)
+        for c in range(6):
+            acc = 0.0
+            for r in range(6):
+                acc += back[r, c] * coeffs[i, r]
+            out[i, c] = acc
+
+
+@njit(cache=True)
+def _metric(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, out: np.ndarray) -> None:
+    """``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` (floored) for the damping (module docstring)."""
+    gram = np.zeros((6, 6))
+    p = 0
+    for j in range(a.shape[0]):
+        for r in range(6):
+            for c in range(6):
+                gram[r, c] += a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[
+                    j, c, 2
+                ]
+        while p < nodes.size and nodes[p] == j + 1:
+            acc = 0.0
+            for r in range(6):
+                for c in range(6):
+                    acc += h[p, r] * gram[r, c] * h[p, c]
+            out[p] = max(acc, 1e-300)
+            p += 1
+
+
+def solve(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    blocks: np.ndarray,
+    eps: float,
+    weight: float,
+    rows: DualRows,
+    warm: np.ndarray | None = None,
+    max_iter: int = MAX_ITER,
+) -> DualAnswer:
+    """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
+    terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
+    linear cost weight ``1 − ε`` and quadratic ``weight``; ``warm``: starting multipliers
+    (R,) of ``rows`` (zero when None)."""
+    steps = blocks.shape[0]
+    phi, gam = discretize(n, dt_s)
+    free_states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3)))
+    a = np.ascontiguousarray(blocks * u_max)
+    h = np.empty_like(rows.coeffs)
+    _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
+    f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
+    metric = np.empty(rows.nodes.size)
+    _metric(a, h, rows.nodes, metric)
+    y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
+    u = np.zeros((steps, 3))
+    c1 = 1.0 - min(float(eps), 1.0)
+    status, iterations = projected_newton(
+        a, h, f, rows.nodes, rows.equality, rows.tol, metric, c1, float(weight), y, u,
+        max_iter, ENTER,
+    )  # fmt: skip
+    norms = np.linalg.norm(u, axis=1)
+    cost = float(np.sum(c1 * norms + weight * norms**2))
+    controls = u * u_max
+    phi, gam = discretize(n, dt_s)
+    states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
+    return DualAnswer(status == STATUS_CONVERGED, controls, states, y, cost, int(iterations))
