@@ -1,4 +1,4 @@
-"""The dual solver of the constrained program at adaptive ε (issue 32; physics/guidance/path_dual.py).
+"""The dual solver of the constrained program at adaptive ε (issue 32; guidance/path_dual.py).
 
 Clarabel is the reference: the dual solver's plans are compared with
 ``constrained.plan(solver="clarabel")`` on random constrained problems, and its
@@ -74,7 +74,7 @@ def test_dual_plans_match_clarabels_on_random_adaptive_problems() -> None:
         assert np.all(level >= 1.0)
         states, _ = cp.node_positions(N_MOTION, DT, x0, res.controls)
         assert np.max(np.abs(states[-1] - xf)) <= 1e-9
-    assert 0 < programs - fallbacks
+    assert programs - fallbacks > 0
 
 
 def test_an_unknown_solver_is_refused() -> None:

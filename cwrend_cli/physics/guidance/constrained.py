@@ -72,6 +72,20 @@ fix the states), so every iterate keeps the safety argued above. In
 campaigns/safe_approach.toml a re-solve's program has path rows on about the
 last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 
+**Solvers.** Where the quadratic weight max(ε, ρ) is at least
+:data:`.convex.DUAL_MIN_WEIGHT` (every adaptive re-solve), each SCP program is
+first given to the projected dual Newton solver of :mod:`.path_dual` (numba),
+whole: the terminal rows, every kept half-space row, the trust rows of every
+constrained node and the abort rows, the corridor cones left out. Its answer is
+the Lagrangian's minimiser, accepted only when it is certified optimal for the
+whole program (:func:`_dual_solve`): every row within :data:`DUAL_TOL_KM`
+(:data:`DUAL_TOL_KM_S` on the terminal velocity), every row with a positive
+multiplier within it of equality, every corridor cone held, and the path and
+abort multipliers summing below their slack's price (so the exact penalty keeps
+its slack at 0). Otherwise Clarabel solves the program as below (counted in
+``ConstrainedPlan.fallbacks``); ``plan(solver="clarabel")`` uses Clarabel only.
+The two agree to the solvers' tolerances (``tests/test_path_dual.py``).
+
 **Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
 free drift from every keep-out node (the corridor nodes of the final approach,
 node 0 and the terminal node exempt) stays outside the keep-out zone for T,
@@ -590,9 +604,7 @@ def _dual_solve(
     rows, kind = _dual_rows(sub, pairs, g.row_scale)
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _guess_active(rows, kind, sub.r_bar)
-    ans = path_dual.solve(
-        sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
-    )
+    ans = path_dual.solve(sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm)
     if not ans.converged:
         return None, ans.iterations, None
     s_p = float(g.row_scale[0])
@@ -632,7 +644,11 @@ def _reduced_solve(
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used, fallback = 0, 0
-    if reduce and sub.first_order and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT:
+    if (
+        reduce
+        and sub.first_order
+        and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT
+    ):
         dual, used, dual_answer = _dual_solve(sub, pairs)
         if dual is not None:
             return dual, used, dual_answer, 0
