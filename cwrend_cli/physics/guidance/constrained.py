@@ -124,7 +124,7 @@ import math
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import clarabel
 import numpy as np
@@ -185,6 +185,16 @@ ABORT_ROUNDS = 4
 _CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
 
 
+class Duals(NamedTuple):
+    """The row multipliers of a plan's last program when the dual solver answered it:
+    ``codes`` (M,) int64 (node, kind and key of each row, :func:`_dual_rows`) and their
+    ``values`` (M,) [scaled cost per scaled row]; the next re-solve's warm start
+    (:func:`shift_duals`)."""
+
+    codes: np.ndarray
+    values: np.ndarray
+
+
 @dataclass(frozen=True)
 class ConstrainedPlan:
     """The answer of :func:`plan`.
@@ -206,6 +216,7 @@ class ConstrainedPlan:
     wall_time_s: float
     abort_slack_km: float = 0.0  # the abort rows' softening (0: every drift covered) [km]
     fallbacks: int = 0  # programs the dual solver left to Clarabel (module docstring) [-]
+    duals: Duals | None = None  # the last program's row multipliers (dual solver only)
 
 
 def node_positions(
@@ -474,6 +485,7 @@ class _Subproblem:
     motion: cg.BodyMotion | None = None
     abort_rows: ab.AbortRows | None = None
     first_order: bool = True  # try the dual solver (:func:`_dual_solve`) before Clarabel
+    warm_duals: Duals | None = None  # its starting multipliers (:func:`_warm_multipliers`)
 
 
 @dataclass(frozen=True)
@@ -483,6 +495,7 @@ class _DualSolution:
 
     obj_val: float
     x: np.ndarray
+    duals: Duals
     status: Any = None
 
 
@@ -494,22 +507,29 @@ DUAL_TOL_KM = 1e-9
 DUAL_TOL_KM_S = 1e-12
 
 
+#: A row's code for carrying its multiplier to the next program: node × _CODE_NODE +
+#: kind × _CODE_KIND + key (terminal and trust rows: their component 0 … 5; half-space
+#: rows: (node − the plane's node) + 2 × ellipsoid; abort rows: none, key 999).
+_CODE_NODE, _CODE_KIND = 1 << 20, 1 << 16
+
+
 def _dual_rows(
     sub: _Subproblem, pairs: np.ndarray, row_scale: np.ndarray
-) -> tuple[path_dual.DualRows, np.ndarray]:
+) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
     """The linear rows of the whole program of ``sub`` (module docstring; the corridor cones
-    aside) for :func:`.path_dual.solve`, sorted by node, and each row's kind
-    (0 terminal, 1 half-space, 2 trust, 3 abort). Rows scaled as the terminal position rows
-    (``row_scale``: :func:`.feasibility.grid_problem`)."""
+    aside) for :func:`.path_dual.solve`, sorted by node, each row's kind (0 terminal,
+    1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows scaled as the
+    terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`)."""
     steps = sub.modes.size - 1
     s_p = float(row_scale[0])
-    nodes, coeffs, offsets, tol, kinds = [], [], [], [], []
+    nodes, coeffs, offsets, tol, kinds, keys = [], [], [], [], [], []
     # terminal state: x_N = x_f
     nodes.append(np.full(6, steps))
     coeffs.append(np.diag(row_scale))
     offsets.append(row_scale * sub.xf)
     tol.append(row_scale * np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)])
     kinds.append(np.zeros(6, np.int64))
+    keys.append(np.arange(6))
     if pairs.size:  # nᵀ r_k ≥ offset
         normals, offs = _planes(sub.half_spaces, pairs, sub.motion)
         nodes.append(pairs[:, 0])
@@ -517,6 +537,7 @@ def _dual_rows(
         offsets.append(offs * s_p)
         tol.append(np.full(pairs.shape[0], DUAL_TOL_KM * s_p))
         kinds.append(np.ones(pairs.shape[0], np.int64))
+        keys.append(pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2])
     boxed = np.flatnonzero(sub.modes > 0)
     if boxed.size:  # r_k,i ≥ r̄_k,i − T and −r_k,i ≥ −r̄_k,i − T
         eye = np.hstack([np.eye(3), np.zeros((3, 3))]) * s_p
@@ -527,6 +548,7 @@ def _dual_rows(
         offsets.append(np.hstack([low, high]).ravel() * s_p)
         tol.append(np.full(6 * boxed.size, DUAL_TOL_KM * s_p))
         kinds.append(np.full(6 * boxed.size, 2, np.int64))
+        keys.append(np.tile(np.arange(6), boxed.size))
     if sub.abort_rows is not None and sub.abort_rows.nodes.size:  # cᵀ x_k ≥ o
         count = sub.abort_rows.nodes.size
         nodes.append(sub.abort_rows.nodes)
@@ -534,9 +556,11 @@ def _dual_rows(
         offsets.append(sub.abort_rows.offsets_km * s_p)
         tol.append(np.full(count, DUAL_TOL_KM * s_p))
         kinds.append(np.full(count, 3, np.int64))
+        keys.append(np.full(count, 999))
     node = np.concatenate(nodes).astype(np.int64)
     order = np.argsort(node, kind="stable")
     kind = np.concatenate(kinds)[order]
+    code = node[order] * _CODE_NODE + kind * _CODE_KIND + np.concatenate(keys)[order]
     rows = path_dual.DualRows(
         node[order],
         np.ascontiguousarray(np.concatenate(coeffs)[order]),
@@ -544,7 +568,32 @@ def _dual_rows(
         kind == 0,
         np.concatenate(tol)[order],
     )
-    return rows, kind
+    return rows, kind, code
+
+
+def shift_duals(duals: Duals | None, steps: int) -> Duals | None:
+    """A plan's row multipliers (:attr:`ConstrainedPlan.duals`) for a program that starts
+    ``steps`` nodes later (the next re-solve): each row's node moves back by ``steps``; rows
+    that fall on or before the new start are dropped."""
+    if duals is None:
+        return None
+    codes = duals.codes - steps * _CODE_NODE
+    keep = codes >= _CODE_NODE
+    return Duals(codes[keep], duals.values[keep])
+
+
+def _warm_multipliers(warm: Duals | None, code: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    """Starting multipliers of the rows ``code``: those of ``warm`` where a row has the same
+    code, else ``guess`` (:func:`_guess_active`)."""
+    if warm is None or warm.codes.size == 0:
+        return guess
+    order = np.argsort(warm.codes)
+    sorted_codes = warm.codes[order]
+    at = np.clip(np.searchsorted(sorted_codes, code), 0, sorted_codes.size - 1)
+    hit = sorted_codes[at] == code
+    out = guess.copy()
+    out[hit] = warm.values[order][at[hit]]
+    return out
 
 
 #: A half-space row whose plane passes within this of the previous iterate's node starts
@@ -601,9 +650,9 @@ def _dual_solve(
     above its slack's price: then the program needs its slack) — Clarabel then solves it."""
     steps = sub.modes.size - 1
     g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
-    rows, kind = _dual_rows(sub, pairs, g.row_scale)
+    rows, kind, code = _dual_rows(sub, pairs, g.row_scale)
     weight = max(float(sub.eps), convex.REGULARISATION)
-    warm = _guess_active(rows, kind, sub.r_bar)
+    warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
     ans = path_dual.solve(sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm)
     if not ans.converged:
         return None, ans.iterations, None
@@ -614,7 +663,8 @@ def _dual_solve(
         return None, ans.iterations, None
     if np.any(_cone_residuals(sub, ans.states[:, :3]) < -DUAL_TOL_KM):
         return None, ans.iterations, None
-    sol = _DualSolution(ans.cost, np.zeros(1))
+    active = ans.multipliers != 0.0
+    sol = _DualSolution(ans.cost, np.zeros(1), Duals(code[active], ans.multipliers[active]))
     return sol, ans.iterations, (ans.controls, ans.states, 0.0)
 
 
@@ -1018,6 +1068,7 @@ def plan(
     motion: cg.BodyMotion | None = None,
     abort_safe_s: float | None = None,
     solver: str = "auto",
+    warm_duals: Duals | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
@@ -1033,7 +1084,9 @@ def plan(
     ``solver``: ``"auto"`` tries the dual solver of :mod:`.path_dual` on every program
     whose quadratic weight is at least :data:`.convex.DUAL_MIN_WEIGHT`, Clarabel on the
     others and whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
-    (module docstring, *Solvers*).
+    (module docstring, *Solvers*). ``warm_duals``: the dual solver's starting multipliers,
+    an earlier plan's :attr:`ConstrainedPlan.duals` moved to this grid by
+    :func:`shift_duals`.
     """
     if solver not in ("auto", "clarabel"):
         raise ValueError(f"solver must be 'auto' or 'clarabel', not {solver!r}")
@@ -1093,11 +1146,12 @@ def plan(
                 rows = ab.rows_of(axes, drift, chords)
             sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
-                half_spaces, trust, motion, rows, solver == "auto",
+                half_spaces, trust, motion, rows, solver == "auto", warm_duals,
             )  # fmt: skip
             sol, iterations, answer, fell_back = _reduced_solve(sub, reduce)
             used += iterations
             fallbacks += fell_back
+            warm_duals = sol.duals if isinstance(sol, _DualSolution) else None
             if rows is None or answer is None:
                 break
             assert chords is not None and drift is not None and axes is not None
@@ -1145,6 +1199,7 @@ def plan(
             time.perf_counter() - start,
             abort_slack if abort_slack > SLACK_TOL_KM else 0.0,
             fallbacks,
+            warm_duals,
         )
         x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)

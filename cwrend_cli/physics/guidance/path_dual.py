@@ -63,10 +63,13 @@ MAX_ITER = 150
 #: first [-] (a cold plan that crosses the zone violates the rows of tens of nodes, nearly
 #: dependent on one another; a handful at a time keeps the Newton system small and well
 #: posed).
-ENTER = 1
+ENTER = 4
+#: Violated rows join once every free row is within this multiple of its tolerance [-]
+#: (the working set need not be solved to the last digit before it grows).
+SETTLED = 1e3
 _ARMIJO = 1e-4
 _HALVINGS = 4
-_DAMPING_TRIES = 30
+_DAMPING_TRIES = 40
 
 
 class DualRows(NamedTuple):
@@ -211,6 +214,15 @@ def _hessian(
 
 
 @njit(cache=True)
+def _merit(grad: np.ndarray, free: np.ndarray, n_free: int, tol: np.ndarray) -> float:
+    """``Σ (g_i/tol_i)²`` over the free rows: what a Newton step on them reduces."""
+    total = 0.0
+    for p in range(n_free):
+        total += (grad[free[p]] / tol[free[p]]) ** 2
+    return total
+
+
+@njit(cache=True)
 def _kkt_error(
     y: np.ndarray, grad: np.ndarray, equality: np.ndarray, tol: np.ndarray
 ) -> tuple[bool, int]:
@@ -229,6 +241,54 @@ def _kkt_error(
                 worst_v = g / tol[i]
                 worst = i
     return ok, worst
+
+
+@njit(cache=True)
+def _blocking_step(
+    hess: np.ndarray,
+    mat: np.ndarray,
+    g_f: np.ndarray,
+    y: np.ndarray,
+    free: np.ndarray,
+    n_free: int,
+    equality: np.ndarray,
+    step: np.ndarray,
+) -> bool:
+    """The Newton step on the free rows (``mat``: ``−H`` damped), with every inequality row
+    whose multiplier the step would take below 0 sent to 0 and the step solved again for
+    the others given that move (a primal–dual active-set step: a row that leaves does so
+    in one iteration). False if a system is not positive definite."""
+    kept = np.ones(n_free, dtype=np.bool_)
+    for _round in range(n_free):
+        idx = np.flatnonzero(kept)
+        m = idx.size
+        sub = np.empty((m, m))
+        rhs = np.empty(m)
+        for r in range(m):
+            acc = g_f[idx[r]]
+            for q in range(n_free):
+                if not kept[q]:  # d_q = −y_q moves the model's gradient by M_rq y_q
+                    acc += hess[idx[r], q] * y[free[q]]
+            rhs[r] = acc
+            for c in range(m):
+                sub[r, c] = mat[idx[r], idx[c]]
+        out = np.empty(m)
+        if not _cholesky_solve(sub, rhs, out):
+            return False
+        for q in range(n_free):
+            if not kept[q]:
+                step[q] = -y[free[q]]
+        for r in range(m):
+            step[idx[r]] = out[r]
+        blocked = False
+        for r in range(m):
+            q = idx[r]
+            if not equality[free[q]] and y[free[q]] + out[r] < 0.0:
+                kept[q] = False
+                blocked = True
+        if not blocked:
+            return True
+    return True
 
 
 @njit(cache=True)
@@ -296,7 +356,7 @@ def projected_newton(
                 delta = max(delta, y[i] - max(0.0, y[i] + grad[i] / metric[i]))
         for i in range(count):
             in_free[i] = equality[i] or y[i] > 0.0
-            if in_free[i] and abs(grad[i]) > tol[i]:
+            if in_free[i] and abs(grad[i]) > SETTLED * tol[i]:
                 settled = False
             if not equality[i] and 0.0 < y[i] <= delta and grad[i] < 0.0:
                 in_free[i] = False
@@ -331,7 +391,13 @@ def projected_newton(
                 for c in range(n_free):
                     mat[r, c] = hess[r, c]
                 mat[r, r] += max(damping, 1e-12) * metric[free[r]]
-            if not _cholesky_solve(mat, g_f, step):
+            # even tries: the blocking step; odd tries (its line search failed): the plain
+            # projected Newton step, same damping; then more damping
+            if _try % 2 == 0:
+                solved = _blocking_step(hess, mat, g_f, y, free, n_free, equality, step)
+            else:
+                solved = _cholesky_solve(mat, g_f, step)
+            if not solved:
                 damping = max(10.0 * damping, 1e-4)
                 continue
             alpha = 1.0
@@ -352,17 +418,19 @@ def projected_newton(
                 if gain > 0.0 and value_t >= value + _ARMIJO * gain:
                     accepted = True
                     break
-                if alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300):
-                    ok_t, _ = _kkt_error(y_t, grad_t, equality, tol)
-                    if ok_t:
-                        accepted = True
-                        break
+                # a full step that leaves D flat to rounding (near the optimum, along a
+                # nearly dependent pair of rows) is taken when it reduces the KKT errors
+                flat = alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300)
+                if flat and _merit(grad_t, free, n_free, tol) < _merit(grad, free, n_free, tol):
+                    accepted = True
+                    break
                 alpha *= 0.5
             if accepted:
                 if alpha == 1.0:
                     damping = 0.0 if damping < 1e-6 else damping * 0.01
                 break
-            damping = max(10.0 * damping, 1e-4)
+            if _try % 2 == 1:
+                damping = max(10.0 * damping, 1e-4)
         if not accepted:
             break
         y[:] = y_t
