@@ -51,10 +51,11 @@ def test_terminal_rows_alone_give_the_unconstrained_dual_ascents_plan(eps: float
 def test_dual_plans_match_clarabels_on_random_adaptive_problems() -> None:
     """On 8 random problems whose straight path crosses the zone (ε from 0.2 to 1, cold):
     the default solver's plan has the cost of Clarabel's within 1e-6 relative (both stop
-    at ~1e-9 km of feasibility; measured ≤ 5.6e-10, controls within 3.6e-7 u_max), every
-    node outside the zone (the planes are inner approximations) and the terminal state
-    within 1e-9 km. The dual solver answers some of these cold programs (measured: 2 of
-    8; the others fall back to Clarabel and are counted in ``fallbacks``)."""
+    at ~1e-9 km of feasibility; measured ≤ 4.1e-11, controls within 4.9e-7 u_max,
+    positions within 8.5e-8 km), every node outside the zone (the planes are inner
+    approximations) and the terminal state within 1e-9 km. The dual solver answers most
+    of these cold programs (measured: 6 of 8; the others fall back to Clarabel and are
+    counted in ``fallbacks``)."""
     rng = np.random.default_rng(3291)
     programs, fallbacks = 0, 0
     for _ in range(8):
@@ -74,10 +75,41 @@ def test_dual_plans_match_clarabels_on_random_adaptive_problems() -> None:
         assert np.all(level >= 1.0)
         states, _ = cp.node_positions(N_MOTION, DT, x0, res.controls)
         assert np.max(np.abs(states[-1] - xf)) <= 1e-9
-    assert programs - fallbacks > 0
+    assert fallbacks <= programs // 2
 
 
 def test_an_unknown_solver_is_refused() -> None:
     x0, xf, geo = _far_problem(np.random.default_rng(3292))
     with pytest.raises(ValueError, match="solver"):
         cp.plan(N_MOTION, DT, U_MAX, x0, xf, 300.0, 0.5, geo, solver="pipg")
+
+
+def test_shifted_duals_move_back_by_the_steps_flown_and_drop_the_past() -> None:
+    """A row's code carries its node: after 10 steps a row at node 15 is at node 5, one at
+    node 10 falls on the new start (node 0) and is dropped."""
+    node = cp._CODE_NODE
+    duals = cp.Duals(np.array([15 * node + 3, 10 * node + 1, 300 * node]), np.ones(3))
+    shifted = cp.shift_duals(duals, 10)
+    assert shifted is not None
+    np.testing.assert_array_equal(shifted.codes, [5 * node + 3, 290 * node])
+    assert cp.shift_duals(None, 10) is None
+
+
+def test_a_warm_start_from_the_last_plans_duals_gives_the_same_plan() -> None:
+    """A re-solve 10 steps on, started from the first plan's row multipliers moved by 10
+    steps, gives the cold re-solve's plan (controls within 1e-6 u_max: both certified to
+    1e-9 km; measured 1.4e-9) in fewer dual iterations (measured 9 against 20)."""
+    rng = np.random.default_rng(3293)
+    x0, xf, geo = _far_problem(rng)
+    first = cp.plan(N_MOTION, DT, U_MAX, x0, xf, 300.0, 0.9, geo)
+    assert first.duals is not None
+    x1 = cp.node_positions(N_MOTION, DT, x0, first.controls[:10])[0][-1]
+    warm_u = first.controls[10:]
+    cold = cp.plan(N_MOTION, DT, U_MAX, x1, xf, 290.0, 0.9, geo, warm_controls=warm_u)
+    warm = cp.plan(
+        N_MOTION, DT, U_MAX, x1, xf, 290.0, 0.9, geo, warm_controls=warm_u,
+        warm_duals=cp.shift_duals(first.duals, 10),
+    )  # fmt: skip
+    assert cold.fallbacks == 0 and warm.fallbacks == 0
+    np.testing.assert_allclose(warm.controls, cold.controls, rtol=0, atol=1e-6 * U_MAX)
+    assert warm.solver_iterations < cold.solver_iterations
