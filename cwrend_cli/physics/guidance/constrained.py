@@ -622,22 +622,69 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
     return y
 
 
-def _cone_residuals(sub: _Subproblem, r: np.ndarray) -> np.ndarray:
-    """The tightened corridor cone's residual [km] (≥ 0 inside) at every corridor node of
-    ``r`` (N + 1, 3), in the body frame with ``motion``."""
+#: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
+CONE_ROUNDS = 6
+
+
+def _cone_cuts(
+    sub: _Subproblem, r: np.ndarray, scale: float, key: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cuts of the corridor cones that ``r`` (N + 1, 3) breaks: (nodes, coeffs (M, 6),
+    offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``, code key ``key``.
+
+    At a corridor node whose position breaks its (tightened) cone ``‖Aρ + b‖ ≤ cᵀρ + d``
+    by more than :data:`DUAL_TOL_KM`, with w = Aρ + b and ŵ = w/‖w‖: ``ŵᵀ(Aρ + b) ≤ cᵀρ
+    + d``, i.e. ``(c − Aᵀŵ)ᵀρ ≥ ŵᵀb − d``. The cone implies it (‖w‖ ≥ ŵᵀw for any
+    unit ŵ), so a program with cuts is a relaxation of the one with cones (Kelley's
+    cutting planes); ρ = R_kᵀ r with ``motion``.
+    """
     nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
     rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
-    return np.array(
-        [
-            float(cg.corridor_cone(sub.geo, float(sub.margins_km[k])).residual_km(rho[i]))
-            for i, k in enumerate(nodes.tolist())
-        ]
-    )
+    out_nodes, coeffs, offsets = [], [], []
+    for i, k in enumerate(nodes.tolist()):
+        a, b, c, d = cg.corridor_cone(sub.geo, float(sub.margins_km[k])).rows()
+        w = a @ rho[i] + b
+        size = float(np.linalg.norm(w))
+        if float(c @ rho[i]) + d - size >= -DUAL_TOL_KM:
+            continue
+        w_hat = w / size if size > 0.0 else np.zeros(3)
+        normal = c - a.T @ w_hat
+        if sub.motion is not None:
+            normal = sub.motion.rotation[k] @ normal
+        out_nodes.append(k)
+        coeffs.append(np.r_[normal, np.zeros(3)] * scale)
+        offsets.append((float(w_hat @ b) - d) * scale)
+    m = len(out_nodes)
+    node = np.array(out_nodes, dtype=np.int64)
+    code = node * _CODE_NODE + 4 * _CODE_KIND + key
+    return node, np.array(coeffs).reshape(m, 6), np.array(offsets), code
 
 
 def _motion_at(motion: cg.BodyMotion, nodes: np.ndarray) -> cg.BodyMotion:
     """``motion`` at ``nodes`` only (its rotations; what :func:`.constraints.to_body` reads)."""
     return motion._replace(rotation=motion.rotation[nodes])
+
+
+def _with_rows(
+    rows: path_dual.DualRows,
+    kind: np.ndarray,
+    code: np.ndarray,
+    cuts: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tol: float,
+) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
+    """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts`, kind 4, tolerance
+    ``tol``), sorted by node again."""
+    node, coeffs, offsets, cut_code = cuts
+    nodes = np.r_[rows.nodes, node]
+    order = np.argsort(nodes, kind="stable")
+    merged = path_dual.DualRows(
+        nodes[order],
+        np.ascontiguousarray(np.vstack([rows.coeffs, coeffs])[order]),
+        np.r_[rows.offsets, offsets][order],
+        np.r_[rows.equality, np.zeros(node.size, dtype=bool)][order],
+        np.r_[rows.tol, np.full(node.size, tol)][order],
+    )
+    return merged, np.r_[kind, np.full(node.size, 4)][order], np.r_[code, cut_code][order]
 
 
 def _dual_solve(
@@ -646,26 +693,43 @@ def _dual_solve(
     """The whole program of ``sub`` by the projected dual Newton method of
     :mod:`.path_dual` (module docstring, *Solvers*): (solution, iterations, (controls, states,
     slack 0)), or (None, iterations, None) when its answer is not certified optimal for the
-    whole program (not converged, a corridor cone broken, or a path or abort multiplier sum
-    above its slack's price: then the program needs its slack) — Clarabel then solves it."""
+    whole program (not converged, a corridor cone still broken after :data:`CONE_ROUNDS`
+    rounds of cuts (:func:`_cone_cuts`), or a path or abort multiplier sum above its
+    slack's price: then the program needs its slack) — Clarabel then solves it."""
     steps = sub.modes.size - 1
     g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
     rows, kind, code = _dual_rows(sub, pairs, g.row_scale)
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
-    ans = path_dual.solve(sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm)
-    if not ans.converged:
-        return None, ans.iterations, None
     s_p = float(g.row_scale[0])
-    if float(np.sum(ans.multipliers[kind == 1])) * s_p > SLACK_PENALTY:
-        return None, ans.iterations, None
-    if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
-        return None, ans.iterations, None
-    if np.any(_cone_residuals(sub, ans.states[:, :3]) < -DUAL_TOL_KM):
-        return None, ans.iterations, None
-    active = ans.multipliers != 0.0
-    sol = _DualSolution(ans.cost, np.zeros(1), Duals(code[active], ans.multipliers[active]))
-    return sol, ans.iterations, (ans.controls, ans.states, 0.0)
+    used = 0
+    for cut_round in range(CONE_ROUNDS + 1):
+        ans = path_dual.solve(
+            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
+        )
+        used += ans.iterations
+        if not ans.converged:
+            return None, used, None
+        path = (kind == 1) | (kind == 4)
+        if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
+            return None, used, None
+        if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+            return None, used, None
+        cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cut_round)
+        if cuts[0].size == 0:
+            active = ans.multipliers != 0.0
+            duals = Duals(code[active], ans.multipliers[active])
+            return (
+                _DualSolution(ans.cost, np.zeros(1), duals),
+                used,
+                (ans.controls, ans.states, 0.0),
+            )
+        if cut_round == CONE_ROUNDS:
+            break
+        known = Duals(code, ans.multipliers)
+        rows, kind, code = _with_rows(rows, kind, code, cuts, DUAL_TOL_KM * s_p)
+        warm = _warm_multipliers(known, code, np.zeros(code.size))
+    return None, used, None
 
 
 def _reduced_solve(
