@@ -76,15 +76,20 @@ last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 :data:`.convex.DUAL_MIN_WEIGHT` (every adaptive re-solve), each SCP program is
 first given to the projected dual Newton solver of :mod:`.path_dual` (numba),
 whole: the terminal rows, every kept half-space row, the trust rows of every
-constrained node and the abort rows, the corridor cones left out. Its answer is
-the Lagrangian's minimiser, accepted only when it is certified optimal for the
-whole program (:func:`_dual_solve`): every row within :data:`DUAL_TOL_KM`
+constrained node and the abort rows; a corridor cone the answer breaks adds its
+supporting plane at that point (a cut the cone implies) and the program is
+solved again (:data:`CONE_ROUNDS`). Its answer is the Lagrangian's minimiser,
+accepted only when it is certified optimal for the whole program
+(:func:`_dual_solve`): every row within :data:`DUAL_TOL_KM`
 (:data:`DUAL_TOL_KM_S` on the terminal velocity), every row with a positive
 multiplier within it of equality, every corridor cone held, and the path and
 abort multipliers summing below their slack's price (so the exact penalty keeps
 its slack at 0). Otherwise Clarabel solves the program as below (counted in
 ``ConstrainedPlan.fallbacks``); ``plan(solver="clarabel")`` uses Clarabel only.
-The two agree to the solvers' tolerances (``tests/test_path_dual.py``).
+The two agree to the solvers' tolerances (``tests/test_path_dual.py``). The
+dual solver starts from the row multipliers of the previous SCP iteration, or
+of the plan the re-solve replaces (``warm_duals``, :func:`shift_duals`), else
+from the half-space rows the previous iterate touches (:func:`_guess_active`).
 
 **Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
 free drift from every keep-out node (the corridor nodes of the final approach,

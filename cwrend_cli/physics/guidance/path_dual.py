@@ -28,10 +28,15 @@ Hessian ``−h_aᵀ Q_{min(k_a,k_b)} h_b``, ``Q_k = Σ_{j<k} A_j J_j A_jᵀ``,
 **Method.** ``max D`` over ``y`` with ``y_i ≥ 0`` on inequality rows by the
 projected Newton method of Bertsekas (1982, "Projected Newton methods for
 optimization problems with simple constraints", SIAM J. Control Optim. 20(2)):
-the inequality rows at their bound whose gradient points outward are held at 0
-(a scaled-gradient step), a Levenberg–Marquardt Newton step on the others
-(:data:`ENTER` violated rows at most join a step, the most violated first), an
-Armijo search along the projection arc. **Certificate:** it stops only when
+the inequality rows near their bound whose gradient points outward take a
+scaled-gradient step, the others a Levenberg–Marquardt Newton step; a row the
+Newton step would take below 0 is set to 0 and the step solved again for the
+others (a primal–dual active-set step, :func:`_blocking_step`); violated rows
+join the free set, :data:`ENTER` at a time and the most violated first, once the
+free rows are within :data:`SETTLED` tolerances; an Armijo search along the
+projection arc, or a full step that leaves ``D`` flat to rounding and reduces
+the free rows' residuals (two nearly parallel rows of neighbouring nodes make
+``D`` almost flat along their difference). **Certificate:** it stops only when
 ``ũ(y)`` — the Lagrangian's minimiser, so stationary by construction — meets
 every equality row within its tolerance, every inequality row within its
 tolerance, and every row with ``y_i > 0`` within its tolerance of equality
