@@ -196,17 +196,17 @@ def _hessian(
     for j in range(last):
         iso = curv[j, 0]
         rad = curv[j, 1]
-        if iso != 0.0 or rad != 0.0:
+        if iso != 0.0 or rad != 0.0:  # the upper triangle (Q is symmetric)
             for r in range(6):
                 ar = rad * curv[j, 2 + r]
-                for c in range(6):
+                for c in range(r, 6):
                     q[r, c] += iso * aat[j, r, c] + ar * curv[j, 2 + c]
         while p < n_free and nodes[free[p]] == j + 1:
             row = free[p]
             for r in range(6):
                 acc = 0.0
                 for c in range(6):
-                    acc += q[r, c] * h[row, c]
+                    acc += (q[r, c] if r <= c else q[c, r]) * h[row, c]
                 qh[p, r] = acc
             p += 1
     for a_ in range(n_free):
@@ -216,6 +216,22 @@ def _hessian(
                 acc += qh[a_, c] * h[free[b_], c]
             out[a_, b_] = acc
             out[b_, a_] = acc
+
+
+@njit(cache=True)
+def _fill_metric(
+    gram: np.ndarray, h: np.ndarray, nodes: np.ndarray, i: int, metric: np.ndarray
+) -> float:
+    """Row i's Levenberg–Marquardt metric ``h_iᵀ G_{k_i} h_i`` (``gram``: the prefix sums
+    ``G_k = Σ_{j<k} A_j A_jᵀ``), computed the first time a row needs it (floored)."""
+    if metric[i] < 0.0:
+        k = nodes[i]
+        acc = 0.0
+        for r in range(6):
+            for c in range(6):
+                acc += h[i, r] * gram[k, r, c] * h[i, c]
+        metric[i] = max(acc, 1e-300)
+    return float(metric[i])
 
 
 @njit(cache=True)
@@ -316,7 +332,8 @@ def projected_newton(
 
     Returns ``(status, iterations)``: ``STATUS_CONVERGED`` when the KKT
     conditions hold to ``tol`` (module docstring), else ``STATUS_FAILED``.
-    ``metric`` (R,): the Levenberg–Marquardt metric, ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i``.
+    ``metric`` (R,): the Levenberg–Marquardt metric ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` of
+    each row, negative where not yet computed (filled as rows need it).
     """
     steps = a.shape[0]
     count = nodes.size
@@ -327,6 +344,11 @@ def projected_newton(
                 aat[j, r, c] = (
                     a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[j, c, 2]
                 )
+    gram = np.zeros((steps + 1, 6, 6))
+    for j in range(steps):
+        for r in range(6):
+            for c in range(6):
+                gram[j + 1, r, c] = gram[j, r, c] + aat[j, r, c]
     for i in range(count):
         if not equality[i] and y[i] < 0.0:
             y[i] = 0.0
@@ -358,7 +380,8 @@ def projected_newton(
         delta = 0.0
         for i in range(count):
             if not equality[i] and y[i] > 0.0:
-                delta = max(delta, y[i] - max(0.0, y[i] + grad[i] / metric[i]))
+                m_i = _fill_metric(gram, h, nodes, i, metric)
+                delta = max(delta, y[i] - max(0.0, y[i] + grad[i] / m_i))
         for i in range(count):
             in_free[i] = equality[i] or y[i] > 0.0
             if in_free[i] and abs(grad[i]) > SETTLED * tol[i]:
@@ -381,6 +404,7 @@ def projected_newton(
             if in_free[i]:
                 free[n_free] = i
                 n_free += 1
+                _fill_metric(gram, h, nodes, i, metric)
         if n_free == 0 and n_bound == 0:
             break
         hess = np.empty((n_free, n_free))
@@ -464,26 +488,6 @@ def _row_vectors(
             out[i, c] = acc
 
 
-@njit(cache=True)
-def _metric(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, out: np.ndarray) -> None:
-    """``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` (floored) for the damping (module docstring)."""
-    gram = np.zeros((6, 6))
-    p = 0
-    for j in range(a.shape[0]):
-        for r in range(6):
-            for c in range(6):
-                gram[r, c] += (
-                    a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[j, c, 2]
-                )
-        while p < nodes.size and nodes[p] == j + 1:
-            acc = 0.0
-            for r in range(6):
-                for c in range(6):
-                    acc += h[p, r] * gram[r, c] * h[p, c]
-            out[p] = max(acc, 1e-300)
-            p += 1
-
-
 def solve(
     n: float,
     dt_s: float,
@@ -509,8 +513,7 @@ def solve(
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
     f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
-    metric = np.empty(rows.nodes.size)
-    _metric(a, h, rows.nodes, metric)
+    metric = np.full(rows.nodes.size, -1.0)
     y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
     u = np.zeros((steps, 3))
     c1 = 1.0 - min(float(eps), 1.0)
