@@ -56,6 +56,7 @@ import numpy as np
 from numba import njit
 
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
+from cwrend_cli.physics.guidance._grid_kernels import step_law
 from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
 
 __all__ = ["ENTER", "MAX_ITER", "DualAnswer", "DualRows", "solve"]
@@ -131,32 +132,12 @@ def _evaluate(
                 for i in range(6):
                     lam[i] += y[p] * h[p, i]
             p -= 1
-        y0 = 0.0
-        y1 = 0.0
-        y2 = 0.0
-        for i in range(6):
-            y0 += a[j, i, 0] * lam[i]
-            y1 += a[j, i, 1] * lam[i]
-            y2 += a[j, i, 2] * lam[i]
-        ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-        level = (ny - c1) / (2.0 * c2)
+        ny, level, ramp, h0, h1, h2 = step_law(a, j, lam, c1, c2, u)
         if level <= 0.0:
-            u[j, 0] = 0.0
-            u[j, 1] = 0.0
-            u[j, 2] = 0.0
             curv[j, 0] = 0.0
             curv[j, 1] = 0.0
             continue
-        ramp = level < 1.0
-        if not ramp:
-            level = 1.0
         conj += ny * level - c1 * level - c2 * level * level
-        h0 = y0 / ny
-        h1 = y1 / ny
-        h2 = y2 / ny
-        u[j, 0] = level * h0
-        u[j, 1] = level * h1
-        u[j, 2] = level * h2
         iso = level / ny
         curv[j, 0] = iso
         curv[j, 1] = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
