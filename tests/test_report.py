@@ -872,6 +872,39 @@ def test_compare_names_the_worlds_of_a_sweeps_points_not_its_base(truth_sweep_di
     assert results_world(truth_sweep_dir) == worlds
 
 
+def test_the_world_of_a_campaign_is_read_from_three_columns_of_its_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``results_world`` (``cwrend compare``'s figure) reads ``status``, ``point`` and the swept
+    values of runs.parquet, not every column of every run."""
+    from cwrend_cli.report import load
+
+    (tmp_path / "manifest.json").write_text(json.dumps({"config": resolved_dict(CwrendConfig())}))
+    runs = pd.DataFrame(
+        {
+            "run_key": ["p_cw.mtf_adaptive.s000000", "p_2b.mtf_adaptive.s000000"],
+            "point": ["p_cw", "p_2b"],
+            "arch": ["mtf_adaptive"] * 2,
+            "status": ["ok"] * 2,
+            "error": ["", ""],
+            "miss_km": [0.001, 0.002],
+            "param.truth.model": ["cw", "two_body"],
+        }
+    )
+    runs.to_parquet(tmp_path / "runs.parquet")
+    read: list[Any] = []
+    real = load._read_parquet
+
+    def spy(path: Path, **kwargs: Any) -> pd.DataFrame:
+        read.append(kwargs.get("columns"))
+        return real(path, **kwargs)
+
+    monkeypatch.setattr(load, "_read_parquet", spy)
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert load.results_world(tmp_path) == worlds
+    assert read == [["point", "status", "param.truth.model"]]
+
+
 # ---------------------------------------------------------------------------
 # Sampled designs and their sensitivity (issue 19, item 4)
 # ---------------------------------------------------------------------------
