@@ -806,6 +806,19 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
         assert world in f.draw().get_suptitle(), f.file
 
 
+def test_every_figure_names_its_world_under_its_title(ablation_dir: Path) -> None:
+    """Fig. 6 and the distributions (one titled axes each) had the world above their
+    title; every figure has it on the line under its title."""
+    from cwrend_cli.report import figures
+
+    data = load_results(ablation_dir)
+    for f in figures.planned_figures(data):
+        fig = f.draw()
+        *title, world = fig.get_suptitle().split("\n")
+        assert world == data.world and title, f.file
+        assert not any(ax.get_title() in title for ax in fig.axes), f.file  # not twice
+
+
 @pytest.fixture(scope="module")
 def truth_sweep_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 2-seed sweep over ``truth.model`` (base: CW), as ``--param truth.model=cw,two_body``."""
