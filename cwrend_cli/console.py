@@ -755,19 +755,20 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
     return table
 
 
-def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table:
+def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table | Text:
     """``cwrend compare``: what differs between A's and B's configurations (fits 80 columns).
 
     One row per dotted key (``campaign.compare.config_diff``) with A's and B's
-    values as :func:`~cwrend_cli.report.labels.setting_text` shows them; long
-    values fold onto further lines, never cut.
+    values as :func:`~cwrend_cli.report.labels.setting_text` shows them (as
+    text, never read as markup); long values fold onto further lines, never
+    cut. No difference: one line that says so.
     """
+    if not differences:
+        return Text("A and B have the same configuration (no setting differs outside [output])")
     table = _table("A and B differ in", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("setting", overflow="fold")
     table.add_column("A", overflow="fold")
     table.add_column("B", overflow="fold")
     for key, a, b in differences:
-        table.add_row(key, setting_text(a), setting_text(b))
-    if not differences:
-        table.caption = "the same configuration (no setting differs outside [output])"
+        table.add_row(Text(key), Text(setting_text(a)), Text(setting_text(b)))
     return table

@@ -167,3 +167,25 @@ def test_the_campaign_tables_show_every_name_and_number_whole_at_80_columns() ->
     assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)
     text = _render(applied_console_table(sweep, ["point", "param.schedule.beta"]))
     assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)
+
+
+def _at_80(renderable: object) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=80, color_system=None).print(renderable)
+    return buf.getvalue()
+
+
+def test_compare_of_two_equal_configurations_says_so_on_one_line() -> None:
+    """``cwrend compare A A``: the empty table's caption folded into a 14-column stack and
+    lost ``[output]`` (read as markup)."""
+    from cwrend_cli.console import config_diff_console_table
+
+    text = _at_80(config_diff_console_table([]))
+    assert text == "A and B have the same configuration (no setting differs outside [output])\n"
+
+
+def test_compare_shows_a_setting_whose_value_looks_like_markup() -> None:
+    from cwrend_cli.console import config_diff_console_table
+
+    text = _at_80(config_diff_console_table([("noise.file", "[bold]a.npz", "b.npz")]))
+    assert '"[bold]a.npz"' in text or "[bold]a.npz" in text

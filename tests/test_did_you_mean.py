@@ -10,10 +10,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
+from cwrend_cli.campaign.compare import parse_metrics
 from cwrend_cli.cli import app
 from cwrend_cli.config.messages import did_you_mean
+from cwrend_cli.errors import ConfigError
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 runner = CliRunner()
@@ -51,3 +54,9 @@ def test_a_misspelt_pair_is_answered_with_an_architecture_of_the_campaign(
 def test_an_unrelated_word_gets_no_suggestion() -> None:
     assert did_you_mean("zzz", ["beta", "kappa_mtf"]) == ""
     assert did_you_mean(3, ["beta"]) == ""  # a list index is not a name
+
+
+def test_a_misspelt_compare_metric_is_answered_with_the_metric_meant() -> None:
+    """``cwrend compare --metric mis`` (as ``cwrend table``'s fields already were)."""
+    with pytest.raises(ConfigError, match="did you mean 'miss'"):
+        parse_metrics("mis")
