@@ -8,12 +8,16 @@ has one (two completions).
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from rich.console import Console
+from typer.testing import CliRunner
 
 from cwrend_cli.campaign import statistics
+from cwrend_cli.cli import app
 from cwrend_cli.console import (
     RichProgress,
     ablation_console_table,
@@ -22,6 +26,8 @@ from cwrend_cli.console import (
     sweep_console_table,
 )
 from cwrend_cli.physics import metrics
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 
 
 class _Clock:
@@ -189,3 +195,17 @@ def test_compare_shows_a_setting_whose_value_looks_like_markup() -> None:
 
     text = _at_80(config_diff_console_table([("noise.file", "[bold]a.npz", "b.npz")]))
     assert '"[bold]a.npz"' in text or "[bold]a.npz" in text
+
+
+def test_a_campaign_under_the_working_directory_is_named_as_the_tour_gives_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``cwrend ablate … --name tour`` ended "… → /home/me/cwrend/results/tour", past 80
+    columns; under the working directory it is ``results/tour``."""
+    monkeypatch.chdir(tmp_path)
+    args = ["ablate", str(PAPER), "--seeds", "1", "--arch", "mtf_adaptive", "--workers", "1",
+            "--no-rrd", "--name", "tour", "--set", 'output.dir="results"']  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    last = result.stderr.strip().splitlines()[-1]
+    assert last == "1 run(s) computed, 0 already done; campaign holds 1 ok, 0 failed → results/tour"
