@@ -709,12 +709,7 @@ def _campaign(
                 ):
                     break
                 if not opts.quiet and n < opts.max_seeds:
-                    widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
-                    err.print(
-                        f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
-                        f"> {widest.limit:.3g}); next batch",
-                        markup=False,
-                    )
+                    err.print(sequential.next_batch_message(n, opts.batch, achieved), markup=False)
         _report_campaign(command, plan, summary, statistics, out, opts, err)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err

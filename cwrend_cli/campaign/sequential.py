@@ -49,6 +49,8 @@ __all__ = [
     "Achieved",
     "Target",
     "achieved",
+    "checked_from",
+    "next_batch_message",
     "parse_until",
     "ready",
     "seed_counts",
@@ -148,9 +150,35 @@ def seed_counts(batch: int, max_seeds: int) -> Iterator[int]:
     yield max_seeds
 
 
+def checked_from(batch: int) -> int:
+    """The seed count from which widths are checked: :data:`MIN_BATCHES` batches and at
+    least :data:`MIN_SEEDS` seeds."""
+    return max(MIN_BATCHES * batch, MIN_SEEDS)
+
+
 def ready(n_seeds: int, batch: int) -> bool:
     """Whether widths may be checked at ``n_seeds`` (the minimum batches and seeds reached)."""
-    return n_seeds >= max(MIN_BATCHES * batch, MIN_SEEDS)
+    return n_seeds >= checked_from(batch)
+
+
+def next_batch_message(n_seeds: int, batch: int, achieved: Sequence[Achieved]) -> str:
+    """What ``--until`` says before its next batch: the widest interval against its target,
+    or, every one within its target before widths are checked, from when they are."""
+    unmet = [a for a in achieved if not a.met]
+    if not unmet:
+        return (
+            f"{n_seeds} seeds: within the target, but widths are checked from "
+            f"{checked_from(batch):,} seeds ({MIN_BATCHES} batches, at least {MIN_SEEDS}); "
+            "next batch"
+        )
+    without = [a for a in unmet if not math.isfinite(a.half_width)]
+    if without:
+        return f"{n_seeds} seeds: not yet ({without[0].label}: no interval yet); next batch"
+    widest = max(unmet, key=lambda a: a.half_width / a.limit if a.limit else math.inf)
+    return (
+        f"{n_seeds} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
+        f"> {widest.limit:.3g}); next batch"
+    )
 
 
 @dataclass(frozen=True)
