@@ -41,6 +41,22 @@ def test_targets_parse_as_documented(text: str, target: sequential.Target) -> No
 
 
 @pytest.mark.parametrize(
+    ("short", "column"),
+    [("miss:0.0005", "miss_km:0.0005"), ("median.dv:5%", "median.delta_v_km_s:5%"),
+     ("miss@mtf_adaptive-plain_adaptive:0.001", "miss_km@mtf_adaptive-plain_adaptive:0.001")],
+)  # fmt: skip
+def test_targets_take_the_short_metric_names_of_compare_and_table(short: str, column: str) -> None:
+    """``--until miss:0.001`` was refused ("metric must be one of delta_v_km_s, …") while
+    ``cwrend compare --metric`` and ``cwrend table`` take ``miss``."""
+    assert sequential.parse_until(short) == sequential.parse_until(column)
+
+
+def test_a_misspelt_target_metric_is_answered_with_the_one_meant() -> None:
+    with pytest.raises(ConfigError, match="did you mean 'miss'"):
+        sequential.parse_until("mis:0.001")
+
+
+@pytest.mark.parametrize(
     ("text", "message"),
     [
         ("miss", "expected [STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%]"),

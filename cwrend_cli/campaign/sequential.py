@@ -12,6 +12,8 @@ Target syntax, ``[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%]``:
 
 * ``miss_km:0.0005`` — the half-width of the 95 % interval of the mean miss
   is at most 0.5 m, for every architecture;
+* ``miss:0.0005`` — the same: ``miss``, ``dv`` and ``fuel`` name the metrics as in
+  ``cwrend compare`` and ``cwrend table``;
 * ``median.miss_km:5%`` — of the median, relative: at most 5 % of |median|;
 * ``miss_km@mtf_adaptive-plain_adaptive:0.0005`` — the paired difference of
   the two architectures on the same seeds (``median_diff`` for the miss,
@@ -41,7 +43,9 @@ from dataclasses import dataclass
 import pandas as pd
 
 from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, STATISTICS
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.tables import METRIC_NAMES
 
 __all__ = [
     "MIN_BATCHES",
@@ -101,7 +105,7 @@ def parse_until(
     m = _SYNTAX.match(text.strip())
     if m is None:
         raise ConfigError(f"--until {text!r}: expected {syntax}")
-    metric = m["metric"]
+    metric = METRIC_NAMES.get(m["metric"], m["metric"])  # miss, dv, fuel as in compare, table
     try:
         width = float(m["width"])
     except ValueError:
@@ -111,7 +115,12 @@ def parse_until(
         raise ConfigError(f"--until {text!r}: the half-width must be positive")
     if m["a"] is None:
         if metric not in METRICS:
-            raise ConfigError(f"--until {text!r}: metric must be one of {', '.join(METRICS)}")
+            short = [k for k, v in METRIC_NAMES.items() if v in METRICS]
+            near = did_you_mean(m["metric"], [*short, *METRICS])
+            raise ConfigError(
+                f"--until {text!r}: metric must be one of {', '.join(short)} "
+                f"({', '.join(METRICS)}){near}"
+            )
         statistic = m["stat"] or "mean"
         if statistic not in STATISTICS:
             raise ConfigError(f"--until {text!r}: statistic must be one of {', '.join(STATISTICS)}")
