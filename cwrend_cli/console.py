@@ -36,13 +36,14 @@ from cwrend_cli.report.labels import (
     MIN_BOOTSTRAP_N,
     consistency_text,
     markdown_table,
+    number,
     setting_text,
     swept_values,
 )
 
 
 def _num(value: float, spec: str) -> str:
-    return "–" if math.isnan(value) else f"{value:{spec}}"
+    return "–" if math.isnan(value) else number(value, spec)
 
 
 def _solves(r: Mapping[str, Any]) -> str:
@@ -420,12 +421,12 @@ def _unreliable(row: pd.Series) -> bool:
 
 def _ci(row: pd.Series, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> str:
     """Value, and its 95 % interval on a second (dim) line, marked when unreliable."""
-    value = row["value"] * scale
+    value = number(row["value"] * scale, spec)
     if math.isnan(row["ci_low"]):
-        return f"{value:{spec}}"
-    lo, hi = row["ci_low"] * scale, row["ci_high"] * scale
+        return value
+    lo, hi = number(row["ci_low"] * scale, spec), number(row["ci_high"] * scale, spec)
     mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
-    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}{mark}[/dim]"
+    return f"{value}\n[dim]{lo}–{hi}{mark}[/dim]"
 
 
 #: Said instead of an interval's caption when every quantity of a table has one realisation.

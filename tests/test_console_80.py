@@ -209,3 +209,18 @@ def test_a_campaign_under_the_working_directory_is_named_as_the_tour_gives_it(
     assert result.exit_code == 0, result.output
     last = result.stderr.strip().splitlines()[-1]
     assert last == "1 run(s) computed, 0 already done; campaign holds 1 ok, 0 failed → results/tour"
+
+
+def test_a_difference_that_rounds_to_zero_has_no_minus_sign() -> None:
+    """An ``everything_with_stf`` ablation's paired table read "-0.0000–-0.0000*" for the
+    Δv of mtf_fixed_socp vs stf_fixed_socp; the report's tables likewise."""
+    from cwrend_cli.console import _ci
+    from cwrend_cli.report import markdown
+
+    row = pd.Series({"value": -2e-6, "ci_low": -4e-6, "ci_high": -1e-6, "n": 2})
+    assert _ci(row, ".4f") == "0.0000\n[dim]0.0000–0.0000*[/dim]"
+    assert markdown._ci(row, ".4f") == "0.0000 [0.0000, 0.0000]\\*"
+    assert markdown._fmt(-0.004, "+.2f") == "+0.00"
+    assert _ci(pd.Series({"value": -0.25, "ci_low": -0.5, "ci_high": 0.1, "n": 20}), ".2f") == (
+        "-0.25\n[dim]-0.50–0.10[/dim]"
+    )
