@@ -213,14 +213,16 @@ def test_a_campaign_under_the_working_directory_is_named_as_the_tour_gives_it(
 
 def test_a_difference_that_rounds_to_zero_has_no_minus_sign() -> None:
     """An ``everything_with_stf`` ablation's paired table read "-0.0000–-0.0000*" for the
-    Δv of mtf_fixed_socp vs stf_fixed_socp; the report's tables likewise."""
+    Δv of mtf_fixed_socp vs stf_fixed_socp; the report's and ``cwrend table``'s likewise."""
     from cwrend_cli.console import _ci
     from cwrend_cli.report import markdown
+    from cwrend_cli.report.table import _cell, parse_value
 
     row = pd.Series({"value": -2e-6, "ci_low": -4e-6, "ci_high": -1e-6, "n": 2})
     assert _ci(row, ".4f") == "0.0000\n[dim]0.0000–0.0000*[/dim]"
     assert markdown._ci(row, ".4f") == "0.0000 [0.0000, 0.0000]\\*"
     assert markdown._fmt(-0.004, "+.2f") == "+0.00"
+    assert _cell(row, parse_value("mean_diff.dv"), "*") == "0.00000 [0.00000, 0.00000]*"
     assert _ci(pd.Series({"value": -0.25, "ci_low": -0.5, "ci_high": 0.1, "n": 20}), ".2f") == (
         "-0.25\n[dim]-0.50–0.10[/dim]"
     )
