@@ -1062,7 +1062,9 @@ def sweep(
 
 
 @app.command(
-    "report", cls=_Command, short_help="Figures (PNG) and report.md into RESULTS_DIR/report/."
+    "report",
+    cls=_Command,
+    short_help="Figures, report.md and report.html into RESULTS_DIR/report/.",
 )
 def report(
     results_dir: Annotated[

@@ -90,3 +90,11 @@ def test_a_number_given_with_its_unit_is_told_to_drop_it() -> None:
     )
     assert "write the number alone, in km/s²" in result.stderr
     assert 'schedule.beta = "abc": must be a number\n' in result.stderr  # no number: no hint
+
+
+def test_the_command_list_says_report_writes_report_html() -> None:
+    """``cwrend --help`` listed report as "Figures (PNG) and report.md …", leaving out the
+    self-contained report.html the tour and the guide open."""
+    result = runner.invoke(app, ["--help"], env={"COLUMNS": "80"})
+    line = next(x for x in result.stdout.splitlines() if x.strip().startswith("report"))
+    assert "report.html" in line and len(line) <= 80
