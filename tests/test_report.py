@@ -569,6 +569,16 @@ def test_point_picks_the_grid_point_of_figs_1_to_5(
     assert set(data.steps["point"].astype(str)) == {"p_b"}
 
 
+def test_a_point_asked_of_an_ablation_says_it_sweeps_nothing() -> None:
+    """``cwrend report results/tour --point x`` (an ablation) said "no such grid point
+    (points: base ())": the fix is to drop --point."""
+    from cwrend_cli.report.load import ReportError, _chosen_point
+
+    runs = pd.DataFrame({"point": ["base", "base"], "status": ["ok", "ok"], "seed": [0, 1]})
+    with pytest.raises(ReportError, match=r"sweeps nothing \(one point, base\).*drop it"):
+        _chosen_point(runs, "x")
+
+
 def test_a_bad_point_exits_2_listing_the_points(sweep_dir: Path, run_dir: Path) -> None:
     result = _report(sweep_dir, "--point", "beta=0.3")
     assert result.exit_code == 2

@@ -583,6 +583,11 @@ def _chosen_point(runs: pd.DataFrame, wanted: str) -> str:
     ]  # fmt: skip
     if len(found) == 1:
         return found[0]
+    if not params:  # an ablation (or a run): one point, nothing swept
+        raise ReportError(
+            f"--point {wanted}: this campaign sweeps nothing (one point, {', '.join(points)}); "
+            "--point picks a point of a sweep: drop it"
+        )
     what = "matches several grid points" if found else "no such grid point"
     raise ReportError(f"--point {wanted}: {what} (points: {_point_list(runs)})")
 
