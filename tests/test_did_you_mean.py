@@ -60,3 +60,14 @@ def test_a_misspelt_compare_metric_is_answered_with_the_metric_meant() -> None:
     """``cwrend compare --metric mis`` (as ``cwrend table``'s fields already were)."""
     with pytest.raises(ConfigError, match="did you mean 'miss'"):
         parse_metrics("mis")
+
+
+def test_a_misspelt_design_range_is_answered_with_the_key_meant(tmp_path: Path) -> None:
+    """``--range schedule.betta=0.1:1`` / ``shedule.beta``: "not a configuration value" with
+    no suggestion, where ``--set`` suggests one."""
+    out_dir = f"output.dir={json.dumps(str(tmp_path))}"
+    for typo in ("schedule.betta", "shedule.beta"):
+        args = ["sweep", str(PAPER), "--design", "lhs", "--samples", "4", "--range",
+                f"{typo}=0.1:1", "--set", out_dir]  # fmt: skip
+        assert "did you mean 'schedule.beta'?" in _refused(args)
+    assert not list(tmp_path.iterdir())  # nothing written
