@@ -901,7 +901,7 @@ def plan(
             time.perf_counter() - start,
         )
     result = failed
-    cost = math.inf
+    cost, last_slack = math.inf, math.inf
     drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
         margins = _node_margins(
@@ -972,7 +972,13 @@ def plan(
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         settled = settled and result.abort_slack_km == 0.0
-        if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
+        # a turning body's slack that the iterates no longer change is the linearised set's
+        # own: more iterations would not remove it (module docstring, Iterations)
+        slack_settled = slack == 0.0 or (
+            motion is not None and abs(slack - last_slack) <= SCP_TOL_KM
+        )
+        last_slack = slack
+        if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
     return result
