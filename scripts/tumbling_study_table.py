@@ -10,6 +10,8 @@ per tumble rate ‖ω(0)‖ and truth model, and with ``--by arch`` per architec
 * violations: runs whose true trajectory entered the turning unsafe set
   (``safety_violated``), with the 95 % Wilson interval
   (:func:`cwrend_cli.campaign.statistics.wilson_ci`);
+* min distance: the smallest signed distance of any run to the turning unsafe set
+  (negative: inside);
 * the docking position and velocity errors relative to the moving port at T,
   median (max);
 * Δv (the paper's trapezoid), mean;
@@ -38,7 +40,8 @@ TRUTH = "param.truth.model"
 
 
 def _rate(value: Any) -> float:
-    """‖ω(0)‖ [deg/s] of a swept rate vector (1 decimal)."""
+    """‖ω(0)‖ [deg/s] of a swept rate vector (1 decimal; JSON text in ``runs.parquet``)."""
+    value = json.loads(value) if isinstance(value, str) else value
     return round(float(np.linalg.norm(np.asarray(value, dtype=float))), 1)
 
 
@@ -80,7 +83,7 @@ def table(campaign: Path, by_arch: bool) -> str:
         if s["kind"] == "resolve" and s["run_key"] in keys:
             resolves[keys[s["run_key"]]].append(s)
     head = ["rate [°/s]", "truth"] + (["architecture"] if by_arch else [])
-    head += ["runs", "violations [Wilson 95 %]", "dock position error [m]",
+    head += ["runs", "violations [Wilson 95 %]", "min distance [m]", "dock position error [m]",
              "dock velocity error [mm/s]", "Δv [m/s]", "re-solve [ms]", "SCP iterations",
              "slack / infeasible / failed [%]"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -102,6 +105,7 @@ def table(campaign: Path, by_arch: bool) -> str:
         cols += [
             str(n),
             f"{bad}/{n} [{lo:.2f}, {hi:.2f}]",
+            _fmt(1e3 * min(r["safety_min_distance_km"] for r in rs), 1),
             f"{_fmt(float(np.median(dp)))} ({_fmt(float(dp.max()))})",
             f"{_fmt(float(np.median(dv)), 1)} ({_fmt(float(dv.max()), 1)})",
             _fmt(float(delta_v), 1),
