@@ -71,6 +71,12 @@ METRIC_NAMES: Mapping[str, str] = {
     "fuel_applied": "fuel_penalty_applied_pct",
     "nees": "mean_nees",
     "nis": "mean_nis_nominal",
+    # safety of the true trajectory (issue 32; tumbling target and abort safety, issue 34)
+    "min_distance": "safety_min_distance_km",
+    "unsafe_time": "safety_unsafe_time_s",
+    "dock_position": "safety_dock_position_error_km",
+    "dock_velocity": "safety_dock_velocity_error_km_s",
+    "abort_distance": "abort_min_distance_km",
 }
 
 
