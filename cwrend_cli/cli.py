@@ -1269,7 +1269,13 @@ def table(
             ":with=STEP / :without=STEP keep the runs whose re-solves used / never used that "
             "fallback step (n:with=socp_plan counts them). :bare drops the interval, :3 shows "
             "3 decimals. mean.nees, mean.nis: the runs' mean NEES and NIS with the χ² 95 % band "
-            "of a consistent filter.",
+            "of a consistent filter. Safety (a campaign with [constraints]): violated_pct, "
+            "abort_pct (share of runs, % with Wilson), median|p1.min_distance, "
+            "median|p1.abort_distance (m), mean.unsafe_time (s) (bootstrap); from the runs: "
+            "min.min_distance (m, the worst run), median|max.dock_position (m), "
+            "median|max.dock_velocity (mm/s); from solves/ (re-solves of the ok runs): "
+            "mean|max.scp_iterations, mean|p95|max.resolve_ms, slack_pct, abort_slack_pct "
+            "(share needing a slack, %).",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",
@@ -1310,11 +1316,13 @@ def table(
 
     Reads each campaign's ablation.parquet or sweep.parquet (values with their 95 %
     intervals, never recomputed) and, for the values computed from the runs, its
-    runs.parquet (and solves/ for :with= / :without=); --versus pairs the runs of two
-    campaigns.
+    runs.parquet (and solves/ for :with= / :without= and the re-solve values); --versus
+    pairs the runs of two campaigns.
     Each cell must be one stored value: a cell that two campaigns, grid points or pairs
     fill is refused naming the field that tells them apart (exit 2), as is an unknown
-    field or value. Misses in m, Δv in km/s, fuel penalty in %; a bootstrap interval
+    field or value, and a value no campaign holds (a safety value without [constraints]).
+    Misses and distances in m, Δv in km/s, docking speed in mm/s, shares and fuel penalty
+    in %; a bootstrap interval
     from fewer than 10 seeds is marked *. Example (a sweep over guidance.hold):
 
     cwrend table results/paper-1000 --rows guidance.hold,arch --metric n,mean.miss,p95.miss:bare
