@@ -881,16 +881,12 @@ def _report_campaign(
                 stdout.print(table)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
-    elif (
-        plan.design is not None
-        and plan.design.kind != "sobol"
-        and design.rbd_fast_harmonics(len(plan.design.rows)) < 1
-    ):
-        err.print(
-            f"no sensitivity indices: RBD-FAST needs at least 9 design rows "
-            f"(this design has {len(plan.design.rows)}); raise --samples",
-            markup=False,
+    if plan.design is not None:
+        note = design.sensitivity_note(
+            plan.design.kind, plan.design.samples, len(plan.design.rows)
         )
+        if note is not None:
+            err.print(note, markup=False)
     if not summary.interrupted:
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "

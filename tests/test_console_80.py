@@ -226,3 +226,18 @@ def test_a_difference_that_rounds_to_zero_has_no_minus_sign() -> None:
     assert _ci(pd.Series({"value": -0.25, "ci_low": -0.5, "ci_high": 0.1, "n": 20}), ".2f") == (
         "-0.25\n[dim]-0.50–0.10[/dim]"
     )
+
+
+def test_the_no_sensitivity_note_breaks_between_phrases_at_80_columns(tmp_path: Path) -> None:
+    """``sweep --design lhs --samples 4``: the note wrapped at 80 columns as "…; raise" /
+    "--samples"; it is now two lines, each whole."""
+    cfg = tmp_path / "lhs.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\nrrd_seeds = 0\n'
+                   '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n')  # fmt: skip
+    args = ["sweep", str(cfg), "--design", "lhs", "--samples", "4", "--seeds", "1",
+            "--arch", "mtf_adaptive", "--workers", "1", "--no-rrd"]  # fmt: skip
+    result = CliRunner(env={"COLUMNS": "80"}).invoke(app, args)
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.splitlines()
+    at = lines.index("no sensitivity indices: RBD-FAST needs at least 9 design rows")
+    assert lines[at + 1] == "(this design has 4): raise --samples to 9 or more"
