@@ -739,8 +739,12 @@ def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table | Group:
     return Group(table, second)
 
 
-def until_console_table(achieved: Sequence[Any], target: str) -> Table:
-    """The intervals a ``--until`` target asked for, as achieved."""
+def until_console_table(achieved: Sequence[Any], target: str, checked: bool = True) -> Table:
+    """The intervals a ``--until`` target asked for, as achieved.
+
+    ``checked`` False: the campaign stopped before widths are checked
+    (``sequential.ready``), so an interval within its target reads "not checked".
+    """
     table = _table(f"--until {target}", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("interval of")
     for name in ("seeds", "value", "half-width", "target"):
@@ -748,7 +752,13 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
     table.add_column("met")
     for a in achieved:
         needed = a.seeds_needed
-        verdict = "yes" if a.met else "no" if needed is None else f"no: ~{needed:,} seeds"
+        verdict = (
+            ("yes" if checked else "not checked")
+            if a.met
+            else "no"
+            if needed is None
+            else f"no: ~{needed:,} seeds"
+        )
         table.add_row(a.label, str(a.n), f"{a.value:.6g}", f"{a.half_width:.3g}",
                       f"{a.limit:.3g}", verdict)  # fmt: skip
     if not all(a.met for a in achieved):
