@@ -890,9 +890,7 @@ def _report_campaign(
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
     if plan.design is not None:
-        note = design.sensitivity_note(
-            plan.design.kind, plan.design.samples, len(plan.design.rows)
-        )
+        note = design.sensitivity_note(plan.design.kind, plan.design.samples, len(plan.design.rows))
         if note is not None:
             err.print(note, markup=False)
     if not summary.interrupted:

@@ -76,9 +76,7 @@ def _point_table(
     params = [c for c in point_cols if c != "point"]
     for p in params:
         numeric = p in stats and pd.api.types.is_numeric_dtype(stats[p])
-        table.add_column(
-            p.rsplit(".", 1)[-1], justify="right" if numeric else "left", no_wrap=True
-        )
+        table.add_column(p.rsplit(".", 1)[-1], justify="right" if numeric else "left", no_wrap=True)
     return table, params
 
 

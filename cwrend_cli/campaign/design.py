@@ -82,8 +82,8 @@ __all__ = [
     "salib_problem",
     "salib_seed",
     "sensitivity",
-    "sobol_indices",
     "sensitivity_note",
+    "sobol_indices",
     "unit_samples",
 ]
 
@@ -375,7 +375,8 @@ def sensitivity_note(kind: Design, samples: int, n_rows: int) -> str | None:
         if samples >= SOBOL_SAMPLES_ADVISED:
             return None
         return (
-            f"warning: Sobol indices from {samples} base points are unreliable;\nrerun with --samples {SOBOL_SAMPLES_ADVISED} or more in this "
+            f"warning: Sobol indices from {samples} base points are unreliable;\n"
+            f"rerun with --samples {SOBOL_SAMPLES_ADVISED} or more in this "
             "directory (it extends this design)"
         )
     if rbd_fast_harmonics(n_rows) >= 1:

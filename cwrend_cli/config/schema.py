@@ -1708,9 +1708,7 @@ def start_in_keep_out(cfg: CwrendConfig) -> str | None:
     if float(signed_distance(r, geo)) >= 0.0:
         return None
     (inside, *_) = [
-        "constraints.keep_out.semi_axes_km"
-        if i == 0
-        else f"constraints.keep_out.bodies.{i - 1}"
+        "constraints.keep_out.semi_axes_km" if i == 0 else f"constraints.keep_out.bodies.{i - 1}"
         for i, (centre, axes) in enumerate(ellipsoids(geo))
         if float(ellipsoid_level(r if centre is None else r - centre, axes)) < 1.0
     ]
