@@ -1292,6 +1292,12 @@ class TargetConfig(_FrozenModel):
         description="tumbling: the constrained guidance's body-rate knowledge error, σ per "
         "axis drawn once a run from its own stream; in [0, 60] [deg/s]",
     )
+    knowledge_draw: Literal["run", "resolve"] = Field(
+        "run",
+        description="tumbling, with a knowledge error: 'run' draws the error once a run (the "
+        "same at every re-solve), 'resolve' afresh at every re-solve (independent draws of "
+        "the same σ, from the run's own stream) [-]",
+    )
 
     @model_serializer(mode="wrap")
     def _without_perfect_knowledge(self, handler: SerializerFunctionWrapHandler) -> Any:
@@ -1300,6 +1306,8 @@ class TargetConfig(_FrozenModel):
         for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
             if getattr(self, name) == 0.0:
                 out.pop(name, None)
+        if self.knowledge_draw == "run":
+            out.pop("knowledge_draw", None)
         return out
 
     @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
@@ -1340,6 +1348,7 @@ class TargetConfig(_FrozenModel):
                     "inertia",
                     "knowledge_sigma_deg",
                     "knowledge_sigma_deg_s",
+                    "knowledge_draw",
                 )
                 if getattr(self, name) != type(self).model_fields[name].default
             ]
@@ -1355,6 +1364,21 @@ class TargetConfig(_FrozenModel):
                         )
                     ]
                 )
+        if (
+            self.knowledge_draw != "run"
+            and self.knowledge_sigma_deg == 0.0
+            and self.knowledge_sigma_deg_s == 0.0
+        ):
+            raise rules_error(
+                [
+                    (
+                        "knowledge_draw",
+                        self.knowledge_draw,
+                        "there is no knowledge error to draw: set target.knowledge_sigma_deg "
+                        "or target.knowledge_sigma_deg_s above 0, or leave it out",
+                    )
+                ]
+            )
         return self
 
 
