@@ -1245,7 +1245,7 @@ _LATEX = {
     "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
     "Δ": r"$\Delta$", "ε": r"$\varepsilon$", "β": r"$\beta$", "σ": r"$\sigma$", "κ": r"$\kappa$",
     "ρ": r"$\rho$", "α": r"$\alpha$", "°": r"$^\circ$", "×": r"$\times$", "–": "--",
-    "−": "$-$", "·": r"$\cdot$", "²": r"$^2$", "≤": r"$\le$", "≥": r"$\ge$",
+    "ω": r"$\omega$", "−": "$-$", "·": r"$\cdot$", "²": r"$^2$", "≤": r"$\le$", "≥": r"$\ge$",
 }  # fmt: skip
 
 
