@@ -30,6 +30,9 @@ def main(argv: list[str]) -> None:
     """Profile the compile of one cwrend command (module docstring)."""
     if "NUMBA_CACHE_DIR" not in os.environ or os.listdir(os.environ["NUMBA_CACHE_DIR"]):
         os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="cwrend-compile-costs-")
+    from cwrend_cli.physics.compiled import tune_for_compiling
+
+    tune_for_compiling()  # as the command's main() does, before numba is imported
     import numba.core.event as ev
 
     own: dict[str, float] = defaultdict(float)

@@ -45,6 +45,31 @@ _COMPILE_CPU_S = {
 _AHEAD_CPU_S = {"references": 5.0, "shooting": 4.0, "socp": 4.0}
 
 
+#: The cyclic garbage collector's thresholds in cwrend's processes (Python's default:
+#: 700, 10, 10). numba's compiler allocates millions of objects; at the default it collected
+#: the youngest generation about 1,200 times while compiling the references' solver, 1.7 of
+#: its 21 CPU s, against 0.5 s at these (2-core AMD EPYC, 2026-12-02; gc.callbacks timing).
+GC_THRESHOLDS = (50_000, 20, 20)
+
+
+def tune_for_compiling() -> None:
+    """Make this process's numba compiles cheaper, changing nothing they compute.
+
+    Called first in every cwrend process that may compile (the command, pool
+    workers). Sets :data:`GC_THRESHOLDS`, and, unless set already,
+    ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING``: numba builds an error
+    message for every overload it tries and rejects while typing a kernel,
+    and with highlighting on each one re-initialises colorama on stdout and
+    stderr (a few % of a first compile). Has to run before numba is imported
+    for the second; processes spawned afterwards inherit it.
+    """
+    import gc
+    import os
+
+    gc.set_threshold(*GC_THRESHOLDS)
+    os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
+
+
 def _entry_points(part: str) -> tuple[Any, ...]:
     """The dispatchers whose compile brings in the kernels of ``part`` (see _COMPILE_CPU_S)."""
     from cwrend_cli.physics import _loop_kernels
@@ -108,6 +133,29 @@ def references_cold() -> bool:
     return not all(_cached(d) for d in _entry_points("references"))
 
 
+def compile_ascent(problem: Problem) -> None:
+    """Compile (or load) the references' dual ascent, the longest chain of a first compile.
+
+    On a first run the campaign process compiles the shooting solver
+    (``bang_bang_ascent``, for the references: about half of a first
+    compile) before any run can start. Its two halves are compiled in two
+    processes at once (issue 37 item 12): here the dual ascent
+    (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_newton_ascent`:
+    the ascent, its start selection, the dual evaluation, its breakpoints and
+    switching times, nine levels that compile one after the other), in the
+    second process the switching-time Newton
+    (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
+    after :func:`compile_ahead`. The campaign process then waits for the
+    Newton and loads it rather than compiling it a second time; the solver's
+    top is all that is left of it. ``problem``: the campaign's first point
+    (its solver settings' types).
+    """
+    from cwrend_cli.physics import simulation
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    _switching_kernels.compile_newton_ascent(simulation.solver_settings(problem).newton_fields)
+
+
 def compile_ahead(
     problem: Problem,
     archs: Iterable[Architecture],
@@ -115,35 +163,24 @@ def compile_ahead(
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
 ) -> None:
-    """Compile what a first run needs besides the references' solver (issue 37 item 12).
+    """Compile a first run's step loop in a second process (issue 37 item 12).
 
-    On a first run the campaign process compiles the shooting solver
-    (``bang_bang_ascent``, for the references: about half of a first
-    compile) before any run can start, one core busy. Meanwhile a second
-    process (a pool worker, or a helper beside an in-process campaign)
-    compiles into numba's cache, for the campaign process and the first runs
-    to load:
-
-    - the solver's switching-time Newton
-      (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
-      which the campaign process reaches last, after the dual ascent;
-    - the step loop of the first of ``archs`` of each guidance method
-      (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
-      depend on the solver.
-
-    The Newton first, so that it is cached before the campaign process
-    reaches it (the switching-time search below both then compiles in both
-    processes, at the same time, on two cores): after the step loop it was
-    ready only about when the campaign process reached it (seen on a loaded
-    2-core AMD EPYC). What is left for the runs is the compiled
-    loop's top (``_resolve_loop``, which carries the solver, and the cone
-    program's grid kernels). ``problem`` and the draws: those of the
-    campaign's first run, so that the argument types are the runs' own.
+    The step loop of the first of ``archs`` of each guidance method
+    (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
+    depend on the solver, while the campaign process compiles the
+    references' dual ascent (:func:`compile_ascent`); then the same process
+    compiles the solver's switching-time Newton, which the campaign process
+    waits for. The step loop first: the campaign process needs the Newton
+    only after the ascent (about 10 CPU s), by when the step loop (about 7 s)
+    is done, and the ascent's switching-time search, which the Newton calls
+    too, is cached by then, so neither process compiles it a second time.
+    What is left for the runs is the compiled loop's top (``_resolve_loop``,
+    which carries the solver, and the cone program's grid kernels).
+    ``problem`` and the draws: those of the campaign's first run, so that
+    the argument types are the runs' own.
     """
     from cwrend_cli.physics import simulation
-    from cwrend_cli.physics.guidance import _switching_kernels
 
-    _switching_kernels.compile_switching_newton()
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)
