@@ -26,23 +26,23 @@ if TYPE_CHECKING:
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls.
 #: Measured in one process (``python -m benchmarks.compile_costs``: the paper ablation with
 #: ``--workers 1`` into an empty ``NUMBA_CACHE_DIR``) on a 2-core AMD EPYC (znver4,
-#: 2026-12-02, loaded by other jobs): the solver 19.9 CPU s, the compiled loop 13.2 s with
-#: its step loop, 37.6 CPU s for the whole command (47.8 s before issue 37 item 12's third
-#: step, same measurement; 51 s wall on that machine idle). Machines differ by about 2x:
-#: the notice is the slower machine's figure. The cone program's part was not measured
-#: again. An estimate for the notice only: the machine and the scenario (a nonlinear truth,
-#: an actuator with errors, a nonlinear sensor, an EKF) move it.
+#: 2026-12-02, load average 10 from other jobs): the solver 16.7 CPU s, the compiled loop
+#: 11.3 s with its step loop (6.1 s), 31.2 CPU s for the whole command (37.6 s before
+#: issue 37 item 12's fourth step, :func:`tune_for_compiling`; 47.8 s before the third).
+#: Machines differ by about 2x: the notice is the slower machine's figure. The cone
+#: program's part was not measured again (24 s before the fourth step, less the same 17 %).
+#: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
+#: actuator with errors, a nonlinear sensor, an EKF) move it.
 _COMPILE_CPU_S = {
-    "references": 20.0,  # bang_bang_ascent: the open-loop references and every first plan
-    "shooting": 17.0,  # _resolve_loop: the closed loop with its compiled re-solves
-    "socp": 24.0,  # _advance and the cone program's grid kernels
+    "references": 17.0,  # bang_bang_ascent: the open-loop references and every first plan
+    "shooting": 11.5,  # _resolve_loop: the closed loop with its compiled re-solves
+    "socp": 20.0,  # _advance and the cone program's grid kernels
 }
-#: Of each part, the CPU seconds a second process compiles while the campaign process
-#: compiles the references (:func:`compile_ahead`: the solver's switching-time Newton and
-#: the step loop below the re-solves); on 2 cores or more they overlap the references. On
-#: the loaded AMD EPYC above the campaign process's compile ended at 24.0 CPU s, the
-#: helper's at 20.5 s: the parts' 37 s less these.
-_AHEAD_CPU_S = {"references": 5.0, "shooting": 4.0, "socp": 4.0}
+#: Of each part, the CPU seconds a second process compiles (the step loop below the
+#: re-solves, :func:`compile_ahead`: 6.1 s; then the solver's switching-time Newton: 4.5 s)
+#: while the campaign process compiles the references' dual ascent (:func:`compile_ascent`);
+#: on 2 cores or more they overlap it.
+_AHEAD_CPU_S = {"references": 4.5, "shooting": 6.0, "socp": 4.0}
 
 
 #: The cyclic garbage collector's thresholds in cwrend's processes (Python's default:
@@ -107,7 +107,7 @@ def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
     ``fan_out``: a local campaign given two workers or more (its pool, or a
     helper process beside a campaign of one task), whose second process
     compiles :data:`_AHEAD_CPU_S` while the campaign process compiles the
-    references (:func:`compile_ahead`), so those seconds overlap.
+    references' dual ascent (:func:`compile_ascent`), so those seconds overlap.
     """
     parts = ["references", *sorted(set(methods))]
     cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
