@@ -265,6 +265,19 @@ def test_the_switching_newton_compiled_ahead_is_the_one_the_solver_calls() -> No
     assert switching.switching_newton.signatures == before  # no signature of its own
 
 
+def test_the_burn_prediction_compiled_first_is_the_one_the_newton_calls() -> None:
+    from numba import njit
+
+    switching = _solver_copy_typed()
+    # an uncached copy of the Newton types its call of the burn prediction here
+    copy = njit(switching.switching_newton.py_func)
+    for sig in switching.switching_newton.signatures:
+        copy.compile(sig)
+    before = switching.predicted_length.signatures
+    switching.compile_predicted_length()
+    assert switching.predicted_length.signatures == before  # no signature of its own
+
+
 def test_the_dual_ascent_compiled_first_is_the_one_the_solver_calls() -> None:
     from cwrend_cli.config.adapt import problem_of
     from cwrend_cli.physics.guidance import _kernels

@@ -454,6 +454,22 @@ def compile_switching_newton() -> None:
     switching_newton.compile((f, vec, vec, f, f, vec, vec, i, f, f, i, vec))
 
 
+def compile_predicted_length() -> None:
+    """Compile (or load) :func:`predicted_length` for the argument types
+    :func:`switching_newton` calls it with; runs nothing.
+
+    A campaign's first run compiles it with the dual ascent
+    (:func:`compile_newton_ascent`), before the second process compiling
+    :func:`switching_newton` reaches it: the two processes then finish their
+    halves of the solver about together (issue 37 item 12,
+    :func:`cwrend_cli.physics.compiled.compile_ascent`).
+    """
+    vec, mat = types.float64[::1], types.float64[:, ::1]
+    f, i = types.float64, types.int64
+    kinds = types.int64[:, ::1]
+    predicted_length.compile((f, vec, vec, f, f, vec, vec, i, mat, kinds, vec, mat))
+
+
 def compile_newton_ascent(settings_t: tuple[Any, ...]) -> None:
     """Compile (or load) :func:`._kernels.newton_ascent` for the argument types
     :func:`bang_bang_ascent` calls it with, CW's mean motion as the model; runs nothing.
