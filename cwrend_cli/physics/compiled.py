@@ -39,10 +39,10 @@ _COMPILE_CPU_S = {
     "socp": 20.0,  # _advance and the cone program's grid kernels
 }
 #: Of each part, the CPU seconds a second process compiles (the step loop below the
-#: re-solves, :func:`compile_ahead`: 6.1 s; then the solver's switching-time Newton: 4.5 s)
-#: while the campaign process compiles the references' dual ascent (:func:`compile_ascent`);
-#: on 2 cores or more they overlap it.
-_AHEAD_CPU_S = {"references": 4.5, "shooting": 6.0, "socp": 4.0}
+#: re-solves, :func:`compile_ahead`: 6.1 s; then the solver's switching-time Newton less
+#: its burn prediction: 2.5 s) while the campaign process compiles the references' dual
+#: ascent (:func:`compile_ascent`); on 2 cores or more they overlap it.
+_AHEAD_CPU_S = {"references": 2.5, "shooting": 6.0, "socp": 4.0}
 
 
 #: The cyclic garbage collector's thresholds in cwrend's processes (Python's default:
