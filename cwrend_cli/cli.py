@@ -567,6 +567,16 @@ def command_line() -> list[str]:
     return argv
 
 
+def _shown(path: Path) -> str:
+    """``path`` as a command prints where it wrote: relative to the working directory when
+    inside it (``results/tour``, as given in the tour), else absolute."""
+    absolute = Path(path).absolute()
+    try:
+        return str(absolute.relative_to(Path.cwd()))
+    except ValueError:
+        return str(absolute)
+
+
 def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     base = Path(cfg.output.dir)
     out = (base / (cfg.output.name or "campaign")).resolve()
@@ -699,12 +709,7 @@ def _campaign(
                 ):
                     break
                 if not opts.quiet and n < opts.max_seeds:
-                    widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
-                    err.print(
-                        f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
-                        f"> {widest.limit:.3g}); next batch",
-                        markup=False,
-                    )
+                    err.print(sequential.next_batch_message(n, opts.batch, achieved), markup=False)
         _report_campaign(command, plan, summary, statistics, out, opts, err)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err
@@ -718,7 +723,7 @@ def _campaign(
             err.print(
                 f"interrupted: {done} of {len(asked)} runs done ({summary.executed} computed now), "
                 f"{summary.failed} failed; run the same command to resume (and to write the "
-                f"statistics) → {out}",
+                f"statistics) → {_shown(out)}",
                 soft_wrap=True,
                 markup=False,
             )
@@ -889,7 +894,7 @@ def _report_campaign(
     if not summary.interrupted:
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
-            f"holds {summary.ok} ok, {summary.failed} failed → {out}",
+            f"holds {summary.ok} ok, {summary.failed} failed → {_shown(out)}",
             soft_wrap=True,  # a path must stay copyable
             markup=False,
         )
@@ -1057,7 +1062,9 @@ def sweep(
 
 
 @app.command(
-    "report", cls=_Command, short_help="Figures (PNG) and report.md into RESULTS_DIR/report/."
+    "report",
+    cls=_Command,
+    short_help="Figures, report.md and report.html into RESULTS_DIR/report/.",
 )
 def report(
     results_dir: Annotated[
@@ -1204,7 +1211,7 @@ def compare(
             err = _stderr()
             for note in result.notes:
                 err.print(f"note: {note}", markup=False)
-            err.print(f"results written to {out}", soft_wrap=True, markup=False)
+            err.print(f"results written to {_shown(out)}", soft_wrap=True, markup=False)
 
 
 # ---------------------------------------------------------------------------

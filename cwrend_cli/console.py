@@ -36,13 +36,14 @@ from cwrend_cli.report.labels import (
     MIN_BOOTSTRAP_N,
     consistency_text,
     markdown_table,
+    number,
     setting_text,
     swept_values,
 )
 
 
 def _num(value: float, spec: str) -> str:
-    return "–" if math.isnan(value) else f"{value:{spec}}"
+    return "–" if math.isnan(value) else number(value, spec)
 
 
 def _solves(r: Mapping[str, Any]) -> str:
@@ -420,12 +421,12 @@ def _unreliable(row: pd.Series) -> bool:
 
 def _ci(row: pd.Series, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> str:
     """Value, and its 95 % interval on a second (dim) line, marked when unreliable."""
-    value = row["value"] * scale
+    value = number(row["value"] * scale, spec)
     if math.isnan(row["ci_low"]):
-        return f"{value:{spec}}"
-    lo, hi = row["ci_low"] * scale, row["ci_high"] * scale
+        return value
+    lo, hi = number(row["ci_low"] * scale, spec), number(row["ci_high"] * scale, spec)
     mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
-    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}{mark}[/dim]"
+    return f"{value}\n[dim]{lo}–{hi}{mark}[/dim]"
 
 
 #: Said instead of an interval's caption when every quantity of a table has one realisation.
@@ -755,19 +756,20 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
     return table
 
 
-def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table:
+def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table | Text:
     """``cwrend compare``: what differs between A's and B's configurations (fits 80 columns).
 
     One row per dotted key (``campaign.compare.config_diff``) with A's and B's
-    values as :func:`~cwrend_cli.report.labels.setting_text` shows them; long
-    values fold onto further lines, never cut.
+    values as :func:`~cwrend_cli.report.labels.setting_text` shows them (as
+    text, never read as markup); long values fold onto further lines, never
+    cut. No difference: one line that says so.
     """
+    if not differences:
+        return Text("A and B have the same configuration (no setting differs outside [output])")
     table = _table("A and B differ in", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("setting", overflow="fold")
     table.add_column("A", overflow="fold")
     table.add_column("B", overflow="fold")
     for key, a, b in differences:
-        table.add_row(key, setting_text(a), setting_text(b))
-    if not differences:
-        table.caption = "the same configuration (no setting differs outside [output])"
+        table.add_row(Text(key), Text(setting_text(a)), Text(setting_text(b)))
     return table

@@ -178,11 +178,13 @@ def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
         if noise.digest is None:
             return load_noise_file(noise.file, n_steps)
         try:  # planned: the file must still hold what was planned
-            if file_digest(noise.file) == noise.digest:
-                return load_noise_file(noise.file, n_steps)
-            reason = "changed since the campaign was planned"
+            unchanged = file_digest(noise.file) == noise.digest
         except InputDataError as exc:  # deleted or unreadable since
             reason = f"unusable since the campaign was planned ({exc})"
+        else:
+            if unchanged:  # the file as planned: what is wrong with it was so from the start
+                return load_noise_file(noise.file, n_steps)
+            reason = "changed since the campaign was planned"
         raise InputChangedError(
             f"noise.file = {noise.file!r} {reason}; a campaign replays one realisation, so it "
             "stopped and recorded no run for it: restore the file and run the same command "

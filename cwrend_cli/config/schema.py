@@ -991,7 +991,7 @@ class OutputConfig(_FrozenModel):
         "failed 'timed out' and the campaign goes on; the open-loop references of a grid "
         "point get the same limit; unset = 10 s + 3 x 100 µs x steps x re-solves / 2, "
         "120 s more for a process's first run of an architecture (19.5 s for the paper's "
-        "800 steps and 79 re-solves; not enforced on Dask workers)",
+        "800 steps and 79 re-solves)",
     )
     dask_no_worker_timeout_s: Float = Field(
         60.0,

@@ -1670,11 +1670,16 @@ def _file_key(text: str) -> str:
 def _with_world(draw: Callable[[], Figure], world: str) -> Figure:
     """The figure of ``draw`` with the simulated world added to its title.
 
-    Under the figure's title (a second line of its suptitle), or as its
-    suptitle when it has only axes titles.
+    Under the figure's title (a second line of its suptitle). A figure of one
+    titled axes (fig. 6, the distributions) has that title made its suptitle
+    first, so the world is under it there too, not above it.
     """
     fig = draw()
     title = fig.get_suptitle()
+    titled = [ax for ax in fig.axes if ax.get_title()]
+    if not title and len(titled) == 1:
+        title = titled[0].get_title()
+        titled[0].set_title("")
     fig.suptitle(f"{title}\n{world}" if title else world)
     return fig
 

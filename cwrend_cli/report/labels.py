@@ -89,6 +89,14 @@ def param_label(key: str) -> str:
     return f"{symbol} [{unit}]" if unit is not None else symbol
 
 
+def number(value: float, spec: str) -> str:
+    """``value`` formatted with ``spec`` (``.4f``, ``+.1f``, …) without a negative zero: a
+    value that rounds to zero reads ``0.0000``, not ``-0.0000`` (the format's ``z``
+    option, PEP 682)."""
+    signed = spec[:1] in ("+", "-", " ")
+    return format(value, f"{spec[0]}z{spec[1:]}" if signed else f"z{spec}")
+
+
 def format_value(value: Any) -> str:
     """A swept value as given: floats with 12 significant digits (no floating-point noise)."""
     if isinstance(value, bool | str) or value is None:
