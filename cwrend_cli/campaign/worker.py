@@ -310,6 +310,22 @@ def compile_ahead(task: Task) -> None:
         return
 
 
+def compile_newton() -> None:
+    """Compile the shooting solver's switching-time Newton (in a pool worker; issue 37 item 12).
+
+    :func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`,
+    the half of the references' solver that the campaign process does not
+    compile (:func:`cwrend_cli.physics.compiled.compile_ascent`). A failure is
+    only a lost head start, as in :func:`compile_ahead`.
+    """
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    try:
+        _switching_kernels.compile_switching_newton()
+    except Exception:  # the references compile it themselves
+        return
+
+
 @dataclass(frozen=True)
 class RunOutcome:
     """What a worker returns for one run: small, whatever the run's length."""
