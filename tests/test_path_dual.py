@@ -178,3 +178,24 @@ def test_the_dual_solver_writes_far_fewer_trust_rows_than_the_box_has(
     assert res.status is SolveStatus.CONVERGED
     assert written[0] > 0
     assert written[0] < boxed[0] // 10
+
+
+def test_a_warm_start_that_fails_is_retried_from_the_guess() -> None:
+    """A re-solve whose warm multipliers the Newton method cannot recover from within its
+    iteration cap (the last plan's, shifted, times 1e12) is solved again from the guess of
+    the rows the iterate touches, by the dual solver: no program left to Clarabel (before:
+    one) and the cold re-solve's plan (controls within 1e-6 u_max; measured 0)."""
+    x0, xf, geo = _far_problem(np.random.default_rng(3293))
+    first = cp.plan(N_MOTION, DT, U_MAX, x0, xf, 300.0, 0.9, geo)
+    shifted = cp.shift_duals(first.duals, 10)
+    assert shifted is not None
+    x1 = cp.node_positions(N_MOTION, DT, x0, first.controls[:10])[0][-1]
+    warm_u = first.controls[10:]
+    cold = cp.plan(N_MOTION, DT, U_MAX, x1, xf, 290.0, 0.9, geo, warm_controls=warm_u)
+    bad = cp.plan(
+        N_MOTION, DT, U_MAX, x1, xf, 290.0, 0.9, geo, warm_controls=warm_u,
+        warm_duals=cp.Duals(shifted.codes, shifted.values * 1e12),
+    )  # fmt: skip
+    assert bad.status is SolveStatus.CONVERGED
+    assert bad.fallbacks == 0
+    np.testing.assert_allclose(bad.controls, cold.controls, rtol=0, atol=1e-6 * U_MAX)

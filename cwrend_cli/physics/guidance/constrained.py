@@ -758,11 +758,19 @@ def _dual_solve(
     s_p = float(g.row_scale[0])
     used = 0
     cone_rounds = trust_rounds = 0
+    retried = sub.warm_duals is None
     while True:
         ans = path_dual.solve(
             sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
         )
         used += ans.iterations
+        if not ans.converged and not retried:  # the warm start failed: once from the guess
+            retried = True
+            ans = path_dual.solve(
+                sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
+                _guess_active(rows, kind, sub.r_bar),
+            )  # fmt: skip
+            used += ans.iterations
         if not ans.converged:
             return None, used, None
         path = (kind == 1) | (kind == 4)
