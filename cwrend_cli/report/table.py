@@ -71,7 +71,13 @@ from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWE
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES, PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
-from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, markdown_table
+from cwrend_cli.report.labels import (
+    M_PER_KM,
+    MIN_BOOTSTRAP_N,
+    format_value,
+    markdown_table,
+    number,
+)
 
 __all__ = [
     "FIELDS",
@@ -1043,10 +1049,10 @@ def _cell(cell: pd.Series | None, value: Value, mark: str) -> str:
     if cell is None or not math.isfinite(float(cell["value"])):
         return _MISSING
     scale, spec = value.scale(), f".{value.decimals()}f"
-    text = format(float(cell["value"]) * scale, spec)
+    text = number(float(cell["value"]) * scale, spec)
     lo, hi = float(cell["ci_low"]), float(cell["ci_high"])
     if value.interval and math.isfinite(lo) and math.isfinite(hi):
-        text += f" [{lo * scale:{spec}}, {hi * scale:{spec}}]"
+        text += f" [{number(lo * scale, spec)}, {number(hi * scale, spec)}]"
         if _unreliable(cell, value):
             text += mark
     return text

@@ -48,7 +48,13 @@ and meets the test: **the first program is the last** whenever it needs no
 slack, leaves every node's mode as it found it and its own chord bound holds
 (a warm re-solve, from the previous plan shifted to the current step, nearly
 always: one iteration in 776 of the 780 re-solves of seeds 0–4 of
-campaigns/safe_approach.toml, MTF architectures).
+campaigns/safe_approach.toml, MTF architectures). A turning body's SCP
+(``motion``, issue 34) also stops with a slack, once the slack is settled (within
+:data:`SCP_TOL_KM` of the previous iterate's): next to a moving port the
+tightened corridor rows of the last nodes cannot all hold, the slack is the same
+at every iterate, and more iterations only repeat the program
+(docs/guide/tumbling-target.md, *The cost of a turning set*). A fixed target keeps
+the rule above (its plans are pinned bit for bit).
 
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
@@ -1268,7 +1274,7 @@ def plan(
             time.perf_counter() - start,
         )
     result = failed
-    cost = math.inf
+    cost, last_slack = math.inf, math.inf
     fallbacks = 0
     drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
@@ -1345,7 +1351,13 @@ def plan(
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         settled = settled and result.abort_slack_km == 0.0
-        if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
+        # a turning body's slack that the iterates no longer change is the linearised set's
+        # own: more iterations would not remove it (module docstring, Iterations)
+        slack_settled = slack == 0.0 or (
+            motion is not None and abs(slack - last_slack) <= SCP_TOL_KM
+        )
+        last_slack = slack
+        if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
     return result
