@@ -118,7 +118,10 @@ def _rows(
     factor: float | None,
 ) -> list[Row]:
     """Re-solve time (mean, p95, max; baseline: the same of ``pair[1]``) and SCP iterations
-    of ``pair[0]``; a target of ``factor`` times the baseline's mean (None: no target)."""
+    of ``pair[0]``; a target of ``factor`` times the baseline's mean (None: no target).
+    No seeds (``--tumbling-seeds 0``: the section left out): no rows."""
+    if seeds < 1:
+        return []
     measured, reference = pair
     rows = []
     for base in bases:

@@ -8,6 +8,7 @@ has one (two completions).
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -226,3 +227,44 @@ def test_a_difference_that_rounds_to_zero_has_no_minus_sign() -> None:
     assert _ci(pd.Series({"value": -0.25, "ci_low": -0.5, "ci_high": 0.1, "n": 20}), ".2f") == (
         "-0.25\n[dim]-0.50–0.10[/dim]"
     )
+
+
+def test_the_no_sensitivity_note_breaks_between_phrases_at_80_columns(tmp_path: Path) -> None:
+    """``sweep --design lhs --samples 4``: the note wrapped at 80 columns as "…; raise" /
+    "--samples"; it is now two lines, each whole."""
+    cfg = tmp_path / "lhs.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\nrrd_seeds = 0\n'
+                   '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n')  # fmt: skip
+    args = ["sweep", str(cfg), "--design", "lhs", "--samples", "4", "--seeds", "1",
+            "--arch", "mtf_adaptive", "--workers", "1", "--no-rrd"]  # fmt: skip
+    result = CliRunner(env={"COLUMNS": "80"}).invoke(app, args)
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.splitlines()
+    at = lines.index("no sensitivity indices: RBD-FAST needs at least 9 design rows")
+    assert lines[at + 1] == "(this design has 4): raise --samples to 9 or more"
+
+
+def _columns_of(text: str, names: Sequence[str]) -> set[int]:
+    """The column at which each of ``names`` starts on its row of a rendered table."""
+    return {line.index(f" {n} ") + 1 for line in text.splitlines() for n in names
+            if f" {n} " in line}  # fmt: skip
+
+
+def test_the_sweep_table_left_aligns_the_architectures() -> None:
+    """Names left-aligned as in the ablation tables (they were right-aligned here)."""
+    text = _render(sweep_console_table(_stats(SLUGS, points=2), ["point", "param.schedule.beta"],
+                                       "sweep"))  # fmt: skip
+    assert len(_columns_of(text, SLUGS)) == 1
+
+
+def test_the_consistency_table_left_aligns_the_architectures() -> None:
+    from cwrend_cli.console import consistency_console_table
+
+    rows = pd.DataFrame(
+        [{"kind": "consistency", "arch": arch, "metric": metric, "statistic": "mean",
+          "value": 6.0, "ci_low": 5.0, "ci_high": 7.0, "n": 12}
+         for arch in SLUGS for metric in ("mean_nees", "mean_nis_nominal")]
+    )  # fmt: skip
+    table = consistency_console_table(rows, [], "filter consistency")
+    assert table is not None
+    assert len(_columns_of(_render(table), SLUGS)) == 1

@@ -175,3 +175,29 @@ def test_compiling_outside_the_main_thread_does_not_count_against_the_limit() ->
     assert isinstance(_in_a_thread(block), guards.RunTimeoutError)
     assert times["compiled"] - times["started"] >= 2.0  # the compile ran to its end
     assert time.monotonic() - times["compiled"] >= 0.5  # the limit's remaining second, not 0
+
+
+def test_another_threads_compile_stops_this_threads_clock_too() -> None:
+    """numba's events are process-wide: on a Dask worker one task's compile stops every
+    task's clock. Deliberate (docs/guide/integrity.md, "Time limits"): a thread meeting a
+    kernel meanwhile waits for numba's process-wide compiler lock with no event of its own,
+    so a per-thread pause would count another run's compile against it."""
+    from numba.core import event
+
+    inside, compiled = threading.Event(), threading.Event()
+
+    def block() -> None:
+        with guards.time_limit(3.0):
+            inside.set()
+            while not compiled.is_set():  # a task waiting on the lock another thread holds
+                time.sleep(0.01)
+
+    thread_result: list[BaseException | None] = []
+    runner = threading.Thread(target=lambda: thread_result.append(_in_a_thread(block)))
+    runner.start()
+    assert inside.wait(timeout=60.0)
+    with event.trigger_event("numba:compile"):  # this thread compiles for twice the limit
+        time.sleep(6.0)
+    compiled.set()
+    runner.join(timeout=60.0)
+    assert thread_result == [None]

@@ -343,6 +343,14 @@ class _CompilePause(numba_event.Listener):
     ``numba:compile`` event, nested for the kernels a kernel calls; the clock is
     stopped at the outermost start and set again, with the time it had left,
     at the outermost end.
+
+    The listener is process-wide (numba's events are): on a Dask worker running
+    tasks in threads, one thread's compile stops every thread's clock. Kept so on
+    purpose, as it only lengthens a limit: numba compiles under a process-wide
+    lock (``numba.core.compiler_lock``) that another thread meeting any kernel
+    waits for without an event of its own, and the compile holds the GIL; a
+    per-thread pause would count that wait against the waiting run
+    (docs/guide/integrity.md, "Time limits").
     """
 
     def __init__(self, alarm: _Alarm) -> None:

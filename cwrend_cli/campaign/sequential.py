@@ -58,6 +58,7 @@ __all__ = [
     "parse_until",
     "ready",
     "seed_counts",
+    "unchecked_message",
     "unmet_message",
 ]
 
@@ -168,6 +169,20 @@ def checked_from(batch: int) -> int:
 def ready(n_seeds: int, batch: int) -> bool:
     """Whether widths may be checked at ``n_seeds`` (the minimum batches and seeds reached)."""
     return n_seeds >= checked_from(batch)
+
+
+def unchecked_message(n_seeds: int, batch: int) -> str:
+    """What ``--until`` says when it stopped at ``n_seeds`` (``--max-seeds``) before widths are
+    checked (:func:`ready`): whether the target was met is not known, and how to know."""
+    first = checked_from(batch)
+    fix = f"raise --max-seeds to {first:,}"
+    if MIN_BATCHES * batch > MIN_SEEDS:
+        fix += f" or lower --batch to {math.ceil(MIN_SEEDS / MIN_BATCHES)}"
+    return (
+        f"--until not checked: widths are checked from {first:,} seeds ({MIN_BATCHES} batches "
+        f"of --batch {batch}, at least {MIN_SEEDS}) and --max-seeds stopped the campaign at "
+        f"{n_seeds}: {fix}"
+    )
 
 
 def next_batch_message(n_seeds: int, batch: int, achieved: Sequence[Achieved]) -> str:

@@ -333,9 +333,10 @@ def simulate(
     errors (required when ``problem.actuator`` has per-step noise; ignored
     where its σ is zero). ``fault_draws``: the draws of the degradation
     windows' sensor faults (required for the kinds some window switches on,
-    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the 6
+    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the
     standard normals of the guidance's attitude-knowledge error (a tumbling target
-    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`).
+    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`):
+    6, or (N, 6) with ``target.knowledge_draw = "resolve"`` (row k at step k's re-solve).
 
     ``observe`` (tests, benchmarks): called with the input of every shooting
     re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
@@ -609,7 +610,8 @@ def _body_motion(
 @dataclass(frozen=True)
 class _Knowledge:
     """What the guidance knows of a tumbling target's attitude (issue 34): the truth's
-    attitude (None for a fixed target) and the run's knowledge error (None: exact)."""
+    attitude (None for a fixed target) and the run's knowledge error (None: exact; each
+    part (3,) for one error a run, (N, 3) for one a re-solve, row k at step k)."""
 
     truth: attitude.TargetAttitude | None
     error: tuple[FloatArray, FloatArray] | None
@@ -621,8 +623,10 @@ def _knowledge_error(
     """The run's attitude-knowledge error (δθ, δω), None when the guidance knows exactly."""
     if not problem.target.knowledge_error:
         return None
-    if draws is None:
-        raise ValueError("target.knowledge_sigma_*: the run needs its attitude draws")
+    per_step = (problem.scenario.n_steps, 6)
+    expected = per_step if problem.target.knowledge_draw == "resolve" else (6,)
+    if draws is None or np.shape(draws) != expected:
+        raise ValueError(f"target.knowledge_sigma_*: the run needs its attitude draws {expected}")
     return attitude.knowledge_error(problem.target, draws)
 
 
@@ -638,9 +642,12 @@ def _predicted_motion(
     sc = problem.scenario
     model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
     i = k_from * every
+    d_theta, d_w = known.error
+    if d_theta.ndim == 2:  # drawn at every re-solve: this one's (row k_from)
+        d_theta, d_w = d_theta[k_from], d_w[k_from]
     believed, q_hb, w = attitude.predict(
-        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s, known.error,
-        every,
+        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s,
+        (d_theta, d_w), every,
     )  # fmt: skip
     return attitude.body_motion(believed, q_hb, w)
 

@@ -83,6 +83,7 @@ from cwrend_cli.physics.params import Window
 from cwrend_cli.report.consistency import step_ensembles
 from cwrend_cli.report.labels import (
     M_PER_KM,
+    category_text,
     difference_text,
     format_value,
     param_label,
@@ -1317,7 +1318,7 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         if numeric:
             ax.set_xticks(levels, [format_value(v) for v in levels])
         else:
-            ax.set_xticks(range(len(levels)), [str(v) for v in levels])
+            ax.set_xticks(range(len(levels)), [category_text(str(v)) for v in levels])
     band = " (band: 95 % interval)" if banded else ""
     ax_m.set_ylabel("median terminal miss [m]")
     ax_m.set_title(f"median miss over seeds{band}")

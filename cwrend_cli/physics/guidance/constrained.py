@@ -48,7 +48,13 @@ and meets the test: **the first program is the last** whenever it needs no
 slack, leaves every node's mode as it found it and its own chord bound holds
 (a warm re-solve, from the previous plan shifted to the current step, nearly
 always: one iteration in 776 of the 780 re-solves of seeds 0–4 of
-campaigns/safe_approach.toml, MTF architectures).
+campaigns/safe_approach.toml, MTF architectures). A turning body's SCP
+(``motion``, issue 34) also stops with a slack, once the slack is settled (within
+:data:`SCP_TOL_KM` of the previous iterate's): next to a moving port the
+tightened corridor rows of the last nodes cannot all hold, the slack is the same
+at every iterate, and more iterations only repeat the program
+(docs/guide/tumbling-target.md, *The cost of a turning set*). A fixed target keeps
+the rule above (its plans are pinned bit for bit).
 
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
@@ -519,12 +525,16 @@ _CODE_NODE, _CODE_KIND = 1 << 20, 1 << 16
 
 
 def _dual_rows(
-    sub: _Subproblem, pairs: np.ndarray, row_scale: np.ndarray
+    sub: _Subproblem,
+    pairs: np.ndarray,
+    row_scale: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
 ) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
-    """The linear rows of the whole program of ``sub`` (module docstring; the corridor cones
-    aside) for :func:`.path_dual.solve`, sorted by node, each row's kind (0 terminal,
-    1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows scaled as the
-    terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`)."""
+    """The linear rows of the program of ``sub`` (module docstring; the corridor cones
+    aside, and of the trust rows only those of ``box``: (nodes, components) of
+    :func:`_trust_rows`) for :func:`.path_dual.solve`, sorted by node, each row's kind
+    (0 terminal, 1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows
+    scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`)."""
     steps = sub.modes.size - 1
     s_p = float(row_scale[0])
     nodes, coeffs, offsets, tol, kinds, keys = [], [], [], [], [], []
@@ -543,17 +553,14 @@ def _dual_rows(
         tol.append(np.full(pairs.shape[0], DUAL_TOL_KM * s_p))
         kinds.append(np.ones(pairs.shape[0], np.int64))
         keys.append(pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2])
-    boxed = np.flatnonzero(sub.modes > 0)
-    if boxed.size:  # r_k,i ≥ r̄_k,i − T and −r_k,i ≥ −r̄_k,i − T
-        eye = np.hstack([np.eye(3), np.zeros((3, 3))]) * s_p
-        nodes.append(np.repeat(boxed, 6))
-        coeffs.append(np.tile(np.vstack([eye, -eye]), (boxed.size, 1)))
-        low = sub.r_bar[boxed] - sub.trust_km
-        high = -sub.r_bar[boxed] - sub.trust_km
-        offsets.append(np.hstack([low, high]).ravel() * s_p)
-        tol.append(np.full(6 * boxed.size, DUAL_TOL_KM * s_p))
-        kinds.append(np.full(6 * boxed.size, 2, np.int64))
-        keys.append(np.tile(np.arange(6), boxed.size))
+    if box[0].size:  # the trust rows given (:func:`_trust_rows`)
+        t_node, t_coeffs, t_offsets, _ = _trust_rows(sub, box[0], box[1], s_p)
+        nodes.append(t_node)
+        coeffs.append(t_coeffs)
+        offsets.append(t_offsets)
+        tol.append(np.full(t_node.size, DUAL_TOL_KM * s_p))
+        kinds.append(np.full(t_node.size, 2, np.int64))
+        keys.append(box[1])
     if sub.abort_rows is not None and sub.abort_rows.nodes.size:  # cᵀ x_k ≥ o
         count = sub.abort_rows.nodes.size
         nodes.append(sub.abort_rows.nodes)
@@ -574,6 +581,44 @@ def _dual_rows(
         np.concatenate(tol)[order],
     )
     return rows, kind, code
+
+
+def _trust_rows(
+    sub: _Subproblem, nodes: np.ndarray, comps: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Trust rows of ``sub`` at ``nodes`` (M,), component ``comps`` (M,) 0 … 5: (nodes,
+    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``. Component
+    i < 3: ``r_k,i ≥ r̄_k,i − T``; i ≥ 3: ``−r_k,i−3 ≥ −r̄_k,i−3 − T`` (T the trust radius)."""
+    sign = np.where(comps < 3, 1.0, -1.0)
+    axis = comps % 3
+    coeffs = np.zeros((nodes.size, 6))
+    coeffs[np.arange(nodes.size), axis] = sign * scale
+    offsets = (sign * sub.r_bar[nodes, axis] - sub.trust_km) * scale
+    return nodes, coeffs, offsets, nodes * _CODE_NODE + 2 * _CODE_KIND + comps
+
+
+def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The trust rows that the positions ``r`` (N + 1, 3) break by more than
+    :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
+    the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
+    boxed = np.flatnonzero(sub.modes > 0)
+    d = r[boxed] - sub.r_bar[boxed]
+    broken = np.hstack([d, -d]) < -(sub.trust_km + DUAL_TOL_KM)
+    at, comp = np.nonzero(broken)
+    return boxed[at], comp.astype(np.int64)
+
+
+def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:
+    """The trust rows with a multiplier in the warm start ``sub.warm_duals`` (those the
+    previous program held active), at constrained nodes: (nodes, components)."""
+    warm = sub.warm_duals
+    if warm is None or warm.codes.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    codes = warm.codes[(warm.codes % _CODE_NODE) // _CODE_KIND == 2]
+    nodes, comps = codes // _CODE_NODE, codes % _CODE_KIND
+    keep = (nodes < sub.modes.size) & (comps < 6)
+    keep[keep] = sub.modes[nodes[keep]] > 0
+    return nodes[keep], comps[keep]
 
 
 def shift_duals(duals: Duals | None, steps: int) -> Duals | None:
@@ -629,6 +674,9 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
 
 #: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
 CONE_ROUNDS = 6
+#: Rounds of trust rows added lazily (those an answer breaks) before the dual solver writes
+#: every trust row (:func:`_dual_solve`) [-].
+TRUST_ROUNDS = 3
 
 
 def _cone_cuts(
@@ -676,9 +724,10 @@ def _with_rows(
     code: np.ndarray,
     cuts: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     tol: float,
+    cut_kind: int = 4,
 ) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
-    """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts`, kind 4, tolerance
-    ``tol``), sorted by node again."""
+    """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts` or
+    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again."""
     node, coeffs, offsets, cut_code = cuts
     nodes = np.r_[rows.nodes, node]
     order = np.argsort(nodes, kind="stable")
@@ -689,7 +738,7 @@ def _with_rows(
         np.r_[rows.equality, np.zeros(node.size, dtype=bool)][order],
         np.r_[rows.tol, np.full(node.size, tol)][order],
     )
-    return merged, np.r_[kind, np.full(node.size, 4)][order], np.r_[code, cut_code][order]
+    return merged, np.r_[kind, np.full(node.size, cut_kind)][order], np.r_[code, cut_code][order]
 
 
 def _dual_solve(
@@ -700,19 +749,34 @@ def _dual_solve(
     slack 0)), or (None, iterations, None) when its answer is not certified optimal for the
     whole program (not converged, a corridor cone still broken after :data:`CONE_ROUNDS`
     rounds of cuts (:func:`_cone_cuts`), or a path or abort multiplier sum above its
-    slack's price: then the program needs its slack) — Clarabel then solves it."""
+    slack's price: then the program needs its slack) — Clarabel then solves it.
+
+    The trust box enters lazily: the program starts with the trust rows the warm start
+    holds active (:func:`_warm_trust`); the rows an answer breaks (:func:`_broken_trust`)
+    are added and the program solved again, warm, and after :data:`TRUST_ROUNDS` such
+    rounds every trust row is written. An answer that holds every trust row it left out
+    (with multiplier 0) meets the whole program's KKT conditions: the same answer."""
     steps = sub.modes.size - 1
     g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
-    rows, kind, code = _dual_rows(sub, pairs, g.row_scale)
+    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub))
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
     s_p = float(g.row_scale[0])
     used = 0
-    for cut_round in range(CONE_ROUNDS + 1):
+    cone_rounds = trust_rounds = 0
+    retried = sub.warm_duals is None
+    while True:
         ans = path_dual.solve(
             sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
         )
         used += ans.iterations
+        if not ans.converged and not retried:  # the warm start failed: once from the guess
+            retried = True
+            ans = path_dual.solve(
+                sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
+                _guess_active(rows, kind, sub.r_bar),
+            )  # fmt: skip
+            used += ans.iterations
         if not ans.converged:
             return None, used, None
         path = (kind == 1) | (kind == 4)
@@ -720,8 +784,9 @@ def _dual_solve(
             return None, used, None
         if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
             return None, used, None
-        cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cut_round)
-        if cuts[0].size == 0:
+        cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
+        box = _broken_trust(sub, ans.states[:, :3])
+        if cuts[0].size == 0 and box[0].size == 0:
             active = ans.multipliers != 0.0
             duals = Duals(code[active], ans.multipliers[active])
             return (
@@ -729,12 +794,24 @@ def _dual_solve(
                 used,
                 (ans.controls, ans.states, 0.0),
             )
-        if cut_round == CONE_ROUNDS:
-            break
         known = Duals(code, ans.multipliers)
-        rows, kind, code = _with_rows(rows, kind, code, cuts, DUAL_TOL_KM * s_p)
+        if cuts[0].size:
+            if cone_rounds == CONE_ROUNDS:
+                return None, used, None
+            cone_rounds += 1
+            rows, kind, code = _with_rows(rows, kind, code, cuts, DUAL_TOL_KM * s_p)
+        if box[0].size:
+            trust_rounds += 1
+            if trust_rounds > TRUST_ROUNDS:  # every trust row not yet written
+                boxed = np.flatnonzero(sub.modes > 0)
+                box = (np.repeat(boxed, 6), np.tile(np.arange(6), boxed.size))
+            trust = _trust_rows(sub, box[0], box[1], s_p)
+            new = ~np.isin(trust[3], code)
+            if not np.any(new) and cuts[0].size == 0:  # broken though written: not certified
+                return None, used, None
+            trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
+            rows, kind, code = _with_rows(rows, kind, code, trust, DUAL_TOL_KM * s_p, 2)
         warm = _warm_multipliers(known, code, np.zeros(code.size))
-    return None, used, None
 
 
 def _reduced_solve(
@@ -1197,7 +1274,7 @@ def plan(
             time.perf_counter() - start,
         )
     result = failed
-    cost = math.inf
+    cost, last_slack = math.inf, math.inf
     fallbacks = 0
     drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
@@ -1274,7 +1351,13 @@ def plan(
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         settled = settled and result.abort_slack_km == 0.0
-        if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
+        # a turning body's slack that the iterates no longer change is the linearised set's
+        # own: more iterations would not remove it (module docstring, Iterations)
+        slack_settled = slack == 0.0 or (
+            motion is not None and abs(slack - last_slack) <= SCP_TOL_KM
+        )
+        last_slack = slack
+        if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
     return result

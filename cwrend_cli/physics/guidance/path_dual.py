@@ -505,6 +505,5 @@ def solve(
     norms = np.linalg.norm(u, axis=1)
     cost = float(np.sum(c1 * norms + weight * norms**2))
     controls = u * u_max
-    phi, gam = discretize(n, dt_s)
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
     return DualAnswer(status == STATUS_CONVERGED, controls, states, y, cost, int(iterations))
