@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
-from benchmarks import bench_constrained
+from pathlib import Path
+
+import pytest
 
 
-def test_a_section_of_no_seeds_has_no_rows() -> None:
+def test_a_section_of_no_seeds_has_no_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     """``--tumbling-seeds 0`` leaves the tumbling section out instead of taking the mean and
     percentiles of no re-solves (it crashed on an empty array)."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1]))  # the repository's
+    from benchmarks import bench_constrained
+
     rows = bench_constrained._rows(
         bench_constrained.TUMBLING_SECTION,
         bench_constrained.tumbling_configs(),

@@ -369,9 +369,9 @@ def test_every_metric_name_means_the_same_column_in_compare_and_table() -> None:
 
     assert {"miss", "dv", "fuel", "dv_applied", "fuel_applied"} <= set(METRIC_NAMES)
     for name, column in METRIC_NAMES.items():
-        assert parse_value(f"mean.{name}").metric == column
+        assert parse_value(name).metric == column  # at its default statistic
         if column in compare.COMPARED:
             assert compare.parse_metrics(name) == (column,)
-        else:  # the filter-consistency means: no "lower is better", not compared
+        else:  # the filter-consistency means and the safety values: not compared
             with pytest.raises(ConfigError, match=f"--metric '{name}': unknown metric"):
                 compare.parse_metrics(name)
