@@ -106,6 +106,7 @@ from cwrend_cli.output.tables import (
 from cwrend_cli.physics import simulation
 from cwrend_cli.physics.metrics import NIS_DOF
 from cwrend_cli.physics.params import Sensor
+from cwrend_cli.teardown import raise_stop, stop_asked
 
 __all__ = [
     "CampaignStatistics",
@@ -679,6 +680,8 @@ def _compile_beside(executor: Executor, task: Task, references: _PointReferences
     with contextlib.suppress(OSError):  # the first task's own call reports it
         references.of(task)
     while not ahead.done():  # waiting on a state: short polls stay interruptible
+        if stop_asked():  # a stop the references' code turned into an error of theirs
+            raise_stop()
         wait([ahead], timeout=_POLL_S)
 
 
@@ -716,6 +719,8 @@ def _drive(
     signals = run_signals(executor, tally.heard)
     try:
         while True:
+            if stop_asked():  # a stop a library turned into an error (the references')
+                raise_stop()
             while fatal is None and not lost and len(in_flight) < limit and queue:
                 task = queue.popleft()
                 record = seeds_to_record(task, plan_.archs, plan_.rrd_seeds_of(task.point))
