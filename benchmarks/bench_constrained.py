@@ -22,8 +22,10 @@ Run alone: ``python -m benchmarks.bench_constrained [--seeds S] [--tumbling-seed
 from __future__ import annotations
 
 import argparse
+import functools
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +35,7 @@ from cwrend_cli.config import ALL_ARCHITECTURES, ARCHITECTURES, CwrendConfig, co
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.config.io import load_config
 from cwrend_cli.physics import simulation
+from cwrend_cli.physics.guidance import constrained
 
 SECTION = "constrained cone program"
 CAMPAIGN = Path(__file__).resolve().parents[1] / "campaigns" / "safe_approach.toml"
@@ -56,21 +59,39 @@ def tumbling_configs() -> tuple[CwrendConfig, CwrendConfig]:
     return load_config(TUMBLING), config_from_dict(data)
 
 
-def _loops(cfg: CwrendConfig, slug: str, seeds: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Re-solve wall times [ms], SCP iterations and softened re-solves over the seeds."""
+def _loops(
+    cfg: CwrendConfig, slug: str, seeds: int
+) -> tuple[np.ndarray, np.ndarray, int, tuple[int, int]]:
+    """Re-solve wall times [ms], SCP iterations, softened re-solves, and (programs left by
+    the dual solver to Clarabel, programs) over the seeds (counted from each constrained
+    plan's ``fallbacks`` and ``scp_iterations``; the loops call ``constrained.plan``)."""
     problem = problem_of(cfg)
     refs = simulation.open_loop_references(problem)
     times: list[float] = []
     scp: list[int] = []
     softened = 0
-    for seed in range(seeds):
-        noise = campaign.standard_normal_for(cfg, seed)
-        result = simulation.simulate(problem, ALL_ARCHITECTURES[slug], noise, refs, seed=seed)
-        for s in result.resolves:
-            times.append(s.wall_time_ms)
-            scp.append(s.scp_iterations)
-            softened += s.slack_km > 0.0
-    return np.array(times), np.array(scp), softened
+    counts = [0, 0]
+    plan = constrained.plan
+
+    @functools.wraps(plan)
+    def counted(*args: Any, **kwargs: Any) -> constrained.ConstrainedPlan:
+        out = plan(*args, **kwargs)
+        counts[0] += out.fallbacks
+        counts[1] += out.scp_iterations
+        return out
+
+    constrained.plan = counted
+    try:
+        for seed in range(seeds):
+            noise = campaign.standard_normal_for(cfg, seed)
+            result = simulation.simulate(problem, ALL_ARCHITECTURES[slug], noise, refs, seed=seed)
+            for s in result.resolves:
+                times.append(s.wall_time_ms)
+                scp.append(s.scp_iterations)
+                softened += s.slack_km > 0.0
+    finally:
+        constrained.plan = plan
+    return np.array(times), np.array(scp), softened, (counts[0], counts[1])
 
 
 def run(
@@ -97,13 +118,16 @@ def _rows(
     factor: float | None,
 ) -> list[Row]:
     """Re-solve time (mean, p95, max; baseline: the same of ``pair[1]``) and SCP iterations
-    of ``pair[0]``; a target of ``factor`` times the baseline's mean (None: no target)."""
+    of ``pair[0]``; a target of ``factor`` times the baseline's mean (None: no target).
+    No seeds (``--tumbling-seeds 0``: the section left out): no rows."""
+    if seeds < 1:
+        return []
     measured, reference = pair
     rows = []
     for base in bases:
         slug = f"{base}_socp"
-        t, scp, softened = _loops(measured, slug, seeds)
-        t0, scp0, _ = _loops(reference, slug, seeds)
+        t, scp, softened, (fallbacks, programs) = _loops(measured, slug, seeds)
+        t0, scp0, _, _ = _loops(reference, slug, seeds)
         label = f"{slug}: {what} re-solve, seeds 0–{seeds - 1}"
         for stat, value, ref in (
             ("mean", t.mean(), t0.mean()),
@@ -139,7 +163,8 @@ def _rows(
                 note=f"mean {scp.mean():.2f}"
                 + (f" ({versus}: {scp0.mean():.2f})" if versus_scp else "")
                 + f", max {scp.max()}, histogram {np.bincount(scp).tolist()}; "
-                f"{softened} softened (slack > 0)",
+                f"{softened} softened (slack > 0); {fallbacks} of {programs} programs "
+                "left by the dual solver to Clarabel",
             )
         )
     return rows

@@ -112,7 +112,7 @@ def capture_resolves(cfg: CwrendConfig, slug: str, seed: int) -> list[Captured]:
 def naive_solve(problem: guidance.ShootingProblem, guess: np.ndarray) -> tuple[float, bool]:
     """A straightforward SciPy port: solve_ivp of state + costate in least_squares (FD Jacobian).
 
-    Returns (wall time [s], success with ‖x(T) − x_f‖ < 1e-4 as in SPEC §5).
+    Returns (wall time [s], success with ‖x(T) − x_f‖ < 1e-4 as the re-solves count success).
     """
     a, b = cw_system(problem.mean_motion_rad_s)
 

@@ -13,6 +13,17 @@ inclusive figure of a top-level kernel is the whole cost of its first call.
 
 By hand only, never in CI. CPU seconds (``time.process_time``) of this
 process: other load on the machine moves them far less than wall time.
+
+Measured (AMD EPYC znver4, 2 vCPU, 2026-12-02, load average 10 from other
+jobs; docs/performance.md, "The first run"): 29.4 CPU s compiling (16.7 in
+LLVM), 31.2 CPU s the command, against 35.5 and 37.6 before issue 37 item
+12's fourth step (``compiled.tune_for_compiling``, the solver's two halves
+in two processes); the solver 16.7 CPU s with its callees (the dual ascent
+10.0, the switching-time Newton 4.6), the compiled loop's top 11.3 (its step
+loop 6.1). ``COMPILE_TREE=1`` prints the call tree too. For the two
+processes of a real campaign, log numba's ``numba:compile`` events in each
+(a listener installed before the command starts, e.g. from a
+``sitecustomize`` module on ``PYTHONPATH``) with the process's CPU time.
 """
 
 from __future__ import annotations
@@ -30,6 +41,9 @@ def main(argv: list[str]) -> None:
     """Profile the compile of one cwrend command (module docstring)."""
     if "NUMBA_CACHE_DIR" not in os.environ or os.listdir(os.environ["NUMBA_CACHE_DIR"]):
         os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="cwrend-compile-costs-")
+    from cwrend_cli.physics.compiled import tune_for_compiling
+
+    tune_for_compiling()  # as the command's main() does, before numba is imported
     import numba.core.event as ev
 
     own: dict[str, float] = defaultdict(float)

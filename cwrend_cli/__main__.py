@@ -18,6 +18,7 @@ import faulthandler
 import signal
 import sys
 
+from cwrend_cli.physics.compiled import tune_for_compiling
 from cwrend_cli.teardown import end_without_teardown, stop_exit_code, stop_on_signals
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, the shell convention).
@@ -33,6 +34,7 @@ def main() -> None:
     also raises again a stop that compiled code swallowed), with exit status
     128 + the signal: 130, 143, 129.
     """
+    tune_for_compiling()
     if hasattr(signal, "SIGUSR1"):
         faulthandler.register(signal.SIGUSR1, all_threads=True)
     stop_on_signals()

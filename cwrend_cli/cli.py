@@ -567,6 +567,16 @@ def command_line() -> list[str]:
     return argv
 
 
+def _shown(path: Path) -> str:
+    """``path`` as a command prints where it wrote: relative to the working directory when
+    inside it (``results/tour``, as given in the tour), else absolute."""
+    absolute = Path(path).absolute()
+    try:
+        return str(absolute.relative_to(Path.cwd()))
+    except ValueError:
+        return str(absolute)
+
+
 def _campaign_dir(cfg: CwrendConfig, name: str | None) -> Path:
     base = Path(cfg.output.dir)
     out = (base / (cfg.output.name or "campaign")).resolve()
@@ -675,6 +685,7 @@ def _campaign(
                 command, cfg, archs, seeds, params, opts, out, err, pairs, hold
             )
             achieved: list[sequential.Achieved] = []
+            n = len(seeds)
         else:
             if opts.seeds is not None or opts.seed_list is not None:
                 raise ConfigError("--until chooses the seed count: drop --seeds / --seed-list")
@@ -687,6 +698,7 @@ def _campaign(
             if opts.max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []
+            n = 0
             for n in sequential.seed_counts(opts.batch, opts.max_seeds):
                 plan, summary, statistics = _campaign_step(
                     command, cfg, archs, list(range(n)), params, opts, out, err, pairs, hold
@@ -699,26 +711,27 @@ def _campaign(
                 ):
                     break
                 if not opts.quiet and n < opts.max_seeds:
-                    widest = max(achieved, key=lambda a: a.half_width / a.limit if a.limit else 0)
-                    err.print(
-                        f"{n} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
-                        f"> {widest.limit:.3g}); next batch",
-                        markup=False,
-                    )
+                    err.print(sequential.next_batch_message(n, opts.batch, achieved), markup=False)
         _report_campaign(command, plan, summary, statistics, out, opts, err)
+        # widths are checked only from sequential.checked_from(batch) seeds: a --max-seeds
+        # below that stops with none checked
+        checked = opts.until is None or sequential.ready(n, opts.batch)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err
-            shown.print(until_console_table(achieved, opts.until or ""))
+            shown.print(until_console_table(achieved, opts.until or "", checked))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         if unmet and not summary.interrupted and (opts.strict or not opts.quiet):
             err.print(sequential.unmet_message(achieved, opts.max_seeds), markup=False)
+        unchecked = bool(achieved) and not checked  # met or not: not known (--strict: exit 1)
+        if unchecked and not summary.interrupted and (opts.strict or not opts.quiet):
+            err.print(sequential.unchecked_message(n, opts.batch), markup=False)
         if summary.interrupted:
             asked = {r.run_key for r in plan.runs}
             done = len(asked & campaign.held_run_keys(out))
             err.print(
                 f"interrupted: {done} of {len(asked)} runs done ({summary.executed} computed now), "
                 f"{summary.failed} failed; run the same command to resume (and to write the "
-                f"statistics) → {out}",
+                f"statistics) → {_shown(out)}",
                 soft_wrap=True,
                 markup=False,
             )
@@ -728,7 +741,7 @@ def _campaign(
                 "some runs failed (see events.jsonl / runs.parquet); --retry-failed reruns them"
             )
             raise typer.Exit(code=1)
-        if unmet and opts.strict:
+        if (unmet or unchecked) and opts.strict:
             raise typer.Exit(code=1)
 
 
@@ -876,20 +889,14 @@ def _report_campaign(
                 stdout.print(table)
     if not sensitivity.empty:
         stdout.print(sensitivity_console_table(sensitivity, f"sensitivity · {out.name}"))
-    elif (
-        plan.design is not None
-        and plan.design.kind != "sobol"
-        and design.rbd_fast_harmonics(len(plan.design.rows)) < 1
-    ):
-        err.print(
-            f"no sensitivity indices: RBD-FAST needs at least 9 design rows "
-            f"(this design has {len(plan.design.rows)}); raise --samples",
-            markup=False,
-        )
+    if plan.design is not None:
+        note = design.sensitivity_note(plan.design.kind, plan.design.samples, len(plan.design.rows))
+        if note is not None:
+            err.print(note, markup=False)
     if not summary.interrupted:
         err.print(
             f"{summary.executed} run(s) computed, {summary.skipped} already done; campaign "
-            f"holds {summary.ok} ok, {summary.failed} failed → {out}",
+            f"holds {summary.ok} ok, {summary.failed} failed → {_shown(out)}",
             soft_wrap=True,  # a path must stay copyable
             markup=False,
         )
@@ -940,7 +947,8 @@ def ablate(
         bool,
         typer.Option(
             "--strict",
-            help="With --until: exit 1 when --max-seeds is reached with the target not met.",
+            help="With --until: exit 1 when --max-seeds is reached with the target not met "
+            "(or not checked: widths are checked from 2 batches and 20 seeds).",
         ),
     ] = False,
     pair: PairOption = None,
@@ -953,7 +961,7 @@ def ablate(
     bootstrap intervals and paired comparisons) and recordings/ (one Rerun
     .rrd per recorded seed). Rerunning resumes.
     Exit code 1 if any run failed (or, with --strict, the --until target was not met
-    within --max-seeds), 2 for bad input, 3 if the machine failed (disk full,
+    or not checked within --max-seeds), 2 for bad input, 3 if the machine failed (disk full,
     lost workers: nothing recorded, rerun to resume), 130 if interrupted.
     """
     opts = CampaignOptions(seeds, seed_list, arch, workers, executor, address, name, force,
@@ -1057,7 +1065,9 @@ def sweep(
 
 
 @app.command(
-    "report", cls=_Command, short_help="Figures (PNG) and report.md into RESULTS_DIR/report/."
+    "report",
+    cls=_Command,
+    short_help="Figures, report.md and report.html into RESULTS_DIR/report/.",
 )
 def report(
     results_dir: Annotated[
@@ -1204,7 +1214,7 @@ def compare(
             err = _stderr()
             for note in result.notes:
                 err.print(f"note: {note}", markup=False)
-            err.print(f"results written to {out}", soft_wrap=True, markup=False)
+            err.print(f"results written to {_shown(out)}", soft_wrap=True, markup=False)
 
 
 # ---------------------------------------------------------------------------
@@ -1262,7 +1272,13 @@ def table(
             ":with=STEP / :without=STEP keep the runs whose re-solves used / never used that "
             "fallback step (n:with=socp_plan counts them). :bare drops the interval, :3 shows "
             "3 decimals. mean.nees, mean.nis: the runs' mean NEES and NIS with the χ² 95 % band "
-            "of a consistent filter.",
+            "of a consistent filter. Safety (a campaign with [constraints]): violated_pct, "
+            "abort_pct (share of runs, % with Wilson), median|p1.min_distance, "
+            "median|p1.abort_distance (m), mean.unsafe_time (s) (bootstrap); from the runs: "
+            "min.min_distance (m, the worst run), median|max.dock_position (m), "
+            "median|max.dock_velocity (mm/s); from solves/ (re-solves of the ok runs): "
+            "mean|max.scp_iterations, mean|p95|max.resolve_ms, slack_pct, abort_slack_pct "
+            "(share needing a slack, %).",
             metavar="LIST",
         ),
     ] = "n,mean.miss,median.miss,mean.dv",
@@ -1303,11 +1319,13 @@ def table(
 
     Reads each campaign's ablation.parquet or sweep.parquet (values with their 95 %
     intervals, never recomputed) and, for the values computed from the runs, its
-    runs.parquet (and solves/ for :with= / :without=); --versus pairs the runs of two
-    campaigns.
+    runs.parquet (and solves/ for :with= / :without= and the re-solve values); --versus
+    pairs the runs of two campaigns.
     Each cell must be one stored value: a cell that two campaigns, grid points or pairs
     fill is refused naming the field that tells them apart (exit 2), as is an unknown
-    field or value. Misses in m, Δv in km/s, fuel penalty in %; a bootstrap interval
+    field or value, and a value no campaign holds (a safety value without [constraints]).
+    Misses and distances in m, Δv in km/s, docking speed in mm/s, shares and fuel penalty
+    in %; a bootstrap interval
     from fewer than 10 seeds is marked *. Example (a sweep over guidance.hold):
 
     cwrend table results/paper-1000 --rows guidance.hold,arch --metric n,mean.miss,p95.miss:bare

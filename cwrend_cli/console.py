@@ -36,13 +36,14 @@ from cwrend_cli.report.labels import (
     MIN_BOOTSTRAP_N,
     consistency_text,
     markdown_table,
+    number,
     setting_text,
     swept_values,
 )
 
 
 def _num(value: float, spec: str) -> str:
-    return "–" if math.isnan(value) else f"{value:{spec}}"
+    return "–" if math.isnan(value) else number(value, spec)
 
 
 def _solves(r: Mapping[str, Any]) -> str:
@@ -65,13 +66,17 @@ def _table(title: str | None, **options: Any) -> Table:
     )
 
 
-def _point_table(title: str, point_cols: Sequence[str]) -> tuple[Table, list[str]]:
+def _point_table(
+    title: str, point_cols: Sequence[str], stats: pd.DataFrame
+) -> tuple[Table, list[str]]:
     """A narrow table that opens with a column per swept value (its last key part), and
-    those values' columns (``point_cols`` without ``point``)."""
+    those values' columns (``point_cols`` without ``point``). Numbers right-aligned, names
+    (a swept ``truth.model``) left-aligned, as every table's architecture column."""
     table = _table(title, **_NARROW)
     params = [c for c in point_cols if c != "point"]
     for p in params:
-        table.add_column(p.rsplit(".", 1)[-1], justify="right", no_wrap=True)
+        numeric = p in stats and pd.api.types.is_numeric_dtype(stats[p])
+        table.add_column(p.rsplit(".", 1)[-1], justify="right" if numeric else "left", no_wrap=True)
     return table, params
 
 
@@ -420,12 +425,12 @@ def _unreliable(row: pd.Series) -> bool:
 
 def _ci(row: pd.Series, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> str:
     """Value, and its 95 % interval on a second (dim) line, marked when unreliable."""
-    value = row["value"] * scale
+    value = number(row["value"] * scale, spec)
     if math.isnan(row["ci_low"]):
-        return f"{value:{spec}}"
-    lo, hi = row["ci_low"] * scale, row["ci_high"] * scale
+        return value
+    lo, hi = number(row["ci_low"] * scale, spec), number(row["ci_high"] * scale, spec)
     mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
-    return f"{value:{spec}}\n[dim]{lo:{spec}}–{hi:{spec}}{mark}[/dim]"
+    return f"{value}\n[dim]{lo}–{hi}{mark}[/dim]"
 
 
 #: Said instead of an interval's caption when every quantity of a table has one realisation.
@@ -494,7 +499,7 @@ def applied_console_table(
     marginal = stats[(stats["kind"] == "marginal") & stats["metric"].isin(APPLIED_METRICS)]
     if marginal.empty:
         return None
-    table, params = _point_table(title, point_cols)
+    table, params = _point_table(title, point_cols, marginal)
     table.add_column("architecture", no_wrap=True)
     for name in ("Δv applied km/s", "fuel pen. vs exact %"):
         table.add_column(name, justify="right", no_wrap=True)
@@ -546,8 +551,9 @@ def paired_console_table(stats: pd.DataFrame) -> Table | None:
 
 def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) -> Table:
     """Per grid point and architecture: mean Δv and miss with 95 % CIs."""
-    table, params = _point_table(title, point_cols)
-    for name in ("architecture", "n", "Δv km/s", "miss m"):
+    table, params = _point_table(title, point_cols, stats)
+    table.add_column("architecture", no_wrap=True)  # a name: left-aligned
+    for name in ("n", "Δv km/s", "miss m"):
         table.add_column(name, justify="right", no_wrap=True)
     marginal = stats[stats["kind"] == "marginal"]
     for _, g in marginal.groupby([*params, "point", "arch"], sort=True, observed=True):
@@ -591,8 +597,9 @@ def consistency_console_table(
     rows = stats[stats["kind"] == "consistency"] if "kind" in stats else stats.iloc[:0]
     if rows.empty:
         return None
-    table, params = _point_table(title, point_cols)
-    for name in ("architecture", "n", "NEES", "in\nband", "NIS", "in\nband"):
+    table, params = _point_table(title, point_cols, rows)
+    table.add_column("architecture", no_wrap=True)  # a name: left-aligned
+    for name in ("n", "NEES", "in\nband", "NIS", "in\nband"):
         table.add_column(name, justify="right", no_wrap=True)
     keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]
     # as the table above it: a sweep's by its swept values, an ablation's in its rows' order
@@ -738,8 +745,12 @@ def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table | Group:
     return Group(table, second)
 
 
-def until_console_table(achieved: Sequence[Any], target: str) -> Table:
-    """The intervals a ``--until`` target asked for, as achieved."""
+def until_console_table(achieved: Sequence[Any], target: str, checked: bool = True) -> Table:
+    """The intervals a ``--until`` target asked for, as achieved.
+
+    ``checked`` False: the campaign stopped before widths are checked
+    (``sequential.ready``), so an interval within its target reads "not checked".
+    """
     table = _table(f"--until {target}", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("interval of")
     for name in ("seeds", "value", "half-width", "target"):
@@ -747,7 +758,13 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
     table.add_column("met")
     for a in achieved:
         needed = a.seeds_needed
-        verdict = "yes" if a.met else "no" if needed is None else f"no: ~{needed:,} seeds"
+        verdict = (
+            ("yes" if checked else "not checked")
+            if a.met
+            else "no"
+            if needed is None
+            else f"no: ~{needed:,} seeds"
+        )
         table.add_row(a.label, str(a.n), f"{a.value:.6g}", f"{a.half_width:.3g}",
                       f"{a.limit:.3g}", verdict)  # fmt: skip
     if not all(a.met for a in achieved):
@@ -755,19 +772,20 @@ def until_console_table(achieved: Sequence[Any], target: str) -> Table:
     return table
 
 
-def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table:
+def config_diff_console_table(differences: Sequence[tuple[str, Any, Any]]) -> Table | Text:
     """``cwrend compare``: what differs between A's and B's configurations (fits 80 columns).
 
     One row per dotted key (``campaign.compare.config_diff``) with A's and B's
-    values as :func:`~cwrend_cli.report.labels.setting_text` shows them; long
-    values fold onto further lines, never cut.
+    values as :func:`~cwrend_cli.report.labels.setting_text` shows them (as
+    text, never read as markup); long values fold onto further lines, never
+    cut. No difference: one line that says so.
     """
+    if not differences:
+        return Text("A and B have the same configuration (no setting differs outside [output])")
     table = _table("A and B differ in", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("setting", overflow="fold")
     table.add_column("A", overflow="fold")
     table.add_column("B", overflow="fold")
     for key, a, b in differences:
-        table.add_row(key, setting_text(a), setting_text(b))
-    if not differences:
-        table.caption = "the same configuration (no setting differs outside [output])"
+        table.add_row(Text(key), Text(setting_text(a)), Text(setting_text(b)))
     return table

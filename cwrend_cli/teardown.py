@@ -13,7 +13,9 @@ handler registered later (``atexit`` runs them last-in, first-out: rerun's,
 and multiprocessing's in ``cwrend`` itself), shuts logging down if it was
 imported (its handler was registered earlier in a pool worker, whose
 initializer runs after ``logging`` is imported, and would not run), flushes
-the standard streams and ends the process with ``os._exit``. The campaign's
+the standard streams, waits for multiprocessing's resource tracker if this
+process started one (:func:`stop_resource_tracker`) and ends the process with
+``os._exit``. The campaign's
 pool workers use it from their initializer; ``cwrend`` itself from
 :func:`cwrend_cli.__main__.main`, with the exit code of the command.
 
@@ -61,9 +63,28 @@ def end_without_teardown(exit_code: Callable[[], int | None]) -> None:
             # a closed pipe (``| head``) or a closed stream has nothing left to flush
             with contextlib.suppress(OSError, ValueError):
                 stream.flush()
+        stop_resource_tracker()
         os._exit(code)
 
     atexit.register(_end)
+
+
+def stop_resource_tracker() -> None:
+    """End multiprocessing's resource tracker if this process started it, and wait for it.
+
+    A process pool's first semaphore starts the tracker, a process of its own
+    that lives until the pipe to it closes: at this process's exit, so it
+    outlived ``cwrend`` by a moment (a stray process after the shell's prompt,
+    and its warnings, if any, printed after it). Stopped here, it is gone when
+    the pool is; the next pool starts another. In a pool's worker (which
+    shares its parent's tracker) nothing is done.
+    """
+    resource_tracker = sys.modules.get("multiprocessing.resource_tracker")
+    tracker = getattr(resource_tracker, "_resource_tracker", None)
+    if tracker is None or getattr(tracker, "_pid", None) is None:
+        return  # never started here, or started by the parent process
+    with contextlib.suppress(OSError):  # already gone
+        tracker._stop()
 
 
 #: Signals that stop cwrend (issue 36 item 12): Ctrl-C, ``kill <pid>`` or a batch

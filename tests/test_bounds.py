@@ -15,12 +15,15 @@ import time
 import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.files import check_output_dir
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 runner = CliRunner()
@@ -215,3 +218,15 @@ def test_a_changed_noise_file_is_another_campaign(tmp_path: Path) -> None:
     changed = runner.invoke(app, args)
     assert changed.exit_code == 2
     assert "holds a campaign with a different configuration" in changed.stderr
+
+
+def test_run_out_on_a_read_only_file_system_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``cwrend run --out`` on a read-only mount said "Permission denied" (os.access is false
+    for both); the mount's read-only flag tells them apart. Mounting needs privileges, so
+    the file system's answers are given here."""
+    monkeypatch.setattr(os, "access", lambda *args, **kwargs: False)
+    monkeypatch.setattr(os, "statvfs", lambda path: SimpleNamespace(f_flag=os.ST_RDONLY))
+    with pytest.raises(ConfigError, match=r"cannot write results there \(Read-only file system\)"):
+        check_output_dir(tmp_path / "x", "choose another --out")

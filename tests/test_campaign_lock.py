@@ -17,10 +17,14 @@ import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from typer.testing import CliRunner
 
+from cwrend_cli.campaign.journal import campaign_lock
 from cwrend_cli.cli import app
+from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.layout import LOCK
 
 runner = CliRunner()
 ARCHS = "mtf_adaptive,plain_adaptive"
@@ -78,3 +82,15 @@ def test_a_report_is_refused_while_a_campaign_holds_the_directory(tmp_path: Path
         a.send_signal(signal.SIGCONT)
         a.communicate(timeout=HANG_S)
     assert a.returncode == 0
+
+
+def test_a_lock_that_cannot_be_opened_says_what_to_do(tmp_path: Path) -> None:
+    """A campaign on a read-only share (``cwrend report`` writes report/ into it) said only
+    "cannot open the campaign lock (Read-only file system)". A directory in the lock's place
+    fails the same open, without privileges."""
+    (tmp_path / LOCK).mkdir()
+    with (
+        pytest.raises(ConfigError, match="copy the directory to a writable place"),
+        campaign_lock(tmp_path),
+    ):
+        pass

@@ -76,3 +76,25 @@ def test_version() -> None:
 def test_unknown_command_option_exits_2() -> None:
     result = runner.invoke(app, ["config", "validate", str(PAPER_TOML), "--nope"])
     assert result.exit_code == 2
+
+
+def test_a_number_given_with_its_unit_is_told_to_drop_it() -> None:
+    """``--set scenario.horizon_s=800s`` said only "must be a number"; the key's unit is fixed
+    (its description's, the suffix of its name), so the fix is the number alone."""
+    args = ["config", "validate", str(PAPER_TOML), "--set", "scenario.horizon_s=800s",
+            "--set", 'scenario.u_max_km_s2="0.8 m/s^2"', "--set", "schedule.beta=abc"]  # fmt: skip
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    assert 'scenario.horizon_s = "800s": must be a number; write the number alone, in s' in (
+        result.stderr
+    )
+    assert "write the number alone, in km/s²" in result.stderr
+    assert 'schedule.beta = "abc": must be a number\n' in result.stderr  # no number: no hint
+
+
+def test_the_command_list_says_report_writes_report_html() -> None:
+    """``cwrend --help`` listed report as "Figures (PNG) and report.md …", leaving out the
+    self-contained report.html the tour and the guide open."""
+    result = runner.invoke(app, ["--help"], env={"COLUMNS": "80"})
+    line = next(x for x in result.stdout.splitlines() if x.strip().startswith("report"))
+    assert "report.html" in line and len(line) <= 80

@@ -184,3 +184,6 @@ def test_malformed_noise_file_exits_2_and_writes_nothing(
     assert result.exit_code == 2
     assert needle in result.output
     assert not out.exists()
+    # a file bad from the start did not change: not "unusable since the campaign was
+    # planned … run the same command to resume, or start over with --force" (run has none)
+    assert "since the campaign was planned" not in result.output

@@ -8,12 +8,17 @@ has one (two completions).
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from rich.console import Console
+from typer.testing import CliRunner
 
 from cwrend_cli.campaign import statistics
+from cwrend_cli.cli import app
 from cwrend_cli.console import (
     RichProgress,
     ablation_console_table,
@@ -22,6 +27,8 @@ from cwrend_cli.console import (
     sweep_console_table,
 )
 from cwrend_cli.physics import metrics
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 
 
 class _Clock:
@@ -167,3 +174,97 @@ def test_the_campaign_tables_show_every_name_and_number_whole_at_80_columns() ->
     assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)
     text = _render(applied_console_table(sweep, ["point", "param.schedule.beta"]))
     assert {"0.125", "0.25", "0.375", *SLUGS} <= _cells(text)
+
+
+def _at_80(renderable: object) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=80, color_system=None).print(renderable)
+    return buf.getvalue()
+
+
+def test_compare_of_two_equal_configurations_says_so_on_one_line() -> None:
+    """``cwrend compare A A``: the empty table's caption folded into a 14-column stack and
+    lost ``[output]`` (read as markup)."""
+    from cwrend_cli.console import config_diff_console_table
+
+    text = _at_80(config_diff_console_table([]))
+    assert text == "A and B have the same configuration (no setting differs outside [output])\n"
+
+
+def test_compare_shows_a_setting_whose_value_looks_like_markup() -> None:
+    from cwrend_cli.console import config_diff_console_table
+
+    text = _at_80(config_diff_console_table([("noise.file", "[bold]a.npz", "b.npz")]))
+    assert '"[bold]a.npz"' in text or "[bold]a.npz" in text
+
+
+def test_a_campaign_under_the_working_directory_is_named_as_the_tour_gives_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``cwrend ablate … --name tour`` ended "… → /home/me/cwrend/results/tour", past 80
+    columns; under the working directory it is ``results/tour``."""
+    monkeypatch.chdir(tmp_path)
+    args = ["ablate", str(PAPER), "--seeds", "1", "--arch", "mtf_adaptive", "--workers", "1",
+            "--no-rrd", "--name", "tour", "--set", 'output.dir="results"']  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    last = result.stderr.strip().splitlines()[-1]
+    assert last == "1 run(s) computed, 0 already done; campaign holds 1 ok, 0 failed → results/tour"
+
+
+def test_a_difference_that_rounds_to_zero_has_no_minus_sign() -> None:
+    """An ``everything_with_stf`` ablation's paired table read "-0.0000–-0.0000*" for the
+    Δv of mtf_fixed_socp vs stf_fixed_socp; the report's and ``cwrend table``'s likewise."""
+    from cwrend_cli.console import _ci
+    from cwrend_cli.report import markdown
+    from cwrend_cli.report.table import _cell, parse_value
+
+    row = pd.Series({"value": -2e-6, "ci_low": -4e-6, "ci_high": -1e-6, "n": 2})
+    assert _ci(row, ".4f") == "0.0000\n[dim]0.0000–0.0000*[/dim]"
+    assert markdown._ci(row, ".4f") == "0.0000 [0.0000, 0.0000]\\*"
+    assert markdown._fmt(-0.004, "+.2f") == "+0.00"
+    assert _cell(row, parse_value("mean_diff.dv"), "*") == "0.00000 [0.00000, 0.00000]*"
+    assert _ci(pd.Series({"value": -0.25, "ci_low": -0.5, "ci_high": 0.1, "n": 20}), ".2f") == (
+        "-0.25\n[dim]-0.50–0.10[/dim]"
+    )
+
+
+def test_the_no_sensitivity_note_breaks_between_phrases_at_80_columns(tmp_path: Path) -> None:
+    """``sweep --design lhs --samples 4``: the note wrapped at 80 columns as "…; raise" /
+    "--samples"; it is now two lines, each whole."""
+    cfg = tmp_path / "lhs.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\nrrd_seeds = 0\n'
+                   '[sweep]\n"schedule.beta" = { low = 0.05, high = 1.0 }\n')  # fmt: skip
+    args = ["sweep", str(cfg), "--design", "lhs", "--samples", "4", "--seeds", "1",
+            "--arch", "mtf_adaptive", "--workers", "1", "--no-rrd"]  # fmt: skip
+    result = CliRunner(env={"COLUMNS": "80"}).invoke(app, args)
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.splitlines()
+    at = lines.index("no sensitivity indices: RBD-FAST needs at least 9 design rows")
+    assert lines[at + 1] == "(this design has 4): raise --samples to 9 or more"
+
+
+def _columns_of(text: str, names: Sequence[str]) -> set[int]:
+    """The column at which each of ``names`` starts on its row of a rendered table."""
+    return {line.index(f" {n} ") + 1 for line in text.splitlines() for n in names
+            if f" {n} " in line}  # fmt: skip
+
+
+def test_the_sweep_table_left_aligns_the_architectures() -> None:
+    """Names left-aligned as in the ablation tables (they were right-aligned here)."""
+    text = _render(sweep_console_table(_stats(SLUGS, points=2), ["point", "param.schedule.beta"],
+                                       "sweep"))  # fmt: skip
+    assert len(_columns_of(text, SLUGS)) == 1
+
+
+def test_the_consistency_table_left_aligns_the_architectures() -> None:
+    from cwrend_cli.console import consistency_console_table
+
+    rows = pd.DataFrame(
+        [{"kind": "consistency", "arch": arch, "metric": metric, "statistic": "mean",
+          "value": 6.0, "ci_low": 5.0, "ci_high": 7.0, "n": 12}
+         for arch in SLUGS for metric in ("mean_nees", "mean_nis_nominal")]
+    )  # fmt: skip
+    table = consistency_console_table(rows, [], "filter consistency")
+    assert table is not None
+    assert len(_columns_of(_render(table), SLUGS)) == 1

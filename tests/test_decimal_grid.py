@@ -62,3 +62,22 @@ def test_the_runs_use_and_store_the_decimal_value(tmp_path: Path) -> None:
     runs = pd.read_parquet(tmp_path / "u" / "runs.parquet")
     assert sorted(runs["param.scenario.u_max_km_s2"]) == U_MAX
     assert len(runs[runs["param.scenario.u_max_km_s2"] == 0.0008]) == 1
+
+
+def test_a_param_without_values_names_the_option_and_its_forms() -> None:
+    """``--param schedule.beta`` said "malformed override …: expected KEY=VALUE", the
+    wording of ``--set``."""
+    with pytest.raises(ConfigError, match=r"--param 'schedule.beta': expected KEY=VALUES"):
+        parse_param("schedule.beta")
+
+
+@pytest.mark.parametrize("spec", ["0.1:0.5", "0:1:5:2"])
+def test_a_range_without_its_count_is_refused_as_a_range(spec: str) -> None:
+    """``--param schedule.beta=0.1:0.5`` was taken for the string '0.1:0.5' and refused
+    later as "grid point p… is invalid: must be a number"."""
+    with pytest.raises(ConfigError, match=r"a range is start:stop:num, e\.g\. schedule.beta="):
+        parse_param(f"schedule.beta={spec}")
+
+
+def test_a_value_with_a_colon_that_is_not_a_range_stays_a_string() -> None:
+    assert parse_param("output.name=run:a") == ("output.name", ("run:a",))

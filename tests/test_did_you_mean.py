@@ -10,10 +10,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
+from cwrend_cli.campaign.compare import parse_metrics
 from cwrend_cli.cli import app
 from cwrend_cli.config.messages import did_you_mean
+from cwrend_cli.errors import ConfigError
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 runner = CliRunner()
@@ -51,3 +54,20 @@ def test_a_misspelt_pair_is_answered_with_an_architecture_of_the_campaign(
 def test_an_unrelated_word_gets_no_suggestion() -> None:
     assert did_you_mean("zzz", ["beta", "kappa_mtf"]) == ""
     assert did_you_mean(3, ["beta"]) == ""  # a list index is not a name
+
+
+def test_a_misspelt_compare_metric_is_answered_with_the_metric_meant() -> None:
+    """``cwrend compare --metric mis`` (as ``cwrend table``'s fields already were)."""
+    with pytest.raises(ConfigError, match="did you mean 'miss'"):
+        parse_metrics("mis")
+
+
+def test_a_misspelt_design_range_is_answered_with_the_key_meant(tmp_path: Path) -> None:
+    """``--range schedule.betta=0.1:1`` / ``shedule.beta``: "not a configuration value" with
+    no suggestion, where ``--set`` suggests one."""
+    out_dir = f"output.dir={json.dumps(str(tmp_path))}"
+    for typo in ("schedule.betta", "shedule.beta"):
+        args = ["sweep", str(PAPER), "--design", "lhs", "--samples", "4", "--range",
+                f"{typo}=0.1:1", "--set", out_dir]  # fmt: skip
+        assert "did you mean 'schedule.beta'?" in _refused(args)
+    assert not list(tmp_path.iterdir())  # nothing written

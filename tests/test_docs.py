@@ -155,3 +155,11 @@ def test_the_readme_links_to_files_that_exist() -> None:
     assert len(local) > 10
     for target in local:
         assert (REPO / target).exists(), target
+
+
+def test_shipped_files_cite_the_paper_not_the_teams_spec() -> None:
+    """campaigns/paper.toml cited "SPEC §6", a document that is not shipped: what a user
+    reads cites the paper (or the authors' code)."""
+    shipped = [*REPO.glob("campaigns/*.toml"), *REPO.glob("docs/**/*.md"), REPO / "README.md"]
+    citing = [p.relative_to(REPO) for p in shipped if "SPEC §" in p.read_text(encoding="utf-8")]
+    assert citing == []

@@ -48,6 +48,22 @@ def _in_empty_cache(code: str, cache: Path) -> list[str]:
     ).stdout.splitlines()
 
 
+def test_cwrend_processes_collect_less_often_and_build_plain_numba_messages() -> None:
+    # numba's compiler allocates millions of objects: at Python's default thresholds the
+    # collector took 1.7 of the references' 21 CPU s; and each message numba builds for an
+    # overload it rejects re-initialised colorama with highlighting on
+    code = (
+        "from cwrend_cli.physics.compiled import tune_for_compiling; tune_for_compiling(); "
+        "import gc; from numba.core import errors; "
+        "print(gc.get_threshold(), type(errors.termcolor()).__name__)"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["(50000,", "20,", "20)", "NOPColorScheme"]
+
+
 def test_an_empty_cache_announces_the_first_compile(tmp_path: Path) -> None:
     code = (
         "from cwrend_cli.physics import compiled; "
@@ -228,50 +244,104 @@ class _References:
         self.calls.append(("references", task))
 
 
-def test_the_switching_newton_compiled_ahead_is_the_one_the_solver_calls() -> None:
+def _solver_copy_typed() -> Any:
+    """The switching kernels' module, after an uncached copy of the solver typed its calls."""
     from numba import njit
 
     from cwrend_cli.physics.guidance import _switching_kernels
 
-    # an uncached copy of the solver types its call of the switching-time Newton here
+    # an uncached copy of the solver types its calls of its two halves here
     copy = njit(_switching_kernels.bang_bang_ascent.py_func)
     campaign.run_case(config_from_dict({}), (ARCHITECTURES["mtf_fixed"],), 0)
     for sig in _switching_kernels.bang_bang_ascent.signatures:
         copy.compile(sig)
-    before = _switching_kernels.switching_newton.signatures
-    _switching_kernels.compile_switching_newton()
-    assert _switching_kernels.switching_newton.signatures == before  # no signature of its own
+    return _switching_kernels
+
+
+def test_the_switching_newton_compiled_ahead_is_the_one_the_solver_calls() -> None:
+    switching = _solver_copy_typed()
+    before = switching.switching_newton.signatures
+    switching.compile_switching_newton()
+    assert switching.switching_newton.signatures == before  # no signature of its own
+
+
+def test_the_burn_prediction_compiled_first_is_the_one_the_newton_calls() -> None:
+    from numba import njit
+
+    switching = _solver_copy_typed()
+    # an uncached copy of the Newton types its call of the burn prediction here
+    copy = njit(switching.switching_newton.py_func)
+    for sig in switching.switching_newton.signatures:
+        copy.compile(sig)
+    before = switching.predicted_length.signatures
+    switching.compile_predicted_length()
+    assert switching.predicted_length.signatures == before  # no signature of its own
+
+
+def test_the_dual_ascent_compiled_first_is_the_one_the_solver_calls() -> None:
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics.guidance import _kernels
+
+    _solver_copy_typed()
+    before = _kernels.newton_ascent.signatures
+    compiled.compile_ascent(problem_of(config_from_dict({})))
+    assert _kernels.newton_ascent.signatures == before  # no signature of its own
+
+
+class _Task:
+    problem = object()
+
+
+_TASK = _Task()
+
+
+def _first_run_calls(
+    executor: _Submitted | None, cold: bool, monkeypatch: pytest.MonkeyPatch
+) -> list[tuple[object, ...]]:
+    """What a first campaign asks of ``executor`` (None: a helper process) and does itself."""
+    from contextlib import contextmanager
+
+    from cwrend_cli.campaign import driver
+
+    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
+    helper = executor or _Submitted()
+    monkeypatch.setattr(driver, "helper_process", contextmanager(lambda: iter([helper])))
+    monkeypatch.setattr(
+        compiled, "compile_ascent", lambda problem: helper.calls.append(("ascent", problem))
+    )
+    driver._compile_first_run(executor, [_TASK], _References(helper.calls))  # type: ignore[arg-type, list-item]
+    return helper.calls
+
+
+def _expected(cold: bool) -> list[tuple[object, ...]]:
+    """Cold: the step loop and the switching-time Newton ahead; the ascent and the references."""
+    from cwrend_cli.campaign import worker
+
+    if not cold:
+        return []
+    return [
+        (worker.compile_ahead, _TASK),
+        (worker.compile_newton,),
+        ("ascent", _TASK.problem),
+        ("references", _TASK),
+    ]
 
 
 @pytest.mark.parametrize("cold", [True, False])
 def test_a_one_task_campaign_compiles_ahead_in_a_helper_process(
     cold: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from contextlib import contextmanager
-
-    from cwrend_cli.campaign import driver, worker
-
-    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
-    helper = _Submitted()
-    monkeypatch.setattr(driver, "helper_process", contextmanager(lambda: iter([helper])))
-    task = object()
     # no pool (the task runs in this process): a helper process compiles ahead meanwhile
-    driver._compile_first_run(None, [task], _References(helper.calls))  # type: ignore[arg-type]
-    assert helper.calls == ([(worker.compile_ahead, task), ("references", task)] if cold else [])
+    assert _first_run_calls(None, cold, monkeypatch) == _expected(cold)
 
 
 @pytest.mark.parametrize("cold", [True, False])
 def test_a_first_campaign_compiles_the_step_loop_in_a_worker_while_it_computes_the_references(
     cold: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from cwrend_cli.campaign import driver, worker
-
-    monkeypatch.setattr(compiled, "references_cold", lambda: cold)
-    pool = _Submitted()
-    task = object()
-    driver._compile_first_run(pool, [task], _References(pool.calls))  # type: ignore[arg-type]
-    # cold: a worker compiles the step loop while this process computes the references
-    assert pool.calls == ([(worker.compile_ahead, task), ("references", task)] if cold else [])
+    # cold: a worker compiles the step loop and the Newton while this process compiles the
+    # ascent and computes the references
+    assert _first_run_calls(_Submitted(), cold, monkeypatch) == _expected(cold)
 
 
 def test_a_cone_program_campaign_compiles_no_shooting_loop_ahead(

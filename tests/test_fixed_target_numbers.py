@@ -32,6 +32,10 @@ from cwrend_cli.physics.guidance import constrained as cp
 from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
 
 FIXTURE = Path(__file__).parent / "data" / "fixed_constrained_plans.json"
+#: The fixture pins Clarabel, the solver its plans were made with: at ε > 0 the default
+#: (``solver="auto"``) answers by the dual solver of ``path_dual`` where it certifies its
+#: answer, the same plan to the solvers' tolerances, not to the bit (``test_path_dual``).
+SOLVER = "clarabel"
 N_MOTION = 0.00104218449  # rad/s, the paper's
 U_MAX = 8e-4  # km/s²
 
@@ -56,7 +60,10 @@ def _plans() -> list[dict[str, Any]]:
         xf = np.r_[port, 0, 0, 0] if corridor else np.r_[port * 1.5, 0, 0, 0]
         geo = cg.geometry(Constraints(keep_out=KeepOut(tuple(axes)), corridor=corridor))
         p_pos = np.eye(3) * 1e-4 if i % 2 else None
-        res = cp.plan(N_MOTION, 1.0, U_MAX, x0, xf, 80.0, eps, geo, p_pos, 3.0 if i % 2 else 0.0)
+        res = cp.plan(
+            N_MOTION, 1.0, U_MAX, x0, xf, 80.0, eps, geo, p_pos, 3.0 if i % 2 else 0.0,
+            solver=SOLVER,
+        )  # fmt: skip
         out.append(
             {
                 "status": res.status.name,

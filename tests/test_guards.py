@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -110,3 +112,92 @@ def test_the_time_numba_spends_compiling_does_not_count_against_the_limit() -> N
             time.sleep(0.01)
     assert compiled - started >= 2.0  # the compile ran to its end
     assert time.monotonic() - compiled >= 0.5  # the limit's remaining second, not 0
+
+
+def _in_a_thread(block: Callable[[], None]) -> BaseException | None:
+    """Run ``block`` in a thread that is not the main one (as a Dask worker runs a task);
+    what it raised, if anything."""
+    raised: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            block()
+        except BaseException as exc:  # handed to the test
+            raised.append(exc)
+
+    thread = threading.Thread(target=target)
+    thread.start()
+    thread.join(timeout=120.0)
+    assert not thread.is_alive()
+    return raised[0] if raised else None
+
+
+def test_a_block_longer_than_its_limit_times_out_outside_the_main_thread() -> None:
+    """A Dask worker runs its tasks in threads, where SIGALRM never arrives: the limit
+    is kept there too (before, the block ran unlimited)."""
+
+    def block() -> None:
+        started = time.monotonic()
+        with guards.time_limit(0.2):
+            while time.monotonic() - started < 60.0:
+                time.sleep(0.01)
+
+    raised = _in_a_thread(block)
+    assert isinstance(raised, guards.RunTimeoutError)
+    assert str(raised) == "timed out: the run took longer than 0.2 s"
+
+
+def test_a_finished_block_outside_the_main_thread_leaves_no_alarm_behind() -> None:
+    def block() -> None:
+        with guards.time_limit(0.05):
+            pass
+        waited = time.monotonic()
+        while time.monotonic() - waited < 0.5:  # an alarm left armed would raise here
+            time.sleep(0.01)
+
+    assert _in_a_thread(block) is None
+
+
+def test_compiling_outside_the_main_thread_does_not_count_against_the_limit() -> None:
+    from numba.core import event
+
+    times: dict[str, float] = {}
+
+    def block() -> None:
+        times["started"] = time.monotonic()
+        with guards.time_limit(1.0):
+            with event.trigger_event("numba:compile"):
+                time.sleep(2.0)
+            times["compiled"] = time.monotonic()
+            while time.monotonic() - times["started"] < 30.0:
+                time.sleep(0.01)
+
+    assert isinstance(_in_a_thread(block), guards.RunTimeoutError)
+    assert times["compiled"] - times["started"] >= 2.0  # the compile ran to its end
+    assert time.monotonic() - times["compiled"] >= 0.5  # the limit's remaining second, not 0
+
+
+def test_another_threads_compile_stops_this_threads_clock_too() -> None:
+    """numba's events are process-wide: on a Dask worker one task's compile stops every
+    task's clock. Deliberate (docs/guide/integrity.md, "Time limits"): a thread meeting a
+    kernel meanwhile waits for numba's process-wide compiler lock with no event of its own,
+    so a per-thread pause would count another run's compile against it."""
+    from numba.core import event
+
+    inside, compiled = threading.Event(), threading.Event()
+
+    def block() -> None:
+        with guards.time_limit(3.0):
+            inside.set()
+            while not compiled.is_set():  # a task waiting on the lock another thread holds
+                time.sleep(0.01)
+
+    thread_result: list[BaseException | None] = []
+    runner = threading.Thread(target=lambda: thread_result.append(_in_a_thread(block)))
+    runner.start()
+    assert inside.wait(timeout=60.0)
+    with event.trigger_event("numba:compile"):  # this thread compiles for twice the limit
+        time.sleep(6.0)
+    compiled.set()
+    runner.join(timeout=60.0)
+    assert thread_result == [None]

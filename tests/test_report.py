@@ -569,6 +569,16 @@ def test_point_picks_the_grid_point_of_figs_1_to_5(
     assert set(data.steps["point"].astype(str)) == {"p_b"}
 
 
+def test_a_point_asked_of_an_ablation_says_it_sweeps_nothing() -> None:
+    """``cwrend report results/tour --point x`` (an ablation) said "no such grid point
+    (points: base ())": the fix is to drop --point."""
+    from cwrend_cli.report.load import ReportError, _chosen_point
+
+    runs = pd.DataFrame({"point": ["base", "base"], "status": ["ok", "ok"], "seed": [0, 1]})
+    with pytest.raises(ReportError, match=r"sweeps nothing \(one point, base\).*drop it"):
+        _chosen_point(runs, "x")
+
+
 def test_a_bad_point_exits_2_listing_the_points(sweep_dir: Path, run_dir: Path) -> None:
     result = _report(sweep_dir, "--point", "beta=0.3")
     assert result.exit_code == 2
@@ -806,6 +816,19 @@ def test_every_figure_names_the_simulated_world(ablation_dir: Path) -> None:
         assert world in f.draw().get_suptitle(), f.file
 
 
+def test_every_figure_names_its_world_under_its_title(ablation_dir: Path) -> None:
+    """Fig. 6 and the distributions (one titled axes each) had the world above their
+    title; every figure has it on the line under its title."""
+    from cwrend_cli.report import figures
+
+    data = load_results(ablation_dir)
+    for f in figures.planned_figures(data):
+        fig = f.draw()
+        *title, world = fig.get_suptitle().split("\n")
+        assert world == data.world and title, f.file
+        assert not any(ax.get_title() in title for ax in fig.axes), f.file  # not twice
+
+
 @pytest.fixture(scope="module")
 def truth_sweep_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 2-seed sweep over ``truth.model`` (base: CW), as ``--param truth.model=cw,two_body``."""
@@ -870,6 +893,39 @@ def test_compare_names_the_worlds_of_a_sweeps_points_not_its_base(truth_sweep_di
 
     worlds = "one per point: truth: cw (the design model); truth: two_body"
     assert results_world(truth_sweep_dir) == worlds
+
+
+def test_the_world_of_a_campaign_is_read_from_three_columns_of_its_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``results_world`` (``cwrend compare``'s figure) reads ``status``, ``point`` and the swept
+    values of runs.parquet, not every column of every run."""
+    from cwrend_cli.report import load
+
+    (tmp_path / "manifest.json").write_text(json.dumps({"config": resolved_dict(CwrendConfig())}))
+    runs = pd.DataFrame(
+        {
+            "run_key": ["p_cw.mtf_adaptive.s000000", "p_2b.mtf_adaptive.s000000"],
+            "point": ["p_cw", "p_2b"],
+            "arch": ["mtf_adaptive"] * 2,
+            "status": ["ok"] * 2,
+            "error": ["", ""],
+            "miss_km": [0.001, 0.002],
+            "param.truth.model": ["cw", "two_body"],
+        }
+    )
+    runs.to_parquet(tmp_path / "runs.parquet")
+    read: list[Any] = []
+    real = load._read_parquet
+
+    def spy(path: Path, **kwargs: Any) -> pd.DataFrame:
+        read.append(kwargs.get("columns"))
+        return real(path, **kwargs)
+
+    monkeypatch.setattr(load, "_read_parquet", spy)
+    worlds = "one per point: truth: cw (the design model); truth: two_body"
+    assert load.results_world(tmp_path) == worlds
+    assert read == [["point", "status", "param.truth.model"]]
 
 
 # ---------------------------------------------------------------------------

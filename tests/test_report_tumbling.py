@@ -129,3 +129,28 @@ def test_a_fixed_target_report_has_no_body_frame_figure(tumbling: Path) -> None:
     names = {f.file for f in planned_figures(data)}
     assert "safety_trajectories.png" in names and BODY_FIGURE not in names
     assert "at t = 0" not in fig_safety_trajectories(data).get_suptitle()
+
+
+def test_a_sweep_over_the_body_rates_stores_each_vector_as_one_groupable_value() -> None:
+    """A swept vector (``target.body_rates_deg_s``, campaigns/tumbling_study.toml) is a JSON
+    text cell of ``runs.parquet``, so the report finds each point's value and sets it on the
+    configuration (a list cell was unhashable: ``cwrend report`` of the sweep raised)."""
+    from cwrend_cli.config.io import load_config
+    from cwrend_cli.output.tables import runs_table
+    from cwrend_cli.report.load import with_swept_values
+
+    rates = ([0.0, 0.0, 0.0], [0.291, 0.3881, 1.9403])
+    records = [
+        {"run_key": f"p{i}.a.s{s}", "point": f"p{i}", "arch": "mtf_fixed_socp", "seed": s,
+         "status": "ok", "params": {"target.body_rates_deg_s": rate}}
+        for i, rate in enumerate(rates) for s in (0, 1)
+    ]  # fmt: skip
+    runs = runs_table(records, {}).to_pandas()
+    assert runs["param.target.body_rates_deg_s"].tolist() == [
+        "[0.0, 0.0, 0.0]", "[0.0, 0.0, 0.0]",
+        "[0.291, 0.3881, 1.9403]", "[0.291, 0.3881, 1.9403]",
+    ]  # fmt: skip
+    config = load_config(CAMPAIGNS / "tumbling_target.toml")
+    point = with_swept_values(config, runs[runs["point"] == "p1"])
+    assert point is not None
+    assert point.target.body_rates_deg_s == (0.291, 0.3881, 1.9403)

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import pandas as pd
 import pytest
+from typer.testing import CliRunner
 
 from cwrend_cli.campaign import sequential, statistics
+from cwrend_cli.cli import app
 from cwrend_cli.errors import ConfigError
+
+PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 
 
 @pytest.mark.parametrize(
@@ -32,6 +38,22 @@ from cwrend_cli.errors import ConfigError
 )
 def test_targets_parse_as_documented(text: str, target: sequential.Target) -> None:
     assert sequential.parse_until(text) == target
+
+
+@pytest.mark.parametrize(
+    ("short", "column"),
+    [("miss:0.0005", "miss_km:0.0005"), ("median.dv:5%", "median.delta_v_km_s:5%"),
+     ("miss@mtf_adaptive-plain_adaptive:0.001", "miss_km@mtf_adaptive-plain_adaptive:0.001")],
+)  # fmt: skip
+def test_targets_take_the_short_metric_names_of_compare_and_table(short: str, column: str) -> None:
+    """``--until miss:0.001`` was refused ("metric must be one of delta_v_km_s, …") while
+    ``cwrend compare --metric`` and ``cwrend table`` take ``miss``."""
+    assert sequential.parse_until(short) == sequential.parse_until(column)
+
+
+def test_a_misspelt_target_metric_is_answered_with_the_one_meant() -> None:
+    with pytest.raises(ConfigError, match="did you mean 'miss'"):
+        sequential.parse_until("mis:0.001")
 
 
 @pytest.mark.parametrize(
@@ -89,3 +111,25 @@ def test_an_architecture_without_runs_never_meets_its_target(
     stats = statistics.describe(synthetic_runs(30), ["arch"])
     got = sequential.achieved(stats, sequential.parse_until("miss_km:1"), ["mtf_fixed"])
     assert len(got) == 1 and not got[0].met and got[0].n == 0
+
+
+def test_a_target_met_before_widths_are_checked_is_not_said_to_be_missed(
+    tmp_path: Path,
+) -> None:
+    """At 2 of at most 4 seeds, a half-width within a 1,000 km target printed "not yet (…:
+    half-width 0.00… > 1e+03)": met, but widths count from 20 seeds. One seed has no
+    interval ("half-width nan > 1e+03" before)."""
+    args = ["ablate", str(PAPER), "--arch", "mtf_adaptive", "--until", "miss_km:1000",
+            "--batch", "2", "--max-seeds", "4", "--workers", "1", "--no-rrd",
+            "--set", f"output.dir={json.dumps(str(tmp_path))}"]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "2 seeds: within the target, but widths are checked from 20 seeds" in result.stderr
+    assert "not yet" not in result.stderr
+
+
+def test_a_target_without_an_interval_yet_says_so() -> None:
+    one = sequential.Achieved("mtf_adaptive", 0.001, math.nan, 1000.0, 1)
+    assert sequential.next_batch_message(1, 1, [one]) == (
+        "1 seeds: not yet (mtf_adaptive: no interval yet); next batch"
+    )

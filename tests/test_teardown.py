@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 SCRIPT = """
 import atexit, sys
 from cwrend_cli.teardown import end_without_teardown
@@ -68,3 +70,40 @@ def test_cwrend_keeps_its_exit_codes(tmp_path: Path) -> None:
     )  # fmt: skip
     assert proc.returncode == 2
     assert "config file not found" in proc.stderr
+
+
+#: Starts multiprocessing's resource tracker (a spawn context's queue), prints its pid, ends.
+TRACKER_SCRIPT = """
+import multiprocessing
+from multiprocessing import resource_tracker
+from cwrend_cli.teardown import end_without_teardown
+end_without_teardown(lambda: 0)
+runs = multiprocessing.get_context("spawn").Queue()
+print(resource_tracker._resource_tracker._pid, flush=True)
+"""
+
+#: Runs TRACKER_SCRIPT as a child of a subreaper: a tracker that outlives its process is
+#: handed to this one (prctl PR_SET_CHILD_SUBREAPER = 36) and its waitpid finds it.
+SUBREAPER_SCRIPT = """
+import ctypes, os, subprocess, sys
+assert ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0
+child = subprocess.run([sys.executable, "-c", sys.argv[1]], stdout=subprocess.PIPE, text=True)
+assert child.returncode == 0
+try:
+    os.waitpid(int(child.stdout), 0)
+    print("the tracker outlived its process")
+except ChildProcessError:
+    print("the tracker ended with its process")
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl subreaper: Linux")
+def test_the_resource_tracker_ends_with_the_process() -> None:
+    """A campaign's pool starts multiprocessing's resource tracker; cwrend waits for it at
+    exit, so no process of it is left running after the shell's prompt."""
+    proc = subprocess.run(
+        [sys.executable, "-c", SUBREAPER_SCRIPT, TRACKER_SCRIPT],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "the tracker ended with its process\n"

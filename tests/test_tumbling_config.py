@@ -209,3 +209,54 @@ def test_the_knowledge_draws_are_the_runs_own_stream() -> None:
     assert a.shape == (6,) and np.array_equal(a, b) and not np.array_equal(a, c)
     noise = np.random.default_rng(worker.noise_seed_sequence(42, 0)).standard_normal(6)
     assert not np.array_equal(a, noise)
+
+
+def test_a_knowledge_error_drawn_once_a_run_is_left_out_of_the_tree() -> None:
+    """``knowledge_draw = "run"`` (the default) resolves and hashes as before the field
+    existed; ``"resolve"`` is written and reaches the typed problem."""
+    known = {
+        "attitude": "tumbling",
+        "body_rates_deg_s": [0.0, 1.0, 2.0],
+        "knowledge_sigma_deg": 2.0,
+    }
+    plain = config_from_dict({"target": known, "constraints": ZONE})
+    once = config_from_dict({"target": {**known, "knowledge_draw": "run"}, "constraints": ZONE})
+    assert "knowledge_draw" not in resolved_dict(once)["target"]
+    assert config_hash(once) == config_hash(plain)
+    each = config_from_dict({"target": {**known, "knowledge_draw": "resolve"}, "constraints": ZONE})
+    assert resolved_dict(each)["target"]["knowledge_draw"] == "resolve"
+    assert problem_of(each).target.knowledge_draw == "resolve"
+
+
+def test_a_knowledge_draw_without_a_knowledge_error_exits_2(tmp_path: Path) -> None:
+    """With σ = 0 there is nothing to draw: the setting would do nothing."""
+    result = runner.invoke(
+        app,
+        ["config", "validate", str(_write(tmp_path)), "--set", 'target.knowledge_draw="resolve"'],
+    )
+    assert result.exit_code == 2, result.output
+    assert 'target.knowledge_draw = "resolve": there is no knowledge error to draw' in result.output
+
+
+def test_the_knowledge_draws_of_every_re_solve_are_the_runs_own_stream() -> None:
+    """``"resolve"``: one row of 6 standard normals a step from the run's own stream (the
+    same for the same seed, another for another), whose first row is the draw of
+    ``"run"`` (the same stream, read further)."""
+    from cwrend_cli.campaign import worker
+
+    target = {
+        "attitude": "tumbling",
+        "body_rates_deg_s": [0.0, 1.0, 2.0],
+        "knowledge_sigma_deg": 2.0,
+    }
+    once = problem_of(config_from_dict({"target": target, "constraints": ZONE}))
+    each = problem_of(
+        config_from_dict({"target": {**target, "knowledge_draw": "resolve"}, "constraints": ZONE})
+    )
+    a, b, c = (worker.attitude_draws(each, 42, s) for s in (0, 0, 1))
+    first = worker.attitude_draws(once, 42, 0)
+    assert a is not None and b is not None and c is not None and first is not None
+    assert a.shape == (each.scenario.n_steps, 6)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    assert np.array_equal(a[0], first)
+    assert not np.array_equal(a[1], a[0])

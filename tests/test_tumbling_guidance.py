@@ -305,9 +305,7 @@ def test_a_knowledge_error_turns_the_known_attitude_by_its_draw() -> None:
     assert np.array_equal(believed.w0_rad_s, att.w_rad_s[i] + d_w)
 
 
-def _closed_loop(knowledge: dict[str, float]) -> Any:
-    from cwrend_cli import campaign
-    from cwrend_cli.config import ALL_ARCHITECTURES
+def _config(knowledge: dict[str, Any]) -> Any:
     from cwrend_cli.config.io import config_from_dict
 
     tree = {
@@ -331,7 +329,14 @@ def _closed_loop(knowledge: dict[str, float]) -> Any:
             },
         },
     }
-    cfg = config_from_dict(tree)
+    return config_from_dict(tree)
+
+
+def _closed_loop(knowledge: dict[str, Any]) -> Any:
+    from cwrend_cli import campaign
+    from cwrend_cli.config import ALL_ARCHITECTURES
+
+    cfg = _config(knowledge)
     return campaign.run_case(cfg, (ALL_ARCHITECTURES["mtf_fixed_socp"],), 0).runs[0]
 
 
@@ -350,3 +355,58 @@ def test_a_closed_loop_with_a_knowledge_error_flies_another_prediction() -> None
     assert not np.array_equal(exact.u, wrong.u)
     assert exact.safety.dock_position_error_km <= 1e-3
     assert exact.safety.dock_velocity_error_km_s <= 1e-5
+
+
+def test_a_knowledge_error_drawn_at_every_re_solve_takes_that_steps_draw(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``knowledge_draw = "resolve"``: the re-solve at step k predicts from the truth turned
+    by the error of row k of the run's draws (:func:`attitude.knowledge_error` of that row),
+    so successive re-solves see independent errors."""
+    from cwrend_cli.campaign import worker
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import simulation
+
+    seen: list[tuple[float, np.ndarray, np.ndarray]] = []
+    predict = attitude.predict
+
+    def spy(model: Any, q: Any, w: Any, t_s: float, *rest: Any) -> Any:
+        d_theta, d_w = rest[2]  # (n_steps, dt_s, error, substeps)
+        seen.append((t_s, np.array(d_theta), np.array(d_w)))
+        return predict(model, q, w, t_s, *rest)
+
+    monkeypatch.setattr(simulation.attitude, "predict", spy)
+    run = _closed_loop(
+        {"knowledge_sigma_deg": 2.0, "knowledge_sigma_deg_s": 0.2, "knowledge_draw": "resolve"}
+    )
+    assert all(s.success for s in run.solves)
+    cfg = _config({"knowledge_sigma_deg": 2.0, "knowledge_sigma_deg_s": 0.2,
+                   "knowledge_draw": "resolve"})  # fmt: skip
+    problem = problem_of(cfg)
+    draws = worker.attitude_draws(problem, cfg.noise.seed, 0)
+    assert draws is not None
+    steps = {round(t_s / DT) for t_s, _, _ in seen}
+    assert len(steps) == len(seen) >= 10  # one prediction per re-solve, each at its own step
+    for t_s, d_theta, d_w in seen:
+        expected = attitude.knowledge_error(problem.target, draws[round(t_s / DT)])
+        assert np.array_equal(d_theta, expected[0]) and np.array_equal(d_w, expected[1])
+
+
+def test_a_turning_plans_settled_slack_stops_the_scp_before_its_cap() -> None:
+    """A path slack the iterates no longer change (the corridor rows next to the moving
+    port that no plan can meet, docs/guide/tumbling-target.md) ends the SCP: the softened
+    plans among the first 12 random problems (2 of them: slacks of 82 and 38 mm) stop
+    before :data:`cp.SCP_MAX_ITER` (both ran to it before, with the same slack to 1e-9 km)
+    and still report their slack."""
+    rng = np.random.default_rng(3434)
+    softened = []
+    for _ in range(12):
+        config, target, x0 = _problem(rng)
+        model, att = _attitude(target)
+        res, _ = _plan(cg.geometry(config), model, att, x0, float(rng.choice([0.0, 0.5, 1.0])))
+        if res.slack_km > 0.0:
+            softened.append(res)
+    assert len(softened) == 2
+    for res in softened:
+        assert res.status is SolveStatus.CONVERGED
+        assert res.scp_iterations < cp.SCP_MAX_ITER

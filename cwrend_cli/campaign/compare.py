@@ -55,6 +55,7 @@ from cwrend_cli.campaign.statistics import (
     wilson_ci,
 )
 from cwrend_cli.config.io import file_digest
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError, InputDataError
 from cwrend_cli.output.layout import MANIFEST, RUNS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
@@ -108,7 +109,8 @@ def parse_metrics(text: str) -> tuple[str, ...]:
         name = METRIC_NAMES.get(part, part)
         if name not in COMPARED:
             allowed = ", ".join([*_SHORT, *COMPARED])
-            raise ConfigError(f"--metric {part!r}: unknown metric (allowed: {allowed})")
+            near = did_you_mean(part, [*_SHORT, *COMPARED])
+            raise ConfigError(f"--metric {part!r}: unknown metric (allowed: {allowed}){near}")
         if name not in out:
             out.append(name)
     if not out:

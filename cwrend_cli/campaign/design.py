@@ -82,6 +82,7 @@ __all__ = [
     "salib_problem",
     "salib_seed",
     "sensitivity",
+    "sensitivity_note",
     "sobol_indices",
     "unit_samples",
 ]
@@ -352,6 +353,37 @@ def sobol_indices(
         st_conf=np.asarray(result["ST_conf"]),
         s2=np.asarray(result["S2"]) if second_order else None,
         s2_conf=np.asarray(result["S2_conf"]) if second_order else None,
+    )
+
+
+#: Fewest Sobol base points whose indices cwrend prints without a warning [-]. SALib sets
+#: no minimum (its quick start uses N = 1000; Herman & Usher 2017, SALib README); this is
+#: the size of the guide's example (docs/guide/designs.md), whose 95 % intervals are
+#: about ±0.2 wide. With 2 base points an S1 of −3.26 ± 3.36 was printed as if it meant
+#: something (an index lies in [0, 1]).
+SOBOL_SAMPLES_ADVISED = 64
+
+
+def sensitivity_note(kind: Design, samples: int, n_rows: int) -> str | None:
+    """What to tell about the sensitivity indices of a design this small, or ``None``.
+
+    ``samples``: ``--samples`` (base points for ``sobol``); ``n_rows``: the design's
+    rows. Two lines, each at most 80 characters, broken between phrases (a note
+    wrapped by the terminal broke "raise --samples" in two).
+    """
+    if kind == "sobol":
+        if samples >= SOBOL_SAMPLES_ADVISED:
+            return None
+        return (
+            f"warning: Sobol indices from {samples} base points are unreliable;\n"
+            f"rerun with --samples {SOBOL_SAMPLES_ADVISED} or more in this "
+            "directory (it extends this design)"
+        )
+    if rbd_fast_harmonics(n_rows) >= 1:
+        return None
+    return (
+        f"no sensitivity indices: RBD-FAST needs at least 9 design rows\n"
+        f"(this design has {n_rows}): raise --samples to 9 or more"
     )
 
 

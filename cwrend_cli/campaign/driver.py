@@ -73,6 +73,7 @@ from cwrend_cli.campaign.worker import (
     TaskInterrupted,
     TaskOutcome,
     compile_ahead,
+    compile_newton,
     execute_task,
     references_id,
     references_key,
@@ -653,15 +654,17 @@ def _compile_first_run(
 
     Only when the references' kernels are not in numba's cache (a first run
     after an install or upgrade; :mod:`cwrend_cli.physics.compiled`). This
-    process computes the first point's references, which compiles the
-    shooting solver (about half of the compile), while a pool worker
-    compiles what does not depend on it, the closed loop's step kernels, and
-    then the solver's switching-time Newton
-    (:func:`~cwrend_cli.physics.compiled.compile_ahead`); the first task
-    waits for it, so that whichever worker runs it loads them rather than
-    compiling them a second time. ``executor`` ``None``: the tasks run
-    in-process (one task, the paper ablation's), and a helper process does
-    the worker's part (:func:`~cwrend_cli.campaign.executors.helper_process`).
+    process compiles the shooting solver's dual ascent, the longest chain of
+    the compile, while a pool worker compiles what does not depend on it,
+    the closed loop's step kernels, and then the solver's switching-time
+    Newton (:func:`~cwrend_cli.campaign.worker.compile_ahead`,
+    :func:`~cwrend_cli.campaign.worker.compile_newton`); this process waits for
+    the Newton before it computes the first point's references, and the
+    first task waits for the step kernels, so that whichever process needs
+    them loads them rather than compiling them a second time. ``executor``
+    ``None``: the tasks run in-process (one task, the paper ablation's), and
+    a helper process does the worker's part
+    (:func:`~cwrend_cli.campaign.executors.helper_process`).
     """
     from cwrend_cli.physics import compiled
 
@@ -675,14 +678,29 @@ def _compile_first_run(
 
 
 def _compile_beside(executor: Executor, task: Task, references: _PointReferences) -> None:
-    """The references here while ``executor`` compiles ahead for ``task``; then wait for it."""
-    ahead = executor.submit(compile_ahead, task)
+    """The solver's ascent and the references here while ``executor`` compiles the rest."""
+    from cwrend_cli.physics import compiled
+
+    loop = executor.submit(compile_ahead, task)
+    newton = executor.submit(compile_newton)
+    compiled.compile_ascent(task.problem)
+    _wait_for(newton)  # the solver's other half: loaded below, not compiled a second time
     with contextlib.suppress(OSError):  # the first task's own call reports it
         references.of(task)
+<<<<<<< HEAD
     while not ahead.done():  # waiting on a state: short polls stay interruptible
         if stop_asked():  # a stop the references' code turned into an error of theirs
             raise_stop()
         wait([ahead], timeout=_POLL_S)
+=======
+    _wait_for(loop)
+
+
+def _wait_for(future: Future[None]) -> None:
+    """Wait until ``future`` is done (a state, not a time: short polls stay interruptible)."""
+    while not future.done():
+        wait([future], timeout=_POLL_S)
+>>>>>>> main
 
 
 def _drive(

@@ -52,7 +52,12 @@ from urllib.parse import urlsplit
 
 from cwrend_cli.campaign.worker import stop_task
 from cwrend_cli.errors import ConfigError
+<<<<<<< HEAD
 from cwrend_cli.teardown import STOP_SIGNALS, end_without_teardown, unraisable_stop
+=======
+from cwrend_cli.physics.compiled import tune_for_compiling
+from cwrend_cli.teardown import end_without_teardown
+>>>>>>> main
 
 ExecutorKind = Literal["local", "dask"]
 
@@ -132,6 +137,7 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     cannot hold up the others.
     """
     global _RUN_QUEUE
+    tune_for_compiling()  # a worker's first task may compile the kernels
     for signum in WORKER_STOP_SIGNALS:
         signal.signal(signum, _stop_task)
     sys.unraisablehook = unraisable_stop

@@ -9,12 +9,15 @@ the pure simulation, in the worker, never inside it.
 
 from __future__ import annotations
 
+import ctypes
 import math
 import signal
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
+from typing import Protocol
 
 import numpy as np
 from numba.core import event as numba_event
@@ -194,10 +197,12 @@ def run_timeout_s(configured: float | None, problem: Problem, *, first: bool = F
 def time_limit(seconds: float | None) -> Iterator[None]:
     """Raise :class:`RunTimeoutError` in the ``with`` block after ``seconds`` of wall time.
 
-    Uses ``SIGALRM`` (Unix), so it acts only in a process's main thread (the
-    local pool's workers and ``--workers 1``); elsewhere (Dask worker threads)
-    and for ``seconds = None`` the block runs unlimited. The compiled step
-    loop returns to Python at every re-solve, where the alarm is delivered.
+    In a process's main thread (the local pool's workers, ``--workers 1``) with
+    ``SIGALRM`` (Unix); in any other thread (a Dask worker runs its tasks in
+    threads, where no signal arrives) a timer thread raises it in the block's
+    thread (:class:`_ThreadAlarm`). Either way it is raised where the block
+    runs Python code: the compiled step loop returns to Python at every
+    re-solve. ``seconds = None``: the block runs unlimited.
 
     Time numba spends compiling a kernel inside the block does not count: the
     clock stops while it compiles (:class:`_CompilePause`). A kernel first met
@@ -205,47 +210,159 @@ def time_limit(seconds: float | None) -> Iterator[None]:
     the loop) costs 10-15 CPU s on a fresh install, the run's own cost is what
     its limit is for (a run of a sweep timed out that way on a loaded machine).
     """
-    usable = (
-        seconds is not None
-        and hasattr(signal, "setitimer")
-        and threading.current_thread() is threading.main_thread()
-    )
-    if not usable or seconds is None:
+    if seconds is None:
         yield
+        return
+    message = f"timed out: the run took longer than {seconds:g} s"
+    if (
+        not hasattr(signal, "setitimer")
+        or threading.current_thread() is not threading.main_thread()
+    ):
+        alarm = _ThreadAlarm(seconds)
+        try:
+            with numba_event.install_listener("numba:compile", _CompilePause(alarm)):
+                yield
+        except _ExpiredError:
+            raise RunTimeoutError(message) from None
+        finally:
+            alarm.stop()
         return
 
     def expire(signum: int, frame: FrameType | None) -> None:
-        raise RunTimeoutError(f"timed out: the run took longer than {seconds:g} s")
+        raise RunTimeoutError(message)
 
     previous = signal.signal(signal.SIGALRM, expire)
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
-        with numba_event.install_listener("numba:compile", _CompilePause()):
+        with numba_event.install_listener("numba:compile", _CompilePause(_SignalAlarm())):
             yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
 
 
+class _ExpiredError(RunTimeoutError):
+    """What :class:`_ThreadAlarm` raises in the block's thread (a class without arguments:
+    :func:`time_limit` raises the :class:`RunTimeoutError` with its limit instead)."""
+
+    def __init__(self) -> None:
+        super().__init__("timed out: the run took longer than its limit")
+
+
+class _SignalAlarm:
+    """The ``ITIMER_REAL`` clock of :func:`time_limit` in a main thread: stopped, then set
+    again with the time it had left."""
+
+    def __init__(self) -> None:
+        self.left_s = 0.0
+
+    def pause(self) -> None:
+        self.left_s = signal.setitimer(signal.ITIMER_REAL, 0.0)[0]
+
+    def resume(self) -> None:
+        if self.left_s > 0.0:
+            signal.setitimer(signal.ITIMER_REAL, self.left_s)
+
+
+class _ThreadAlarm:
+    """The clock of :func:`time_limit` outside a main thread: a :class:`threading.Timer`
+    that raises :class:`_ExpiredError` in the thread that made it, once, while the block runs.
+
+    ``PyThreadState_SetAsyncExc`` (the C API's asynchronous exception) raises it at the
+    next Python instruction that thread runs; :meth:`stop` withdraws one set but not yet
+    raised, so nothing is raised after the block. A lock orders the timer's firing with
+    :meth:`pause`, :meth:`resume` and :meth:`stop`.
+    """
+
+    def __init__(self, seconds: float) -> None:
+        self._thread = threading.get_ident()
+        self._lock = threading.Lock()
+        self._left_s = seconds
+        self._timer: threading.Timer | None = None
+        self._started = 0.0
+        self._live = True  # the block runs
+        self._fired = False
+        self._start()
+
+    def _start(self) -> None:
+        self._started = time.monotonic()
+        self._timer = threading.Timer(max(self._left_s, 0.0), self._fire, (self._started,))
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _fire(self, started: float) -> None:
+        with self._lock:
+            if (
+                self._live
+                and not self._fired
+                and self._timer is not None
+                and started == self._started
+            ):
+                self._fired = True
+                _set_async_exc(self._thread, _ExpiredError)
+
+    def pause(self) -> None:
+        with self._lock:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+                self._left_s -= time.monotonic() - self._started
+
+    def resume(self) -> None:
+        with self._lock:
+            if self._live and not self._fired and self._timer is None:
+                self._start()
+
+    def stop(self) -> None:
+        with self._lock:
+            self._live = False
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            if self._fired:  # raised already, or withdrawn now
+                _set_async_exc(self._thread, None)
+
+
+def _set_async_exc(thread: int, exc: type[BaseException] | None) -> None:
+    """Raise ``exc`` in the thread ``thread`` (an ident) at its next Python instruction;
+    ``None`` withdraws one set but not yet raised."""
+    target = ctypes.py_object(exc) if exc is not None else None
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread), target)
+
+
+class _Alarm(Protocol):
+    def pause(self) -> None: ...
+
+    def resume(self) -> None: ...
+
+
 class _CompilePause(numba_event.Listener):
-    """Stops the ``ITIMER_REAL`` clock of :func:`time_limit` while numba compiles.
+    """Stops the clock of :func:`time_limit` while numba compiles.
 
     numba announces each compile (a cache miss, not a load from its cache) as a
     ``numba:compile`` event, nested for the kernels a kernel calls; the clock is
     stopped at the outermost start and set again, with the time it had left,
     at the outermost end.
+
+    The listener is process-wide (numba's events are): on a Dask worker running
+    tasks in threads, one thread's compile stops every thread's clock. Kept so on
+    purpose, as it only lengthens a limit: numba compiles under a process-wide
+    lock (``numba.core.compiler_lock``) that another thread meeting any kernel
+    waits for without an event of its own, and the compile holds the GIL; a
+    per-thread pause would count that wait against the waiting run
+    (docs/guide/integrity.md, "Time limits").
     """
 
-    def __init__(self) -> None:
+    def __init__(self, alarm: _Alarm) -> None:
         self.depth = 0
-        self.left_s = 0.0
+        self.alarm = alarm
 
     def on_start(self, event: numba_event.Event) -> None:
         if self.depth == 0:
-            self.left_s = signal.setitimer(signal.ITIMER_REAL, 0.0)[0]
+            self.alarm.pause()
         self.depth += 1
 
     def on_end(self, event: numba_event.Event) -> None:
         self.depth -= 1
-        if self.depth == 0 and self.left_s > 0.0:
-            signal.setitimer(signal.ITIMER_REAL, self.left_s)
+        if self.depth == 0:
+            self.alarm.resume()

@@ -479,7 +479,12 @@ def _locked_fd(path: Path, out_dir: Path) -> int:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         except OSError as exc:
-            raise ConfigError(f"{path}: cannot open the campaign lock ({exc.strerror})") from None
+            raise ConfigError(
+                f"{path}: cannot open the campaign lock ({exc.strerror}); cwrend writes into "
+                f"{out_dir} (a campaign's runs and statistics, a report's report/): make it "
+                "writable, or copy the directory to a writable place and run the command on the "
+                "copy"
+            ) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -263,7 +263,7 @@ def design_points(
             except (KeyError, IndexError, ValueError, TypeError):
                 raise ConfigError(
                     f"--range {text}: {parsed.key} is not a configuration value (a dotted key "
-                    "such as schedule.beta or scenario.u_max_km_s2)"
+                    f"such as schedule.beta or scenario.u_max_km_s2){_key_meant(base, parsed.key)}"
                 ) from None
         by_key[parsed.key] = parsed
     if not by_key:
@@ -281,6 +281,21 @@ def design_points(
         points.setdefault(pid, assignment)
     spec = DesignSpec(kind, samples, tuple(ranges), tuple(rows), second_order)
     return spec, tuple(points.items())
+
+
+def _key_meant(base: Mapping[str, Any], key: str) -> str:
+    """``; did you mean 'schedule.beta'?`` for a dotted key that is not in ``base`` (the
+    resolved configuration): the closest of its dotted keys."""
+
+    def keys(node: Mapping[str, Any], prefix: str) -> list[str]:
+        out = []
+        for name, value in node.items():
+            out.append(f"{prefix}{name}")
+            if isinstance(value, Mapping):
+                out.extend(keys(value, f"{prefix}{name}."))
+        return out
+
+    return did_you_mean(key, keys(base, ""))
 
 
 def point_id(assignment: Assignment) -> str:

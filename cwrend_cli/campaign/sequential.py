@@ -12,6 +12,8 @@ Target syntax, ``[STATISTIC.]METRIC[@A-B]:HALF_WIDTH[%]``:
 
 * ``miss_km:0.0005`` — the half-width of the 95 % interval of the mean miss
   is at most 0.5 m, for every architecture;
+* ``miss:0.0005`` — the same: ``miss``, ``dv`` and ``fuel`` name the metrics as in
+  ``cwrend compare`` and ``cwrend table``;
 * ``median.miss_km:5%`` — of the median, relative: at most 5 % of |median|;
 * ``miss_km@mtf_adaptive-plain_adaptive:0.0005`` — the paired difference of
   the two architectures on the same seeds (``median_diff`` for the miss,
@@ -41,7 +43,9 @@ from dataclasses import dataclass
 import pandas as pd
 
 from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, STATISTICS
+from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.output.tables import METRIC_NAMES
 
 __all__ = [
     "MIN_BATCHES",
@@ -49,9 +53,12 @@ __all__ = [
     "Achieved",
     "Target",
     "achieved",
+    "checked_from",
+    "next_batch_message",
     "parse_until",
     "ready",
     "seed_counts",
+    "unchecked_message",
     "unmet_message",
 ]
 
@@ -99,7 +106,7 @@ def parse_until(
     m = _SYNTAX.match(text.strip())
     if m is None:
         raise ConfigError(f"--until {text!r}: expected {syntax}")
-    metric = m["metric"]
+    metric = METRIC_NAMES.get(m["metric"], m["metric"])  # miss, dv, fuel as in compare, table
     try:
         width = float(m["width"])
     except ValueError:
@@ -109,7 +116,12 @@ def parse_until(
         raise ConfigError(f"--until {text!r}: the half-width must be positive")
     if m["a"] is None:
         if metric not in METRICS:
-            raise ConfigError(f"--until {text!r}: metric must be one of {', '.join(METRICS)}")
+            short = [k for k, v in METRIC_NAMES.items() if v in METRICS]
+            near = did_you_mean(m["metric"], [*short, *METRICS])
+            raise ConfigError(
+                f"--until {text!r}: metric must be one of {', '.join(short)} "
+                f"({', '.join(METRICS)}){near}"
+            )
         statistic = m["stat"] or "mean"
         if statistic not in STATISTICS:
             raise ConfigError(f"--until {text!r}: statistic must be one of {', '.join(STATISTICS)}")
@@ -148,9 +160,49 @@ def seed_counts(batch: int, max_seeds: int) -> Iterator[int]:
     yield max_seeds
 
 
+def checked_from(batch: int) -> int:
+    """The seed count from which widths are checked: :data:`MIN_BATCHES` batches and at
+    least :data:`MIN_SEEDS` seeds."""
+    return max(MIN_BATCHES * batch, MIN_SEEDS)
+
+
 def ready(n_seeds: int, batch: int) -> bool:
     """Whether widths may be checked at ``n_seeds`` (the minimum batches and seeds reached)."""
-    return n_seeds >= max(MIN_BATCHES * batch, MIN_SEEDS)
+    return n_seeds >= checked_from(batch)
+
+
+def unchecked_message(n_seeds: int, batch: int) -> str:
+    """What ``--until`` says when it stopped at ``n_seeds`` (``--max-seeds``) before widths are
+    checked (:func:`ready`): whether the target was met is not known, and how to know."""
+    first = checked_from(batch)
+    fix = f"raise --max-seeds to {first:,}"
+    if MIN_BATCHES * batch > MIN_SEEDS:
+        fix += f" or lower --batch to {math.ceil(MIN_SEEDS / MIN_BATCHES)}"
+    return (
+        f"--until not checked: widths are checked from {first:,} seeds ({MIN_BATCHES} batches "
+        f"of --batch {batch}, at least {MIN_SEEDS}) and --max-seeds stopped the campaign at "
+        f"{n_seeds}: {fix}"
+    )
+
+
+def next_batch_message(n_seeds: int, batch: int, achieved: Sequence[Achieved]) -> str:
+    """What ``--until`` says before its next batch: the widest interval against its target,
+    or, every one within its target before widths are checked, from when they are."""
+    unmet = [a for a in achieved if not a.met]
+    if not unmet:
+        return (
+            f"{n_seeds} seeds: within the target, but widths are checked from "
+            f"{checked_from(batch):,} seeds ({MIN_BATCHES} batches, at least {MIN_SEEDS}); "
+            "next batch"
+        )
+    without = [a for a in unmet if not math.isfinite(a.half_width)]
+    if without:
+        return f"{n_seeds} seeds: not yet ({without[0].label}: no interval yet); next batch"
+    widest = max(unmet, key=lambda a: a.half_width / a.limit if a.limit else math.inf)
+    return (
+        f"{n_seeds} seeds: not yet ({widest.label}: half-width {widest.half_width:.3g} "
+        f"> {widest.limit:.3g}); next batch"
+    )
 
 
 @dataclass(frozen=True)

@@ -169,11 +169,18 @@ def attitude_seed_sequence(root_seed: int, seed: int) -> np.random.SeedSequence:
 
 
 def attitude_draws(problem: Problem, root_seed: int, seed: int) -> FloatArray | None:
-    """The 6 standard normals of realisation ``seed``'s attitude-knowledge error
-    (:func:`cwrend_cli.physics.attitude.knowledge_error`), or ``None`` when it is off."""
-    if not problem.target.knowledge_error:
+    """The standard normals of realisation ``seed``'s attitude-knowledge error
+    (:func:`cwrend_cli.physics.attitude.knowledge_error`), or ``None`` when it is off:
+    6 for an error drawn once a run, (N steps, 6) for one drawn at every re-solve
+    (``target.knowledge_draw = "resolve"``; the re-solve at step k takes row k, so the
+    draws depend on the seed only, not on when or where the run is computed)."""
+    target = problem.target
+    if not target.knowledge_error:
         return None
-    return np.random.default_rng(attitude_seed_sequence(root_seed, seed)).standard_normal(6)
+    rng = np.random.default_rng(attitude_seed_sequence(root_seed, seed))
+    if target.knowledge_draw == "resolve":
+        return rng.standard_normal((problem.scenario.n_steps, 6))
+    return rng.standard_normal(6)
 
 
 def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
@@ -186,11 +193,13 @@ def standard_normal(noise: NoiseSource, seed: int, n_steps: int) -> FloatArray:
         if noise.digest is None:
             return load_noise_file(noise.file, n_steps)
         try:  # planned: the file must still hold what was planned
-            if file_digest(noise.file) == noise.digest:
-                return load_noise_file(noise.file, n_steps)
-            reason = "changed since the campaign was planned"
+            unchanged = file_digest(noise.file) == noise.digest
         except InputDataError as exc:  # deleted or unreadable since
             reason = f"unusable since the campaign was planned ({exc})"
+        else:
+            if unchanged:  # the file as planned: what is wrong with it was so from the start
+                return load_noise_file(noise.file, n_steps)
+            reason = "changed since the campaign was planned"
         raise InputChangedError(
             f"noise.file = {noise.file!r} {reason}; a campaign replays one realisation, so it "
             "stopped and recorded no run for it: restore the file and run the same command "
@@ -306,6 +315,22 @@ def compile_ahead(task: Task) -> None:
             fault_draws(problem, task.noise.root_seed, spec.seed),
         )
     except Exception:  # the runs compile what they need themselves
+        return
+
+
+def compile_newton() -> None:
+    """Compile the shooting solver's switching-time Newton (in a pool worker; issue 37 item 12).
+
+    :func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`,
+    the half of the references' solver that the campaign process does not
+    compile (:func:`cwrend_cli.physics.compiled.compile_ascent`). A failure is
+    only a lost head start, as in :func:`compile_ahead`.
+    """
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    try:
+        _switching_kernels.compile_switching_newton()
+    except Exception:  # the references compile it themselves
         return
 
 

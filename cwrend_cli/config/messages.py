@@ -13,6 +13,7 @@ used to list the allowed keys of a table is passed in (``root_model``).
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any, get_args, get_origin
 
@@ -185,6 +186,29 @@ def _union_errors_merged(errors: Sequence[Any]) -> list[Any]:
     return out
 
 
+#: A number followed by a unit (``800s``, ``8e-4 km/s^2``): a number meant, with its unit.
+_NUMBER_WITH_UNIT = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*[^\d\s.,].*$")
+#: A unit in brackets in a field's description (``[s]``, ``[km/s²]``; ranges hold digits).
+_UNIT = re.compile(r"\[([^\[\]\d]+)\]")
+
+
+def _unit_hint(
+    root_model: type[BaseModel], loc: Sequence[str | int], err: Mapping[str, Any]
+) -> str:
+    """``; write the number alone, in s`` for a number given with a unit (``800s``): the unit
+    is the key's (its description's last bracket without digits), never written."""
+    text = err.get("input")
+    if err["type"] not in ("float_type", "float_parsing") or not isinstance(text, str):
+        return ""
+    if not _NUMBER_WITH_UNIT.match(text):
+        return ""
+    names = [p for p in loc if isinstance(p, str)]
+    model = _model_at(root_model, names[:-1]) if names else None
+    field = model.model_fields.get(names[-1]) if model is not None else None
+    units = _UNIT.findall(field.description or "") if field is not None else []
+    return f"; write the number alone, in {units[-1]}" if units else "; write the number alone"
+
+
 def format_validation_error(
     exc: ValidationError, root_model: type[BaseModel] | None = None
 ) -> list[str]:
@@ -221,7 +245,8 @@ def format_validation_error(
             lines.append(f"{path}: missing required key")
         else:
             where = path or "<config>"
-            lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}")
+            hint = _unit_hint(root_model, loc, err)
+            lines.append(f"{where} = {_fmt_value(err.get('input'))}: {_describe(err)}{hint}")
     if len(errors) > MAX_LISTED_PROBLEMS:
         lines.append(f"… and {len(errors) - MAX_LISTED_PROBLEMS:,} more ({len(errors):,} in all)")
     return lines

@@ -256,14 +256,33 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
     Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
     word is a string. A range gives ``num`` evenly spaced floats.
     """
+    if "=" not in text:
+        raise ConfigError(
+            f"--param {text!r}: expected KEY=VALUES, e.g. schedule.beta=0.1,0.25,0.5 "
+            "or schedule.beta=0.1:0.5:5 (start:stop:num)"
+        )
     key, raw = parse_override(text)
     raw_text = text.split("=", 1)[1].strip()
     if isinstance(raw, str) and raw.count(":") == 2 and "," not in raw_text:
         return key, _range_values(key, raw)
+    if isinstance(raw, str) and ":" in raw and "," not in raw_text and _numbers(raw.split(":")):
+        raise ConfigError(  # 0.1:0.5 (no num) or 0:1:5:2: a range meant, not a string
+            f"--param {text!r}: a range is start:stop:num, e.g. {key}=0.1:0.5:5"
+        )
     parts = [p.strip() for p in raw_text.split(",")]
     if any(not p for p in parts):
         raise ConfigError(f"--param {text!r}: empty value in the list")
     return key, tuple(parse_override(f"{key}={p}")[1] for p in parts)
+
+
+def _numbers(parts: Sequence[str]) -> bool:
+    """Whether every one of ``parts`` is a decimal number."""
+    try:
+        for part in parts:
+            Decimal(part.strip())
+    except ArithmeticError:  # decimal.InvalidOperation
+        return False
+    return True
 
 
 #: Significant digits of a computed parameter value (a range's interior points, a design's

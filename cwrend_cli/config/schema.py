@@ -991,7 +991,7 @@ class OutputConfig(_FrozenModel):
         "failed 'timed out' and the campaign goes on; the open-loop references of a grid "
         "point get the same limit; unset = 10 s + 3 x 100 µs x steps x re-solves / 2, "
         "120 s more for a process's first run of an architecture (19.5 s for the paper's "
-        "800 steps and 79 re-solves; not enforced on Dask workers)",
+        "800 steps and 79 re-solves)",
     )
     dask_no_worker_timeout_s: Float = Field(
         60.0,
@@ -1292,6 +1292,12 @@ class TargetConfig(_FrozenModel):
         description="tumbling: the constrained guidance's body-rate knowledge error, σ per "
         "axis drawn once a run from its own stream; in [0, 60] [deg/s]",
     )
+    knowledge_draw: Literal["run", "resolve"] = Field(
+        "run",
+        description="tumbling, with a knowledge error: 'run' draws the error once a run (the "
+        "same at every re-solve), 'resolve' afresh at every re-solve (independent draws of "
+        "the same σ, from the run's own stream) [-]",
+    )
 
     @model_serializer(mode="wrap")
     def _without_perfect_knowledge(self, handler: SerializerFunctionWrapHandler) -> Any:
@@ -1300,6 +1306,8 @@ class TargetConfig(_FrozenModel):
         for name in ("knowledge_sigma_deg", "knowledge_sigma_deg_s"):
             if getattr(self, name) == 0.0:
                 out.pop(name, None)
+        if self.knowledge_draw == "run":
+            out.pop("knowledge_draw", None)
         return out
 
     @field_validator("initial_quaternion", "body_rates_deg_s", "inertia", mode="before")
@@ -1340,6 +1348,7 @@ class TargetConfig(_FrozenModel):
                     "inertia",
                     "knowledge_sigma_deg",
                     "knowledge_sigma_deg_s",
+                    "knowledge_draw",
                 )
                 if getattr(self, name) != type(self).model_fields[name].default
             ]
@@ -1355,6 +1364,21 @@ class TargetConfig(_FrozenModel):
                         )
                     ]
                 )
+        if (
+            self.knowledge_draw != "run"
+            and self.knowledge_sigma_deg == 0.0
+            and self.knowledge_sigma_deg_s == 0.0
+        ):
+            raise rules_error(
+                [
+                    (
+                        "knowledge_draw",
+                        self.knowledge_draw,
+                        "there is no knowledge error to draw: set target.knowledge_sigma_deg "
+                        "or target.knowledge_sigma_deg_s above 0, or leave it out",
+                    )
+                ]
+            )
         return self
 
 
@@ -1644,6 +1668,9 @@ class CwrendConfig(_FrozenModel):
                         "which needs a keep-out zone: add [constraints.keep_out] or leave it 0",
                     )
                 )
+        start = start_in_keep_out(self)
+        if start is not None:
+            problems.append(("scenario.x0", list(sc.x0), start))
         corridor = self.constraints.corridor
         if corridor is not None and tuple(sc.xf) != (*corridor.port_km, 0.0, 0.0, 0.0):
             problems.append(
@@ -1669,6 +1696,53 @@ class CwrendConfig(_FrozenModel):
         if problems:
             raise rules_error(problems)
         return self
+
+
+def start_in_keep_out(cfg: CwrendConfig) -> str | None:
+    """Why the start position of ``scenario.x0`` is unsafe at t = 0, or ``None`` when it is safe.
+
+    Unsafe: inside the keep-out zone (any of its ellipsoids) and outside the corridor,
+    i.e. the signed distance φ of :func:`cwrend_cli.physics.constraints.signed_distance`
+    is negative. For a tumbling target the position is taken into the body frame at
+    the attitude of t = 0 (``target.initial_quaternion``, body → relative frame).
+    """
+    if cfg.constraints.keep_out is None:
+        return None  # without a zone nothing is unsafe
+    # here, not at the top: numpy, which `cwrend config validate` of most configs does not need
+    import numpy as np
+
+    from cwrend_cli.config.adapt import constraints_of
+    from cwrend_cli.physics.constraints import (
+        ellipsoid_level,
+        ellipsoids,
+        geometry,
+        rotation_matrices,
+        signed_distance,
+    )
+
+    constraints = constraints_of(cfg)
+    assert constraints is not None  # a keep-out zone is set
+    geo = geometry(constraints)
+    r = np.asarray(cfg.scenario.x0[:3], dtype=np.float64)
+    frame = ""
+    if cfg.target.attitude == "tumbling":
+        q = np.asarray(cfg.target.initial_quaternion, dtype=np.float64)
+        r = rotation_matrices(q / np.linalg.norm(q)).T @ r  # relative → body frame
+        frame = " (in the body frame at t = 0, target.initial_quaternion)"
+    if float(signed_distance(r, geo)) >= 0.0:
+        return None
+    (inside, *_) = [
+        "constraints.keep_out.semi_axes_km" if i == 0 else f"constraints.keep_out.bodies.{i - 1}"
+        for i, (centre, axes) in enumerate(ellipsoids(geo))
+        if float(ellipsoid_level(r if centre is None else r - centre, axes)) < 1.0
+    ]
+    outside = "" if constraints.corridor is None else " and outside the corridor"
+    into = "" if constraints.corridor is None else " (or inside the corridor)"
+    return (
+        f"the start position [{', '.join(fmt_num(float(v)) for v in cfg.scenario.x0[:3])}] km "
+        f"is inside the keep-out zone{outside}{frame}, in the ellipsoid {inside}: start "
+        f"outside the zone{into}, or change {inside}"
+    )
 
 
 def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:

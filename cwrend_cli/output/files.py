@@ -229,7 +229,9 @@ def check_output_dir(path: str | Path, setting: str) -> Path:
     if any(len(part.encode()) > name_max for part in out.parts):
         raise _cannot_write(out, "File name too long", setting)
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise _cannot_write(out, "Permission denied", setting)
+        read_only = hasattr(os, "statvfs") and os.statvfs(existing).f_flag & os.ST_RDONLY
+        raise _cannot_write(out, "Read-only file system" if read_only else "Permission denied",
+                            setting)  # fmt: skip
     return out
 
 

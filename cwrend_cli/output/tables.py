@@ -71,6 +71,12 @@ METRIC_NAMES: Mapping[str, str] = {
     "fuel_applied": "fuel_penalty_applied_pct",
     "nees": "mean_nees",
     "nis": "mean_nis_nominal",
+    # safety of the true trajectory (issue 32; tumbling target and abort safety, issue 34)
+    "min_distance": "safety_min_distance_km",
+    "unsafe_time": "safety_unsafe_time_s",
+    "dock_position": "safety_dock_position_error_km",
+    "dock_velocity": "safety_dock_velocity_error_km_s",
+    "abort_distance": "abort_min_distance_km",
 }
 
 
@@ -957,7 +963,9 @@ def _keyed_columns(
     """A column ``<prefix><config key>`` per key of the records' mappings ``record[key]``.
 
     Sorted by key; numbers as float64 (int64 when all are integers), other
-    values of one type as that type, mixed ones as JSON text; missing: null.
+    values of one type as that type, vectors (a swept ``body_rates_deg_s``) and
+    mixed ones as JSON text, so that every cell is one hashable value that the
+    report and ``cwrend table`` can group by; missing: null.
     """
     columns = []
     for name in sorted({k for r in records for k in r.get(key, {})}):
@@ -965,7 +973,7 @@ def _keyed_columns(
         kinds = {type(v) for v in values if v is not None}
         if kinds <= {int, float} and not kinds <= {int}:
             arr = pa.array([None if v is None else float(v) for v in values], pa.float64())
-        elif len(kinds) == 1:
+        elif len(kinds) == 1 and not kinds & {list, tuple}:
             arr = pa.array(values)
         else:
             arr = pa.array([None if v is None else json.dumps(v) for v in values], pa.string())

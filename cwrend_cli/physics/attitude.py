@@ -191,17 +191,19 @@ def body_motion(model: AttitudeModel, q_hb: FloatArray, w_rad_s: FloatArray) -> 
 
 
 def knowledge_error(target: Target, draws: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The attitude-knowledge error of a run (issue 34 item 3) from 6 standard normals.
+    """The attitude-knowledge error (issue 34 item 3) from standard normals (..., 6).
 
-    ``(δθ [rad], δω [rad/s])``: a rotation vector in body axes with σ =
-    ``knowledge_sigma_deg`` per axis and a body-rate error with σ =
+    ``(δθ [rad], δω [rad/s])``, each (..., 3): a rotation vector in body axes with
+    σ = ``knowledge_sigma_deg`` per axis and a body-rate error with σ =
     ``knowledge_sigma_deg_s`` per axis. The guidance believes the attitude
-    ``q ⊗ q(δθ)`` and the rates ``ω + δω``.
+    ``q ⊗ q(δθ)`` and the rates ``ω + δω``. One row (6,) for a run's error
+    (``knowledge_draw = "run"``), one row per step for ``"resolve"`` (the
+    re-solve at step k takes row k).
     """
     d = np.asarray(draws, dtype=np.float64)
     return (
-        math.radians(target.knowledge_sigma_deg) * d[:3],
-        math.radians(target.knowledge_sigma_deg_s) * d[3:6],
+        math.radians(target.knowledge_sigma_deg) * d[..., :3],
+        math.radians(target.knowledge_sigma_deg_s) * d[..., 3:6],
     )
 
 

@@ -26,23 +26,48 @@ if TYPE_CHECKING:
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls.
 #: Measured in one process (``python -m benchmarks.compile_costs``: the paper ablation with
 #: ``--workers 1`` into an empty ``NUMBA_CACHE_DIR``) on a 2-core AMD EPYC (znver4,
-#: 2026-12-02, loaded by other jobs): the solver 19.9 CPU s, the compiled loop 13.2 s with
-#: its step loop, 37.6 CPU s for the whole command (47.8 s before issue 37 item 12's third
-#: step, same measurement; 51 s wall on that machine idle). Machines differ by about 2x:
-#: the notice is the slower machine's figure. The cone program's part was not measured
-#: again. An estimate for the notice only: the machine and the scenario (a nonlinear truth,
-#: an actuator with errors, a nonlinear sensor, an EKF) move it.
+#: 2026-12-02, load average 10 from other jobs): the solver 16.7 CPU s, the compiled loop
+#: 11.3 s with its step loop (6.1 s), 31.2 CPU s for the whole command (37.6 s before
+#: issue 37 item 12's fourth step, :func:`tune_for_compiling`; 47.8 s before the third).
+#: Machines differ by about 2x: the notice is the slower machine's figure. The cone
+#: program's part was not measured again (24 s before the fourth step, less the same 17 %).
+#: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
+#: actuator with errors, a nonlinear sensor, an EKF) move it.
 _COMPILE_CPU_S = {
-    "references": 20.0,  # bang_bang_ascent: the open-loop references and every first plan
-    "shooting": 17.0,  # _resolve_loop: the closed loop with its compiled re-solves
-    "socp": 24.0,  # _advance and the cone program's grid kernels
+    "references": 17.0,  # bang_bang_ascent: the open-loop references and every first plan
+    "shooting": 11.5,  # _resolve_loop: the closed loop with its compiled re-solves
+    "socp": 20.0,  # _advance and the cone program's grid kernels
 }
-#: Of each part, the CPU seconds a second process compiles while the campaign process
-#: compiles the references (:func:`compile_ahead`: the solver's switching-time Newton and
-#: the step loop below the re-solves); on 2 cores or more they overlap the references. On
-#: the loaded AMD EPYC above the campaign process's compile ended at 24.0 CPU s, the
-#: helper's at 20.5 s: the parts' 37 s less these.
-_AHEAD_CPU_S = {"references": 5.0, "shooting": 4.0, "socp": 4.0}
+#: Of each part, the CPU seconds a second process compiles (the step loop below the
+#: re-solves, :func:`compile_ahead`: 6.1 s; then the solver's switching-time Newton less
+#: its burn prediction: 2.5 s) while the campaign process compiles the references' dual
+#: ascent (:func:`compile_ascent`); on 2 cores or more they overlap it.
+_AHEAD_CPU_S = {"references": 2.5, "shooting": 6.0, "socp": 4.0}
+
+
+#: The cyclic garbage collector's thresholds in cwrend's processes (Python's default:
+#: 700, 10, 10). numba's compiler allocates millions of objects; at the default it collected
+#: the youngest generation about 1,200 times while compiling the references' solver, 1.7 of
+#: its 21 CPU s, against 0.5 s at these (2-core AMD EPYC, 2026-12-02; gc.callbacks timing).
+GC_THRESHOLDS = (50_000, 20, 20)
+
+
+def tune_for_compiling() -> None:
+    """Make this process's numba compiles cheaper, changing nothing they compute.
+
+    Called first in every cwrend process that may compile (the command, pool
+    workers). Sets :data:`GC_THRESHOLDS`, and, unless set already,
+    ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING``: numba builds an error
+    message for every overload it tries and rejects while typing a kernel,
+    and with highlighting on each one re-initialises colorama on stdout and
+    stderr (a few % of a first compile). Has to run before numba is imported
+    for the second; processes spawned afterwards inherit it.
+    """
+    import gc
+    import os
+
+    gc.set_threshold(*GC_THRESHOLDS)
+    os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
 
 
 def _entry_points(part: str) -> tuple[Any, ...]:
@@ -82,7 +107,7 @@ def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
     ``fan_out``: a local campaign given two workers or more (its pool, or a
     helper process beside a campaign of one task), whose second process
     compiles :data:`_AHEAD_CPU_S` while the campaign process compiles the
-    references (:func:`compile_ahead`), so those seconds overlap.
+    references' dual ascent (:func:`compile_ascent`), so those seconds overlap.
     """
     parts = ["references", *sorted(set(methods))]
     cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
@@ -108,6 +133,36 @@ def references_cold() -> bool:
     return not all(_cached(d) for d in _entry_points("references"))
 
 
+def compile_ascent(problem: Problem) -> None:
+    """Compile (or load) the references' dual ascent, the longest chain of a first compile.
+
+    On a first run the campaign process compiles the shooting solver
+    (``bang_bang_ascent``, for the references: about half of a first
+    compile) before any run can start. Its two halves are compiled in two
+    processes at once (issue 37 item 12): here the dual ascent
+    (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_newton_ascent`:
+    the ascent, its start selection, the dual evaluation, its breakpoints and
+    switching times, nine levels that compile one after the other), in the
+    second process the switching-time Newton
+    (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
+    after :func:`compile_ahead`. The campaign process then waits for the
+    Newton and loads it rather than compiling it a second time; the solver's
+    top is all that is left of it. Before the ascent it compiles the
+    Newton's burn prediction
+    (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_predicted_length`,
+    about 1.9 of the Newton's 4.6 CPU s), which the second process then
+    loads: the second process starts later (its own start-up) and has the
+    step loop to compile first, and without it the campaign process waited
+    for the Newton. ``problem``: the campaign's first point (its solver
+    settings' types).
+    """
+    from cwrend_cli.physics import simulation
+    from cwrend_cli.physics.guidance import _switching_kernels
+
+    _switching_kernels.compile_predicted_length()
+    _switching_kernels.compile_newton_ascent(simulation.solver_settings(problem).newton_fields)
+
+
 def compile_ahead(
     problem: Problem,
     archs: Iterable[Architecture],
@@ -115,35 +170,24 @@ def compile_ahead(
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
 ) -> None:
-    """Compile what a first run needs besides the references' solver (issue 37 item 12).
+    """Compile a first run's step loop in a second process (issue 37 item 12).
 
-    On a first run the campaign process compiles the shooting solver
-    (``bang_bang_ascent``, for the references: about half of a first
-    compile) before any run can start, one core busy. Meanwhile a second
-    process (a pool worker, or a helper beside an in-process campaign)
-    compiles into numba's cache, for the campaign process and the first runs
-    to load:
-
-    - the solver's switching-time Newton
-      (:func:`~cwrend_cli.physics.guidance._switching_kernels.compile_switching_newton`),
-      which the campaign process reaches last, after the dual ascent;
-    - the step loop of the first of ``archs`` of each guidance method
-      (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
-      depend on the solver.
-
-    The Newton first, so that it is cached before the campaign process
-    reaches it (the switching-time search below both then compiles in both
-    processes, at the same time, on two cores): after the step loop it was
-    ready only about when the campaign process reached it (seen on a loaded
-    2-core AMD EPYC). What is left for the runs is the compiled
-    loop's top (``_resolve_loop``, which carries the solver, and the cone
-    program's grid kernels). ``problem`` and the draws: those of the
-    campaign's first run, so that the argument types are the runs' own.
+    The step loop of the first of ``archs`` of each guidance method
+    (:func:`cwrend_cli.physics.simulation.compile_loop`), which does not
+    depend on the solver, while the campaign process compiles the
+    references' dual ascent (:func:`compile_ascent`); then the same process
+    compiles the solver's switching-time Newton, which the campaign process
+    waits for. The step loop first: the campaign process needs the Newton
+    only after the ascent (about 10 CPU s), by when the step loop (about 7 s)
+    is done, and the ascent's switching-time search, which the Newton calls
+    too, is cached by then, so neither process compiles it a second time.
+    What is left for the runs is the compiled loop's top (``_resolve_loop``,
+    which carries the solver, and the cone program's grid kernels).
+    ``problem`` and the draws: those of the campaign's first run, so that
+    the argument types are the runs' own.
     """
     from cwrend_cli.physics import simulation
-    from cwrend_cli.physics.guidance import _switching_kernels
 
-    _switching_kernels.compile_switching_newton()
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)

@@ -436,7 +436,8 @@ class Target:
     space, in body axes) and the principal moments of inertia ``inertia``
     (ratios). The constrained guidance predicts the attitude from the truth's,
     with a knowledge error of σ ``knowledge_sigma_deg`` and
-    ``knowledge_sigma_deg_s`` per axis drawn once a run
+    ``knowledge_sigma_deg_s`` per axis drawn once a run (``knowledge_draw =
+    "run"``) or afresh at every re-solve (``"resolve"``)
     (:func:`cwrend_cli.physics.attitude.knowledge_error`).
     """
 
@@ -446,6 +447,7 @@ class Target:
     inertia: Vec3 = (1.0, 1.0, 1.0)  # principal moments (I₁, I₂, I₃), ratios [-]
     knowledge_sigma_deg: float = 0.0  # guidance's attitude-knowledge error, σ per axis [deg]
     knowledge_sigma_deg_s: float = 0.0  # its body-rate knowledge error, σ per axis [deg/s]
+    knowledge_draw: Literal["run", "resolve"] = "run"  # the error's draw: once, or per re-solve
 
     @property
     def tumbling(self) -> bool:

@@ -333,9 +333,10 @@ def simulate(
     errors (required when ``problem.actuator`` has per-step noise; ignored
     where its σ is zero). ``fault_draws``: the draws of the degradation
     windows' sensor faults (required for the kinds some window switches on,
-    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the 6
+    :func:`cwrend_cli.physics.sensors.draw_faults`). ``attitude_draws``: the
     standard normals of the guidance's attitude-knowledge error (a tumbling target
-    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`).
+    with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`):
+    6, or (N, 6) with ``target.knowledge_draw = "resolve"`` (row k at step k's re-solve).
 
     ``observe`` (tests, benchmarks): called with the input of every shooting
     re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
@@ -383,12 +384,13 @@ def simulate(
     model = loop.model
     # the last cone-program plan's costate and its step: the next one's warm start (issue 16)
     plan_costate: FloatArray | None = None
+    duals: constrained.Duals | None = None  # the constrained plan's row multipliers
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
         scp = _constrained_plan(
             problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, known
         )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
-            result = scp[0]
+            result, duals = scp[0], scp[2]
         else:
             result = convex.solve(
                 _grid(sc, x_hat0, sc.horizon_s, _guidance_condensed(problem)), eps0, n
@@ -404,7 +406,7 @@ def simulate(
 
     schedule = resolve_steps(problem)
     if socp:
-        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, known)
+        solves += _cone_resolves(problem, schedule, loop, scalars, plan_costate, known, duals)
     else:
         solves += _shooting_resolves(problem, settings, schedule, loop, scalars, observe)
 
@@ -608,7 +610,8 @@ def _body_motion(
 @dataclass(frozen=True)
 class _Knowledge:
     """What the guidance knows of a tumbling target's attitude (issue 34): the truth's
-    attitude (None for a fixed target) and the run's knowledge error (None: exact)."""
+    attitude (None for a fixed target) and the run's knowledge error (None: exact; each
+    part (3,) for one error a run, (N, 3) for one a re-solve, row k at step k)."""
 
     truth: attitude.TargetAttitude | None
     error: tuple[FloatArray, FloatArray] | None
@@ -620,8 +623,10 @@ def _knowledge_error(
     """The run's attitude-knowledge error (δθ, δω), None when the guidance knows exactly."""
     if not problem.target.knowledge_error:
         return None
-    if draws is None:
-        raise ValueError("target.knowledge_sigma_*: the run needs its attitude draws")
+    per_step = (problem.scenario.n_steps, 6)
+    expected = per_step if problem.target.knowledge_draw == "resolve" else (6,)
+    if draws is None or np.shape(draws) != expected:
+        raise ValueError(f"target.knowledge_sigma_*: the run needs its attitude draws {expected}")
     return attitude.knowledge_error(problem.target, draws)
 
 
@@ -637,9 +642,12 @@ def _predicted_motion(
     sc = problem.scenario
     model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
     i = k_from * every
+    d_theta, d_w = known.error
+    if d_theta.ndim == 2:  # drawn at every re-solve: this one's (row k_from)
+        d_theta, d_w = d_theta[k_from], d_w[k_from]
     believed, q_hb, w = attitude.predict(
-        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s, known.error,
-        every,
+        model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s,
+        (d_theta, d_w), every,
     )  # fmt: skip
     return attitude.body_motion(believed, q_hb, w)
 
@@ -822,13 +830,16 @@ def _cone_resolves(
     scalars: sk.LoopScalars,
     plan_costate: FloatArray | None,
     known: _Knowledge | None = None,
+    duals: constrained.Duals | None = None,
 ) -> list[SolveRecord]:
     """Run the loop with its cone-program re-solves (``guidance.method = "socp"``, issue 16).
 
     Driven from Python between compiled stretches of steps. Each re-solve
     starts from the last successful plan's costate propagated to its time
     (``plan_costate``: the initial plan's, or None); a successful one holds its
-    controls; the costate is propagated either way.
+    controls; the costate is propagated either way. A constrained re-solve's dual
+    solver starts from the last successful plan's row multipliers (``duals``: the
+    initial plan's, or None), moved to its start (:func:`.constrained.shift_duals`).
     """
     model, state = loop.model, loop.state
     sc = problem.scenario
@@ -839,7 +850,7 @@ def _cone_resolves(
     condensed = _guidance_condensed(problem)
     lam = state.lam
     records: list[SolveRecord] = []
-    k_next, k_plan = 0, 0
+    k_next, k_plan, k_duals = 0, 0, 0
     for i, k in enumerate(schedule):
         scalars = loop.advance(k_next, k, n_steps, scalars)
         k_next = k + 1
@@ -847,8 +858,9 @@ def _cone_resolves(
         horizon = sc.horizon_s - k_from * dt
         lam_next = model.lam_step @ lam
         scp = _constrained_plan(
-            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, known
-        )
+            problem, state.x_hat, horizon, scalars.eps, state.p, model, k_from, known,
+            constrained.shift_duals(duals, k_from - k_duals),
+        )  # fmt: skip
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result = scp[0]
         else:
@@ -860,6 +872,8 @@ def _cone_resolves(
         if rec.success:
             plan_costate, k_plan = result.costate, k_from
             _hold_plan(result, k + 1, model)
+            if scp is not None:
+                duals, k_duals = scp[2], k_from
         lam[:] = lam_next
         _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
     loop.advance(k_next, n_steps, n_steps, scalars)
@@ -875,15 +889,17 @@ def _constrained_plan(
     model: sk.LoopModel | None,
     k_from: int,
     known: _Knowledge | None = None,
-) -> tuple[guidance.SolveResult, tuple[int, float, float]] | None:
+    warm_duals: constrained.Duals | None = None,
+) -> tuple[guidance.SolveResult, tuple[int, float, float], constrained.Duals | None] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
 
     From the estimate ``x_hat`` at step ``k_from`` over ``horizon_s``, with the
     filter's position covariance (``p[:3, :3]``, held over the horizon) for
     ``constraints.sigma_margin``; warm-started from the plan held from
     ``k_from`` on (``model``'s override), else from the unconstrained plan.
-    Returns the result (its plan the held controls; no costate) and
-    (SCP iterations, path slack [km], abort slack [km]).
+    Returns the result (its plan the held controls; no costate),
+    (SCP iterations, path slack [km], abort slack [km]) and the plan's row multipliers
+    (``warm_duals`` of the next re-solve, after :func:`.constrained.shift_duals`).
 
     A tumbling target (``known``, issue 34): the attitude predicted over the
     horizon from the one known at ``k_from`` turns the keep-out bodies and the
@@ -925,6 +941,7 @@ def _constrained_plan(
         warm,
         motion=motion,
         abort_safe_s=c.abort_safe_s,
+        warm_duals=warm_duals,
     )
     converged = ans.status is guidance.SolveStatus.CONVERGED
     miss = math.nan
@@ -943,7 +960,7 @@ def _constrained_plan(
         controls=ans.controls if converged else None,
     )
     slack = 0.0 if math.isnan(ans.slack_km) else ans.slack_km
-    return result, (ans.scp_iterations, slack, ans.abort_slack_km)
+    return result, (ans.scp_iterations, slack, ans.abort_slack_km), ans.duals
 
 
 def _min_miss_if_infeasible(

@@ -83,6 +83,7 @@ from cwrend_cli.physics.params import Window
 from cwrend_cli.report.consistency import step_ensembles
 from cwrend_cli.report.labels import (
     M_PER_KM,
+    category_text,
     difference_text,
     format_value,
     param_label,
@@ -1317,7 +1318,7 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         if numeric:
             ax.set_xticks(levels, [format_value(v) for v in levels])
         else:
-            ax.set_xticks(range(len(levels)), [str(v) for v in levels])
+            ax.set_xticks(range(len(levels)), [category_text(str(v)) for v in levels])
     band = " (band: 95 % interval)" if banded else ""
     ax_m.set_ylabel("median terminal miss [m]")
     ax_m.set_title(f"median miss over seeds{band}")
@@ -1670,11 +1671,16 @@ def _file_key(text: str) -> str:
 def _with_world(draw: Callable[[], Figure], world: str) -> Figure:
     """The figure of ``draw`` with the simulated world added to its title.
 
-    Under the figure's title (a second line of its suptitle), or as its
-    suptitle when it has only axes titles.
+    Under the figure's title (a second line of its suptitle). A figure of one
+    titled axes (fig. 6, the distributions) has that title made its suptitle
+    first, so the world is under it there too, not above it.
     """
     fig = draw()
     title = fig.get_suptitle()
+    titled = [ax for ax in fig.axes if ax.get_title()]
+    if not title and len(titled) == 1:
+        title = titled[0].get_title()
+        titled[0].set_title("")
     fig.suptitle(f"{title}\n{world}" if title else world)
     return fig
 

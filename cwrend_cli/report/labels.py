@@ -10,6 +10,7 @@ digits, so ``0.0007999999999999999`` (floating-point noise of a grid) reads
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -50,6 +51,7 @@ SYMBOLS: dict[str, tuple[str, str]] = {
     "actuator.pointing_sigma_deg": ("σ_pointing", "°"),
     "actuator.min_thrust_km_s2": ("u_min", "km/s²"),
     "actuator.delay_steps": ("delay", "steps"),
+    "target.body_rates_deg_s": ("ω(0)", "°/s"),
 }
 
 #: Unit suffixes of configuration keys, longest first.
@@ -57,6 +59,7 @@ _SUFFIXES = (
     ("_km_s2", "km/s²"),
     ("_km_s", "km/s"),
     ("_rad_s", "rad/s"),
+    ("_deg_s", "°/s"),
     ("_km", "km"),
     ("_deg", "°"),
     ("_pct", "%"),
@@ -89,6 +92,14 @@ def param_label(key: str) -> str:
     return f"{symbol} [{unit}]" if unit is not None else symbol
 
 
+def number(value: float, spec: str) -> str:
+    """``value`` formatted with ``spec`` (``.4f``, ``+.1f``, …) without a negative zero: a
+    value that rounds to zero reads ``0.0000``, not ``-0.0000`` (the format's ``z``
+    option, PEP 682)."""
+    signed = spec[:1] in ("+", "-", " ")
+    return format(value, f"{spec[0]}z{spec[1:]}" if signed else f"z{spec}")
+
+
 def format_value(value: Any) -> str:
     """A swept value as given: floats with 12 significant digits (no floating-point noise)."""
     if isinstance(value, bool | str) or value is None:
@@ -100,6 +111,20 @@ def format_value(value: Any) -> str:
     if isinstance(value, float):
         return format(value, ".12g")
     return str(value)
+
+
+def category_text(value: str) -> str:
+    """A non-numeric swept value as an axis tick: a vector (``runs.parquet`` holds it as
+    JSON text, ``[0.291, 0.3881, 1.9403]``) one element a line, so neighbours do not
+    overlap; any other value as it is."""
+    if value.startswith("[") and value.endswith("]"):
+        try:
+            items = json.loads(value)
+        except json.JSONDecodeError:
+            return value
+        if isinstance(items, list):
+            return "[" + ",\n".join(setting_text(v) for v in items) + "]"
+    return value
 
 
 def difference_text(key: str, a: Any, b: Any) -> str:

@@ -314,12 +314,23 @@ def results_world(results_dir: Path) -> str:
         if path.exists():
             try:
                 stored = _read_json(path)
-                runs = _read_parquet(root / RUNS) if (root / RUNS).exists() else pd.DataFrame()
+                runs = _world_columns(root / RUNS) if (root / RUNS).exists() else pd.DataFrame()
             except ReportError:
                 break
             config = _stored_config(stored.get("config"), path, [])
             return worlds_of(config, runs, nis_offset_given(stored))
     return world_of(None)
+
+
+def _world_columns(runs_path: Path) -> pd.DataFrame:
+    """The columns of ``runs.parquet`` a world is told from (:func:`worlds_of`): ``status``,
+    ``point`` and the swept values, not the whole file (a 5,000,000-run campaign's)."""
+    try:
+        names = ds.dataset(runs_path, format="parquet").schema.names
+    except (OSError, ValueError) as exc:
+        raise ReportError(f"{runs_path}: unreadable Parquet ({exc})") from None
+    wanted = [c for c in names if c in ("status", "point")] + param_columns(names)
+    return _read_parquet(runs_path, columns=wanted)
 
 
 def arch_label(slug: str) -> str:
@@ -572,6 +583,11 @@ def _chosen_point(runs: pd.DataFrame, wanted: str) -> str:
     ]  # fmt: skip
     if len(found) == 1:
         return found[0]
+    if not params:  # an ablation (or a run): one point, nothing swept
+        raise ReportError(
+            f"--point {wanted}: this campaign sweeps nothing (one point, {', '.join(points)}); "
+            "--point picks a point of a sweep: drop it"
+        )
     what = "matches several grid points" if found else "no such grid point"
     raise ReportError(f"--point {wanted}: {what} (points: {_point_list(runs)})")
 

@@ -41,6 +41,7 @@ from cwrend_cli.report.labels import (
     consistency_text,
     format_value,
     markdown_table,
+    number,
     param_label,
 )
 from cwrend_cli.report.load import ReportData, arch_label, param_values
@@ -67,7 +68,7 @@ def _fmt(value: Any, spec: str = ".4g") -> str:
         return str(value)
     if not np.isfinite(f):
         return "–"
-    return format(f, spec)
+    return number(f, spec)
 
 
 def _finite(value: Any) -> bool:
@@ -91,7 +92,7 @@ def _ci(row: Any, spec: str, scale: float = 1.0, *, bootstrap: bool = True) -> s
         return value
     lo, hi = float(row["ci_low"]) * scale, float(row["ci_high"]) * scale
     mark = UNRELIABLE_MARK if bootstrap and _unreliable(row) else ""
-    return f"{value} [{lo:{spec}}, {hi:{spec}}]{mark}"
+    return f"{value} [{number(lo, spec)}, {number(hi, spec)}]{mark}"
 
 
 def _lookup(stats: pd.DataFrame) -> dict[tuple[str, str], Any]:

@@ -71,7 +71,13 @@ from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWE
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES, PARAM_PREFIX
 from cwrend_cli.physics.params import ALL_ARCHITECTURES
-from cwrend_cli.report.labels import M_PER_KM, MIN_BOOTSTRAP_N, format_value, markdown_table
+from cwrend_cli.report.labels import (
+    M_PER_KM,
+    MIN_BOOTSTRAP_N,
+    format_value,
+    markdown_table,
+    number,
+)
 
 __all__ = [
     "FIELDS",
@@ -115,6 +121,17 @@ QUANTITIES: Mapping[str, _Quantity] = {
     "n_infeasible": _Quantity("infeasible re-solves per run", "-", 1.0, 2),
     "mean_nees": _Quantity("of the runs' mean NEES", "-", 1.0, 2),
     "mean_nis_nominal": _Quantity("of the runs' nominal mean NIS", "-", 1.0, 2),
+    # safety of the true trajectory (issues 32 and 34), as the runs' columns hold it
+    "safety_violated": _Quantity("runs that entered the unsafe set", "%", 100.0, 1),
+    "safety_min_distance_km": _Quantity("closest approach to the unsafe set", "m", M_PER_KM, 1),
+    "safety_unsafe_time_s": _Quantity("time in the unsafe set", "s", 1.0, 2),
+    "safety_dock_position_error_km": _Quantity("docking position error", "m", M_PER_KM, 2),
+    "safety_dock_velocity_error_km_s": _Quantity("docking velocity error", "mm/s", 1e6, 1),
+    "abort_unsafe": _Quantity("runs with an unsafe abort drift", "%", 100.0, 1),
+    "abort_min_distance_km": _Quantity("closest abort drift to the keep-out", "m", M_PER_KM, 1),
+    # of the re-solves (solves/)
+    "scp_iterations": _Quantity("SCP iterations per re-solve", "-", 1.0, 2),
+    "wall_time_ms": _Quantity("re-solve time", "ms", 1.0, 0),
 }
 #: The statistics of each stored metric (the first is the default).
 MARGINAL: Mapping[str, tuple[str, ...]] = {
@@ -129,7 +146,14 @@ MARGINAL: Mapping[str, tuple[str, ...]] = {
     "n_infeasible": ("mean",),
     "mean_nees": ("mean",),
     "mean_nis_nominal": ("mean",),
+    "safety_violated": ("share",),
+    "safety_min_distance_km": ("median", "p1"),
+    "safety_unsafe_time_s": ("mean",),
+    "abort_unsafe": ("share",),
+    "abort_min_distance_km": ("median", "p1"),
 }
+#: Stored shares of runs (Wilson 95 %), asked for by name: name → flag column. Shown in %.
+SHARES: Mapping[str, str] = {"violated_pct": "safety_violated", "abort_pct": "abort_unsafe"}
 #: Filter consistency (issue 33): stored as ``consistency`` rows whose interval is the χ²
 #: 95 % band of a consistent filter's mean over the runs, not a confidence interval.
 CONSISTENCY = ("mean_nees", "mean_nis_nominal")
@@ -150,8 +174,34 @@ RUN_VALUES: Mapping[str, tuple[str, Literal["share", "sum"], str]] = {
     "infeasible_solves": ("n_infeasible", "sum", "re-solves infeasible"),
     "failed_solves": ("n_failed", "sum", "re-solves failed"),
 }
-#: The metrics whose largest value over the cell's ok runs ``max.METRIC`` gives (runs.parquet).
-MAXIMA = ("miss_km", "delta_v_km_s", "fuel_penalty_pct")
+#: The order statistics over the cell's ok runs ``STATISTIC.METRIC`` gives (runs.parquet; NaN
+#: cells skipped): metric → its statistics computed from the runs (none stored).
+RUN_ORDER: Mapping[str, tuple[str, ...]] = {
+    "miss_km": ("max",),
+    "delta_v_km_s": ("max",),
+    "fuel_penalty_pct": ("max",),
+    "safety_min_distance_km": ("min",),  # the worst run: < 0 entered the unsafe set
+    "safety_dock_position_error_km": ("median", "max"),
+    "safety_dock_velocity_error_km_s": ("median", "max"),
+}
+#: Values over the re-solves (``solves/`` rows of kind ``resolve``) of the cell's ok runs:
+#: name → (column, its statistics). ``p95``: numpy's linear percentile, as the statistics'.
+SOLVE_VALUES: Mapping[str, tuple[str, tuple[str, ...]]] = {
+    "scp_iterations": ("scp_iterations", ("mean", "max")),
+    "resolve_ms": ("wall_time_ms", ("mean", "p95", "max")),
+}
+#: Shares of those re-solves [%] that needed a softening (column > 0): name → (column, header).
+SOLVE_SHARES: Mapping[str, tuple[str, str]] = {
+    "slack_pct": ("slack_km", "re-solves with a path slack [%]"),
+    "abort_slack_pct": ("abort_slack_km", "re-solves with an abort slack [%]"),
+}
+_ORDER_FN: Mapping[str, Callable[[pd.Series], float]] = {
+    "max": lambda x: float(x.max()),
+    "min": lambda x: float(x.min()),
+    "median": lambda x: float(x.median()),
+    "mean": lambda x: float(x.mean()),
+    "p95": lambda x: float(np.percentile(x, 95)) if len(x) else math.nan,
+}
 _VALUE_SYNTAX = re.compile(
     r"^(?:(?P<stat>[a-z_0-9]+)\.)?(?P<metric>[a-z_]+)(?:@(?P<a>[a-z_]+)-(?P<b>[a-z_]+))?"
     r"(?P<mods>(?::[a-z0-9_=]+)*)$"
@@ -161,7 +211,12 @@ _SYNTAX_HELP = (
     "p95.miss:bare, frac_less.miss@mtf_adaptive-plain_adaptive, mean_diff.dv, n, "
     "infeasible_pct, failed_solves, max.miss:with=socp_plan"
 )
-_RUN_HELP = "n, max.miss, max.dv, max.fuel, " + ", ".join(RUN_VALUES) + " (computed from the runs)"
+_RUN_HELP = (
+    "n, max.miss, max.dv, max.fuel, min.min_distance, median|max.dock_position, "
+    f"median|max.dock_velocity, {', '.join(RUN_VALUES)} (computed from the runs); "
+    "mean|max.scp_iterations, mean|p95|max.resolve_ms, "
+    f"{', '.join(SOLVE_SHARES)} (from the re-solves)"
+)
 
 
 @dataclass(frozen=True)
@@ -169,11 +224,15 @@ class Value:
     """One value asked for by ``--metric`` (:func:`parse_value`)."""
 
     text: str  # as given
-    #: stored (marginal, paired, count: n) or computed from the cell's runs (runs)
-    kind: Literal["marginal", "paired", "count", "runs"]
-    #: column of the statistics; of a runs value: n, a name of RUN_VALUES or of MAXIMA
+    #: stored (marginal, paired, count: n) or computed from the cell's runs (runs) or their
+    #: re-solves (solves)
+    kind: Literal["marginal", "paired", "count", "runs", "solves"]
+    #: column of the statistics; of a runs value: n, a name of RUN_VALUES or of RUN_ORDER;
+    #: of a solves value: a column of solves/
     metric: str
-    statistic: str  # of a runs value: count, share, sum or max
+    #: of a runs value: count, share, sum or one of RUN_ORDER; of a solves value: share or
+    #: one of SOLVE_VALUES
+    statistic: str
     pair: tuple[str, str] | None = None
     interval: bool = True  # show the stored interval
     digits: int | None = None  # decimals (None: the quantity's)
@@ -186,9 +245,11 @@ class Value:
         """The column header: quantity, unit, and the interval's kind."""
         if self.kind == "count":
             return "n"
-        if self.kind == "runs":
+        if self.kind in ("runs", "solves"):
             return self._runs_header()
         q = QUANTITIES[self.metric]
+        if self.statistic == "share":
+            return f"{q.name} [{q.unit}]" + (" (95 % Wilson)" if self.interval else "")
         ci = " (95 % CI)" if self.interval else ""
         if self.metric in CONSISTENCY:
             ci = " (95 % χ² band)" if self.interval else ""
@@ -202,9 +263,11 @@ class Value:
         return f"{self.statistic} {q.name} [{q.unit}]{ci}"
 
     def _runs_header(self) -> str:
-        if self.statistic == "max":
+        if self.kind == "solves" and self.statistic == "share":
+            head = next(h for c, h in SOLVE_SHARES.values() if c == self.metric)
+        elif self.statistic in _ORDER_FN:
             q = QUANTITIES[self.metric]
-            head = f"max {q.name} [{q.unit}]"
+            head = f"{self.statistic} {q.name} [{q.unit}]"
         elif self.statistic == "count":
             head = "runs"
         else:
@@ -225,8 +288,10 @@ class Value:
             return self.digits
         if self.integer:
             return 0
-        if self.kind == "runs" and self.statistic == "share":
-            return 2
+        if self.kind == "solves" and self.statistic == "max" and self.metric == "scp_iterations":
+            return 0  # a count
+        if self.kind in ("runs", "solves") and self.statistic == "share":
+            return 1 if self.kind == "solves" else 2
         if self.statistic == "frac_less":
             return 3
         if self.statistic == "mean_diff" and self.metric in _DV:
@@ -234,9 +299,9 @@ class Value:
         return QUANTITIES[self.metric].digits
 
     def scale(self) -> float:
-        if self.kind == "runs" and self.statistic == "max":
+        if self.kind in ("runs", "solves") and self.statistic in _ORDER_FN:
             return QUANTITIES[self.metric].scale
-        if self.kind in ("count", "runs") or self.statistic == "frac_less":
+        if self.kind in ("count", "runs", "solves") or self.statistic == "frac_less":
             return 1.0
         return QUANTITIES[self.metric].scale
 
@@ -273,26 +338,47 @@ def parse_value(text: str) -> Value:
                     f"(choices: {', '.join(ALL_ARCHITECTURES)})"
                 )
     runs_value = (stat is None and name in ("n", *RUN_VALUES)) or (
-        stat == "max" and metric in MAXIMA
+        stat in RUN_ORDER.get(metric, ())
     )
-    if runs_value and pair is not None:
+    solves_value = (stat is None and name in SOLVE_SHARES) or (
+        name in SOLVE_VALUES and stat in SOLVE_VALUES[name][1]
+    )
+    if (runs_value or solves_value or name in SHARES) and pair is not None:
         raise ConfigError(f"--metric {text!r}: {name} is per architecture, not per pair")
     if stat is None and name == "n" and subset is None:
         return Value(text, "count", name, name, None, False, digits)
     if runs_value:
-        statistic = "count" if name == "n" else "max" if stat == "max" else RUN_VALUES[name][1]
+        statistic = "count" if name == "n" else stat if stat is not None else RUN_VALUES[name][1]
         column = name if stat is None else metric
         return Value(text, "runs", column, statistic, None, False, digits, subset)
+    if solves_value:
+        if stat is None:
+            return Value(
+                text, "solves", SOLVE_SHARES[name][0], "share", None, False, digits, subset
+            )
+        return Value(text, "solves", SOLVE_VALUES[name][0], stat, None, False, digits, subset)
+    if name in SOLVE_VALUES:
+        raise ConfigError(
+            f"--metric {text!r}: statistic {stat!r} of {name} is one of "
+            f"{', '.join(SOLVE_VALUES[name][1])} (over the re-solves)"
+        )
     if subset is not None:
         raise ConfigError(
             f"--metric {text!r}: ':{subset[0]}=' keeps runs of a value computed from the runs "
             f"({_RUN_HELP}), not of a stored statistic"
         )
+    if stat is None and name in SHARES:
+        return Value(text, "marginal", SHARES[name], "share", None, interval, digits)
     paired_stats = PAIRED.get(metric, ())
-    if metric not in MARGINAL:
-        known = ", ".join([*METRIC_NAMES, *(m for m in MARGINAL if m not in METRIC_NAMES.values())])
+    if metric not in MARGINAL and metric not in RUN_ORDER:
+        shown = [k for k, v in METRIC_NAMES.items() if v in MARGINAL or v in RUN_ORDER]
+        names = [*shown, *(m for m in MARGINAL if m not in METRIC_NAMES.values())]
+        names = [n for n in names if n not in SHARES.values()]
+        known = ", ".join([*names, *SHARES, *SOLVE_VALUES])
+        every = [*names, *SHARES, *SOLVE_VALUES, *SOLVE_SHARES, *RUN_VALUES, "n"]
         raise ConfigError(
             f"--metric {text!r}: unknown metric {name!r} (metrics: {known}; also {_RUN_HELP})"
+            f"{did_you_mean(name, every)}"
         )
     if stat in paired_stats or (stat is None and pair is not None):
         if not paired_stats:
@@ -303,11 +389,12 @@ def parse_value(text: str) -> Value:
             f"--metric {text!r}: the paired statistics of {metric} are "
             f"{', '.join(paired_stats) or 'none'}"
         )
-    stat = stat or MARGINAL[metric][0]
-    if stat not in MARGINAL[metric]:
-        allowed = ", ".join(
-            [*MARGINAL[metric], *(["max"] if metric in MAXIMA else []), *paired_stats]
-        )
+    stored = MARGINAL.get(metric, ())
+    stat = stat or (stored or RUN_ORDER[metric])[0]
+    if stat in RUN_ORDER.get(metric, ()):  # the default statistic of a metric stored nowhere
+        return Value(text, "runs", metric, stat, None, False, digits)
+    if stat not in stored:
+        allowed = ", ".join([*stored, *RUN_ORDER.get(metric, ()), *paired_stats])
         raise ConfigError(f"--metric {text!r}: statistic {stat!r} of {metric} is one of {allowed}")
     return Value(text, "marginal", metric, stat, None, interval, digits)
 
@@ -328,6 +415,8 @@ class Source:
     runs: pd.DataFrame | None = field(default=None, compare=False)  # read when a value needs it
     #: the distinct (run_key, fallback_step) of its solves/, read for ``:with=`` / ``:without=``
     steps: pd.DataFrame | None = field(default=None, compare=False)
+    #: its solves/ re-solves (kind ``resolve``): run_key and the columns of the solves values
+    solves: pd.DataFrame | None = field(default=None, compare=False)
     #: of the pairs across two campaigns (``--versus``): B's campaign (``stats``: the pairs)
     versus: Source | None = field(default=None, compare=False)
 
@@ -390,8 +479,9 @@ def load_source(text: str) -> Source:
     return Source(label or path.resolve().name, path, manifest, stats)
 
 
-def _loaded(source: Source, runs: bool, steps: bool) -> Source:
-    """``source`` with its ``runs.parquet`` (``runs``) and its solves' steps (``steps``)."""
+def _loaded(source: Source, runs: bool, steps: bool, resolves: bool = False) -> Source:
+    """``source`` with its ``runs.parquet`` (``runs``), its solves' steps (``steps``) and
+    its re-solves (``resolves``: run_key and the columns of the solves values it holds)."""
     if runs and source.runs is None:
         try:
             source = replace(source, runs=pd.read_parquet(source.path / RUNS))
@@ -406,7 +496,26 @@ def _loaded(source: Source, runs: bool, steps: bool) -> Source:
                 "':with=' / ':without=' need"
             ) from None
         source = replace(source, steps=solves.drop_duplicates(ignore_index=True))
+    if resolves and source.solves is None:
+        source = replace(source, solves=_resolves(source.path))
     return source
+
+
+def _resolves(path: Path) -> pd.DataFrame:
+    """The re-solves of ``path/solves/``: run_key and each column of the solves values held."""
+    import pyarrow.dataset as pads
+
+    wanted = {c for c, _ in SOLVE_VALUES.values()} | {c for c, _ in SOLVE_SHARES.values()}
+    try:
+        held = set(pads.dataset(path / SOLVES, format="parquet", partitioning="hive").schema.names)
+        columns = ["run_key", "kind", *sorted(wanted & held)]
+        frame = pd.read_parquet(path / SOLVES, columns=columns)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(
+            f"{path}: cannot read the per-solve data {SOLVES}/ ({exc}), which the values of "
+            "the re-solves need"
+        ) from None
+    return frame[frame["kind"] == "resolve"].drop(columns="kind").reset_index(drop=True)
 
 
 # ---------------------------------------------------------------------------
@@ -595,23 +704,28 @@ def _entries(
 
 
 def _from_runs(source: Source, value: Value) -> pd.DataFrame:
-    """A value computed from ``runs.parquet`` per grid point and architecture.
+    """A value computed from ``runs.parquet`` (or its re-solves) per grid point and architecture.
 
     Over the cell's ok runs (with ``value.subset``: those whose re-solves used, or
     never used, the fallback step): their number (``count``), Σ(column) (``sum``),
-    100 × Σ(column) / Σ(n_solves) (``share``) or the largest metric (``max``; none
-    when no run is kept). ``n``: the runs kept.
+    100 × Σ(column) / Σ(n_solves) (``share``) or an order statistic of the metric
+    (:data:`RUN_ORDER`; NaN cells skipped, none when no run is kept). A value of the
+    re-solves (``kind`` solves): a statistic of :data:`SOLVE_VALUES` of the column over
+    every re-solve of the kept runs, or the share [%] of them with the column > 0
+    (:data:`SOLVE_SHARES`). ``n``: the runs kept.
     """
     runs = source.runs
     assert runs is not None
-    column = RUN_VALUES[value.metric][0] if value.statistic in ("share", "sum") else value.metric
-    needed = [column] if value.statistic != "count" else []
-    needed += ["n_solves"] if value.statistic == "share" else []
-    missing = [c for c in needed if c not in runs.columns]
-    if missing:
-        raise ConfigError(
-            f"{source.path}: {RUNS} holds no {missing[0]} (written by an older cwrend)"
-        )
+    column = (
+        RUN_VALUES[value.metric][0]
+        if value.kind == "runs" and value.statistic in ("share", "sum")
+        else value.metric
+    )
+    params = [c for c in runs.columns if c.startswith(PARAM_PREFIX)]
+    frame = source.solves if value.kind == "solves" else runs
+    if value.statistic != "count" and (frame is None or column not in frame.columns):
+        # a campaign without the column (another one holds it: _check_held): no value, –
+        return pd.DataFrame(columns=["point", "arch", "value", "ci_low", "ci_high", "n", *params])
     ok = runs[runs["status"] == "ok"]
     kept = pd.Series(True, index=ok.index)
     if value.subset is not None:
@@ -620,11 +734,18 @@ def _from_runs(source: Source, value: Value) -> pd.DataFrame:
         steps = source.steps
         using = ok["run_key"].isin(set(steps.loc[steps["fallback_step"] == step, "run_key"]))
         kept = using if which == "with" else ~using
-    params = [c for c in ok.columns if c.startswith(PARAM_PREFIX)]
+    resolves = source.solves if value.kind == "solves" else None
     rows = []
     for (point, arch), g in ok.groupby(["point", "arch"], sort=False, observed=True):
         sub = g[kept[g.index]]
-        if value.statistic == "count":
+        if resolves is not None:
+            mine = resolves["run_key"].isin(set(sub["run_key"]))
+            x = resolves.loc[mine, column].to_numpy(dtype=float)
+            if value.statistic == "share":
+                number = 100.0 * float(np.mean(x > 0.0)) if len(x) else math.nan
+            else:
+                number = _ORDER_FN[value.statistic](pd.Series(x)) if len(x) else math.nan
+        elif value.statistic == "count":
             number = float(len(sub))
         elif value.statistic == "sum":
             number = float(sub[column].sum())
@@ -632,12 +753,56 @@ def _from_runs(source: Source, value: Value) -> pd.DataFrame:
             solves = float(sub["n_solves"].sum())
             number = 100.0 * float(sub[column].sum()) / solves if solves else math.nan
         else:
-            number = float(sub[column].max()) if len(sub) else math.nan
+            number = _ORDER_FN[value.statistic](sub[column].astype(float)) if len(sub) else math.nan
         first = g.iloc[0]
         rows.append({"point": str(point), "arch": str(arch), "value": number,
                      "ci_low": math.nan, "ci_high": math.nan, "n": float(len(sub)),
                      **{p: first[p] for p in params}})  # fmt: skip
     return pd.DataFrame(rows, columns=["point", "arch", "value", "ci_low", "ci_high", "n", *params])
+
+
+def _needs(value: Value) -> tuple[str, str] | None:
+    """(where, column) a value reads that not every campaign writes: a stored statistic's
+    metric (``stats``), a column of ``runs.parquet`` (``runs``) or of solves/ (``solves``)."""
+    if value.kind == "marginal":
+        return "stats", value.metric
+    if value.kind == "solves":
+        return "solves", value.metric
+    if value.kind != "runs" or value.statistic == "count":
+        return None
+    if value.statistic in ("share", "sum"):
+        return "runs", RUN_VALUES[value.metric][0]
+    return "runs", value.metric
+
+
+def _check_held(sources: Sequence[Source], values: Sequence[Value]) -> None:
+    """Each value's metric or column is held by at least one campaign (a campaign without it
+    shows –); else :class:`ConfigError` naming the value and what writes it."""
+    for v in values:
+        need = _needs(v)
+        if need is None:
+            continue
+        where, column = need
+
+        def held(s: Source, where: str = where, column: str = column) -> bool:
+            if where == "stats":
+                return bool((s.stats["metric"] == column).any())
+            frame = s.runs if where == "runs" else s.solves
+            return frame is not None and column in frame.columns
+
+        if not any(held(s) for s in sources):
+            names = ", ".join(s.label for s in sources)
+            if column.startswith(("safety_", "abort_")) or column in ("scp_iterations", "slack_km"):
+                why = (
+                    "a campaign with [constraints] writes it (abort_*: with "
+                    "constraints.abort_safe_s; dock_*: with a corridor)"
+                )
+            else:
+                why = "written by a newer cwrend; re-run the campaign"
+            file = {"stats": "statistics", "runs": RUNS, "solves": f"{SOLVES}/"}[where]
+            raise ConfigError(
+                f"--metric {v.text!r}: {names} hold(s) no {column} in its {file}: {why}"
+            )
 
 
 def _check_steps(sources: Sequence[Source], values: Sequence[Value]) -> None:
@@ -803,7 +968,7 @@ class Table:
 
 
 def _unreliable(cell: pd.Series | None, value: Value) -> bool:
-    if cell is None or value.statistic == "frac_less" or not value.interval:
+    if cell is None or value.statistic in ("frac_less", "share") or not value.interval:
         return False
     if value.metric in CONSISTENCY:  # a χ² band, not a bootstrap interval
         return False
@@ -908,10 +1073,12 @@ def build_table(
             "(with the other column fields, e.g. --cols metric,arch) or leave it out"
         )
     steps = any(v.subset is not None for v in values)
-    runs = steps or bool(versus) or any(v.kind == "runs" for v in values)
-    sources = [_loaded(s, runs, steps) for s in sources]
+    solves = any(v.kind == "solves" for v in values)
+    runs = steps or solves or bool(versus) or any(v.kind == "runs" for v in values)
+    sources = [_loaded(s, runs, steps, solves) for s in sources]
     if steps:
         _check_steps(sources, values)
+    _check_held(sources, values)
     crossed = _across(sources, versus, values, filters, pair_across)
     if not row_fields:
         row_fields = _default_rows(sources, values, col_fields, bool(crossed))
@@ -1043,10 +1210,10 @@ def _cell(cell: pd.Series | None, value: Value, mark: str) -> str:
     if cell is None or not math.isfinite(float(cell["value"])):
         return _MISSING
     scale, spec = value.scale(), f".{value.decimals()}f"
-    text = format(float(cell["value"]) * scale, spec)
+    text = number(float(cell["value"]) * scale, spec)
     lo, hi = float(cell["ci_low"]), float(cell["ci_high"])
     if value.interval and math.isfinite(lo) and math.isfinite(hi):
-        text += f" [{lo * scale:{spec}}, {hi * scale:{spec}}]"
+        text += f" [{number(lo * scale, spec)}, {number(hi * scale, spec)}]"
         if _unreliable(cell, value):
             text += mark
     return text
@@ -1078,7 +1245,7 @@ _LATEX = {
     "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
     "Δ": r"$\Delta$", "ε": r"$\varepsilon$", "β": r"$\beta$", "σ": r"$\sigma$", "κ": r"$\kappa$",
     "ρ": r"$\rho$", "α": r"$\alpha$", "°": r"$^\circ$", "×": r"$\times$", "–": "--",
-    "−": "$-$", "·": r"$\cdot$", "²": r"$^2$", "≤": r"$\le$", "≥": r"$\ge$",
+    "ω": r"$\omega$", "−": "$-$", "·": r"$\cdot$", "²": r"$^2$", "≤": r"$\le$", "≥": r"$\ge$",
 }  # fmt: skip
 
 

@@ -52,6 +52,39 @@ CERTIFICATE_MARGIN = 1e-12
 
 
 @njit(cache=True)
+def step_law(
+    a: np.ndarray, s: int, vec: np.ndarray, c1: float, c2: float, u: np.ndarray
+) -> tuple[float, float, bool, float, float, float]:
+    """Step ``s``'s minimiser of ``f(ũ) − y_sᵀũ``, ``y_s = A_sᵀ vec`` (the smoothed law of
+    paper Eq. 10 on the grid, module docstring): writes ``ũ_s`` into ``u[s]``; returns
+    ``(‖y_s‖, a_s, on the ramp, ŷ_s)``, ``a_s = 0`` (and ŷ_s zero) on a coasting step."""
+    y0 = 0.0
+    y1 = 0.0
+    y2 = 0.0
+    for i in range(6):
+        y0 += a[s, i, 0] * vec[i]
+        y1 += a[s, i, 1] * vec[i]
+        y2 += a[s, i, 2] * vec[i]
+    ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    level = (ny - c1) / (2.0 * c2)
+    if level <= 0.0:
+        u[s, 0] = 0.0
+        u[s, 1] = 0.0
+        u[s, 2] = 0.0
+        return ny, 0.0, False, 0.0, 0.0, 0.0
+    ramp = level < 1.0
+    if not ramp:
+        level = 1.0
+    h0 = y0 / ny
+    h1 = y1 / ny
+    h2 = y2 / ny
+    u[s, 0] = level * h0
+    u[s, 1] = level * h1
+    u[s, 2] = level * h2
+    return ny, level, ramp, h0, h1, h2
+
+
+@njit(cache=True)
 def grid_dual(
     a: np.ndarray,
     b: np.ndarray,
@@ -77,31 +110,11 @@ def grid_dual(
     norm_sum = 0.0
     ay = np.empty(6)
     for s in range(steps):
-        y0 = 0.0
-        y1 = 0.0
-        y2 = 0.0
-        for i in range(6):
-            y0 += a[s, i, 0] * nu[i]
-            y1 += a[s, i, 1] * nu[i]
-            y2 += a[s, i, 2] * nu[i]
-        ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        ny, level, ramp, h0, h1, h2 = step_law(a, s, nu, c1, c2, u)
         norm_sum += ny
-        level = (ny - c1) / (2.0 * c2)
         if level <= 0.0:
-            u[s, 0] = 0.0
-            u[s, 1] = 0.0
-            u[s, 2] = 0.0
             continue
-        ramp = level < 1.0
-        if not ramp:
-            level = 1.0
         conj += ny * level - c1 * level - c2 * level * level  # f*(y) = yᵀũ − f(ũ)
-        h0 = y0 / ny
-        h1 = y1 / ny
-        h2 = y2 / ny
-        u[s, 0] = level * h0
-        u[s, 1] = level * h1
-        u[s, 2] = level * h2
         iso = level / ny
         rad = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
         for i in range(6):

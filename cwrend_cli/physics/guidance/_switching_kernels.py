@@ -47,7 +47,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit, types
+from numba import njit, typeof, types
 
 from cwrend_cli.physics.guidance import _kernels as kern
 from cwrend_cli.physics.lti_kernels import KernelModel
@@ -452,6 +452,41 @@ def compile_switching_newton() -> None:
     vec = types.float64[::1]
     f, i = types.float64, types.int64
     switching_newton.compile((f, vec, vec, f, f, vec, vec, i, f, f, i, vec))
+
+
+def compile_predicted_length() -> None:
+    """Compile (or load) :func:`predicted_length` for the argument types
+    :func:`switching_newton` calls it with; runs nothing.
+
+    A campaign's first run compiles it with the dual ascent
+    (:func:`compile_newton_ascent`), before the second process compiling
+    :func:`switching_newton` reaches it: the two processes then finish their
+    halves of the solver about together (issue 37 item 12,
+    :func:`cwrend_cli.physics.compiled.compile_ascent`).
+    """
+    vec, mat = types.float64[::1], types.float64[:, ::1]
+    f, i = types.float64, types.int64
+    kinds = types.int64[:, ::1]
+    predicted_length.compile((f, vec, vec, f, f, vec, vec, i, mat, kinds, vec, mat))
+
+
+def compile_newton_ascent(settings_t: tuple[Any, ...]) -> None:
+    """Compile (or load) :func:`._kernels.newton_ascent` for the argument types
+    :func:`bang_bang_ascent` calls it with, CW's mean motion as the model; runs nothing.
+
+    ``settings_t``: the solver's :class:`._kernels.NewtonSettings` as the plain
+    tuple :func:`bang_bang_ascent` takes (only its types matter). The dual
+    ascent is the longest chain of the solver's compile (the ascent, its start
+    selection, the dual evaluation, its breakpoints, the switching times): a
+    campaign's first run compiles it first while a second process compiles
+    :func:`switching_newton` (issue 37 item 12,
+    :func:`cwrend_cli.physics.compiled.compile_ascent`).
+    """
+    vec, mat = types.float64[::1], types.float64[:, ::1]
+    f, i = types.float64, types.int64
+    settings = typeof(settings_t)  # type: ignore[no-untyped-call]
+    sig = (f, vec, vec, f, f, f, mat, vec, vec, i, settings, vec)
+    kern.newton_ascent.compile(sig)
 
 
 @njit(cache=True)

@@ -48,7 +48,13 @@ and meets the test: **the first program is the last** whenever it needs no
 slack, leaves every node's mode as it found it and its own chord bound holds
 (a warm re-solve, from the previous plan shifted to the current step, nearly
 always: one iteration in 776 of the 780 re-solves of seeds 0–4 of
-campaigns/safe_approach.toml, MTF architectures).
+campaigns/safe_approach.toml, MTF architectures). A turning body's SCP
+(``motion``, issue 34) also stops with a slack, once the slack is settled (within
+:data:`SCP_TOL_KM` of the previous iterate's): next to a moving port the
+tightened corridor rows of the last nodes cannot all hold, the slack is the same
+at every iterate, and more iterations only repeat the program
+(docs/guide/tumbling-target.md, *The cost of a turning set*). A fixed target keeps
+the rule above (its plans are pinned bit for bit).
 
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
@@ -71,6 +77,25 @@ no higher, and the whole program's optimum is unique in the controls, which
 fix the states), so every iterate keeps the safety argued above. In
 campaigns/safe_approach.toml a re-solve's program has path rows on about the
 last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
+
+**Solvers.** Where the quadratic weight max(ε, ρ) is at least
+:data:`.convex.DUAL_MIN_WEIGHT` (every adaptive re-solve), each SCP program is
+first given to the projected dual Newton solver of :mod:`.path_dual` (numba),
+whole: the terminal rows, every kept half-space row, the trust rows of every
+constrained node and the abort rows; a corridor cone the answer breaks adds its
+supporting plane at that point (a cut the cone implies) and the program is
+solved again (:data:`CONE_ROUNDS`). Its answer is the Lagrangian's minimiser,
+accepted only when it is certified optimal for the whole program
+(:func:`_dual_solve`): every row within :data:`DUAL_TOL_KM`
+(:data:`DUAL_TOL_KM_S` on the terminal velocity), every row with a positive
+multiplier within it of equality, every corridor cone held, and the path and
+abort multipliers summing below their slack's price (so the exact penalty keeps
+its slack at 0). Otherwise Clarabel solves the program as below (counted in
+``ConstrainedPlan.fallbacks``); ``plan(solver="clarabel")`` uses Clarabel only.
+The two agree to the solvers' tolerances (``tests/test_path_dual.py``). The
+dual solver starts from the row multipliers of the previous SCP iteration, or
+of the plan the re-solve replaces (``warm_duals``, :func:`shift_duals`), else
+from the half-space rows the previous iterate touches (:func:`_guess_active`).
 
 **Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
 free drift from every keep-out node (the corridor nodes of the final approach,
@@ -110,7 +135,7 @@ import math
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import clarabel
 import numpy as np
@@ -119,7 +144,7 @@ import scipy.sparse as sp
 from cwrend_cli.physics import abort_safety as ab
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
-from cwrend_cli.physics.guidance import convex, feasibility
+from cwrend_cli.physics.guidance import convex, feasibility, path_dual
 from cwrend_cli.physics.guidance.results import SolveStatus
 
 __all__ = [
@@ -171,6 +196,16 @@ ABORT_ROUNDS = 4
 _CORRIDOR, _KEEP_OUT, _BOTH = 1, 2, 3
 
 
+class Duals(NamedTuple):
+    """The row multipliers of a plan's last program when the dual solver answered it:
+    ``codes`` (M,) int64 (node, kind and key of each row, :func:`_dual_rows`) and their
+    ``values`` (M,) [scaled cost per scaled row]; the next re-solve's warm start
+    (:func:`shift_duals`)."""
+
+    codes: np.ndarray
+    values: np.ndarray
+
+
 @dataclass(frozen=True)
 class ConstrainedPlan:
     """The answer of :func:`plan`.
@@ -191,6 +226,8 @@ class ConstrainedPlan:
     solver_iterations: int
     wall_time_s: float
     abort_slack_km: float = 0.0  # the abort rows' softening (0: every drift covered) [km]
+    fallbacks: int = 0  # programs the dual solver left to Clarabel (module docstring) [-]
+    duals: Duals | None = None  # the last program's row multipliers (dual solver only)
 
 
 def node_positions(
@@ -458,11 +495,328 @@ class _Subproblem:
     trust_km: float
     motion: cg.BodyMotion | None = None
     abort_rows: ab.AbortRows | None = None
+    first_order: bool = True  # try the dual solver (:func:`_dual_solve`) before Clarabel
+    warm_duals: Duals | None = None  # its starting multipliers (:func:`_warm_multipliers`)
+
+
+@dataclass(frozen=True)
+class _DualSolution:
+    """What :func:`plan` reads of a program's solution when the dual solver answered:
+    its scaled cost and (last entry of ``x``) the abort slack, zero."""
+
+    obj_val: float
+    x: np.ndarray
+    duals: Duals
+    status: Any = None
+
+
+#: Tolerance of every row of the dual solver: the terminal state within 1e-12 km and
+#: 1e-15 km/s (the unconstrained ascent's, :data:`.convex._NEWTON`), every path, trust and
+#: abort row within 1e-12 km (a thousandth of Clarabel's feasibility, which reaches ~1e-9
+#: km on these programs) [km, km/s].
+DUAL_TOL_KM = 1e-9
+DUAL_TOL_KM_S = 1e-12
+
+
+#: A row's code for carrying its multiplier to the next program: node × _CODE_NODE +
+#: kind × _CODE_KIND + key (terminal and trust rows: their component 0 … 5; half-space
+#: rows: (node − the plane's node) + 2 × ellipsoid; abort rows: none, key 999).
+_CODE_NODE, _CODE_KIND = 1 << 20, 1 << 16
+
+
+def _dual_rows(
+    sub: _Subproblem,
+    pairs: np.ndarray,
+    row_scale: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
+    """The linear rows of the program of ``sub`` (module docstring; the corridor cones
+    aside, and of the trust rows only those of ``box``: (nodes, components) of
+    :func:`_trust_rows`) for :func:`.path_dual.solve`, sorted by node, each row's kind
+    (0 terminal, 1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows
+    scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`)."""
+    steps = sub.modes.size - 1
+    s_p = float(row_scale[0])
+    nodes, coeffs, offsets, tol, kinds, keys = [], [], [], [], [], []
+    # terminal state: x_N = x_f
+    nodes.append(np.full(6, steps))
+    coeffs.append(np.diag(row_scale))
+    offsets.append(row_scale * sub.xf)
+    tol.append(row_scale * np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)])
+    kinds.append(np.zeros(6, np.int64))
+    keys.append(np.arange(6))
+    if pairs.size:  # nᵀ r_k ≥ offset
+        normals, offs = _planes(sub.half_spaces, pairs, sub.motion)
+        nodes.append(pairs[:, 0])
+        coeffs.append(np.hstack([normals, np.zeros_like(normals)]) * s_p)
+        offsets.append(offs * s_p)
+        tol.append(np.full(pairs.shape[0], DUAL_TOL_KM * s_p))
+        kinds.append(np.ones(pairs.shape[0], np.int64))
+        keys.append(pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2])
+    if box[0].size:  # the trust rows given (:func:`_trust_rows`)
+        t_node, t_coeffs, t_offsets, _ = _trust_rows(sub, box[0], box[1], s_p)
+        nodes.append(t_node)
+        coeffs.append(t_coeffs)
+        offsets.append(t_offsets)
+        tol.append(np.full(t_node.size, DUAL_TOL_KM * s_p))
+        kinds.append(np.full(t_node.size, 2, np.int64))
+        keys.append(box[1])
+    if sub.abort_rows is not None and sub.abort_rows.nodes.size:  # cᵀ x_k ≥ o
+        count = sub.abort_rows.nodes.size
+        nodes.append(sub.abort_rows.nodes)
+        coeffs.append(sub.abort_rows.coeffs * s_p)
+        offsets.append(sub.abort_rows.offsets_km * s_p)
+        tol.append(np.full(count, DUAL_TOL_KM * s_p))
+        kinds.append(np.full(count, 3, np.int64))
+        keys.append(np.full(count, 999))
+    node = np.concatenate(nodes).astype(np.int64)
+    order = np.argsort(node, kind="stable")
+    kind = np.concatenate(kinds)[order]
+    code = node[order] * _CODE_NODE + kind * _CODE_KIND + np.concatenate(keys)[order]
+    rows = path_dual.DualRows(
+        node[order],
+        np.ascontiguousarray(np.concatenate(coeffs)[order]),
+        np.concatenate(offsets)[order],
+        kind == 0,
+        np.concatenate(tol)[order],
+    )
+    return rows, kind, code
+
+
+def _trust_rows(
+    sub: _Subproblem, nodes: np.ndarray, comps: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Trust rows of ``sub`` at ``nodes`` (M,), component ``comps`` (M,) 0 … 5: (nodes,
+    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``. Component
+    i < 3: ``r_k,i ≥ r̄_k,i − T``; i ≥ 3: ``−r_k,i−3 ≥ −r̄_k,i−3 − T`` (T the trust radius)."""
+    sign = np.where(comps < 3, 1.0, -1.0)
+    axis = comps % 3
+    coeffs = np.zeros((nodes.size, 6))
+    coeffs[np.arange(nodes.size), axis] = sign * scale
+    offsets = (sign * sub.r_bar[nodes, axis] - sub.trust_km) * scale
+    return nodes, coeffs, offsets, nodes * _CODE_NODE + 2 * _CODE_KIND + comps
+
+
+def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The trust rows that the positions ``r`` (N + 1, 3) break by more than
+    :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
+    the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
+    boxed = np.flatnonzero(sub.modes > 0)
+    d = r[boxed] - sub.r_bar[boxed]
+    broken = np.hstack([d, -d]) < -(sub.trust_km + DUAL_TOL_KM)
+    at, comp = np.nonzero(broken)
+    return boxed[at], comp.astype(np.int64)
+
+
+def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:
+    """The trust rows with a multiplier in the warm start ``sub.warm_duals`` (those the
+    previous program held active), at constrained nodes: (nodes, components)."""
+    warm = sub.warm_duals
+    if warm is None or warm.codes.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    codes = warm.codes[(warm.codes % _CODE_NODE) // _CODE_KIND == 2]
+    nodes, comps = codes // _CODE_NODE, codes % _CODE_KIND
+    keep = (nodes < sub.modes.size) & (comps < 6)
+    keep[keep] = sub.modes[nodes[keep]] > 0
+    return nodes[keep], comps[keep]
+
+
+def shift_duals(duals: Duals | None, steps: int) -> Duals | None:
+    """A plan's row multipliers (:attr:`ConstrainedPlan.duals`) for a program that starts
+    ``steps`` nodes later (the next re-solve): each row's node moves back by ``steps``; rows
+    that fall on or before the new start are dropped."""
+    if duals is None:
+        return None
+    codes = duals.codes - steps * _CODE_NODE
+    keep = codes >= _CODE_NODE
+    return Duals(codes[keep], duals.values[keep])
+
+
+def _warm_multipliers(warm: Duals | None, code: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    """Starting multipliers of the rows ``code``: those of ``warm`` where a row has the same
+    code, else ``guess`` (:func:`_guess_active`)."""
+    if warm is None or warm.codes.size == 0:
+        return guess
+    order = np.argsort(warm.codes)
+    sorted_codes = warm.codes[order]
+    at = np.clip(np.searchsorted(sorted_codes, code), 0, sorted_codes.size - 1)
+    hit = sorted_codes[at] == code
+    out = guess.copy()
+    out[hit] = warm.values[order][at[hit]]
+    return out
+
+
+#: A half-space row whose plane passes within this of the previous iterate's node starts
+#: in the dual solver's working set (a plan that touches the zone lies on its planes, and
+#: the next linearisation's plane passes through it to second order) [km].
+GUESS_KM = 1e-3
+
+
+def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
+    """Starting multipliers of the dual solver: a positive speck (1e-300: it only marks the
+    row as in the working set) on the half-space rows that the previous iterate ``r_bar``
+    nearly touches (within :data:`GUESS_KM`), one per run of consecutive such nodes (the
+    closest: a state constraint touched over a stretch is held by a few of its rows);
+    zero elsewhere."""
+    y = np.zeros(rows.nodes.size)
+    hs = np.flatnonzero(kind == 1)
+    if hs.size == 0:
+        return y
+    residual = (
+        np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
+    ) / np.linalg.norm(rows.coeffs[hs, :3], axis=1)
+    close = hs[residual <= GUESS_KM]
+    if close.size == 0:
+        return y
+    y[close] = 1e-300
+    return y
+
+
+#: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
+CONE_ROUNDS = 6
+#: Rounds of trust rows added lazily (those an answer breaks) before the dual solver writes
+#: every trust row (:func:`_dual_solve`) [-].
+TRUST_ROUNDS = 3
+
+
+def _cone_cuts(
+    sub: _Subproblem, r: np.ndarray, scale: float, key: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cuts of the corridor cones that ``r`` (N + 1, 3) breaks: (nodes, coeffs (M, 6),
+    offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``, code key ``key``.
+
+    At a corridor node whose position breaks its (tightened) cone ``‖Aρ + b‖ ≤ cᵀρ + d``
+    by more than :data:`DUAL_TOL_KM`, with w = Aρ + b and ŵ = w/‖w‖: ``ŵᵀ(Aρ + b) ≤ cᵀρ
+    + d``, i.e. ``(c − Aᵀŵ)ᵀρ ≥ ŵᵀb − d``. The cone implies it (‖w‖ ≥ ŵᵀw for any
+    unit ŵ), so a program with cuts is a relaxation of the one with cones (Kelley's
+    cutting planes); ρ = R_kᵀ r with ``motion``.
+    """
+    nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
+    rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
+    out_nodes, coeffs, offsets = [], [], []
+    for i, k in enumerate(nodes.tolist()):
+        a, b, c, d = cg.corridor_cone(sub.geo, float(sub.margins_km[k])).rows()
+        w = a @ rho[i] + b
+        size = float(np.linalg.norm(w))
+        if float(c @ rho[i]) + d - size >= -DUAL_TOL_KM:
+            continue
+        w_hat = w / size if size > 0.0 else np.zeros(3)
+        normal = c - a.T @ w_hat
+        if sub.motion is not None:
+            normal = sub.motion.rotation[k] @ normal
+        out_nodes.append(k)
+        coeffs.append(np.r_[normal, np.zeros(3)] * scale)
+        offsets.append((float(w_hat @ b) - d) * scale)
+    m = len(out_nodes)
+    node = np.array(out_nodes, dtype=np.int64)
+    code = node * _CODE_NODE + 4 * _CODE_KIND + key
+    return node, np.array(coeffs).reshape(m, 6), np.array(offsets), code
+
+
+def _motion_at(motion: cg.BodyMotion, nodes: np.ndarray) -> cg.BodyMotion:
+    """``motion`` at ``nodes`` only (its rotations; what :func:`.constraints.to_body` reads)."""
+    return motion._replace(rotation=motion.rotation[nodes])
+
+
+def _with_rows(
+    rows: path_dual.DualRows,
+    kind: np.ndarray,
+    code: np.ndarray,
+    cuts: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tol: float,
+    cut_kind: int = 4,
+) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
+    """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts` or
+    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again."""
+    node, coeffs, offsets, cut_code = cuts
+    nodes = np.r_[rows.nodes, node]
+    order = np.argsort(nodes, kind="stable")
+    merged = path_dual.DualRows(
+        nodes[order],
+        np.ascontiguousarray(np.vstack([rows.coeffs, coeffs])[order]),
+        np.r_[rows.offsets, offsets][order],
+        np.r_[rows.equality, np.zeros(node.size, dtype=bool)][order],
+        np.r_[rows.tol, np.full(node.size, tol)][order],
+    )
+    return merged, np.r_[kind, np.full(node.size, cut_kind)][order], np.r_[code, cut_code][order]
+
+
+def _dual_solve(
+    sub: _Subproblem, pairs: np.ndarray
+) -> tuple[_DualSolution, int, tuple[np.ndarray, np.ndarray, float]] | tuple[None, int, None]:
+    """The whole program of ``sub`` by the projected dual Newton method of
+    :mod:`.path_dual` (module docstring, *Solvers*): (solution, iterations, (controls, states,
+    slack 0)), or (None, iterations, None) when its answer is not certified optimal for the
+    whole program (not converged, a corridor cone still broken after :data:`CONE_ROUNDS`
+    rounds of cuts (:func:`_cone_cuts`), or a path or abort multiplier sum above its
+    slack's price: then the program needs its slack) — Clarabel then solves it.
+
+    The trust box enters lazily: the program starts with the trust rows the warm start
+    holds active (:func:`_warm_trust`); the rows an answer breaks (:func:`_broken_trust`)
+    are added and the program solved again, warm, and after :data:`TRUST_ROUNDS` such
+    rounds every trust row is written. An answer that holds every trust row it left out
+    (with multiplier 0) meets the whole program's KKT conditions: the same answer."""
+    steps = sub.modes.size - 1
+    g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
+    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub))
+    weight = max(float(sub.eps), convex.REGULARISATION)
+    warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
+    s_p = float(g.row_scale[0])
+    used = 0
+    cone_rounds = trust_rounds = 0
+    retried = sub.warm_duals is None
+    while True:
+        ans = path_dual.solve(
+            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
+        )
+        used += ans.iterations
+        if not ans.converged and not retried:  # the warm start failed: once from the guess
+            retried = True
+            ans = path_dual.solve(
+                sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
+                _guess_active(rows, kind, sub.r_bar),
+            )  # fmt: skip
+            used += ans.iterations
+        if not ans.converged:
+            return None, used, None
+        path = (kind == 1) | (kind == 4)
+        if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
+            return None, used, None
+        if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+            return None, used, None
+        cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
+        box = _broken_trust(sub, ans.states[:, :3])
+        if cuts[0].size == 0 and box[0].size == 0:
+            active = ans.multipliers != 0.0
+            duals = Duals(code[active], ans.multipliers[active])
+            return (
+                _DualSolution(ans.cost, np.zeros(1), duals),
+                used,
+                (ans.controls, ans.states, 0.0),
+            )
+        known = Duals(code, ans.multipliers)
+        if cuts[0].size:
+            if cone_rounds == CONE_ROUNDS:
+                return None, used, None
+            cone_rounds += 1
+            rows, kind, code = _with_rows(rows, kind, code, cuts, DUAL_TOL_KM * s_p)
+        if box[0].size:
+            trust_rounds += 1
+            if trust_rounds > TRUST_ROUNDS:  # every trust row not yet written
+                boxed = np.flatnonzero(sub.modes > 0)
+                box = (np.repeat(boxed, 6), np.tile(np.arange(6), boxed.size))
+            trust = _trust_rows(sub, box[0], box[1], s_p)
+            new = ~np.isin(trust[3], code)
+            if not np.any(new) and cuts[0].size == 0:  # broken though written: not certified
+                return None, used, None
+            trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
+            rows, kind, code = _with_rows(rows, kind, code, trust, DUAL_TOL_KM * s_p, 2)
+        warm = _warm_multipliers(known, code, np.zeros(code.size))
 
 
 def _reduced_solve(
     sub: _Subproblem, reduce: bool = True
-) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None]:
+) -> tuple[Any, int, tuple[np.ndarray, np.ndarray, float] | None, int]:
     """One SCP iteration's program, solved reduced (module docstring, *Reductions*):
     (Clarabel's last solution, its iterations summed, (controls [km/s²], states,
     slack [km]) or None when unsolved).
@@ -485,7 +839,16 @@ def _reduced_solve(
     thrust = _thrust_guess(u_bar, u_max, eps)
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
-    used = 0
+    used, fallback = 0, 0
+    if (
+        reduce
+        and sub.first_order
+        and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT
+    ):
+        dual, used, dual_answer = _dual_solve(sub, pairs)
+        if dual is not None:
+            return dual, used, dual_answer, 0
+        fallback = 1
     for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
         if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
             first, thrust = 1, np.arange(steps)
@@ -493,14 +856,14 @@ def _reduced_solve(
         used += iterations
         if not feasibility.solved(sol):
             if thrust.size == steps:
-                return sol, used, None
+                return sol, used, None, fallback
             thrust = np.arange(steps)  # the held steps may be why: free them
             continue
         u, x, slack = _answer(n, dt_s, u_max, x0, sol, steps, first, thrust)
         broken = _broken_rows(x, r_bar, modes, first, half_spaces, dropped, trust_km, slack, motion)
         wake = _coasting_broken(n, dt_s, u_max, x0, xf, eps, sol, steps, first, thrust)
         if attempt == REDUCED_ROUNDS or (broken.size == 0 and wake.size == 0):
-            return sol, used, (u, x, slack)
+            return sol, used, (u, x, slack), fallback
         if broken.size:
             first = min(first, int(broken[0]))
             back = (dropped[:, 0] >= first) | np.isin(dropped[:, 0], broken)
@@ -850,6 +1213,8 @@ def plan(
     reduce: bool = True,
     motion: cg.BodyMotion | None = None,
     abort_safe_s: float | None = None,
+    solver: str = "auto",
+    warm_duals: Duals | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
@@ -862,7 +1227,15 @@ def plan(
     against; module docstring, *Reductions*). ``motion`` (a tumbling target,
     issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
     ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
+    ``solver``: ``"auto"`` tries the dual solver of :mod:`.path_dual` on every program
+    whose quadratic weight is at least :data:`.convex.DUAL_MIN_WEIGHT`, Clarabel on the
+    others and whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
+    (module docstring, *Solvers*). ``warm_duals``: the dual solver's starting multipliers,
+    an earlier plan's :attr:`ConstrainedPlan.duals` moved to this grid by
+    :func:`shift_duals`.
     """
+    if solver not in ("auto", "clarabel"):
+        raise ValueError(f"solver must be 'auto' or 'clarabel', not {solver!r}")
     start = time.perf_counter()
     steps = max(1, round(horizon_s / dt_s))
     x0 = np.asarray(x0, dtype=np.float64)
@@ -901,7 +1274,8 @@ def plan(
             time.perf_counter() - start,
         )
     result = failed
-    cost = math.inf
+    cost, last_slack = math.inf, math.inf
+    fallbacks = 0
     drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
     for scp in range(1, SCP_MAX_ITER + 1):
         margins = _node_margins(
@@ -918,10 +1292,12 @@ def plan(
                 rows = ab.rows_of(axes, drift, chords)
             sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
-                half_spaces, trust, motion, rows,
+                half_spaces, trust, motion, rows, solver == "auto", warm_duals,
             )  # fmt: skip
-            sol, iterations, answer = _reduced_solve(sub, reduce)
+            sol, iterations, answer, fell_back = _reduced_solve(sub, reduce)
             used += iterations
+            fallbacks += fell_back
+            warm_duals = sol.duals if isinstance(sol, _DualSolution) else None
             if rows is None or answer is None:
                 break
             assert chords is not None and drift is not None and axes is not None
@@ -943,6 +1319,7 @@ def plan(
                 scp,
                 used,
                 time.perf_counter() - start,
+                fallbacks=fallbacks,
             )
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
@@ -967,12 +1344,20 @@ def plan(
             used,
             time.perf_counter() - start,
             abort_slack if abort_slack > SLACK_TOL_KM else 0.0,
+            fallbacks,
+            warm_duals,
         )
         x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
         cost = float(sol.obj_val)
         settled = settled and result.abort_slack_km == 0.0
-        if settled and slack == 0.0 and np.array_equal(new_modes, modes) and bound_ok:
+        # a turning body's slack that the iterates no longer change is the linearised set's
+        # own: more iterations would not remove it (module docstring, Iterations)
+        slack_settled = slack == 0.0 or (
+            motion is not None and abs(slack - last_slack) <= SCP_TOL_KM
+        )
+        last_slack = slack
+        if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
     return result

@@ -1,0 +1,509 @@
+"""A projected dual Newton solver for the smoothed minimum-fuel program with linear path rows.
+
+Issue 32: the constrained cone program's SCP subproblem at adaptive ε (quadratic
+weight ``c₂ = max(ε, ρ) ≥ 1e-3``). The program, in the scaled controls
+``ũ_j = u_j/u_max`` (N × 3) on the zero-order-hold grid (exact CW dynamics,
+paper Eq. 11: ``x_k = Φᵏ x₀ + Σ_{j<k} Φ^{k−1−j} Γ u_max ũ_j``):
+
+    ``min Σ_j c₁‖ũ_j‖ + c₂‖ũ_j‖²``  s.t. ``‖ũ_j‖ ≤ 1``,
+    ``g_iᵀ x_{k_i} = f_i`` (equality rows: the terminal state),
+    ``g_iᵀ x_{k_i} ≥ f_i`` (inequality rows: keep-out half-spaces, trust box, abort rows),
+
+``c₁ = 1 − ε``. It is the program of :mod:`.convex` (whose dual ascent,
+:mod:`._grid_kernels`, is this solver's special case with the six terminal rows
+only) with any number of rows, each a linear function of one node's state.
+
+**Dual.** With ``L = Σ f(ũ_j) − Σ_i y_i (g_iᵀ x_{k_i} − f_i)`` (``y_i ≥ 0`` on
+inequality rows) and ``A_j = Φ^{N−1−j} Γ u_max`` (the terminal blocks), a row
+at node k acts on ũ_j (j < k) through ``g_iᵀ Φ^{k−1−j} Γ u_max = h_iᵀ A_j`` with
+``h_i = (Φ^{k−N})ᵀ g_i``. So each step minimises ``f(ũ) − (A_jᵀ λ_j)ᵀ ũ`` with
+the piecewise-constant ``λ_j = Σ_{i: k_i > j} y_i h_i`` — in closed form, the
+smoothed law of paper Eq. 10 on the grid (:mod:`._grid_kernels`): ``ũ_j = a_j ŷ_j``,
+``a_j = clip((‖y_j‖ − c₁)/(2c₂), 0, 1)``, ``y_j = A_jᵀ λ_j``. The dual function
+``D(y) = yᵀ f' − Σ_j f*(y_j)`` (``f'_i = f_i − g_iᵀ Φ^{k_i} x₀``) is concave with
+gradient ``f'_i − h_iᵀ Σ_{j<k_i} A_j ũ_j`` (the row's residual, negated) and
+Hessian ``−h_aᵀ Q_{min(k_a,k_b)} h_b``, ``Q_k = Σ_{j<k} A_j J_j A_jᵀ``,
+``J_j = ∂ũ_j/∂y_j`` (prefix sums: one pass over the steps whatever the rows).
+
+**Method.** ``max D`` over ``y`` with ``y_i ≥ 0`` on inequality rows by the
+projected Newton method of Bertsekas (1982, "Projected Newton methods for
+optimization problems with simple constraints", SIAM J. Control Optim. 20(2)):
+the inequality rows near their bound whose gradient points outward take a
+scaled-gradient step, the others a Levenberg–Marquardt Newton step; a row the
+Newton step would take below 0 is set to 0 and the step solved again for the
+others (a primal–dual active-set step, :func:`_blocking_step`); violated rows
+join the free set, :data:`ENTER` at a time and the most violated first, once the
+free rows are within :data:`SETTLED` tolerances; an Armijo search along the
+projection arc, or a full step that leaves ``D`` flat to rounding and reduces
+the free rows' residuals (two nearly parallel rows of neighbouring nodes make
+``D`` almost flat along their difference). **Certificate:** it stops only when
+``ũ(y)`` — the Lagrangian's minimiser, so stationary by construction — meets
+every equality row within its tolerance, every inequality row within its
+tolerance, and every row with ``y_i > 0`` within its tolerance of equality
+(complementarity); with ``c₂ > 0`` these KKT conditions make ``ũ(y)`` the
+program's unique minimiser (to the tolerances). Otherwise the status is
+failed and the caller solves the program with Clarabel (its reference).
+
+Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
+tolerances in the same scaled units).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
+from cwrend_cli.physics.guidance._grid_kernels import step_law
+from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
+
+__all__ = ["ENTER", "MAX_ITER", "DualAnswer", "DualRows", "solve"]
+
+#: Newton iterations at most [-] (median 39 over the re-solves of seeds 0–1 of
+#: campaigns/safe_approach.toml, MTF adaptive: 60 left 32 of 79 programs to Clarabel, 150
+#: left 22; docs/solvers.md).
+MAX_ITER = 150
+#: Violated inequality rows that may join the free set in one iteration, the most violated
+#: first [-] (a cold plan that crosses the zone violates the rows of tens of nodes, nearly
+#: dependent on one another; a handful at a time keeps the Newton system small and well
+#: posed).
+ENTER = 4
+#: Violated rows join once every free row is within this multiple of its tolerance [-]
+#: (the working set need not be solved to the last digit before it grows).
+SETTLED = 1e3
+_ARMIJO = 1e-4
+_HALVINGS = 4
+_DAMPING_TRIES = 40
+
+
+class DualRows(NamedTuple):
+    """Rows ``g_iᵀ x_{k_i} (= or ≥) f_i`` of the program, sorted by node.
+
+    ``nodes`` (R,) int64 in 1 … N; ``coeffs`` (R, 6) g_i; ``offsets`` (R,) f_i;
+    ``equality`` (R,) bool; ``tol`` (R,) each row's tolerance; all in the
+    caller's scaled units (a row and its tolerance multiplied by one factor).
+    """
+
+    nodes: np.ndarray
+    coeffs: np.ndarray
+    offsets: np.ndarray
+    equality: np.ndarray
+    tol: np.ndarray
+
+
+class DualAnswer(NamedTuple):
+    """``converged``; ``controls`` (N, 3) [km/s²]; ``states`` (N + 1, 6); ``multipliers``
+    (R,) of the rows (≥ 0 on inequality rows; in the rows' scaled units); ``cost`` the
+    scaled cost ``Σ c₁‖ũ‖ + c₂‖ũ‖²``; ``iterations`` the Newton iterations."""
+
+    converged: bool
+    controls: np.ndarray
+    states: np.ndarray
+    multipliers: np.ndarray
+    cost: float
+    iterations: int
+
+
+@njit(cache=True)
+def _evaluate(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    y: np.ndarray,
+    c1: float,
+    c2: float,
+    u: np.ndarray,
+    curv: np.ndarray,
+    grad: np.ndarray,
+) -> float:
+    """``D(y)``; writes ``ũ(y)`` (N, 3), the gradient (R,) and per step the curvature
+    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring)."""
+    steps = a.shape[0]
+    count = nodes.size
+    lam = np.zeros(6)
+    p = count - 1
+    conj = 0.0
+    for j in range(steps - 1, -1, -1):
+        while p >= 0 and nodes[p] > j:
+            if y[p] != 0.0:
+                for i in range(6):
+                    lam[i] += y[p] * h[p, i]
+            p -= 1
+        ny, level, ramp, h0, h1, h2 = step_law(a, j, lam, c1, c2, u)
+        if level <= 0.0:
+            curv[j, 0] = 0.0
+            curv[j, 1] = 0.0
+            continue
+        conj += ny * level - c1 * level - c2 * level * level
+        iso = level / ny
+        curv[j, 0] = iso
+        curv[j, 1] = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
+        for i in range(6):
+            curv[j, 2 + i] = a[j, i, 0] * h0 + a[j, i, 1] * h1 + a[j, i, 2] * h2
+    s = np.zeros(6)
+    p = 0
+    value = 0.0
+    for j in range(steps):
+        for i in range(6):
+            s[i] += a[j, i, 0] * u[j, 0] + a[j, i, 1] * u[j, 1] + a[j, i, 2] * u[j, 2]
+        while p < count and nodes[p] == j + 1:
+            acc = 0.0
+            for i in range(6):
+                acc += h[p, i] * s[i]
+            grad[p] = f[p] - acc
+            value += y[p] * f[p]
+            p += 1
+    return value - conj
+
+
+@njit(cache=True)
+def _hessian(
+    aat: np.ndarray,
+    h: np.ndarray,
+    nodes: np.ndarray,
+    curv: np.ndarray,
+    free: np.ndarray,
+    n_free: int,
+    out: np.ndarray,
+) -> None:
+    """``−H`` on the rows ``free[:n_free]`` (sorted by node): ``h_aᵀ Q_{min(k_a,k_b)} h_b``."""
+    q = np.zeros((6, 6))
+    qh = np.empty((n_free, 6))  # Q_{k_a} h_a
+    p = 0
+    last = nodes[free[n_free - 1]]
+    for j in range(last):
+        iso = curv[j, 0]
+        rad = curv[j, 1]
+        if iso != 0.0 or rad != 0.0:  # the upper triangle (Q is symmetric)
+            for r in range(6):
+                ar = rad * curv[j, 2 + r]
+                for c in range(r, 6):
+                    q[r, c] += iso * aat[j, r, c] + ar * curv[j, 2 + c]
+        while p < n_free and nodes[free[p]] == j + 1:
+            row = free[p]
+            for r in range(6):
+                acc = 0.0
+                for c in range(6):
+                    acc += (q[r, c] if r <= c else q[c, r]) * h[row, c]
+                qh[p, r] = acc
+            p += 1
+    for a_ in range(n_free):
+        for b_ in range(a_, n_free):  # k_a ≤ k_b: Q_{min} = Q_{k_a}
+            acc = 0.0
+            for c in range(6):
+                acc += qh[a_, c] * h[free[b_], c]
+            out[a_, b_] = acc
+            out[b_, a_] = acc
+
+
+@njit(cache=True)
+def _fill_metric(
+    gram: np.ndarray, h: np.ndarray, nodes: np.ndarray, i: int, metric: np.ndarray
+) -> float:
+    """Row i's Levenberg–Marquardt metric ``h_iᵀ G_{k_i} h_i`` (``gram``: the prefix sums
+    ``G_k = Σ_{j<k} A_j A_jᵀ``), computed the first time a row needs it (floored)."""
+    if metric[i] < 0.0:
+        k = nodes[i]
+        acc = 0.0
+        for r in range(6):
+            for c in range(6):
+                acc += h[i, r] * gram[k, r, c] * h[i, c]
+        metric[i] = max(acc, 1e-300)
+    return float(metric[i])
+
+
+@njit(cache=True)
+def _merit(grad: np.ndarray, free: np.ndarray, n_free: int, tol: np.ndarray) -> float:
+    """``Σ (g_i/tol_i)²`` over the free rows: what a Newton step on them reduces."""
+    total = 0.0
+    for p in range(n_free):
+        total += (grad[free[p]] / tol[free[p]]) ** 2
+    return total
+
+
+@njit(cache=True)
+def _kkt_error(
+    y: np.ndarray, grad: np.ndarray, equality: np.ndarray, tol: np.ndarray
+) -> tuple[bool, int]:
+    """(every row within its tolerance, the most violated inequality row at 0 or −1)."""
+    ok = True
+    worst = -1
+    worst_v = 0.0
+    for i in range(y.size):
+        g = grad[i]
+        if equality[i] or y[i] > 0.0:
+            if abs(g) > tol[i]:
+                ok = False
+        elif g > tol[i]:
+            ok = False
+            if g / tol[i] > worst_v:
+                worst_v = g / tol[i]
+                worst = i
+    return ok, worst
+
+
+@njit(cache=True)
+def _blocking_step(
+    hess: np.ndarray,
+    mat: np.ndarray,
+    g_f: np.ndarray,
+    y: np.ndarray,
+    free: np.ndarray,
+    n_free: int,
+    equality: np.ndarray,
+    step: np.ndarray,
+) -> bool:
+    """The Newton step on the free rows (``mat``: ``−H`` damped), with every inequality row
+    whose multiplier the step would take below 0 sent to 0 and the step solved again for
+    the others given that move (a primal–dual active-set step: a row that leaves does so
+    in one iteration). False if a system is not positive definite."""
+    kept = np.ones(n_free, dtype=np.bool_)
+    for _round in range(n_free):
+        idx = np.flatnonzero(kept)
+        m = idx.size
+        sub = np.empty((m, m))
+        rhs = np.empty(m)
+        for r in range(m):
+            acc = g_f[idx[r]]
+            for q in range(n_free):
+                if not kept[q]:  # d_q = −y_q moves the model's gradient by M_rq y_q
+                    acc += hess[idx[r], q] * y[free[q]]
+            rhs[r] = acc
+            for c in range(m):
+                sub[r, c] = mat[idx[r], idx[c]]
+        out = np.empty(m)
+        if not _cholesky_solve(sub, rhs, out):
+            return False
+        for q in range(n_free):
+            if not kept[q]:
+                step[q] = -y[free[q]]
+        for r in range(m):
+            step[idx[r]] = out[r]
+        blocked = False
+        for r in range(m):
+            q = idx[r]
+            if not equality[free[q]] and y[free[q]] + out[r] < 0.0:
+                kept[q] = False
+                blocked = True
+        if not blocked:
+            return True
+    return True
+
+
+@njit(cache=True)
+def projected_newton(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    equality: np.ndarray,
+    tol: np.ndarray,
+    metric: np.ndarray,
+    c1: float,
+    c2: float,
+    y: np.ndarray,
+    u: np.ndarray,
+    max_iter: int,
+    enter: int,
+) -> tuple[int, int]:
+    """Maximise ``D`` over ``y`` (inequality entries ≥ 0) from ``y`` in place; writes ``ũ``.
+
+    Returns ``(status, iterations)``: ``STATUS_CONVERGED`` when the KKT
+    conditions hold to ``tol`` (module docstring), else ``STATUS_FAILED``.
+    ``metric`` (R,): the Levenberg–Marquardt metric ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` of
+    each row, negative where not yet computed (filled as rows need it).
+    """
+    steps = a.shape[0]
+    count = nodes.size
+    aat = np.empty((steps, 6, 6))
+    for j in range(steps):
+        for r in range(6):
+            for c in range(6):
+                aat[j, r, c] = (
+                    a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[j, c, 2]
+                )
+    gram = np.zeros((steps + 1, 6, 6))
+    for j in range(steps):
+        for r in range(6):
+            for c in range(6):
+                gram[j + 1, r, c] = gram[j, r, c] + aat[j, r, c]
+    for i in range(count):
+        if not equality[i] and y[i] < 0.0:
+            y[i] = 0.0
+    curv = np.empty((steps, 8))
+    grad = np.empty(count)
+    u_t = np.empty((steps, 3))
+    curv_t = np.empty((steps, 8))
+    grad_t = np.empty(count)
+    y_t = np.empty(count)
+    free = np.empty(count, dtype=np.int64)
+    bound = np.empty(count, dtype=np.int64)
+    in_free = np.zeros(count, dtype=np.bool_)
+    value = _evaluate(a, h, f, nodes, y, c1, c2, u, curv, grad)
+    damping = 0.0
+    for it in range(max_iter + 1):
+        ok, _ = _kkt_error(y, grad, equality, tol)
+        if ok:
+            return STATUS_CONVERGED, it
+        if it == max_iter:
+            break
+        # free set: equality rows, inequality rows away from their bound or violated
+        # (at most ``enter`` of the violated rows at 0 join, the most violated first)
+        n_free = 0
+        n_bound = 0
+        settled = True  # the rows already free hold: only then may violated rows join
+        # Bertsekas's binding set: positive multipliers within δ (the projected scaled
+        # gradient's size) of 0 whose gradient pushes them there take a scaled-gradient
+        # step instead of a Newton step
+        delta = 0.0
+        for i in range(count):
+            if not equality[i] and y[i] > 0.0:
+                m_i = _fill_metric(gram, h, nodes, i, metric)
+                delta = max(delta, y[i] - max(0.0, y[i] + grad[i] / m_i))
+        for i in range(count):
+            in_free[i] = equality[i] or y[i] > 0.0
+            if in_free[i] and abs(grad[i]) > SETTLED * tol[i]:
+                settled = False
+            if not equality[i] and 0.0 < y[i] <= delta and grad[i] < 0.0:
+                in_free[i] = False
+                bound[n_bound] = i
+                n_bound += 1
+        for _e in range(enter if settled else 0):
+            best = -1
+            best_v = 0.0
+            for i in range(count):
+                if not in_free[i] and grad[i] > tol[i] and grad[i] / tol[i] > best_v:
+                    best_v = grad[i] / tol[i]
+                    best = i
+            if best < 0:
+                break
+            in_free[best] = True
+        for i in range(count):
+            if in_free[i]:
+                free[n_free] = i
+                n_free += 1
+                _fill_metric(gram, h, nodes, i, metric)
+        if n_free == 0 and n_bound == 0:
+            break
+        hess = np.empty((n_free, n_free))
+        _hessian(aat, h, nodes, curv, free, n_free, hess)
+        g_f = np.empty(n_free)
+        for p in range(n_free):
+            g_f[p] = grad[free[p]]
+        step = np.empty(n_free)
+        mat = np.empty((n_free, n_free))
+        accepted = False
+        for _try in range(_DAMPING_TRIES):
+            for r in range(n_free):
+                for c in range(n_free):
+                    mat[r, c] = hess[r, c]
+                mat[r, r] += max(damping, 1e-12) * metric[free[r]]
+            # even tries: the blocking step; odd tries (its line search failed): the plain
+            # projected Newton step, same damping; then more damping
+            if _try % 2 == 0:
+                solved = _blocking_step(hess, mat, g_f, y, free, n_free, equality, step)
+            else:
+                solved = _cholesky_solve(mat, g_f, step)
+            if not solved:
+                damping = max(10.0 * damping, 1e-4)
+                continue
+            alpha = 1.0
+            for _ls in range(_HALVINGS):
+                y_t[:] = y
+                gain = 0.0
+                for p in range(n_free):
+                    i = free[p]
+                    y_t[i] = y[i] + alpha * step[p]
+                    if not equality[i] and y_t[i] < 0.0:
+                        y_t[i] = 0.0
+                    gain += grad[i] * (y_t[i] - y[i])
+                for p in range(n_bound):
+                    i = bound[p]
+                    y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
+                    gain += grad[i] * (y_t[i] - y[i])
+                value_t = _evaluate(a, h, f, nodes, y_t, c1, c2, u_t, curv_t, grad_t)
+                if gain > 0.0 and value_t >= value + _ARMIJO * gain:
+                    accepted = True
+                    break
+                # a full step that leaves D flat to rounding (near the optimum, along a
+                # nearly dependent pair of rows) is taken when it reduces the KKT errors
+                flat = alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300)
+                if flat and _merit(grad_t, free, n_free, tol) < _merit(grad, free, n_free, tol):
+                    accepted = True
+                    break
+                alpha *= 0.5
+            if accepted:
+                if alpha == 1.0:
+                    damping = 0.0 if damping < 1e-6 else damping * 0.01
+                break
+            if _try % 2 == 1:
+                damping = max(10.0 * damping, 1e-4)
+        if not accepted:
+            break
+        y[:] = y_t
+        u[:, :] = u_t
+        curv[:, :] = curv_t
+        grad[:] = grad_t
+        value = value_t
+    return STATUS_FAILED, it
+
+
+@njit(cache=True)
+def _row_vectors(
+    n: float, dt_s: float, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
+) -> None:
+    """``h_i = (Φ^{k_i−N})ᵀ g_i`` (module docstring), one closed-form Φ a distinct node."""
+    last = -1
+    back = np.eye(6)
+    for i in range(nodes.size):
+        if nodes[i] != last:
+            last = nodes[i]
+            back = stm(n, (last - steps) * dt_s)
+        for c in range(6):
+            acc = 0.0
+            for r in range(6):
+                acc += back[r, c] * coeffs[i, r]
+            out[i, c] = acc
+
+
+def solve(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    blocks: np.ndarray,
+    eps: float,
+    weight: float,
+    rows: DualRows,
+    warm: np.ndarray | None = None,
+    max_iter: int = MAX_ITER,
+) -> DualAnswer:
+    """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
+    terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
+    linear cost weight ``1 − ε`` and quadratic ``weight``; ``warm``: starting multipliers
+    (R,) of ``rows`` (zero when None)."""
+    steps = blocks.shape[0]
+    phi, gam = discretize(n, dt_s)
+    free_states = zoh_rollout(
+        phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
+    )
+    a = np.ascontiguousarray(blocks * u_max)
+    h = np.empty_like(rows.coeffs)
+    _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
+    f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
+    metric = np.full(rows.nodes.size, -1.0)
+    y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
+    u = np.zeros((steps, 3))
+    c1 = 1.0 - min(float(eps), 1.0)
+    status, iterations = projected_newton(
+        a, h, f, rows.nodes, rows.equality, rows.tol, metric, c1, float(weight), y, u,
+        max_iter, ENTER,
+    )  # fmt: skip
+    norms = np.linalg.norm(u, axis=1)
+    cost = float(np.sum(c1 * norms + weight * norms**2))
+    controls = u * u_max
+    states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
+    return DualAnswer(status == STATUS_CONVERGED, controls, states, y, cost, int(iterations))
