@@ -687,20 +687,15 @@ def _compile_beside(executor: Executor, task: Task, references: _PointReferences
     _wait_for(newton)  # the solver's other half: loaded below, not compiled a second time
     with contextlib.suppress(OSError):  # the first task's own call reports it
         references.of(task)
-<<<<<<< HEAD
-    while not ahead.done():  # waiting on a state: short polls stay interruptible
-        if stop_asked():  # a stop the references' code turned into an error of theirs
-            raise_stop()
-        wait([ahead], timeout=_POLL_S)
-=======
     _wait_for(loop)
 
 
 def _wait_for(future: Future[None]) -> None:
     """Wait until ``future`` is done (a state, not a time: short polls stay interruptible)."""
     while not future.done():
+        if stop_asked():  # a stop the references' code turned into an error of theirs
+            raise_stop()
         wait([future], timeout=_POLL_S)
->>>>>>> main
 
 
 def _drive(

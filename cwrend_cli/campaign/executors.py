@@ -52,12 +52,8 @@ from urllib.parse import urlsplit
 
 from cwrend_cli.campaign.worker import stop_task
 from cwrend_cli.errors import ConfigError
-<<<<<<< HEAD
-from cwrend_cli.teardown import STOP_SIGNALS, end_without_teardown, unraisable_stop
-=======
 from cwrend_cli.physics.compiled import tune_for_compiling
-from cwrend_cli.teardown import end_without_teardown
->>>>>>> main
+from cwrend_cli.teardown import STOP_SIGNALS, end_without_teardown, unraisable_stop
 
 ExecutorKind = Literal["local", "dask"]
 
