@@ -463,7 +463,8 @@ def _run_locked(
                 cores = workers or default_workers()
                 workers = min(cores, len(tasks))
                 beside = workers == 1 < cores
-            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside)
+            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside,
+                     owner)  # fmt: skip
     except KeyboardInterrupt:
         interrupted = True
     except _StopError as stop:
@@ -607,6 +608,7 @@ def _execute(
     workers: int | None,
     address: str | None,
     beside: bool = False,
+    owner: JournalOwner | None = None,
 ) -> None:
     """Run ``tasks`` on an executor, reopening it after an infrastructure fault.
 
@@ -618,9 +620,12 @@ def _execute(
     broke, the scheduler was lost, the task was cancelled) is submitted again
     to a fresh executor, up to :data:`MAX_TASK_ATTEMPTS` times, with a
     backoff of :data:`RETRY_BACKOFF_S` doubling per reopening; nothing of it is
-    journaled as a result. An I/O error writing results stops at once (a
-    full disk does not heal by retrying). Raises :class:`_StopError` when the
-    campaign cannot go on.
+    journaled as a result, and the files it wrote are removed before (a
+    surviving worker of a broken pool, stopped by the pool's SIGTERM, writes
+    those of the runs it finished; ``owner``: the journal's, see
+    :func:`~cwrend_cli.campaign.journal.load_journal`). An I/O error writing
+    results stops at once (a full disk does not heal by retrying). Raises
+    :class:`_StopError` when the campaign cannot go on.
     """
     attempts: dict[str, int] = {}
     references = _PointReferences(
@@ -631,6 +636,7 @@ def _execute(
     while pending:
         if reopened:
             time.sleep(RETRY_BACKOFF_S * 2 ** min(reopened - 1, 4))
+            remove_orphan_files(out_dir, load_journal(out_dir / EVENTS, owner=owner).files)
         try:
             with open_executor(kind, workers, address) as (pool, parallel):
                 if kind == "local" and (parallel > 1 or beside) and not reopened:
