@@ -11,6 +11,8 @@ problem at the homotopy parameters the guidance tests use, obtained by
 from __future__ import annotations
 
 import concurrent.futures
+import fcntl
+import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +25,116 @@ import pytest
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
+
+#: Set on the controller of a whole-suite run on xdist workers (:func:`pytest_cmdline_main`).
+_DISTRIBUTED = pytest.StashKey[bool]()
+
+#: The groups of a whole-suite run on xdist workers, in the order they start: the test
+#: modules whose tests take longest first (so that no long one is left for the end of the
+#: run; their cold-cache times: docs/development.md), and modules that compile the same
+#: step-loop specialisations together, one after the other on one worker, so that the
+#: second loads from numba's cache what the first compiled instead of compiling it at the
+#: same time on the other worker. Every other module is a group of its own, after these,
+#: in file order. A group's tests run on one worker in file order, as in one process.
+GROUPS: dict[str, tuple[str, ...]] = {
+    name: (name,)
+    for name in (
+        # the second compiles no step loop for its first ~25 CPU s, while the first compiles
+        # the paper's (both workers compiled it at once when both began with a campaign)
+        "test_report", "test_tumbling_guidance", "test_first_run", "test_interrupt",
+        "test_distributed", "test_ekf", "test_abort_safety", "test_campaign", "test_report_safety",
+        "test_ss_shooting", "test_startup", "test_report_tumbling", "test_table",
+        "test_process_noise", "test_constrained_guidance", "test_compare", "test_progress",
+    )
+}  # fmt: skip
+_GROUP_OF = {module: group for group, modules in GROUPS.items() for module in modules}
+_ORDER = {group: i for i, group in enumerate(GROUPS)}
+
+
+def _group(path: str) -> str:
+    """The group of a test module (its path or node id, ``tests/test_x.py::…``)."""
+    module = Path(path.split("::", 1)[0]).stem
+    return _GROUP_OF.get(module, module)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """The whole suite (``pytest`` with no paths: the ``testpaths``) runs on one pytest-xdist
+    worker per usable CPU, each of :data:`GROUPS` on one worker; a run given paths
+    (``pytest tests/test_x.py``) stays in one process, as does a run given ``-n`` (``-n 0``:
+    in one process), ``--pdb`` or ``-p no:xdist``. Most of a cold run is numba compiling
+    the step loop once per feature combination, on one core: two workers compile two at
+    once (docs/development.md)."""
+    opt = config.option
+    if (
+        hasattr(config, "workerinput")  # an xdist worker
+        or getattr(opt, "numprocesses", 0) is not None  # no xdist, or -n given
+        or config.args_source is not pytest.Config.ArgsSource.TESTPATHS
+        or opt.usepdb
+        or opt.collectonly
+    ):
+        return
+    cpus = len(os.sched_getaffinity(0))
+    if cpus > 1 and opt.dist == "no":
+        opt.numprocesses = cpus
+        opt.dist = "loadscope"  # scheduled by pytest_xdist_make_scheduler
+        opt.loadscopereorder = False  # in the order of pytest_collection_modifyitems
+        config.stash[_DISTRIBUTED] = True
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """xdist's scheduler of whole work units (``--dist loadscope``) with :data:`GROUPS` as
+    the units: a unit starts on the first worker free, its tests in order."""
+    if not config.stash.get(_DISTRIBUTED, False):
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleGroups(LoadScopeScheduling):  # type: ignore[misc]
+        def _split_scope(self, nodeid: str) -> str:
+            return _group(nodeid)
+
+    return ModuleGroups(config, log)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: Any) -> None:
+    """Tells each xdist worker of a whole-suite run to order its tests by :data:`GROUPS`."""
+    if node.config.stash.get(_DISTRIBUTED, False):
+        node.workerinput["cwrend_groups"] = True
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On an xdist worker of a whole-suite run: the tests in the order of :data:`GROUPS`
+    (each module's in file order), which the scheduler starts the groups in."""
+    if getattr(config, "workerinput", {}).get("cwrend_groups"):
+        items.sort(key=lambda item: _ORDER.get(_group(item.nodeid), len(_ORDER)))
+
+
+def _lock_numba_cache_saves() -> None:
+    """Serialise numba's cache writes across the test processes (xdist workers).
+
+    Numba saves a specialisation by reading a function's cache index, adding the entry
+    (with the first data-file number the index does not use) and writing index and data
+    back, with no lock: two processes saving two specialisations of one function at once
+    can pick the same data file, so one index entry may name the other's code. Each save
+    here holds an exclusive ``flock`` on a file in that cache directory.
+    """
+    from numba.core import caching
+
+    save = caching.IndexDataCacheFile.save
+
+    def locked_save(self: Any, key: Any, data: Any) -> None:
+        with open(os.path.join(self._cache_path, "cwrend-tests.lock"), "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            save(self, key, data)
+
+    caching.IndexDataCacheFile.save = locked_save
+
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    _lock_numba_cache_saves()
 
 #: Homotopy parameters of the guidance tests, in continuation order (1 → 0).
 EPS_CONTINUATION = (1.0, 0.3, 0.05, 0.0)
