@@ -29,9 +29,10 @@ def main() -> None:
     """Run the command line; Ctrl-C during start-up exits 130 without a traceback.
 
     ``kill -USR1 <pid>`` prints every thread's stack to stderr (a campaign that
-    seems stuck can say where), without stopping it. SIGTERM and SIGHUP stop
-    it as Ctrl-C does (:func:`~cwrend_cli.teardown.stop_on_signals`), with exit
-    status 128 + the signal (143, 129) where Ctrl-C's is 130.
+    seems stuck can say where), without stopping it. Ctrl-C, SIGTERM and SIGHUP
+    stop it the same way (:func:`~cwrend_cli.teardown.stop_on_signals`, which
+    also raises again a stop that compiled code swallowed), with exit status
+    128 + the signal: 130, 143, 129.
     """
     tune_for_compiling()
     if hasattr(signal, "SIGUSR1"):
@@ -47,7 +48,7 @@ def main() -> None:
         except KeyboardInterrupt:  # while importing, or while Typer builds the command line
             sys.exit(INTERRUPTED_EXIT)
     except SystemExit as exc:
-        if exc.code == INTERRUPTED_EXIT:  # Ctrl-C's, or SIGTERM/SIGHUP handled as Ctrl-C
+        if exc.code == INTERRUPTED_EXIT:  # a stop signal's: Ctrl-C, SIGTERM or SIGHUP
             exc.code = stop_exit_code()
         if exc.code is None or isinstance(exc.code, int):  # a message the interpreter prints
             exit_code.append(exc.code or 0)

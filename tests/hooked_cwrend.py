@@ -7,7 +7,12 @@ sends ``SIGNAL`` once the driver has seen the ``N``-th state ``WHEN``:
 * ``journal``: the driver appended to ``events.jsonl`` (a task journaled);
 * ``run``: the driver heard a run finish (a per-run signal of a task in flight);
 * ``statistics``: the command is about to write a campaign's statistics (its runs done);
-* ``pool``: the driver opened its process pool (the workers started, still importing).
+* ``pool``: the driver opened its process pool (the workers started, still importing);
+* ``compile``: this process starts its ``N``-th run, which first "compiles": compiled
+  code calling back into Python (a ctypes callback, as numba's compiler does after each
+  module), the signal sent from inside the callback, where its exception cannot
+  propagate, then Python and callbacks in turn until the stop lands (the run is then
+  dropped) or :data:`HANG_S` passes (it then runs).
 
 SIGKILL (``kill -9``), SIGSTOP (the test then acts while the campaign is
 frozen at that state, and lets it go on with SIGCONT) and a signal written
@@ -22,6 +27,7 @@ to an hour: what a stop keeps must not depend on the machine's speed either.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import signal
 import subprocess
@@ -108,6 +114,26 @@ def _hook(when: str, after: int, signum: signal.Signals, alone: bool) -> None:
                 yield pool
 
         driver.open_executor = opening  # type: ignore[attr-defined]
+    elif when == "compile":
+        from cwrend_cli.physics import simulation
+
+        real = simulation.simulate
+        started = [0]
+        signalled = ctypes.CFUNCTYPE(None)(lambda: (count(), [None for _ in range(3)]))
+        compiled = ctypes.CFUNCTYPE(None)(lambda: None)
+
+        def simulate(*args: Any, **kwargs: Any) -> Any:
+            started[0] += 1
+            if started[0] == after:
+                signalled()  # the handler runs in the callback (its loop checks for signals)
+                hang = time.monotonic() + HANG_S
+                while time.monotonic() < hang:  # compiling: Python, then compiled code
+                    time.sleep(0.01)
+                    compiled()
+            return real(*args, **kwargs)
+
+        simulation.simulate = simulate  # type: ignore[assignment]
+        seen[0] = after - 1  # count() sends at once
     else:
         raise SystemExit(f"unknown state {when!r}")
 

@@ -763,6 +763,55 @@ def test_ctrl_c_stops_a_two_worker_campaign_quickly_and_it_resumes_identically(
     _assert_same_as_uninterrupted(out, uninterrupted, seeds=40)
 
 
+@pytest.mark.parametrize(("sig", "code"), [("SIGINT", 130), ("SIGTERM:self", 143)])
+def test_a_stop_swallowed_by_a_compile_still_drops_the_run_and_resumes_identically(
+    tmp_path: Path, uninterrupted: Path, sig: str, code: int
+) -> None:
+    """Ctrl-C to the process group, or ``kill <pid>``, landing where compiled code calls back
+    into Python (numba's compiler, on a first run), where its exception cannot propagate: it
+    is raised again, so the run compiling is dropped and none starts after it; the two tasks
+    journaled before are kept, and the campaign resumes to the uninterrupted tables."""
+    # no run time limit: it would end the "compile" as it ends a run (numba's own pauses it)
+    cfg = _write_config(
+        tmp_path / "c.toml", "compile", "seeds_per_task = 4\nrun_timeout_s = 86400\n"
+    )
+    out = tmp_path / "results" / "compile"
+    args = ["ablate", str(cfg), "--seeds", "24", "--arch", ADAPTIVE, "--workers", "1", "-q",
+            "--no-rrd"]  # fmt: skip
+    # the first run of the third task of 6 (8 runs each) compiles, and the signal lands there
+    proc = _hooked("compile", 17, sig, *args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                   start_new_session=True, preexec_fn=_sigint_default)  # fmt: skip
+    _, stderr = proc.communicate(timeout=2 * HANG_S)
+    assert proc.returncode == code, stderr
+    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
+    assert len(pd.read_parquet(out / "runs.parquet")) == 16  # no run finished after the signal
+    resumed = _cli(*args)
+    assert resumed.exit_code == 0, resumed.output
+    _assert_same_as_uninterrupted(out, uninterrupted, seeds=24)
+
+
+def test_sigterm_to_the_process_group_keeps_the_runs_the_workers_finished(
+    tmp_path: Path, uninterrupted: Path
+) -> None:
+    """A batch scheduler's time limit (Slurm sends SIGTERM to every process of the job), once
+    a run is heard: the workers stop their tasks and return the runs they finished instead
+    of dying with them; exit 143, true counts, and the campaign resumes identically."""
+    cfg = _write_config(tmp_path / "c.toml", "term", "seeds_per_task = 8\n")
+    out = tmp_path / "results" / "term"
+    args = ["ablate", str(cfg), "--seeds", "16", "--arch", ADAPTIVE, "--workers", "2", "--no-rrd"]
+    proc = _hooked("run", 1, "SIGTERM", *args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                   start_new_session=True, preexec_fn=_sigint_default)  # fmt: skip
+    _, stderr = proc.communicate(timeout=HANG_S)
+    assert proc.returncode == 143, stderr
+    held = len(pd.read_parquet(out / "runs.parquet"))
+    assert held >= 1  # the run heard before the signal, at least: its task came back
+    assert f"interrupted: {held} of 32 runs done ({held} computed now), 0 failed" in stderr
+    assert "Traceback" not in stderr, stderr
+    resumed = _cli(*args[: args.index("--workers")], "--workers", "1", "--no-rrd")
+    assert resumed.exit_code == 0, resumed.output
+    _assert_same_as_uninterrupted(out, uninterrupted, seeds=16)
+
+
 def test_ctrl_c_during_start_up_exits_130_without_a_traceback(tmp_path: Path) -> None:
     cfg = _write_config(tmp_path / "c.toml", "early")
     proc = subprocess.Popen(

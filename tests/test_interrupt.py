@@ -25,8 +25,7 @@ import pytest
 from hooked_cwrend import HANG_S, HOOKED, wait_stopped
 from typer.testing import CliRunner
 
-from cwrend_cli import campaign
-from cwrend_cli.campaign import worker
+from cwrend_cli import campaign, teardown
 from cwrend_cli.cli import app
 from cwrend_cli.config import load_config
 from cwrend_cli.physics import simulation
@@ -110,23 +109,25 @@ def test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run(
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
 
 
-def test_a_stop_that_lands_in_a_compiled_callback_is_dropped_silently(
+def test_a_stop_that_lands_in_a_compiled_callback_is_owed_not_printed(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """numba's compiler calls Python through ctypes, which can only print an exception: the
-    stop's KeyboardInterrupt landing there prints nothing (the task stops after its run)."""
+    stop's KeyboardInterrupt landing there prints nothing and is owed (raised again)."""
 
     def callback() -> None:
         raise KeyboardInterrupt
 
+    owed: list[float] = []
     call = ctypes.CFUNCTYPE(None)(callback)
-    monkeypatch.setattr(sys, "unraisablehook", worker.unraisable_stop)
-    monkeypatch.setitem(worker._STOP, "asked", True)
+    monkeypatch.setattr(sys, "unraisablehook", teardown.unraisable_stop)
+    monkeypatch.setattr(teardown, "redeliver", owed.append)  # not raised in pytest itself
+    monkeypatch.setattr(teardown, "_RECEIVED", [signal.SIGINT])
     call()
-    assert capsys.readouterr().err == ""
-    monkeypatch.setitem(worker._STOP, "asked", False)  # not a stop's: printed as usual
+    assert capsys.readouterr().err == "" and owed == [teardown.REDELIVER_S]
+    teardown.clear_stop()  # not a stop's: printed as usual
     call()
-    assert "KeyboardInterrupt" in capsys.readouterr().err
+    assert "KeyboardInterrupt" in capsys.readouterr().err and len(owed) == 1
 
 
 def _runs(out: Path) -> pd.DataFrame:

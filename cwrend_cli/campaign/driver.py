@@ -107,6 +107,7 @@ from cwrend_cli.output.tables import (
 from cwrend_cli.physics import simulation
 from cwrend_cli.physics.metrics import NIS_DOF
 from cwrend_cli.physics.params import Sensor
+from cwrend_cli.teardown import raise_stop, stop_asked
 
 __all__ = [
     "CampaignStatistics",
@@ -462,7 +463,8 @@ def _run_locked(
                 cores = workers or default_workers()
                 workers = min(cores, len(tasks))
                 beside = workers == 1 < cores
-            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside)
+            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside,
+                     owner)  # fmt: skip
     except KeyboardInterrupt:
         interrupted = True
     except _StopError as stop:
@@ -606,6 +608,7 @@ def _execute(
     workers: int | None,
     address: str | None,
     beside: bool = False,
+    owner: JournalOwner | None = None,
 ) -> None:
     """Run ``tasks`` on an executor, reopening it after an infrastructure fault.
 
@@ -617,9 +620,12 @@ def _execute(
     broke, the scheduler was lost, the task was cancelled) is submitted again
     to a fresh executor, up to :data:`MAX_TASK_ATTEMPTS` times, with a
     backoff of :data:`RETRY_BACKOFF_S` doubling per reopening; nothing of it is
-    journaled as a result. An I/O error writing results stops at once (a
-    full disk does not heal by retrying). Raises :class:`_StopError` when the
-    campaign cannot go on.
+    journaled as a result, and the files it wrote are removed before (a
+    surviving worker of a broken pool, stopped by the pool's SIGTERM, writes
+    those of the runs it finished; ``owner``: the journal's, see
+    :func:`~cwrend_cli.campaign.journal.load_journal`). An I/O error writing
+    results stops at once (a full disk does not heal by retrying). Raises
+    :class:`_StopError` when the campaign cannot go on.
     """
     attempts: dict[str, int] = {}
     references = _PointReferences(
@@ -630,6 +636,7 @@ def _execute(
     while pending:
         if reopened:
             time.sleep(RETRY_BACKOFF_S * 2 ** min(reopened - 1, 4))
+            remove_orphan_files(out_dir, load_journal(out_dir / EVENTS, owner=owner).files)
         try:
             with open_executor(kind, workers, address) as (pool, parallel):
                 if kind == "local" and (parallel > 1 or beside) and not reopened:
@@ -692,6 +699,8 @@ def _compile_beside(executor: Executor, task: Task, references: _PointReferences
 def _wait_for(future: Future[None]) -> None:
     """Wait until ``future`` is done (a state, not a time: short polls stay interruptible)."""
     while not future.done():
+        if stop_asked():  # a stop the references' code turned into an error of theirs
+            raise_stop()
         wait([future], timeout=_POLL_S)
 
 
@@ -729,6 +738,8 @@ def _drive(
     signals = run_signals(executor, tally.heard)
     try:
         while True:
+            if stop_asked():  # a stop a library turned into an error (the references')
+                raise_stop()
             while fatal is None and not lost and len(in_flight) < limit and queue:
                 task = queue.popleft()
                 record = seeds_to_record(task, plan_.archs, plan_.rrd_seeds_of(task.point))

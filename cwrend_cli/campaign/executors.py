@@ -50,10 +50,10 @@ from types import FrameType
 from typing import Literal, ParamSpec, Protocol, TypeVar
 from urllib.parse import urlsplit
 
-from cwrend_cli.campaign.worker import stop_task, unraisable_stop
+from cwrend_cli.campaign.worker import stop_task
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.physics.compiled import tune_for_compiling
-from cwrend_cli.teardown import end_without_teardown
+from cwrend_cli.teardown import STOP_SIGNALS, end_without_teardown, unraisable_stop
 
 ExecutorKind = Literal["local", "dask"]
 
@@ -85,14 +85,16 @@ _RUN_QUEUE: Queue[tuple[int, bool]] | None = None
 
 
 #: Signals a pool worker turns into a stop of its task (:func:`worker.stop_task`), not its end:
-#: the terminal sends Ctrl-C (and a hang-up) to the whole process group, and the driver
-#: forwards a stop to its workers (:func:`ask_workers_to_stop`); the parent decides the rest.
-#: SIGTERM still ends a worker (the driver's :func:`_terminate_workers`).
-WORKER_STOP_SIGNALS = (signal.SIGINT, signal.SIGHUP)
+#: the terminal sends Ctrl-C (and a hang-up) to the whole process group, a batch scheduler
+#: its time limit's SIGTERM to every process of the job (Slurm), and the driver forwards a
+#: stop to its workers (:func:`ask_workers_to_stop`); the parent decides the rest. Each
+#: worker returns the runs it finished; the driver ends workers with SIGKILL
+#: (:func:`_terminate_workers`), the pool its idle ones with its sentinel.
+WORKER_STOP_SIGNALS = STOP_SIGNALS
 
 
 def _stop_task(signum: int, frame: FrameType | None) -> None:
-    stop_task()
+    stop_task(signum)
 
 
 @contextmanager
@@ -114,13 +116,14 @@ def _stop_signals_blocked() -> Iterator[None]:
 
 
 def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
-    """Pool workers stop their task on Ctrl-C (the parent stops the campaign), exit if the
-    parent dies.
+    """Pool workers stop their task on Ctrl-C or SIGTERM (the parent stops the campaign),
+    exit if the parent dies.
 
-    Ctrl-C and SIGHUP (:data:`WORKER_STOP_SIGNALS`, blocked from the worker's
-    start by :func:`_stop_signals_blocked`) stop the task running, which
-    returns its finished runs (:func:`worker.stop_task`); they never print a
-    traceback.
+    Ctrl-C, SIGTERM and SIGHUP (:data:`WORKER_STOP_SIGNALS`, blocked from the
+    worker's start by :func:`_stop_signals_blocked`) stop the task running,
+    which returns its finished runs (:func:`worker.stop_task`); they never
+    print a traceback, and a stop swallowed by compiled code is raised again
+    (:func:`cwrend_cli.teardown.unraisable_stop`).
 
     They end without the interpreter's teardown (:mod:`cwrend_cli.teardown`:
     0.5–0.6 s of every campaign's end, which waits for its workers to exit).
@@ -172,13 +175,13 @@ def _quiet_dask_logs() -> None:
 
 
 def _terminate_workers(pool: ProcessPoolExecutor) -> None:
-    """Stop a pool's worker processes now (SIGTERM; they ignore Ctrl-C).
+    """End a pool's worker processes now (SIGKILL: the stop signals only stop their task).
 
     What their running tasks wrote is unjournaled and removed on resume
     (:func:`cwrend_cli.campaign.journal.remove_orphan_files`).
     """
     for process in list((pool._processes or {}).values()):
-        process.terminate()
+        process.kill()
 
 
 def ask_workers_to_stop(executor: Executor) -> None:
@@ -390,7 +393,8 @@ def open_executor(
         context = multiprocessing.get_context("spawn")
         # the workers and multiprocessing's resource tracker start with the stop signals
         # blocked: the tracker, started by the queue's first semaphore, ignores SIGINT and
-        # SIGTERM itself, not SIGHUP; starting, it unblocks SIGINT here, hence two blocks
+        # SIGTERM itself, not SIGHUP; starting, it unblocks SIGINT and SIGTERM here, hence
+        # two blocks
         with _stop_signals_blocked():
             runs: Queue[tuple[int, bool]] = context.Queue()
         with _stop_signals_blocked():

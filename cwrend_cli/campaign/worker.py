@@ -34,7 +34,6 @@ drawn only for the fault kinds some window of the run switches on.
 
 from __future__ import annotations
 
-import _thread
 import hashlib
 import signal
 import sys
@@ -44,7 +43,6 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import numpy as np
@@ -75,6 +73,16 @@ from cwrend_cli.physics.params import (
     Scenario,
 )
 from cwrend_cli.physics.params import Solver as SolverParams
+from cwrend_cli.teardown import (
+    clear_stop,
+    note_stop,
+    on_stop,
+    raise_stop,
+    redeliver,
+    redelivered,
+    stop_asked,
+    unraisable_stop,
+)
 
 __all__ = [
     "CaseResult",
@@ -362,79 +370,66 @@ class TaskInterrupted(KeyboardInterrupt):
         self.outcome = outcome
 
 
-#: This process's stop (pool workers, :func:`stop_task`): asked; whether a task's runs are
-#: running in the main thread now; whether the run in progress is to be interrupted.
-_STOP = {"asked": False, "running": False, "interrupt": False}
+#: Whether this process's main thread is running a task's runs now (:func:`execute_task`).
+_RUNNING = {"runs": False}
 #: How long a pool worker asked to stop lets the run in progress end before it interrupts
-#: it [s]. Most runs end sooner (5-100 ms) and are kept; an interrupt lands anywhere, even in
-#: a callback of numba's compiler, which prints it and goes on (the run is then dropped at
-#: its end, never recorded failed).
+#: it [s]. Most runs end sooner (5-100 ms) and are kept; the interrupt lands at the run's
+#: next Python code, or, swallowed by a callback of numba's compiler, is raised again
+#: (:func:`cwrend_cli.teardown.unraisable_stop`); the run is dropped, never recorded failed.
 STOP_PATIENCE_S = 0.25
 
 
-def stop_task() -> None:
-    """Ask the task of this pool worker to stop and keep its finished runs (a signal handler's).
+def stop_task(signum: int) -> None:
+    """Stop this pool worker's task and keep its finished runs (its handler of ``signum``).
 
     The run in progress may end (within :data:`STOP_PATIENCE_S`, then it is
-    interrupted: ``KeyboardInterrupt`` is raised into it, once, from this same
-    handler) and the task returns (:class:`TaskInterrupted`) with the runs it
-    finished; a task that starts later stops before its first run. A second
-    signal (the terminal's Ctrl-C, then the driver's) changes nothing.
+    interrupted: the stop is raised into it from this same handler, again
+    until it lands) and the task returns (:class:`TaskInterrupted`) with the
+    runs it finished; a task that starts later stops before its first run. A
+    second signal (the terminal's Ctrl-C, then the driver's) changes nothing.
     """
-    if _STOP["interrupt"] and _STOP["running"]:  # STOP_PATIENCE_S is over
-        _STOP["interrupt"] = False
-        raise KeyboardInterrupt
-    if not _STOP["asked"]:
-        _STOP["asked"] = True
-        if _STOP["running"]:
+    if redelivered():  # STOP_PATIENCE_S is over, or an interrupt was swallowed
+        if _RUNNING["runs"]:
+            raise_stop()
+        return
+    if not stop_asked():
+        note_stop(signum)
+        if _RUNNING["runs"]:
             later = threading.Timer(STOP_PATIENCE_S, _interrupt_run)
             later.daemon = True
             later.start()
 
 
-def _ctrl_c_noted() -> Callable[[], None]:
-    """In-process, note a Ctrl-C as this task's stop when it is raised; what restores.
+def _interrupt_run() -> None:
+    """Interrupt the run in progress, if any (:func:`stop_task` raises in the main thread)."""
+    if _RUNNING["runs"]:
+        redeliver()
 
-    Python's own handler raises ``KeyboardInterrupt`` wherever the main thread
-    is; in a library it may become an error of the run (or be printed and
-    dropped by a compiler callback). Noted, the run is dropped rather than
-    recorded failed, and the task stops after it at the latest. A pool
-    worker's handler (:func:`stop_task`) notes its stop itself.
+
+def _ctrl_c_noted() -> Callable[[], None]:
+    """In-process, make a Ctrl-C this task's stop, as ``cwrend`` does; what restores.
+
+    ``cwrend`` handles Ctrl-C itself (:func:`cwrend_cli.teardown.stop_on_signals`);
+    a library caller's Python raises ``KeyboardInterrupt`` without noting it,
+    and there it may become an error of the run or be swallowed by a compiler
+    callback. For the task, Ctrl-C gets cwrend's handler: noted, the run is
+    dropped rather than recorded failed, a swallowed stop is raised again, and
+    the task stops before its next run at the latest. A pool worker's handler
+    (:func:`stop_task`) notes its stop itself.
     """
     in_main = threading.current_thread() is threading.main_thread()
     if not in_main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return lambda: None
-
-    def noted(signum: int, frame: FrameType | None) -> None:
-        _STOP["asked"] = True
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGINT, noted)
+    hook = sys.unraisablehook
+    signal.signal(signal.SIGINT, on_stop)
     sys.unraisablehook = unraisable_stop
 
     def restore() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        sys.unraisablehook = sys.__unraisablehook__
-        _STOP["asked"] = False
+        sys.unraisablehook = hook
+        clear_stop()
 
     return restore
-
-
-def unraisable_stop(unraisable: Any) -> None:
-    """``sys.unraisablehook`` of a process running tasks: a stop's ``KeyboardInterrupt`` that
-    landed in a callback of compiled code (numba's compiler calls Python through ctypes,
-    which can only print it) is dropped silently; the task stops after its run. Anything
-    else is printed as Python does."""
-    if _STOP["asked"] and isinstance(unraisable.exc_value, KeyboardInterrupt):
-        return
-    sys.__unraisablehook__(unraisable)
-
-
-def _interrupt_run() -> None:
-    """Interrupt the run in progress, if any (:func:`stop_task` raises in the main thread)."""
-    if _STOP["running"]:
-        _STOP["interrupt"] = True
-        _thread.interrupt_main(signal.SIGINT)
 
 
 def execute_task(
@@ -503,11 +498,11 @@ def execute_task(
     noises: dict[tuple[Assignment, int], FloatArray] = {}  # shared by the archs of a seed
     stopped = False
     restore = _ctrl_c_noted()
-    _STOP["running"] = True
+    _RUNNING["runs"] = True
     try:
         for spec in task.runs:
-            if _STOP["asked"]:  # a pool worker told to stop: no new run
-                raise KeyboardInterrupt
+            if stop_asked():  # told to stop: no new run (a stop swallowed meanwhile too)
+                raise_stop()
             started = time.time()
             t0 = time.perf_counter()
             try:
@@ -546,8 +541,8 @@ def execute_task(
             except InputChangedError:  # the campaign's input, not this run: it stops
                 raise
             except Exception as exc:  # failure isolation: the campaign goes on
-                if _STOP["asked"]:  # what the interrupt became (in a library): not a result
-                    raise KeyboardInterrupt from exc
+                if stop_asked():  # what the interrupt became (in a library): not a result
+                    raise_stop()
                 kind = "error" if isinstance(exc, CwrendError) else type(exc).__name__
                 text = f"{kind}: {exc}\n{traceback.format_exc(limit=8)}"
                 outcomes.append(
@@ -555,11 +550,11 @@ def execute_task(
                 )
             if on_run is not None and not task.record_only:
                 on_run(outcomes[-1].status == "ok")
-        _STOP["running"] = False
+        _RUNNING["runs"] = False
     except KeyboardInterrupt:  # the runs finished so far are kept (TaskInterrupted below)
         stopped = True
     finally:
-        _STOP["running"] = False
+        _RUNNING["runs"] = False
         restore()
     files: list[str] = []
     # the runs executed: the task's, or those finished before a stop
