@@ -211,11 +211,21 @@ _SYNTAX_HELP = (
     "p95.miss:bare, frac_less.miss@mtf_adaptive-plain_adaptive, mean_diff.dv, n, "
     "infeasible_pct, failed_solves, max.miss:with=socp_plan"
 )
+_SHORT_NAME = {column: name for name, column in METRIC_NAMES.items()}
+#: The values computed from the runs and the re-solves, named from :data:`RUN_ORDER`,
+#: :data:`RUN_VALUES`, :data:`SOLVE_VALUES` and :data:`SOLVE_SHARES` (one list, no copy).
 _RUN_HELP = (
-    "n, max.miss, max.dv, max.fuel, min.min_distance, median|max.dock_position, "
-    f"median|max.dock_velocity, {', '.join(RUN_VALUES)} (computed from the runs); "
-    "mean|max.scp_iterations, mean|p95|max.resolve_ms, "
-    f"{', '.join(SOLVE_SHARES)} (from the re-solves)"
+    ", ".join(
+        ["n"]
+        + [f"{'|'.join(stats)}.{_SHORT_NAME[column]}" for column, stats in RUN_ORDER.items()]
+        + list(RUN_VALUES)
+    )
+    + " (computed from the runs); "
+    + ", ".join(
+        [f"{'|'.join(stats)}.{name}" for name, (_, stats) in SOLVE_VALUES.items()]
+        + list(SOLVE_SHARES)
+    )
+    + " (from the re-solves)"
 )
 
 
