@@ -463,8 +463,9 @@ def _run_locked(
                 cores = workers or default_workers()
                 workers = min(cores, len(tasks))
                 beside = workers == 1 < cores
-            _execute(tasks, plan_, out_dir, progress, executor_kind, workers, address, beside,
-                     owner)  # fmt: skip
+            _execute(
+                tasks, plan_, out_dir, progress, executor_kind, workers, address, beside, owner
+            )
     except KeyboardInterrupt:
         interrupted = True
     except _StopError as stop:
