@@ -1134,7 +1134,11 @@ def build_table(
         frame, across = frame[keep.astype(bool)], across[keep.astype(bool)]
     names = [f.name for f in (*row_fields, *col_fields)]
     for name in names:
-        frame[name] = frame[name].map(_hashable)
+        # a list, not Series.map: pandas 3 infers a string dtype from mapped strings and
+        # Nones and turns each None (no pair, no value) into NaN, printed as 'nan'
+        frame[name] = pd.Series(
+            [_hashable(v) for v in frame[name]], index=frame.index, dtype=object
+        )
     _check_one_per_cell(frame, names, keys)
     row_keys = _keys(frame, row_fields, sources, filters, values)
     col_keys = _keys(frame, col_fields, sources, filters, values)
