@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import Result
+from test_safety_measured import SHORT
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
@@ -471,27 +472,10 @@ def test_a_marginal_row_beside_paired_ones_shows_no_pair(studies: dict[str, Path
 
 #: 1 km above a 200 m keep-out sphere, the port below it (tests/test_safety_measured.py):
 #: the unconstrained path crosses the zone. The twin flies to the same port at rest.
-SAFE = """
-[scenario]
-horizon_s = 200.0
-x0 = [0.0, 0.02, 1.0, 0.0, 0.0, 0.0]
-[degradation]
-windows = []
-[constraints.keep_out]
-semi_axes_km = [0.2, 0.2, 0.2]
-[constraints.corridor]
-port_km = [0.0, 0.0, -0.25]
-axis = [0.0, 0.0, -1.0]
-half_angle_deg = 30.0
-"""
-FREE = """
-[scenario]
-horizon_s = 200.0
-x0 = [0.0, 0.02, 1.0, 0.0, 0.0, 0.0]
-xf = [0.0, 0.0, -0.25, 0.0, 0.0, 0.0]
-[degradation]
-windows = []
-"""
+SAFE = SHORT
+FREE = SHORT.split("[constraints")[0].replace(
+    "[degradation]", "xf = [0.0, 0.0, -0.25, 0.0, 0.0, 0.0]\n[degradation]"
+)
 
 
 @pytest.fixture(scope="module")
