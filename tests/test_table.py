@@ -468,6 +468,33 @@ def test_a_marginal_row_beside_paired_ones_shows_no_pair(studies: dict[str, Path
     assert "nan" not in "\n".join(lines)
 
 
+@pytest.mark.parametrize(
+    ("where", "metric", "message"),
+    [
+        (
+            "other=mtf_adaptive",
+            "n,mean.dv,frac_less.miss",
+            "--where other=mtf_adaptive keeps no entry of --metric 'n', so its column would be "
+            "empty: a value of one architecture's runs has no other",
+        ),
+        (
+            "arch=mtf_adaptive_socp",
+            "mean.dv,frac_less.miss@plain_adaptive-mtf_adaptive",
+            "--where arch=mtf_adaptive_socp keeps no entry of --metric "
+            "'frac_less.miss@plain_adaptive-mtf_adaptive', so its column would be empty",
+        ),
+    ],
+)
+def test_a_filter_that_empties_a_value_exits_2_naming_it(
+    studies: dict[str, Path], where: str, metric: str, message: str
+) -> None:
+    """The value's column was left out of the table without a word."""
+    result = _table(studies["methods"], "--where", where, "--metric", metric)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert "Traceback" not in result.output
+
+
 # --- the Δv cost of a constrained plan over the unconstrained one (issue 32) ----------
 
 #: 1 km above a 200 m keep-out sphere, the port below it (tests/test_safety_measured.py):
