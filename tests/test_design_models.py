@@ -177,6 +177,47 @@ def test_ss_coefficients_are_the_orbit_averaged_j2_gradient(inc_deg: float) -> N
     assert lti.beta == pytest.approx(2 * N * ss.c, rel=1e-15)
 
 
+#: Inclination where 1 + 3 cos 2i = 0 (cos² i = 1/3): the averaged J2 gradient leaves s = 0.
+CRITICAL_DEG = math.degrees(math.acos(1.0 / math.sqrt(3.0)))
+
+
+@pytest.mark.parametrize("inc_deg", [0.0, 28.5, 51.6, CRITICAL_DEG, 97.0, 180.0])
+def test_ss_matches_the_published_coefficients(inc_deg: float) -> None:
+    """s, c and the three coefficients as Schweighart & Sedwick (2002) publish them.
+
+    Schweighart & Sedwick, "High-Fidelity Linearized J2 Model for Satellite Formation
+    Flight", J. Guid. Control Dyn. 25(6), 1073–1080, 2002: the linearised equations of
+    motion with constant coefficients (cited by formula; their equation numbers could
+    not be checked against a copy of the paper)::
+
+        s = 3 J2 R_E² / (8 r_ref²) · (1 + 3 cos 2i_ref),   c = √(1 + s)
+        ẍ − 2(nc) ẏ − (5c² − 2) n² x = …,   ÿ + 2(nc) ẋ = …,   z̈ + (3c² − 2) n² z = …
+
+    (the right-hand sides, the reference orbit's own J2 forcing, cancel in the relative
+    motion; module docstring of design_models). Checked here in both forms of s: as
+    printed, and with 1 + 3 cos 2i = 4 − 6 sin² i (its form per sin² i, e.g. c² = 1 +
+    3 J2 R_E²/(2 r²) (1 − 3/2 sin² i)); s = 0 and c = 1 at cos² i = 1/3. Tolerance: the
+    same formula up to rounding, 1e-14 relative (the two forms of s differ by ≤ 5.3e-16
+    relative, measured); at the critical inclination, where s vanishes, 1e-20 absolute
+    (measured: exactly 0 in all three).
+    """
+    ss = dm.schweighart_sedwick(N, A_KM, inc_deg, J2, RE)
+    i = math.radians(inc_deg)
+    k = J2 * RE * RE / (A_KM * A_KM)
+    s_printed = 3.0 * k / 8.0 * (1.0 + 3.0 * math.cos(2.0 * i))
+    s_sin = 3.0 * k / 2.0 * (1.0 - 1.5 * math.sin(i) ** 2)
+    for s in (s_printed, s_sin):
+        assert ss.s == pytest.approx(s, rel=1e-14, abs=1e-20)
+    c = math.sqrt(1.0 + s_printed)
+    assert ss.c == pytest.approx(c, rel=1e-14)
+    lti = ss.lti()
+    assert lti.alpha == pytest.approx((5.0 * c * c - 2.0) * N * N, rel=1e-14)
+    assert lti.beta == pytest.approx(2.0 * N * c, rel=1e-14)
+    assert lti.q**2 == pytest.approx((3.0 * c * c - 2.0) * N * N, rel=1e-14)
+    if inc_deg == CRITICAL_DEG:
+        assert abs(ss.s) < 1e-18 and ss.c == pytest.approx(1.0, abs=1e-15)
+
+
 def test_ss_without_j2_is_cw() -> None:
     lti = dm.schweighart_sedwick(N, A_KM, 51.6, 0.0, RE).lti()
     for t in (1.0, 800.0):

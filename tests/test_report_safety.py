@@ -180,3 +180,72 @@ def test_a_stored_config_without_constraints_draws_none_even_with_safety_columns
     data = load_results(root)
     assert data.constraints is None
     assert not {f.file for f in planned_figures(data)} & set(SAFETY_FIGURES)
+
+
+# --- issue 32's "done when", end to end: the commands as the issue names them ---------
+
+
+def _entities(rrd: Path) -> set[str]:
+    from rerun.chunk import RrdReader
+
+    return {chunk.entity_path for chunk in RrdReader(rrd).stream()}
+
+
+def _safety_columns_of_every_ok_run(root: Path, archs: set[str]) -> pd.DataFrame:
+    runs = pd.read_parquet(root / "runs.parquet")
+    assert set(runs["arch"]) == archs and (runs["status"] == "ok").all(), runs[["arch", "status"]]
+    assert runs[["safety_min_distance_km", "safety_violated"]].notna().all().all()
+    return runs
+
+
+@pytest.mark.slow
+def test_the_safe_approach_ablation_of_every_cone_program_runs_end_to_end(
+    tmp_path: Path,
+) -> None:
+    """``cwrend ablate campaigns/safe_approach.toml --arch all_socp`` (one seed): the
+    Parquet with the safety columns, the recording with the keep-out zone and the
+    corridor, the report with the safety figures."""
+    args = ["ablate", str(CAMPAIGNS / "safe_approach.toml"), "--arch", "all_socp",
+            "--seeds", "1", "--workers", "1", "-q", "--set", f"output.dir={tmp_path}",
+            "--name", "c"]  # fmt: skip
+    result = runner.invoke(app, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    root = tmp_path / "c"
+    socp = {"plain_fixed_socp", "mtf_fixed_socp", "plain_adaptive_socp", "mtf_adaptive_socp"}
+    _safety_columns_of_every_ok_run(root, socp)
+    (rrd,) = sorted((root / "recordings").glob("*.rrd"))
+    assert {"/constraints/keep_out", "/constraints/corridor"} <= _entities(rrd)
+    report = _reported(root)
+    assert all((report / name).exists() for name in SAFETY_FIGURES)
+
+
+@pytest.mark.slow
+def test_a_sweep_over_the_margin_with_a_dispersed_corridor_runs_end_to_end(
+    tmp_path: Path,
+) -> None:
+    """``cwrend sweep`` of campaigns/safe_approach.toml over ``constraints.sigma_margin``
+    with the corridor's half-angle dispersed (±5° about 30°), two seeds: each point's runs
+    carry their margin, each run its own half-angle, the safety columns and statistics per
+    point, the recording and the report."""
+    config = tmp_path / "safe_dispersed.toml"
+    config.write_text(
+        (CAMPAIGNS / "safe_approach.toml").read_text(encoding="utf-8")
+        + '\n[dispersions]\n"constraints.corridor.half_angle_deg" = '
+        '{ dist = "uniform", low = -5.0, high = 5.0 }\n',
+        encoding="utf-8",
+    )
+    args = ["sweep", str(config), "--param", "constraints.sigma_margin=0,3", "--arch",
+            "mtf_adaptive_socp", "--seeds", "2", "--workers", "1", "-q", "--set",
+            f"output.dir={tmp_path}", "--name", "s"]  # fmt: skip
+    result = runner.invoke(app, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    root = tmp_path / "s"
+    runs = _safety_columns_of_every_ok_run(root, {"mtf_adaptive_socp"})
+    assert sorted(runs["param.constraints.sigma_margin"]) == [0.0, 0.0, 3.0, 3.0]
+    angles = runs["disp.constraints.corridor.half_angle_deg"]
+    assert angles.between(25.0, 35.0).all() and angles.nunique() == 2  # per seed
+    stats = pd.read_parquet(root / "sweep.parquet")
+    violated = stats[(stats["metric"] == "safety_violated") & (stats["statistic"] == "share")]
+    assert violated["point"].nunique() == 2
+    assert list((root / "recordings").glob("*.rrd"))
+    assert all((_reported(root) / name).exists() for name in SAFETY_FIGURES)

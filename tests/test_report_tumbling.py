@@ -154,3 +154,36 @@ def test_a_sweep_over_the_body_rates_stores_each_vector_as_one_groupable_value()
     point = with_swept_values(config, runs[runs["point"] == "p1"])
     assert point is not None
     assert point.target.body_rates_deg_s == (0.291, 0.3881, 1.9403)
+
+
+@pytest.mark.slow
+def test_a_sweep_over_the_tumble_rate_runs_end_to_end(tmp_path: Path) -> None:
+    """Issue 34's "done when": ``cwrend sweep`` of campaigns/tumbling_target.toml over the
+    tumble rate (at rest in inertial space, and the shipped 2 °/s), one seed, with the
+    recording and the report: each point's runs carry their rates and the safety and
+    docking columns, the recording draws the turning body, the report its body frame."""
+    from rerun.chunk import RrdReader
+
+    config = tmp_path / "tumbling_sweep.toml"
+    config.write_text(
+        (CAMPAIGNS / "tumbling_target.toml").read_text(encoding="utf-8")
+        + '\n[sweep]\n"target.body_rates_deg_s" = [[0.0, 0.0, 0.0], [0.3, 0.4, 2.0]]\n',
+        encoding="utf-8",
+    )
+    args = ["sweep", str(config), "--arch", "mtf_adaptive_socp", "--seeds", "1", "--workers",
+            "1", "-q", "--set", f"output.dir={tmp_path}", "--name", "s"]  # fmt: skip
+    result = runner.invoke(app, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    root = tmp_path / "s"
+    runs = pd.read_parquet(root / "runs.parquet")
+    assert (runs["status"] == "ok").all() and len(runs) == 2
+    assert sorted(runs["param.target.body_rates_deg_s"]) == ["[0.0, 0.0, 0.0]", "[0.3, 0.4, 2.0]"]
+    columns = ["safety_min_distance_km", "safety_dock_position_error_km"]
+    assert runs[columns].notna().all().all()
+    rrds = sorted((root / "recordings").glob("*.rrd"))
+    assert rrds
+    entities = {chunk.entity_path for chunk in RrdReader(rrds[0]).stream()}
+    assert "/target/body/constraints/keep_out" in entities
+    result = runner.invoke(app, ["report", str(root)], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    assert (root / "report" / BODY_FIGURE).exists()

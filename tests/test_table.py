@@ -13,9 +13,11 @@ import csv
 import io
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from click.testing import Result
+from test_safety_measured import SHORT
 from typer.testing import CliRunner
 
 from cwrend_cli.cli import app
@@ -453,6 +455,121 @@ def test_a_bad_pair_across_campaigns_exits_2_saying_why(
     assert result.exit_code == 2, result.output
     assert message in result.stderr
     assert "Traceback" not in result.output
+
+
+def test_a_marginal_row_beside_paired_ones_shows_no_pair(studies: dict[str, Path]) -> None:
+    """A table of a marginal and a paired value: the marginal rows' ``vs`` is ``–`` (no
+    pair), never ``nan`` (pandas 3's ``Series.map`` turned the None of a field into NaN)."""
+    lines = _lines(_table(studies["methods"], "--metric", "mean.dv,mean_diff.dv"))
+    assert lines[0].startswith("| architecture | vs | mean Δv")
+    rows = [line.split(" | ") for line in lines[2:] if line.startswith("| ")]
+    marginal = [r for r in rows if r[2] != "–"]
+    assert len(marginal) == 4 and all(r[1] == "–" for r in marginal)
+    assert "nan" not in "\n".join(lines)
+
+
+@pytest.mark.parametrize(
+    ("where", "metric", "message"),
+    [
+        (
+            "other=mtf_adaptive",
+            "n,mean.dv,frac_less.miss",
+            "--where other=mtf_adaptive keeps no entry of --metric 'n', so its column would be "
+            "empty: a value of one architecture's runs has no other",
+        ),
+        (
+            "arch=mtf_adaptive_socp",
+            "mean.dv,frac_less.miss@plain_adaptive-mtf_adaptive",
+            "--where arch=mtf_adaptive_socp keeps no entry of --metric "
+            "'frac_less.miss@plain_adaptive-mtf_adaptive', so its column would be empty",
+        ),
+    ],
+)
+def test_a_filter_that_empties_a_value_exits_2_naming_it(
+    studies: dict[str, Path], where: str, metric: str, message: str
+) -> None:
+    """The value's column was left out of the table without a word."""
+    result = _table(studies["methods"], "--where", where, "--metric", metric)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert "Traceback" not in result.output
+
+
+# --- the Δv cost of a constrained plan over the unconstrained one (issue 32) ----------
+
+#: 1 km above a 200 m keep-out sphere, the port below it (tests/test_safety_measured.py):
+#: the unconstrained path crosses the zone. The twin flies to the same port at rest.
+SAFE = SHORT
+FREE = SHORT.split("[constraints")[0].replace(
+    "[degradation]", "xf = [0.0, 0.0, -0.25, 0.0, 0.0, 0.0]\n[degradation]"
+)
+
+
+@pytest.fixture(scope="module")
+def constrained_pair(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The constrained cone program and its unconstrained twin, seeds 0–2 each."""
+    root = tmp_path_factory.mktemp("constrained_pair")
+    out = {}
+    for name, text in (("safe", SAFE), ("free", FREE)):
+        cfg = root / f"{name}.toml"
+        cfg.write_text(text + f'[output]\ndir = "{root / "results"}"\n', encoding="utf-8")
+        args = ["ablate", str(cfg), "--name", name, "--seeds", "3", "-w", "1", "--no-rrd", "-q",
+                "--arch", "mtf_adaptive_socp"]  # fmt: skip
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        out[name] = root / "results" / name
+    return out
+
+
+def test_the_delta_v_cost_of_the_constraints_is_a_pair_across_campaigns(
+    constrained_pair: dict[str, Path],
+) -> None:
+    """``--versus`` the unconstrained twin: ``mean_diff.dv`` (and ``.dv_applied``) is the
+    mean over the seeds of the constrained run's Δv minus the twin's [km/s], as the runs
+    hold them (CSV: unrounded)."""
+    safe, free = constrained_pair["safe"], constrained_pair["free"]
+    result = _table(
+        safe, free, "--versus", "free", "--where", "other_campaign=free",
+        "--where", "campaign=safe", "--metric", "n,mean_diff.dv,mean_diff.dv_applied",
+        "--format", "csv",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    (row,) = list(csv.DictReader(io.StringIO(result.stdout)))
+    a = pd.read_parquet(safe / "runs.parquet").set_index("seed")
+    b = pd.read_parquet(free / "runs.parquet").set_index("seed")
+    assert a["safety_violated"].sum() == 0 and "safety_violated" not in b  # the pair is real
+    assert float(row["n"]) == 3
+    for column, header in (
+        ("delta_v_km_s", "mean Δv"),
+        ("delta_v_applied_km_s", "mean applied Δv"),
+    ):
+        d = a[column] - b[column]
+        assert float(row[f"{header} difference [km/s] (95 % CI)"]) == pytest.approx(
+            d.mean(), rel=1e-12
+        )
+        assert (d > 0).all()  # going round the zone costs Δv in every seed
+
+
+def test_a_constrained_campaigns_fuel_penalty_is_over_the_unconstrained_optimum(
+    constrained_pair: dict[str, Path],
+) -> None:
+    """``mean.fuel`` / ``mean.fuel_applied`` of a constrained campaign compare each run with
+    the open-loop fuel optimum of the *unconstrained* problem to the port: its stored
+    references are those of the unconstrained twin, file for file."""
+    safe, free = (constrained_pair[k] / "references" for k in ("safe", "free"))
+    files = sorted(p.name for p in safe.glob("*.parquet"))
+    assert files and files == sorted(p.name for p in free.glob("*.parquet"))
+    for name in files:
+        pd.testing.assert_frame_equal(pd.read_parquet(safe / name), pd.read_parquet(free / name))
+    # and the runs' penalty is against that optimum's Δv (its 1 s trapezoid of ‖u‖)
+    (fuel,) = [
+        f for f in (pd.read_parquet(free / n) for n in files) if "fuel" in set(f["reference"])
+    ]
+    fuel = fuel[fuel["reference"] == "fuel"].sort_values("t_s")
+    dv_fuel = float(np.trapezoid(fuel["u_norm_km_s2"], fuel["t_s"]))
+    runs = pd.read_parquet(constrained_pair["safe"] / "runs.parquet")
+    expected = 100.0 * (runs["delta_v_km_s"] / dv_fuel - 1.0)
+    np.testing.assert_allclose(runs["fuel_penalty_pct"], expected, rtol=1e-12)
 
 
 # --- values computed from the runs and their re-solves --------------------------------

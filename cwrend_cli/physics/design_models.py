@@ -6,10 +6,12 @@ that describe the orbit better, each as its exact zero-order-hold
 discretisation over one step, ``x_{k+1} = Φ_k x_k + Γ_k u_k``:
 
 * ``"ss"`` — Schweighart & Sedwick, "High-Fidelity Linearized J2 Model for
-  Satellite Formation Flight", J. Guid. Control Dyn. 25(6), 2002. The
+  Satellite Formation Flight", J. Guid. Control Dyn. 25(6), 1073–1080, 2002. The
   gradient of the J2 acceleration averaged over one orbit of a circular
   reference orbit of radius r_ref and inclination i gives linear equations
-  with constant coefficients::
+  with constant coefficients (the paper's linearised equations of motion and
+  its constants s and c, cited here by formula: their equation numbers were
+  not checked against a copy of the paper)::
 
       s  = (3 J2 R_E² / (8 r_ref²)) (1 + 3 cos 2i)          [-]
       c  = √(1 + s)                                         [-]

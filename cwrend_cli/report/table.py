@@ -1131,10 +1131,27 @@ def build_table(
                 f"--where {f.field.name}={','.join(f.values)} keeps nothing: the entries have "
                 f"{f.field.name} = {', '.join(dict.fromkeys(held))}"
             )
+        held_before = set(frame["metric"])
         frame, across = frame[keep.astype(bool)], across[keep.astype(bool)]
+        lost = sorted(held_before - set(frame["metric"]))
+        if lost:  # its column would be left out without a word
+            hint = (
+                f"a value of one architecture's runs has no {f.field.name}: ask for it in a "
+                "table of its own"
+                if f.field.name in ("other", "other_campaign")
+                else "drop the value or widen the filter"
+            )
+            raise ConfigError(
+                f"--where {f.field.name}={','.join(f.values)} keeps no entry of --metric "
+                f"{values[lost[0]].text!r}, so its column would be empty: {hint}"
+            )
     names = [f.name for f in (*row_fields, *col_fields)]
     for name in names:
-        frame[name] = frame[name].map(_hashable)
+        # a list, not Series.map: pandas 3 infers a string dtype from mapped strings and
+        # Nones and turns each None (no pair, no value) into NaN, printed as 'nan'
+        frame[name] = pd.Series(
+            [_hashable(v) for v in frame[name]], index=frame.index, dtype=object
+        )
     _check_one_per_cell(frame, names, keys)
     row_keys = _keys(frame, row_fields, sources, filters, values)
     col_keys = _keys(frame, col_fields, sources, filters, values)
