@@ -765,16 +765,22 @@ def _dual_solve(
     used = 0
     cone_rounds = trust_rounds = 0
     retried = sub.warm_duals is None
+    # below DUAL_MIN_WEIGHT (fixed ε): the steps the iterate thrusts on first, the others
+    # held at zero until their Lagrangian says otherwise (path_dual.solve's ``keep``)
+    keep = None
+    if weight < convex.DUAL_MIN_WEIGHT:
+        keep = _thrust_guess(sub.u_bar, sub.u_max, sub.eps)
     while True:
         ans = path_dual.solve(
-            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
-        )
+            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
+            keep=keep,
+        )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
-                _guess_active(rows, kind, sub.r_bar),
+                _guess_active(rows, kind, sub.r_bar), keep=keep,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:
@@ -786,15 +792,18 @@ def _dual_solve(
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
+        # the next program's warm start: at a small weight the homotopy's first level's
+        # multipliers (path_dual.DualAnswer.start: where the next one starts)
+        carried = ans.multipliers if ans.start is None else ans.start
         if cuts[0].size == 0 and box[0].size == 0:
-            active = ans.multipliers != 0.0
-            duals = Duals(code[active], ans.multipliers[active])
+            active = carried != 0.0
+            duals = Duals(code[active], carried[active])
             return (
                 _DualSolution(ans.cost, np.zeros(1), duals),
                 used,
                 (ans.controls, ans.states, 0.0),
             )
-        known = Duals(code, ans.multipliers)
+        known = Duals(code, carried)
         if cuts[0].size:
             if cone_rounds == CONE_ROUNDS:
                 return None, used, None
@@ -840,11 +849,7 @@ def _reduced_solve(
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used, fallback = 0, 0
-    if (
-        reduce
-        and sub.first_order
-        and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT
-    ):
+    if reduce and sub.first_order:
         dual, used, dual_answer = _dual_solve(sub, pairs)
         if dual is not None:
             return dual, used, dual_answer, 0
