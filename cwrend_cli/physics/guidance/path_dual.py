@@ -539,7 +539,7 @@ def _homotopy(
         total += iterations
         if first is not None and level == HOMOTOPY_FROM:
             first[:] = y
-        if status != STATUS_CONVERGED or last:
+        if last or (status != STATUS_CONVERGED and (level == HOMOTOPY_FROM or iterations >= max_iter)):
             return status, total
         level *= HOMOTOPY_FACTOR
         if level <= weight * (1.0 + 1e-9):  # the last level is the weight itself
@@ -619,6 +619,8 @@ def solve(
             converged = True
             break
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
+        if start is not None:  # the next round's homotopy starts where this one's did
+            y[:] = start
     norms = np.linalg.norm(u, axis=1)
     cost = float(np.sum(c1 * norms + weight * norms**2))
     controls = u * u_max
