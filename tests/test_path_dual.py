@@ -234,9 +234,7 @@ def test_the_weight_homotopy_solves_the_fixed_eps_program() -> None:
         )
         assert ans.converged
         np.testing.assert_allclose(ans.controls, reference, rtol=0, atol=1e-5 * U_MAX)
-        assert abs(_cost(ans.controls, 0.0) - _cost(reference, 0.0)) <= 1e-9 * _cost(
-            reference, 0.0
-        )
+        assert abs(_cost(ans.controls, 0.0) - _cost(reference, 0.0)) <= 1e-9 * _cost(reference, 0.0)
         np.testing.assert_allclose(ans.states[-1], xf, rtol=0, atol=1e-9)
 
 

@@ -78,9 +78,11 @@ fix the states), so every iterate keeps the safety argued above. In
 campaigns/safe_approach.toml a re-solve's program has path rows on about the
 last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 
-**Solvers.** Where the quadratic weight max(ε, ρ) is at least
-:data:`.convex.DUAL_MIN_WEIGHT` (every adaptive re-solve), each SCP program is
-first given to the projected dual Newton solver of :mod:`.path_dual` (numba),
+**Solvers.** Each SCP program is first given to the projected dual Newton
+solver of :mod:`.path_dual` (numba) — below the quadratic weight
+:data:`.convex.DUAL_MIN_WEIGHT` (the fixed-ε re-solves, weight ρ) by its homotopy
+in the weight, over the steps the iterate thrusts on (:func:`_thrust_guess`; the
+held steps are certified by their Lagrangian, :func:`.path_dual.solve`) —
 whole: the terminal rows, every kept half-space row, the trust rows of every
 constrained node and the abort rows; a corridor cone the answer breaks adds its
 supporting plane at that point (a cut the cone implies) and the program is
@@ -1233,8 +1235,8 @@ def plan(
     issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
     ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
     ``solver``: ``"auto"`` tries the dual solver of :mod:`.path_dual` on every program
-    whose quadratic weight is at least :data:`.convex.DUAL_MIN_WEIGHT`, Clarabel on the
-    others and whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
+    (below :data:`.convex.DUAL_MIN_WEIGHT` by its homotopy in the weight), Clarabel
+    whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
     (module docstring, *Solvers*). ``warm_duals``: the dual solver's starting multipliers,
     an earlier plan's :attr:`ConstrainedPlan.duals` moved to this grid by
     :func:`shift_duals`.

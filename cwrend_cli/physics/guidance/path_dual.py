@@ -1,7 +1,8 @@
 """A projected dual Newton solver for the smoothed minimum-fuel program with linear path rows.
 
-Issue 32: the constrained cone program's SCP subproblem at adaptive ε (quadratic
-weight ``c₂ = max(ε, ρ) ≥ 1e-3``). The program, in the scaled controls
+Issue 32: the constrained cone program's SCP subproblem, at adaptive ε (quadratic
+weight ``c₂ = max(ε, ρ) ≥ 1e-3``) and, by a homotopy in the weight, at fixed ε
+(``c₂ = ρ``; *Small weights* below). The program, in the scaled controls
 ``ũ_j = u_j/u_max`` (N × 3) on the zero-order-hold grid (exact CW dynamics,
 paper Eq. 11: ``x_k = Φᵏ x₀ + Σ_{j<k} Φ^{k−1−j} Γ u_max ũ_j``):
 
@@ -43,6 +44,24 @@ tolerance, and every row with ``y_i > 0`` within its tolerance of equality
 (complementarity); with ``c₂ > 0`` these KKT conditions make ``ũ(y)`` the
 program's unique minimiser (to the tolerances). Otherwise the status is
 failed and the caller solves the program with Clarabel (its reference).
+
+**Small weights** (the fixed-ε architectures: ε = 0, ``c₂ = ρ = 1e-6``). There
+a step's throttle ramps from 0 to 1 over ``‖y_j‖ ∈ [c₁, c₁ + 2c₂]``: the dual is
+nearly piecewise linear and Newton from a distant start stalls. Below
+:data:`HOMOTOPY_FROM` the weight is therefore followed down, ``1e-3, 1e-4, 1e-5,
+ρ`` (:data:`HOMOTOPY_FACTOR`), each level's Newton started from the last one's
+multipliers (a path-following in the smoothing, as the shooting method's fallback
+chain continues in ε; here in the quadratic weight alone) and solved to
+:data:`SETTLED` × the tolerances but the last, whose answer alone is certified as
+above. And most steps coast: with ``keep`` the steps outside it (all but those
+the previous plan thrusts on) are held at zero, which makes each Newton iteration
+a pass over about a hundred steps instead of the whole horizon. A row at node k
+acts on the kept steps before k, so the rows keep their vectors ``h`` and only
+their nodes are renumbered. Zero minimises a held step's Lagrangian iff
+``‖A_jᵀλ_j‖ ≤ c₁`` (:func:`held_norms`, for any ``c₂``), so the answer is the
+whole program's exactly when every held step passes that test; the steps that
+fail wake (with those within :data:`WAKE_MARGIN` of it) and the program is solved
+again, the same screen as :mod:`.convex`'s at ε = 0 with Clarabel.
 
 Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
 tolerances in the same scaled units).
@@ -539,7 +558,10 @@ def _homotopy(
         total += iterations
         if first is not None and level == HOMOTOPY_FROM:
             first[:] = y
-        if last or (status != STATUS_CONVERGED and (level == HOMOTOPY_FROM or iterations >= max_iter)):
+        # a level before the last that stalls early hands its multipliers on (only the
+        # last is certified); one that reached the cap, or the first, ends the homotopy
+        stalled = status != STATUS_CONVERGED
+        if last or (stalled and (level == HOMOTOPY_FROM or iterations >= max_iter)):
             return status, total
         level *= HOMOTOPY_FACTOR
         if level <= weight * (1.0 + 1e-9):  # the last level is the weight itself
