@@ -916,6 +916,9 @@ def _initial_constrained_plan(
     seed), which is planned every time."""
     horizon = problem.scenario.horizon_s
     key = None
+    c = problem.constraints
+    if c is None or c.keep_out is None:  # no constrained plan (:func:`_constrained_plan`)
+        return None
     if plans is not None and (known is None or known.truth is None):
         start = time.perf_counter()
         key = pickle.dumps((problem, x_hat, eps, p), protocol=pickle.HIGHEST_PROTOCOL)
