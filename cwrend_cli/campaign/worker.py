@@ -270,6 +270,11 @@ def run_case(
 #: run of each also loads (or compiles) its kernels, which its time limit allows for
 #: (:func:`guards.run_timeout_s`).
 _VARIANTS_RUN: set[tuple[object, ...]] = set()
+#: The initial constrained plans this process made (:func:`.simulation.simulate`'s
+#: ``initial_plans``): every seed of a campaign point starts from the same estimate, so a
+#: worker plans that start once (issue 32's study: 0.25 of the 0.68 CPU s of a
+#: constrained fixed-ε run, docs/performance.md).
+_INITIAL_PLANS: simulation.InitialPlans = {}
 
 
 def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
@@ -530,6 +535,7 @@ def execute_task(
                         actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
                         fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
                         attitude_draws=attitude_draws(problem, task.noise.root_seed, spec.seed),
+                        initial_plans=_INITIAL_PLANS,
                     )
                 guards.check_finite(result)
                 metrics = summary_row(result, run_refs.fuel)

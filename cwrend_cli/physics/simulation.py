@@ -45,8 +45,11 @@ Units: km, s, km/s, km/s².
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import functools
 import math
+import pickle
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -326,6 +329,7 @@ def simulate(
     fault_draws: sensors.FaultDraws | None = None,
     observe: ResolveObserver | None = None,
     attitude_draws: FloatArray | None = None,
+    initial_plans: InitialPlans | None = None,
 ) -> RunResult:
     """Run one closed-loop case of ``arch`` on the noise realisation ``standard_normal`` (N, 3).
 
@@ -337,6 +341,11 @@ def simulate(
     standard normals of the guidance's attitude-knowledge error (a tumbling target
     with ``target.knowledge_sigma_*``; :func:`cwrend_cli.physics.attitude.knowledge_error`):
     6, or (N, 6) with ``target.knowledge_draw = "resolve"`` (row k at step k's re-solve).
+
+    ``initial_plans`` (a campaign worker's): the initial constrained plans already
+    made, by their inputs (:func:`_initial_constrained_plan`); the runs of one
+    campaign point start from the same estimate, so each worker plans that start
+    once (the same plan, bit for bit: it is a function of its inputs).
 
     ``observe`` (tests, benchmarks): called with the input of every shooting
     re-solve (:class:`ResolveInput`: the problem and the warm starts its warm
@@ -386,8 +395,8 @@ def simulate(
     plan_costate: FloatArray | None = None
     duals: constrained.Duals | None = None  # the constrained plan's row multipliers
     if socp:  # the cone program's plan from x̂0 at ε0, held until the first re-solve (issue 16)
-        scp = _constrained_plan(
-            problem, x_hat0, sc.horizon_s, eps0, est.p0_matrix(), None, 0, known
+        scp = _initial_constrained_plan(
+            problem, x_hat0, eps0, est.p0_matrix(), known, initial_plans
         )
         if scp is not None:  # a keep-out zone: the constrained cone program (issue 32)
             result, duals = scp[0], scp[2]
@@ -878,6 +887,51 @@ def _cone_resolves(
         _min_miss_if_infeasible(problem, result, schedule, i, state.x_hat, model)
     loop.advance(k_next, n_steps, n_steps, scalars)
     return records
+
+
+#: The initial constrained plans a campaign worker made, by the pickled inputs of
+#: :func:`_initial_constrained_plan` (at most :data:`INITIAL_PLANS_KEPT`, the oldest dropped).
+InitialPlans = dict[
+    bytes, tuple[guidance.SolveResult, tuple[int, float, float], "constrained.Duals | None"]
+]
+#: Initial plans a worker keeps (:data:`InitialPlans`) [-].
+INITIAL_PLANS_KEPT = 64
+
+
+def _initial_constrained_plan(
+    problem: Problem,
+    x_hat: FloatArray,
+    eps: float,
+    p: FloatArray,
+    known: _Knowledge | None,
+    plans: InitialPlans | None,
+) -> tuple[guidance.SolveResult, tuple[int, float, float], constrained.Duals | None] | None:
+    """:func:`_constrained_plan` from ``x_hat`` at step 0 over the whole horizon, cold.
+
+    With ``plans`` (:func:`simulate`'s ``initial_plans``) a plan is made once for each
+    set of inputs — the problem, the estimate, ε and the covariance, pickled — and a
+    copy returned after that (its ``wall_time_s`` that of the look-up). A cold plan is
+    a function of exactly these (no warm start, no random draw), so the copy is the plan
+    bit for bit. Not with a tumbling target's attitude knowledge (``known``: drawn per
+    seed), which is planned every time."""
+    horizon = problem.scenario.horizon_s
+    key = None
+    c = problem.constraints
+    if c is None or c.keep_out is None:  # no constrained plan (:func:`_constrained_plan`)
+        return None
+    if plans is not None and (known is None or known.truth is None):
+        start = time.perf_counter()
+        key = pickle.dumps((problem, x_hat, eps, p), protocol=pickle.HIGHEST_PROTOCOL)
+        hit = plans.get(key)
+        if hit is not None:
+            result, scp, duals = copy.deepcopy(hit)
+            return dataclasses.replace(result, wall_time_s=time.perf_counter() - start), scp, duals
+    made = _constrained_plan(problem, x_hat, horizon, eps, p, None, 0, known)
+    if key is not None and plans is not None and made is not None:
+        while len(plans) >= INITIAL_PLANS_KEPT:
+            plans.pop(next(iter(plans)))
+        plans[key] = copy.deepcopy(made)
+    return made
 
 
 def _constrained_plan(

@@ -78,9 +78,11 @@ fix the states), so every iterate keeps the safety argued above. In
 campaigns/safe_approach.toml a re-solve's program has path rows on about the
 last 60 nodes of up to 800, and at ε = 0 about 65 steps that thrust.
 
-**Solvers.** Where the quadratic weight max(ε, ρ) is at least
-:data:`.convex.DUAL_MIN_WEIGHT` (every adaptive re-solve), each SCP program is
-first given to the projected dual Newton solver of :mod:`.path_dual` (numba),
+**Solvers.** Each SCP program is first given to the projected dual Newton
+solver of :mod:`.path_dual` (numba) — below the quadratic weight
+:data:`.convex.DUAL_MIN_WEIGHT` (the fixed-ε re-solves, weight ρ) by its homotopy
+in the weight, over the steps the iterate thrusts on (:func:`_thrust_guess`; the
+held steps are certified by their Lagrangian, :func:`.path_dual.solve`) —
 whole: the terminal rows, every kept half-space row, the trust rows of every
 constrained node and the abort rows; a corridor cone the answer breaks adds its
 supporting plane at that point (a cut the cone implies) and the program is
@@ -765,16 +767,22 @@ def _dual_solve(
     used = 0
     cone_rounds = trust_rounds = 0
     retried = sub.warm_duals is None
+    # below DUAL_MIN_WEIGHT (fixed ε): the steps the iterate thrusts on first, the others
+    # held at zero until their Lagrangian says otherwise (path_dual.solve's ``keep``)
+    keep = None
+    if weight < convex.DUAL_MIN_WEIGHT:
+        keep = _thrust_guess(sub.u_bar, sub.u_max, sub.eps)
     while True:
         ans = path_dual.solve(
-            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm
-        )
+            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
+            keep=keep,
+        )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
-                _guess_active(rows, kind, sub.r_bar),
+                _guess_active(rows, kind, sub.r_bar), keep=keep,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:
@@ -786,15 +794,18 @@ def _dual_solve(
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
+        # the next program's warm start: at a small weight the homotopy's first level's
+        # multipliers (path_dual.DualAnswer.start: where the next one starts)
+        carried = ans.multipliers if ans.start is None else ans.start
         if cuts[0].size == 0 and box[0].size == 0:
-            active = ans.multipliers != 0.0
-            duals = Duals(code[active], ans.multipliers[active])
+            active = carried != 0.0
+            duals = Duals(code[active], carried[active])
             return (
                 _DualSolution(ans.cost, np.zeros(1), duals),
                 used,
                 (ans.controls, ans.states, 0.0),
             )
-        known = Duals(code, ans.multipliers)
+        known = Duals(code, carried)
         if cuts[0].size:
             if cone_rounds == CONE_ROUNDS:
                 return None, used, None
@@ -840,11 +851,7 @@ def _reduced_solve(
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used, fallback = 0, 0
-    if (
-        reduce
-        and sub.first_order
-        and max(float(eps), convex.REGULARISATION) >= convex.DUAL_MIN_WEIGHT
-    ):
+    if reduce and sub.first_order:
         dual, used, dual_answer = _dual_solve(sub, pairs)
         if dual is not None:
             return dual, used, dual_answer, 0
@@ -1228,8 +1235,8 @@ def plan(
     issue 34): the predicted turn of the body frame at the N + 1 nodes, in which
     ``geo`` is given; ``xf`` is then the port's predicted state at the horizon's end.
     ``solver``: ``"auto"`` tries the dual solver of :mod:`.path_dual` on every program
-    whose quadratic weight is at least :data:`.convex.DUAL_MIN_WEIGHT`, Clarabel on the
-    others and whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
+    (below :data:`.convex.DUAL_MIN_WEIGHT` by its homotopy in the weight), Clarabel
+    whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
     (module docstring, *Solvers*). ``warm_duals``: the dual solver's starting multipliers,
     an earlier plan's :attr:`ConstrainedPlan.duals` moved to this grid by
     :func:`shift_duals`.

@@ -1,7 +1,8 @@
 """A projected dual Newton solver for the smoothed minimum-fuel program with linear path rows.
 
-Issue 32: the constrained cone program's SCP subproblem at adaptive ε (quadratic
-weight ``c₂ = max(ε, ρ) ≥ 1e-3``). The program, in the scaled controls
+Issue 32: the constrained cone program's SCP subproblem, at adaptive ε (quadratic
+weight ``c₂ = max(ε, ρ) ≥ 1e-3``) and, by a homotopy in the weight, at fixed ε
+(``c₂ = ρ``; *Small weights* below). The program, in the scaled controls
 ``ũ_j = u_j/u_max`` (N × 3) on the zero-order-hold grid (exact CW dynamics,
 paper Eq. 11: ``x_k = Φᵏ x₀ + Σ_{j<k} Φ^{k−1−j} Γ u_max ũ_j``):
 
@@ -44,6 +45,24 @@ tolerance, and every row with ``y_i > 0`` within its tolerance of equality
 program's unique minimiser (to the tolerances). Otherwise the status is
 failed and the caller solves the program with Clarabel (its reference).
 
+**Small weights** (the fixed-ε architectures: ε = 0, ``c₂ = ρ = 1e-6``). There
+a step's throttle ramps from 0 to 1 over ``‖y_j‖ ∈ [c₁, c₁ + 2c₂]``: the dual is
+nearly piecewise linear and Newton from a distant start stalls. Below
+:data:`HOMOTOPY_FROM` the weight is therefore followed down, ``1e-3, 1e-4, 1e-5,
+ρ`` (:data:`HOMOTOPY_FACTOR`), each level's Newton started from the last one's
+multipliers (a path-following in the smoothing, as the shooting method's fallback
+chain continues in ε; here in the quadratic weight alone) and solved to
+:data:`SETTLED` × the tolerances but the last, whose answer alone is certified as
+above. And most steps coast: with ``keep`` the steps outside it (all but those
+the previous plan thrusts on) are held at zero, which makes each Newton iteration
+a pass over about a hundred steps instead of the whole horizon. A row at node k
+acts on the kept steps before k, so the rows keep their vectors ``h`` and only
+their nodes are renumbered. Zero minimises a held step's Lagrangian iff
+``‖A_jᵀλ_j‖ ≤ c₁`` (:func:`held_norms`, for any ``c₂``), so the answer is the
+whole program's exactly when every held step passes that test; the steps that
+fail wake (with those within :data:`WAKE_MARGIN` of it) and the program is solved
+again, the same screen as :mod:`.convex`'s at ε = 0 with Clarabel.
+
 Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
 tolerances in the same scaled units).
 """
@@ -59,7 +78,18 @@ from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
 from cwrend_cli.physics.guidance._grid_kernels import step_law
 from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
 
-__all__ = ["ENTER", "MAX_ITER", "DualAnswer", "DualRows", "solve"]
+__all__ = [
+    "ENTER",
+    "HOMOTOPY_FACTOR",
+    "HOMOTOPY_FROM",
+    "MAX_ITER",
+    "WAKE_MARGIN",
+    "WAKE_ROUNDS",
+    "DualAnswer",
+    "DualRows",
+    "held_norms",
+    "solve",
+]
 
 #: Newton iterations at most [-] (median 39 over the re-solves of seeds 0–1 of
 #: campaigns/safe_approach.toml, MTF adaptive: 60 left 32 of 79 programs to Clarabel, 150
@@ -73,6 +103,18 @@ ENTER = 4
 #: Violated rows join once every free row is within this multiple of its tolerance [-]
 #: (the working set need not be solved to the last digit before it grows).
 SETTLED = 1e3
+#: The smallest quadratic weight solved directly [-]; below it (ε = 0: ρ = 1e-6, the fixed-ε
+#: architectures) :func:`solve` follows the weight down from here (module docstring,
+#: *Small weights*).
+HOMOTOPY_FROM = 1e-3
+#: Factor between two weights of that homotopy [-] (1e-3, 1e-4, 1e-5, 1e-6 at ε = 0).
+HOMOTOPY_FACTOR = 0.1
+#: Held steps whose ``‖A_jᵀλ_j‖`` comes within this fraction of the switching value
+#: ``1 − ε`` wake with those above it (:func:`solve`'s ``keep``) [-] (the screen of
+#: :mod:`.convex`, its SCREEN_MARGIN).
+WAKE_MARGIN = 0.03
+#: Rounds of woken steps before every step is a variable [-].
+WAKE_ROUNDS = 3
 _ARMIJO = 1e-4
 _HALVINGS = 4
 _DAMPING_TRIES = 40
@@ -96,7 +138,10 @@ class DualRows(NamedTuple):
 class DualAnswer(NamedTuple):
     """``converged``; ``controls`` (N, 3) [km/s²]; ``states`` (N + 1, 6); ``multipliers``
     (R,) of the rows (≥ 0 on inequality rows; in the rows' scaled units); ``cost`` the
-    scaled cost ``Σ c₁‖ũ‖ + c₂‖ũ‖²``; ``iterations`` the Newton iterations."""
+    scaled cost ``Σ c₁‖ũ‖ + c₂‖ũ‖²``; ``iterations`` the Newton iterations; ``start``
+    (below :data:`HOMOTOPY_FROM` only, else None): the multipliers at the homotopy's
+    first weight, the warm start of a later homotopy on these rows (a re-solve's next
+    one starts at that weight, where they are closer than ``multipliers``)."""
 
     converged: bool
     controls: np.ndarray
@@ -104,6 +149,7 @@ class DualAnswer(NamedTuple):
     multipliers: np.ndarray
     cost: float
     iterations: int
+    start: np.ndarray | None = None
 
 
 @njit(cache=True)
@@ -469,6 +515,59 @@ def _row_vectors(
             out[i, c] = acc
 
 
+def held_norms(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``‖A_jᵀ λ_j‖`` (N,) of every step at the multipliers ``y`` (R,) of rows at ``nodes``
+    (sorted, original grid), ``λ_j = Σ_{i: k_i > j} y_i h_i`` (module docstring); ``a``
+    (N, 6, 3) the scaled blocks ``A_j``. Step j thrusts in the Lagrangian's minimiser iff
+    it exceeds ``c₁`` (whatever ``c₂``)."""
+    suffix = np.zeros((nodes.size + 1, 6))
+    suffix[:-1] = np.cumsum((y[:, None] * h)[::-1], axis=0)[::-1]
+    lam = suffix[np.searchsorted(nodes, np.arange(a.shape[0]), side="right")]
+    norms: np.ndarray = np.linalg.norm(np.einsum("jab,ja->jb", a, lam), axis=1)
+    return norms
+
+
+def _homotopy(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    rows: DualRows,
+    c1: float,
+    weight: float,
+    y: np.ndarray,
+    u: np.ndarray,
+    max_iter: int,
+    first: np.ndarray | None = None,
+) -> tuple[int, int]:
+    """:func:`projected_newton` at ``weight``; below :data:`HOMOTOPY_FROM`, along the
+    weights ``HOMOTOPY_FROM``, × :data:`HOMOTOPY_FACTOR` …, ``weight``, each level started
+    from the last one's multipliers, the levels before the last to :data:`SETTLED` ×
+    the rows' tolerances (only the last one's answer is certified). (status, iterations
+    summed); ``first`` receives the multipliers of the level ``HOMOTOPY_FROM`` (the next
+    homotopy's start: :attr:`DualAnswer.start`)."""
+    metric = np.full(nodes.size, -1.0)
+    level = max(float(weight), HOMOTOPY_FROM)
+    total = 0
+    while True:
+        last = level == weight
+        tol = rows.tol if last else rows.tol * SETTLED
+        status, iterations = projected_newton(
+            a, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER
+        )
+        total += iterations
+        if first is not None and level == HOMOTOPY_FROM:
+            first[:] = y
+        # a level before the last that stalls early hands its multipliers on (only the
+        # last is certified); one that reached the cap, or the first, ends the homotopy
+        stalled = status != STATUS_CONVERGED
+        if last or (stalled and (level == HOMOTOPY_FROM or iterations >= max_iter)):
+            return status, total
+        level *= HOMOTOPY_FACTOR
+        if level <= weight * (1.0 + 1e-9):  # the last level is the weight itself
+            level = float(weight)
+
+
 def solve(
     n: float,
     dt_s: float,
@@ -480,30 +579,72 @@ def solve(
     rows: DualRows,
     warm: np.ndarray | None = None,
     max_iter: int = MAX_ITER,
+    keep: np.ndarray | None = None,
 ) -> DualAnswer:
     """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
     terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
     linear cost weight ``1 − ε`` and quadratic ``weight``; ``warm``: starting multipliers
-    (R,) of ``rows`` (zero when None)."""
+    (R,) of ``rows`` (zero when None).
+
+    Below :data:`HOMOTOPY_FROM` the weight is followed down to ``weight``
+    (:func:`_homotopy`; module docstring, *Small weights*). ``keep`` (sorted step
+    indices, e.g. the steps the previous plan thrusts on): the other steps are first
+    held at zero, as are those the warm multipliers screen (:data:`WAKE_MARGIN`);
+    the answer is accepted only when every held step's zero minimises its Lagrangian
+    (``‖A_jᵀλ_j‖ ≤ 1 − ε``, :func:`held_norms`), else the steps that fail wake and
+    the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step)."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
     free_states = zoh_rollout(
         phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
     )
-    a = np.ascontiguousarray(blocks * u_max)
+    a_all = np.ascontiguousarray(blocks * u_max)
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
     f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
-    metric = np.full(rows.nodes.size, -1.0)
     y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
-    u = np.zeros((steps, 3))
     c1 = 1.0 - min(float(eps), 1.0)
-    status, iterations = projected_newton(
-        a, h, f, rows.nodes, rows.equality, rows.tol, metric, c1, float(weight), y, u,
-        max_iter, ENTER,
-    )  # fmt: skip
+    if keep is not None:  # step 0 precedes every row: each row acts on a kept step
+        keep = np.union1d(keep, 0)
+        held = np.setdiff1d(np.arange(steps), keep)
+        norms = held_norms(a_all, h, rows.nodes, y)
+        keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
+    u = np.zeros((steps, 3))
+    start = np.zeros(rows.nodes.size) if weight < HOMOTOPY_FROM else None
+    total = 0
+    converged = False
+    for round_ in range(WAKE_ROUNDS + 1):
+        if keep is not None and (keep.size == steps or round_ == WAKE_ROUNDS):
+            keep = None
+        if keep is None:
+            status, iterations = _homotopy(
+                a_all, h, f, rows.nodes, rows, c1, weight, y, u, max_iter, start
+            )
+        else:  # the rows at node k act on the kept steps before k: renumber the nodes
+            u_kept = np.zeros((keep.size, 3))
+            status, iterations = _homotopy(
+                np.ascontiguousarray(a_all[keep]), h, f,
+                np.searchsorted(keep, rows.nodes).astype(np.int64), rows, c1, weight, y,
+                u_kept, max_iter, start,
+            )  # fmt: skip
+            u[:] = 0.0
+            u[keep] = u_kept
+        total += iterations
+        if status != STATUS_CONVERGED:
+            break
+        if keep is None:
+            converged = True
+            break
+        held = np.setdiff1d(np.arange(steps), keep)
+        norms = held_norms(a_all, h, rows.nodes, y)
+        if not np.any(norms[held] > c1):
+            converged = True
+            break
+        keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
+        if start is not None:  # the next round's homotopy starts where this one's did
+            y[:] = start
     norms = np.linalg.norm(u, axis=1)
     cost = float(np.sum(c1 * norms + weight * norms**2))
     controls = u * u_max
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
-    return DualAnswer(status == STATUS_CONVERGED, controls, states, y, cost, int(iterations))
+    return DualAnswer(converged, controls, states, y, cost, int(total), start)
