@@ -59,6 +59,66 @@ program's corridor nodes, :func:`final_approach_start`) and every node within
 measured. Node 0 of a plan (the state it starts from) is given, not planned:
 the cone program cannot constrain it, the truth's measure counts it.
 
+**Several bodies, a turning target** (:class:`BodyDrift`). The zone is the
+union of ellipsoids E_b (centre c_b, semi-axes a_b) given in the target's body
+frame, which turns as ``r = R(t) ρ`` (for a fixed target R = I); the drift from
+node k (time t_k) must stay outside every E_b at its attitude at t_k + s,
+s ∈ [0, T]: ``R(t_k + s)ᵀ Φ(s) x_k ∉ E_b``. Two levels of chords:
+
+* (s) **coarse chords** of h_c (:data:`ABORT_SAMPLE_S` fixed; for a turning
+  target r Δt, the whole multiple of the plan step nearest it,
+  :func:`turning_samples`, so that every sample falls on the grid of the
+  predicted attitude): covered at any attitude when the arc stays outside the
+  sphere of radius R_b (:func:`enclosing_radius_km`) that holds every body at
+  any attitude, test (a) above in the Hill frame against that sphere (its
+  distance ‖r‖ − R_b is exact); and
+* **fine chords** of h_f = h_c / per (the planner: Δt for a turning target, h_c
+  for a fixed one; the truth's measure: :data:`MEASURE_SUBSAMPLES` re-samples of
+  each coarse chord) of the coarse chords that (s) does not clear, tested per
+  body in the body frame at each sample's own time: (a) with the body-frame
+  reach ``(‖v‖ + ‖Ω‖‖r‖) h_f + ½ B h_f²`` (the body-frame speed
+  ‖Rᵀ(v − Ω × r)‖ ≤ ‖v‖ + ‖Ω‖‖r‖), or (b) both samples in a half-space
+  tangent to E_b raised by δ ≥ B h_f²/8. B is the body-frame acceleration bound
+  of :func:`~cwrend_cli.physics.constraints.body_acceleration_bound` (the
+  between-node margin of a turning set, derived there: the fixed drift bound
+  A_j plus the rotation's ``(‖Ω̇‖ + ‖Ω‖²) R + 2‖Ω‖V``), from the Hill state at
+  the chord's first sample; for a fixed target ‖Ω‖ = 0 and B = A_j. The
+  body-frame arc stays within B h_f²/8 of its body-frame chord, so (b) keeps it
+  outside E_b (the argument of the node chords, in the body frame).
+
+Why Δt for the planner's fine chords of a turning target: B grows with the
+distance (the spin term) and with the drift's speed (2‖Ω‖V): near the
+shipped target (0.3 km out at 40 m/s, 2.8 °/s reachable) B h²/8 is 96 m at
+h = 10 s and 0.72 m at h = 1 s (B = 7.7e-3 and 5.8e-3 km/s²). The coarse
+sphere test keeps the count down: a drift leaves the target's neighbourhood
+fast, and only its chords within R_b plus their reach are sampled finely.
+
+Rows of fine chord i of coarse chord j of node k and body b: ``(R_p n)ᵀ C
+Φ(i h_f) Φ(j h_c) x_k ≥ o + nᵀc_b + δ`` at both its samples, p the sample's row
+of the predicted turn (t_0 + p h_f; :func:`body_rows`); one row per body that
+needs it. The coarse chords that (s) leaves short of the trust radius are
+sampled finely, and a body's fine chords get rows when the previous iterate
+leaves them less than :data:`BODY_BUFFER` × the trust radius of room; each
+answer is checked and widened as above (:func:`body_widened`). The attitude over the drifts is the guidance's own
+prediction (every Δt from the attitude known at the re-solve, beyond the plan's
+horizon by :func:`turn_steps`); the truth's measure uses the truth's (its
+torque-free motion propagated past the run's end), re-sampled every
+h_f = Δt/:func:`turn_stride` (0.1 s at Δt = 1 s), where the sampled minimum is
+at most ``(‖v‖ + ‖Ω‖‖r‖) h_f/2`` above the continuous one.
+
+**Exemption of a turning target.** The same rule, in the body frame: the final
+approach is the last contiguous stretch of nodes inside the corridor turned to
+each node's own time (``R_kᵀ r_k`` in the cone: the nodes the cone program holds
+in the turning corridor), and the exempt neighbourhood is that of the plan's
+last node in the body frame (``‖R_kᵀ r_k − R_Nᵀ r_N‖`` ≤ the zone's largest
+semi-axis over its bodies): near the moving port, where it is at each node's
+time. For a fixed target it is the rule above (R = I).
+
+One ellipsoid standing still keeps the functions above (:func:`chord_set`,
+:func:`widened`, :func:`rows_of`), whose plans are pinned bit for bit;
+:func:`planner_drift`, :func:`chords_near`, :func:`widen`, :func:`rows_for`
+choose.
+
 Units: km, s, km/s.
 """
 

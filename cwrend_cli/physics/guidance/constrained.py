@@ -105,7 +105,10 @@ which says how many drift samples and why they suffice) with their own slack
 priced :data:`ABORT_SLACK_PENALTY` per km; the chords the rows left out are
 checked on each answer and the subproblem solved again with their rows (at
 most :data:`ABORT_ROUNDS` solves an iteration; an answer still uncovered is
-not converged).
+not converged). Several bodies, or a tumbling target (``abort_turn``: the
+predicted turn over the drifts): one row per body and fine chord, in the body
+frame at each drift sample's own time (:mod:`cwrend_cli.physics.abort_safety`,
+*Several bodies, a turning target*).
 
 **Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
 cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
