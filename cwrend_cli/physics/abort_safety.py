@@ -99,10 +99,11 @@ of the predicted turn (t_0 + p h_f; :func:`body_rows`); one row per body that
 needs it. The coarse chords that (s) leaves short of the trust radius are
 sampled finely, and a body's fine chords get rows when the previous iterate
 leaves them less than :data:`BODY_BUFFER` × the trust radius of room; each
-answer is checked and widened as above (:func:`body_widened`). The attitude over the drifts is the guidance's own
-prediction (every Δt from the attitude known at the re-solve, beyond the plan's
-horizon by :func:`turn_steps`); the truth's measure uses the truth's (its
-torque-free motion propagated past the run's end), re-sampled every
+answer is checked and widened as above (:func:`body_widened`). The attitude
+over the drifts is the guidance's own prediction (every Δt from the attitude
+known at the re-solve, beyond the plan's horizon by :func:`turn_steps`); the
+truth's measure uses the truth's (its torque-free motion propagated past the
+run's end), re-sampled every
 h_f = Δt/:func:`turn_stride` (0.1 s at Δt = 1 s), where the sampled minimum is
 at most ``(‖v‖ + ‖Ω‖‖r‖) h_f/2`` above the continuous one.
 
@@ -463,6 +464,8 @@ def measure_abort(
     assert geo.semi_axes_km is not None
     a = geo.semi_axes_km
     x = np.asarray(x, dtype=np.float64)
+    if turn is not None and dt_s <= 0.0:
+        raise ValueError("a turning target's abort measure needs the grid step dt_s > 0")
     if turn is not None or geo.bodies_centre_km is not None:
         drift = body_drift(n_rad_s, time_s, geo, dt_s, turn, subsamples)
         motion = None
