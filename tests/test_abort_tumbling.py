@@ -297,3 +297,69 @@ def test_abort_safety_with_bodies_validates(tumbling: bool, tmp_path: Path) -> N
     args = ["config", "validate", str(config), "--set", "constraints.abort_safe_s=5400"]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
+
+
+TUMBLING_CASE = """
+[scenario]
+x0 = [0.001, 0.0, 1.0, -0.001, 0.0015, 0.0]
+horizon_s = 400.0
+
+[guidance]
+t_resolve_s = 100.0
+
+[target]
+attitude = "tumbling"
+body_rates_deg_s = [0.0, 0.0, 2.0]
+inertia = [1.0, 1.2, 1.5]
+
+[constraints]
+abort_safe_s = 300.0
+
+[constraints.keep_out]
+semi_axes_km = [0.2, 0.2, 0.2]
+
+[[constraints.keep_out.bodies]]
+centre_km = [0.0, 0.35, 0.0]
+semi_axes_km = [0.05, 0.1, 0.05]
+
+[constraints.corridor]
+port_km = [0.0, 0.0, -0.25]
+axis = [0.0, 0.0, -1.0]
+half_angle_deg = 30.0
+"""
+
+
+def test_a_tumbling_abort_safe_campaign_measures_its_truth_against_the_turning_bodies(
+    tmp_path: Path,
+) -> None:
+    """The wiring: an abort-safe campaign on a tumbling composite target runs, and its runs'
+    abort columns are the measure of its true states against the bodies at the truth's
+    attitude (the torque-free motion from t = 0, past the run's end by the drift time)."""
+    import glob
+
+    import pyarrow.dataset as ds
+    import pyarrow.parquet as pq
+
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.config.io import load_config
+
+    config = tmp_path / "c.toml"
+    config.write_text(TUMBLING_CASE + f'\n[output]\ndir = "{tmp_path / "out"}"\n', "utf-8")
+    args = ["ablate", str(config), "--seeds", "1", "--arch", "mtf_adaptive_socp"]
+    result = runner.invoke(app, [*args, "--workers", "1", "-q", "--no-rrd"])
+    assert result.exit_code == 0, result.output
+    row = pq.read_table(glob.glob(str(tmp_path / "out" / "*" / "runs.parquet"))[0]).to_pylist()[0]
+    steps = ds.dataset(glob.glob(str(tmp_path / "out" / "*" / "steps"))[0], partitioning="hive")
+    columns = ["x_km", "y_km", "z_km", "vx_km_s", "vy_km_s", "vz_km_s"]
+    x = steps.to_table(columns=columns).to_pandas().to_numpy()
+    problem = problem_of(load_config(config))
+    n, dt = problem.scenario.mean_motion_rad_s, problem.scenario.dt_s
+    assert problem.constraints is not None
+    model = attitude.attitude_model(problem.target, n)
+    stride = ab.turn_stride(dt, ab.MEASURE_SUBSAMPLES)
+    truth = attitude.target_attitude(model, x.shape[0] - 1 + ab.turn_steps(300.0, dt), dt, stride)
+    turn = attitude.body_motion(model, truth.q_hb, truth.w_rad_s)
+    m = ab.measure_abort(x, n, cg.geometry(problem.constraints), 300.0, turn=turn, dt_s=dt)
+    assert m.checked_steps > 0
+    assert row["abort_min_distance_km"] == m.min_distance_km
+    assert row["abort_unsafe_steps"] == m.unsafe_steps
