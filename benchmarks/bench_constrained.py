@@ -16,7 +16,11 @@ about ten times a fixed one's re-solve time), beside its fixed-target twin
 (``[target]`` removed: the same bodies and corridor standing still, the same
 seeds), so that the two differ only by the tumble.
 
-Run alone: ``python -m benchmarks.bench_constrained [--seeds S] [--tumbling-seeds T]``.
+With ``--abort-safe-s T`` both of the tumbling pair fly abort-safe for T (issue 34
+item 4: the turning drift rows beside the fixed composite's).
+
+Run alone: ``python -m benchmarks.bench_constrained [--seeds S] [--tumbling-seeds T]
+[--abort-safe-s T]``.
 """
 
 from __future__ import annotations
@@ -52,11 +56,14 @@ def configs() -> tuple[CwrendConfig, CwrendConfig]:
     return constrained, config_from_dict(data)
 
 
-def tumbling_configs() -> tuple[CwrendConfig, CwrendConfig]:
-    """(tumbling, fixed-target twin) of campaigns/tumbling_target.toml."""
+def tumbling_configs(abort_safe_s: float | None = None) -> tuple[CwrendConfig, CwrendConfig]:
+    """(tumbling, fixed-target twin) of campaigns/tumbling_target.toml, both with
+    ``constraints.abort_safe_s`` = ``abort_safe_s`` when given (issue 34 item 4)."""
     data = tomllib.loads(TUMBLING.read_text(encoding="utf-8"))
-    data.pop("target")
-    return load_config(TUMBLING), config_from_dict(data)
+    if abort_safe_s is not None:
+        data["constraints"]["abort_safe_s"] = abort_safe_s
+    twin = {k: v for k, v in data.items() if k != "target"}
+    return config_from_dict(data), config_from_dict(twin)
 
 
 def _loops(
@@ -98,13 +105,18 @@ def run(
     seeds: int = 20,
     bases: tuple[str, ...] = tuple(ARCHITECTURES),
     tumbling_seeds: int | None = None,
+    abort_safe_s: float | None = None,
 ) -> list[Row]:
     """Per ``*_socp`` architecture (of ``bases``, the shooting slugs): constrained re-solve
     time and SCP iterations, then the same on a tumbling target over ``tumbling_seeds``
-    seeds (default ``seeds // 10``, at least 1)."""
+    seeds (default ``seeds // 10``, at least 1); ``abort_safe_s``: the tumbling pair with
+    abort safety for that long."""
     rows = _rows(SECTION, configs(), seeds, bases, "constrained", "unconstrained", 3.0)
     t_seeds = max(1, seeds // 10) if tumbling_seeds is None else tumbling_seeds
-    return rows + _rows(TUMBLING_SECTION, tumbling_configs(), t_seeds, bases, "turning-constraint",
+    what = "turning-constraint" + (
+        "" if abort_safe_s is None else f", abort-safe {abort_safe_s:g} s"
+    )
+    return rows + _rows(TUMBLING_SECTION, tumbling_configs(abort_safe_s), t_seeds, bases, what,
                         "fixed-target constrained", None)  # fmt: skip
 
 
@@ -175,10 +187,13 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--tumbling-seeds", type=int, default=None)
     parser.add_argument("--arch", default=",".join(ARCHITECTURES), help="shooting slugs")
+    parser.add_argument(
+        "--abort-safe-s", type=float, default=None, help="tumbling pair with abort safety [s]"
+    )
     args = parser.parse_args()
     from benchmarks.__main__ import print_rows
 
-    print_rows(run(args.seeds, tuple(args.arch.split(",")), args.tumbling_seeds))
+    print_rows(run(args.seeds, tuple(args.arch.split(",")), args.tumbling_seeds, args.abort_safe_s))
 
 
 if __name__ == "__main__":

@@ -274,17 +274,8 @@ def test_without_abort_safety_no_abort_column_and_the_same_hash() -> None:
             "constraints.abort_safe_s = 5400: abort safety keeps the free drift out of the "
             "keep-out zone",
         ),
-        (
-            [
-                "constraints.abort_safe_s=5400",
-                "constraints.keep_out.semi_axes_km=[0.2, 0.2, 0.2]",
-                "target.attitude='tumbling'",
-                "target.body_rates_deg_s=[0, 0, 2]",
-            ],
-            "abort safety against a tumbling target",
-        ),
     ],
-    ids=["zero", "negative", "above a day", "not a number", "no keep-out zone", "tumbling"],
+    ids=["zero", "negative", "above a day", "not a number", "no keep-out zone"],
 )
 def test_a_bad_abort_config_exits_2_naming_the_field(
     sets: list[str], message: str, tmp_path: Path

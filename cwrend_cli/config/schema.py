@@ -1162,8 +1162,8 @@ class ConstraintsConfig(_FrozenModel):
         gt=0,
         le=ABORT_SAFE_MAX_S,
         description="abort (passive) safety: the free drift from every node of the socp plan "
-        "stays outside the keep-out zone for this long (the final approach in the corridor "
-        "exempt), in (0, 86400]; unset: off [s]",
+        "stays outside the keep-out zone (every body, turning with a tumbling target) for "
+        "this long (the final approach in the corridor exempt), in (0, 86400]; unset: off [s]",
     )
 
     @model_serializer(mode="wrap")
@@ -1622,26 +1622,6 @@ class CwrendConfig(_FrozenModel):
                     "actuator.min_thrust_km_s2",
                     act.min_thrust_km_s2,
                     f"must be <= scenario.u_max_km_s2 ({fmt_num(sc.u_max_km_s2)})",
-                )
-            )
-        if self.target.attitude == "tumbling" and self.constraints.abort_safe_s is not None:
-            problems.append(
-                (
-                    "constraints.abort_safe_s",
-                    self.constraints.abort_safe_s,
-                    "abort safety against a tumbling target's rotating keep-out zone is not "
-                    "supported: use target.attitude = 'fixed' or leave abort_safe_s out",
-                )
-            )
-        keep_out = self.constraints.keep_out
-        if self.constraints.abort_safe_s is not None and keep_out is not None and keep_out.bodies:
-            problems.append(
-                (
-                    "constraints.abort_safe_s",
-                    self.constraints.abort_safe_s,
-                    "abort safety keeps the drift out of the keep-out ellipsoid semi_axes_km "
-                    "only, not of [[constraints.keep_out.bodies]]: leave out the bodies or "
-                    "abort_safe_s",
                 )
             )
         if (

@@ -59,6 +59,67 @@ program's corridor nodes, :func:`final_approach_start`) and every node within
 measured. Node 0 of a plan (the state it starts from) is given, not planned:
 the cone program cannot constrain it, the truth's measure counts it.
 
+**Several bodies, a turning target** (:class:`BodyDrift`). The zone is the
+union of ellipsoids E_b (centre c_b, semi-axes a_b) given in the target's body
+frame, which turns as ``r = R(t) ρ`` (for a fixed target R = I); the drift from
+node k (time t_k) must stay outside every E_b at its attitude at t_k + s,
+s ∈ [0, T]: ``R(t_k + s)ᵀ Φ(s) x_k ∉ E_b``. Two levels of chords:
+
+* (s) **coarse chords** of h_c (:data:`ABORT_SAMPLE_S` fixed; for a turning
+  target r Δt, the whole multiple of the plan step nearest it,
+  :func:`turning_samples`, so that every sample falls on the grid of the
+  predicted attitude): covered at any attitude when the arc stays outside the
+  sphere of radius R_b (:func:`enclosing_radius_km`) that holds every body at
+  any attitude, test (a) above in the Hill frame against that sphere (its
+  distance ‖r‖ − R_b is exact); and
+* **fine chords** of h_f = h_c / per (the planner: Δt for a turning target, h_c
+  for a fixed one; the truth's measure: :data:`MEASURE_SUBSAMPLES` re-samples of
+  each coarse chord) of the coarse chords that (s) does not clear, tested per
+  body in the body frame at each sample's own time: (a) with the body-frame
+  reach ``(‖v‖ + ‖Ω‖‖r‖) h_f + ½ B h_f²`` (the body-frame speed
+  ‖Rᵀ(v − Ω × r)‖ ≤ ‖v‖ + ‖Ω‖‖r‖), or (b) both samples in a half-space
+  tangent to E_b raised by δ ≥ B h_f²/8. B is the body-frame acceleration bound
+  of :func:`~cwrend_cli.physics.constraints.body_acceleration_bound` (the
+  between-node margin of a turning set, derived there: the fixed drift bound
+  A_j plus the rotation's ``(‖Ω̇‖ + ‖Ω‖²) R + 2‖Ω‖V``), from the Hill state at
+  the chord's first sample; for a fixed target ‖Ω‖ = 0 and B = A_j. The
+  body-frame arc stays within B h_f²/8 of its body-frame chord, so (b) keeps it
+  outside E_b (the argument of the node chords, in the body frame).
+
+Why Δt for the planner's fine chords of a turning target: B grows with the
+distance (the spin term) and with the drift's speed (2‖Ω‖V): near the
+shipped target (0.3 km out at 40 m/s, 2.8 °/s reachable) B h²/8 is 96 m at
+h = 10 s and 0.72 m at h = 1 s (B = 7.7e-3 and 5.8e-3 km/s²). The coarse
+sphere test keeps the count down: a drift leaves the target's neighbourhood
+fast, and only its chords within R_b plus their reach are sampled finely.
+
+Rows of fine chord i of coarse chord j of node k and body b: ``(R_p n)ᵀ C
+Φ(i h_f) Φ(j h_c) x_k ≥ o + nᵀc_b + δ`` at both its samples, p the sample's row
+of the predicted turn (t_0 + p h_f; :func:`body_rows`); one row per body that
+needs it. The coarse chords that (s) leaves short of the trust radius are
+sampled finely, and a body's fine chords get rows when the previous iterate
+leaves them less than :data:`BODY_BUFFER` × the trust radius of room; each
+answer is checked and widened as above (:func:`body_widened`). The attitude
+over the drifts is the guidance's own prediction (every Δt from the attitude
+known at the re-solve, beyond the plan's horizon by :func:`turn_steps`); the
+truth's measure uses the truth's (its torque-free motion propagated past the
+run's end), re-sampled every
+h_f = Δt/:func:`turn_stride` (0.1 s at Δt = 1 s), where the sampled minimum is
+at most ``(‖v‖ + ‖Ω‖‖r‖) h_f/2`` above the continuous one.
+
+**Exemption of a turning target.** The same rule, in the body frame: the final
+approach is the last contiguous stretch of nodes inside the corridor turned to
+each node's own time (``R_kᵀ r_k`` in the cone: the nodes the cone program holds
+in the turning corridor), and the exempt neighbourhood is that of the plan's
+last node in the body frame (``‖R_kᵀ r_k − R_Nᵀ r_N‖`` ≤ the zone's largest
+semi-axis over its bodies): near the moving port, where it is at each node's
+time. For a fixed target it is the rule above (R = I).
+
+One ellipsoid standing still keeps the functions above (:func:`chord_set`,
+:func:`widened`, :func:`rows_of`), whose plans are pinned bit for bit;
+:func:`planner_drift`, :func:`chords_near`, :func:`widen`, :func:`rows_for`
+choose.
+
 Units: km, s, km/s.
 """
 
@@ -202,18 +263,36 @@ def tangent_points(
         level = cg.ellipsoid_level(r, a)
         deep = np.argmin(level, axis=1)
         at = d[np.arange(d.shape[0]), deep]
-        vel = at[:, 3:] / np.maximum(np.linalg.norm(at[:, 3:], axis=1), 1e-300)[:, None]
-        side = at[:, :3] - np.sum(at[:, :3] * vel, axis=1)[:, None] * vel
-        size = np.linalg.norm(side, axis=1)
-        flat = size <= 1e-9 * float(np.max(a))
-        if np.any(flat):  # through the centre: the axis least aligned with the velocity
-            axis = np.eye(3)[np.argmin(np.abs(vel[flat]), axis=1)]
-            side[flat] = axis - np.sum(axis * vel[flat], axis=1)[:, None] * vel[flat]
-            size[flat] = np.linalg.norm(side[flat], axis=1)
-        side /= size[:, None]
-        moved = np.where((level < 1.0)[..., None], r + float(np.max(a)) * side[:, None, :], r)
-        out[some[part]] = moved / np.sqrt(cg.ellipsoid_level(moved, a))[..., None]
+        side = _sides(at[:, :3], at[:, 3:], float(np.max(a)))
+        out[some[part]] = _surface_points(r, level, a, side[:, None, :])
     return out
+
+
+def _sides(at_km: FloatArray, direction: FloatArray, size_km: float) -> FloatArray:
+    """Unit vectors (K, 3) across the ``direction``s (K, 3) towards the points ``at_km``
+    (K, 3): the side on which a drift goes round a body (:func:`tangent_points`); a point on
+    its direction's line (within 1e-9 ``size_km``) gets the axis least aligned with it."""
+    vel = direction / np.maximum(np.linalg.norm(direction, axis=1), 1e-300)[:, None]
+    side = at_km - np.sum(at_km * vel, axis=1)[:, None] * vel
+    size = np.linalg.norm(side, axis=1)
+    flat = size <= 1e-9 * size_km
+    if np.any(flat):  # through the centre: the axis least aligned with the velocity
+        axis = np.eye(3)[np.argmin(np.abs(vel[flat]), axis=1)]
+        side[flat] = axis - np.sum(axis * vel[flat], axis=1)[:, None] * vel[flat]
+        size[flat] = np.linalg.norm(side[flat], axis=1)
+    side /= size[:, None]
+    return np.asarray(side, dtype=np.float64)
+
+
+def _surface_points(
+    r_km: FloatArray, level: FloatArray, semi_axes_km: FloatArray, side: FloatArray
+) -> FloatArray:
+    """The points ``r_km`` (..., 3) of ``level`` (...) projected radially onto the ellipsoid's
+    surface, those inside moved first by the largest semi-axis along ``side`` (broadcast)."""
+    moved = np.where((level < 1.0)[..., None], r_km + float(np.max(semi_axes_km)) * side, r_km)
+    return np.asarray(
+        moved / np.sqrt(cg.ellipsoid_level(moved, semi_axes_km))[..., None], dtype=np.float64
+    )
 
 
 class AbortRows(NamedTuple):
@@ -318,19 +397,22 @@ def rows_of(semi_axes_km: FloatArray, table: DriftTable, cs: ChordSet) -> AbortR
     return half_space_rows(semi_axes_km, table, cs.nodes, cs.chords, cs.points, cs.margin_km)
 
 
-def exempt(geo: cg.Geometry, r_km: FloatArray) -> BoolArray:
+def exempt(geo: cg.Geometry, r_km: FloatArray, motion: cg.BodyMotion | None = None) -> BoolArray:
     """The exempt nodes (N + 1,) of positions ``r_km`` (N + 1, 3) (module docstring):
     the final approach in the corridor (:func:`final_approach_start`) and every node
-    within :data:`EXEMPT_RADIUS_FACTOR` × the largest semi-axis of the last node."""
-    assert geo.semi_axes_km is not None
-    radius = EXEMPT_RADIUS_FACTOR * float(np.max(geo.semi_axes_km))
-    out: BoolArray = np.linalg.norm(r_km - r_km[-1], axis=1) <= radius
-    out[final_approach_start(geo, r_km) :] = True
+    within :data:`EXEMPT_RADIUS_FACTOR` × the zone's largest semi-axis (over its bodies) of
+    the last node. ``motion`` (a turning target, its turn at the N + 1 nodes): both in the
+    body frame, each node at its own time."""
+    rho = cg.to_body(motion, r_km)
+    radius = EXEMPT_RADIUS_FACTOR * max(float(np.max(axes)) for _, axes in cg.ellipsoids(geo))
+    out: BoolArray = np.linalg.norm(rho - rho[-1], axis=1) <= radius
+    out[final_approach_start(geo, rho) :] = True
     return out
 
 
 def final_approach_start(geo: cg.Geometry, r_km: FloatArray) -> int:
-    """The first node of the exempt final approach of positions ``r_km`` (N + 1, 3).
+    """The first node of the exempt final approach of positions ``r_km`` (N + 1, 3) (in the
+    body frame, each at its node's time, for a turning target).
 
     The terminal node and, with a corridor, the contiguous stretch of nodes
     before it inside the corridor cone (to 1 mm): module docstring. N without
@@ -364,6 +446,8 @@ def measure_abort(
     time_s: float,
     h_s: float = ABORT_SAMPLE_S,
     subsamples: int = MEASURE_SUBSAMPLES,
+    turn: cg.BodyMotion | None = None,
+    dt_s: float = 0.0,
 ) -> AbortSafety:
     """The :class:`AbortSafety` of the trajectory ``x`` (N + 1, 6) [km, km/s] (module docstring).
 
@@ -372,10 +456,25 @@ def measure_abort(
     0 (may enter E) or below the best upper bound of the distance (may hold the
     minimum) are re-sampled every h/``subsamples``, where the distance is
     computed (exactly where its bounds allow it to be the minimum).
+
+    Several bodies or a turning target (``turn``: its attitude at t = p·Δt/stride,
+    p = 0 … (N + :func:`turn_steps`)·stride, stride = :func:`turn_stride` of ``dt_s``, the
+    grid step, and ``subsamples``): :func:`_measure_bodies` (module docstring).
     """
     assert geo.semi_axes_km is not None
     a = geo.semi_axes_km
     x = np.asarray(x, dtype=np.float64)
+    if turn is not None and dt_s <= 0.0:
+        raise ValueError("a turning target's abort measure needs the grid step dt_s > 0")
+    if turn is not None or geo.bodies_centre_km is not None:
+        drift = body_drift(n_rad_s, time_s, geo, dt_s, turn, subsamples)
+        motion = None
+        if turn is not None:  # the turn at the steps, for the exemption
+            motion = turn._replace(rotation=turn.rotation[:: drift.stride][: x.shape[0]])
+        steps = np.flatnonzero(~exempt(geo, x[:, :3], motion))
+        if steps.size == 0:
+            return AbortSafety(time_s, math.inf, 0, 0)
+        return _measure_bodies(x, steps, geo, drift, time_s)
     steps = np.flatnonzero(~exempt(geo, x[:, :3]))
     if steps.size == 0:
         return AbortSafety(time_s, math.inf, 0, 0)
@@ -399,3 +498,390 @@ def measure_abort(
         unsafe[kk[inside]] = True
         lowest = min(lowest, cg._min_signed_distance(points.reshape(-1, 3), keep_out, None))
     return AbortSafety(time_s, lowest, int(np.count_nonzero(unsafe)), int(steps.size))
+
+
+# ---------------------------------------------------------------------------
+# Several bodies, a turning target (module docstring, *Several bodies, a turning target*)
+# ---------------------------------------------------------------------------
+
+#: The buffer of a body's fine chords, a fraction of the coarse chords' (the trust radius)
+#: [-]: their rows are many (a chord a plan step), so only those the previous iterate has
+#: within a fifth of it get rows at first, the widening adding any the answer needs. On
+#: the first re-solve of campaigns/tumbling_target.toml, 2,893 chords instead of 40,026.
+BODY_BUFFER = 0.2
+#: An integer array (node indices, chord keys).
+IntArray = npt.NDArray[np.int64]
+
+
+class BodyDrift(NamedTuple):
+    """The drift samples against a zone of several bodies, or a turning one: coarse chords
+    of ``coarse.h_s`` for the enclosing-sphere test, each split into ``per`` fine chords of
+    h_f = ``coarse.h_s / per`` for the body tests (module docstring)."""
+
+    n_rad_s: float  # mean motion [rad/s]
+    coarse: DriftTable  # Φ(j h_c), j = 0 … M
+    fine: FloatArray  # (per + 1, 6, 6) Φ(i h_f), i = 0 … per [-, s, 1/s]
+    per: int  # fine chords per coarse chord [-]
+    #: (P, 3, 3) body→Hill at t_0 + p h_f, P > N·stride + M·per; None: fixed (Hill axes)
+    rotation: FloatArray | None
+    stride: int  # fine samples per plan step: node k's drift starts at row k·stride [-]
+    rate_bound_rad_s: float  # ≥ ‖Ω‖ (0 fixed) [rad/s]
+    rate_dot_bound_rad_s2: float  # ≥ ‖Ω̇‖ (0 fixed) [rad/s²]
+    radius_km: float  # R_b: every body lies within it of the centre, at any attitude [km]
+
+    @property
+    def h_fine_s(self) -> float:
+        """h_f, the fine chords' length [s]."""
+        return self.coarse.h_s / self.per
+
+
+def turning_samples(dt_s: float) -> int:
+    """r: plan steps Δt per coarse chord of a turning target's drift, the whole multiple of
+    Δt nearest :data:`ABORT_SAMPLE_S` (at least 1) [-]: every drift sample then falls on a
+    time t_0 + p·Δt (p whole) of the predicted attitude."""
+    return max(1, round(ABORT_SAMPLE_S / dt_s))
+
+
+def turn_steps(time_s: float, dt_s: float) -> int:
+    """The plan steps Δt after a node that its drift's last sample reaches: M·r (M the coarse
+    chords covering ``time_s``, r = :func:`turning_samples`) [-]. The attitude must be
+    known (predicted) that far beyond the plan's last node."""
+    r = turning_samples(dt_s)
+    return max(1, math.ceil(time_s / (r * dt_s) - 1e-9)) * r
+
+
+def turn_stride(dt_s: float, resample: int) -> int:
+    """Fine samples per plan step of a turning drift re-sampled ``resample`` times a coarse
+    chord at least (1: the planner's rows, every Δt; :data:`MEASURE_SUBSAMPLES`: the
+    truth's measure) [-]."""
+    return max(1, math.ceil(resample / turning_samples(dt_s)))
+
+
+def enclosing_radius_km(geo: cg.Geometry) -> float:
+    """R_b [km]: the radius about the target's centre that holds every body of the zone at
+    any attitude, max over the bodies of ‖c‖ + the largest semi-axis."""
+    return max(
+        (0.0 if c is None else float(np.linalg.norm(c))) + float(np.max(a))
+        for c, a in cg.ellipsoids(geo)
+    )
+
+
+def body_drift(
+    n_rad_s: float,
+    time_s: float,
+    geo: cg.Geometry,
+    dt_s: float,
+    turn: cg.BodyMotion | None = None,
+    resample: int = 1,
+) -> BodyDrift:
+    """The :class:`BodyDrift` of ``geo`` over ``time_s`` (module docstring).
+
+    Fixed (``turn`` None): coarse chords of :data:`ABORT_SAMPLE_S`, each re-sampled
+    ``resample`` times. Turning: coarse chords of r Δt (:func:`turning_samples`), fine
+    ones of Δt / :func:`turn_stride` (Δt for the planner's ``resample`` = 1), ``turn``'s
+    rows the attitude at t_0 + p h_f (at least N·stride + :func:`turn_steps`·stride + 1)
+    with its rate bounds.
+    """
+    if turn is None:
+        coarse = drift_table(n_rad_s, time_s)
+        per, stride, rotation, rates = resample, 1, None, (0.0, 0.0)
+    else:
+        r = turning_samples(dt_s)
+        stride = turn_stride(dt_s, resample)
+        coarse = drift_table(n_rad_s, time_s, r * dt_s)
+        per, rotation = r * stride, turn.rotation
+        rates = (turn.rate_bound_rad_s, turn.rate_dot_bound_rad_s2)
+    fine = _phis(n_rad_s, coarse.h_s / per, per)
+    return BodyDrift(n_rad_s, coarse, fine, per, rotation, stride, *rates, enclosing_radius_km(geo))
+
+
+class _Fine(NamedTuple):
+    """The fine samples of the coarse chords near the zone (:func:`_near`)."""
+
+    node: IntArray  # (F,) the node of each coarse chord [-]
+    chord: IntArray  # (F,) its coarse index j [-]
+    states: FloatArray  # (F, per + 1, 6) Hill states of its fine samples [km, km/s]
+    body: FloatArray  # (F, per + 1, 3) their body-frame positions [km]
+    accel: FloatArray  # (F, per) body-frame acceleration bound B of each fine chord [km/s²]
+    reach: FloatArray  # (F, per) how far a fine chord's body-frame arc gets [km]
+
+
+def _rows(drift: BodyDrift, node: IntArray, chord: IntArray, fine: IntArray) -> IntArray:
+    """Rows of ``drift.rotation`` of node k's fine sample i of coarse chord j."""
+    return np.asarray(node * drift.stride + chord * drift.per + fine, dtype=np.int64)
+
+
+def _near(drift: BodyDrift, x: FloatArray, nodes: IntArray, buffer_km: float) -> _Fine:
+    """The fine samples of the coarse chords of ``nodes``' drifts (``x`` (N + 1, 6)) that the
+    enclosing-sphere test leaves short of ``buffer_km`` (module docstring, test (s))."""
+    sphere = np.full(3, drift.radius_km)
+    room, _ = _scan(sphere, drift.n_rad_s, drift.coarse, x[nodes])
+    k, j = np.nonzero(room < buffer_km)
+    node = nodes[k].astype(np.int64)
+    start = np.einsum("fab,fb->fa", drift.coarse.phis[j], x[node])
+    states = np.einsum("iab,fb->fia", drift.fine, start)
+    r = states[..., :3]
+    body = r
+    if drift.rotation is not None:  # ρ = Rᵀ r at each sample's own time
+        rows = _rows(drift, node[:, None], j[:, None], np.arange(drift.per + 1)[None, :])
+        body = np.einsum("fiba,fib->fia", drift.rotation[rows], r)
+    h = drift.h_fine_s
+    accel = chord_accelerations(drift.n_rad_s, h, states)
+    r_norm = np.linalg.norm(r[:, :-1], axis=-1)
+    v_norm = np.linalg.norm(states[:, :-1, 3:], axis=-1)
+    rate = drift.rate_bound_rad_s
+    big = cg.body_acceleration_bound(accel, r_norm, v_norm, rate, drift.rate_dot_bound_rad_s2, h)
+    # the body-frame speed ‖Rᵀ(v − Ω × r)‖ ≤ ‖v‖ + ‖Ω‖‖r‖: constraints.step_excursion_km
+    reach = cg.step_excursion_km(v_norm + rate * r_norm, big, h)
+    return _Fine(node, j.astype(np.int64), states, body, big, reach)
+
+
+def _candidates(
+    geo: cg.Geometry, drift: BodyDrift, fine: _Fine, below_km: float
+) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
+    """The fine chords of ``fine`` whose body test (a) of some body leaves less room than
+    ``below_km``, one per (chord, body): (keys (E,) sorted, body-local first samples (E, 3),
+    their chord directions (E, 3), B (E,)). A key is ((node·M + j)·per + i)·B_n + b."""
+    bodies = cg.ellipsoids(geo)
+    count = drift.coarse.phis.shape[0] - 1
+    keys, local, direction, accel = [], [], [], []
+    for b, (centre, axes) in enumerate(bodies):
+        rho = fine.body if centre is None else fine.body - centre
+        # d_Eb ≥ a_min (√g − 1): the ball test of the body, in the body frame
+        low = float(np.min(axes)) * (np.sqrt(cg.ellipsoid_level(rho[:, :-1], axes)) - 1.0)
+        f, i = np.nonzero(low - fine.reach < below_km)
+        keys.append(((fine.node[f] * count + fine.chord[f]) * drift.per + i) * len(bodies) + b)
+        local.append(rho[f, i])
+        direction.append(rho[f, i + 1] - rho[f, i])
+        accel.append(fine.accel[f, i])
+    key = np.concatenate(keys).astype(np.int64)
+    order = np.argsort(key, kind="stable")
+    return (
+        key[order],
+        np.concatenate(local)[order],
+        np.concatenate(direction)[order],
+        np.concatenate(accel)[order],
+    )
+
+
+def _decode(geo: cg.Geometry, drift: BodyDrift, keys: IntArray) -> tuple[IntArray, ...]:
+    """(node, coarse j, fine i, body b) of chord ``keys`` (:func:`_candidates`)."""
+    bodies = len(cg.ellipsoids(geo))
+    count = drift.coarse.phis.shape[0] - 1
+    rest, b = np.divmod(keys, bodies)
+    rest, i = np.divmod(rest, drift.per)
+    node, j = np.divmod(rest, count)
+    return node, j, i, b
+
+
+def _body_points(
+    geo: cg.Geometry, drift: BodyDrift, keys: IntArray, local: FloatArray, direction: FloatArray
+) -> FloatArray:
+    """Surface points (E, 3) of the chords ``keys``' bodies (body-local), the tangent planes'
+    points: as :func:`tangent_points`, each node's drift going round each body on one side,
+    that of its deepest fine sample with rows across the body-frame chord there."""
+    node, _, _, b = _decode(geo, drift, keys)
+    out = np.empty_like(local)
+    for body, (_, axes) in enumerate(cg.ellipsoids(geo)):
+        sel = np.flatnonzero(b == body)
+        if sel.size == 0:
+            continue
+        level = cg.ellipsoid_level(local[sel], axes)
+        order = np.lexsort((level, node[sel]))  # by node, deepest first
+        first = np.r_[True, node[sel][order][1:] != node[sel][order][:-1]]
+        deep = sel[order[first]]
+        side = _sides(local[deep], direction[deep], float(np.max(axes)))
+        group = np.searchsorted(node[deep], node[sel])
+        out[sel] = _surface_points(local[sel], level, axes, side[group])
+    return out
+
+
+class BodyChords(NamedTuple):
+    """The fine chords of one SCP iteration that carry rows (a zone of several bodies, or a
+    turning one), one per (chord, body), and where they are linearised."""
+
+    nodes: IntArray  # (K,) the constrained nodes of the plan [-]
+    keys: IntArray  # (E,) sorted chord keys (:func:`_candidates`) [-]
+    points: FloatArray  # (E, 3) body-local surface points of their half-spaces [km]
+    margin_km: float  # δ, the half-spaces' tightening [km]
+
+
+def body_chord_set(
+    geo: cg.Geometry,
+    drift: BodyDrift,
+    x_bar: FloatArray,
+    nodes: IntArray,
+    buffer_km: float,
+    accel_factor: float,
+) -> BodyChords:
+    """:func:`chord_set` of a zone of several bodies or a turning one: the fine chords of
+    ``nodes`` that the previous iterate ``x_bar`` has near a body (its test (a) short of
+    ``buffer_km``), linearised there, δ = ``accel_factor`` × their largest B h_f²/8."""
+    fine = _near(drift, x_bar, nodes, buffer_km)
+    keys, local, direction, accel = _candidates(geo, drift, fine, BODY_BUFFER * buffer_km)
+    points = _body_points(geo, drift, keys, local, direction)
+    margin = cg.chord_margin_km(accel_factor * float(np.max(accel, initial=0.0)), drift.h_fine_s)
+    return BodyChords(nodes, keys, points, margin)
+
+
+def body_widened(
+    geo: cg.Geometry,
+    drift: BodyDrift,
+    cs: BodyChords,
+    x_new: FloatArray,
+    nodes: IntArray,
+    accel_factor: float,
+) -> BodyChords | None:
+    """:func:`widened` of a zone of several bodies or a turning one: ``cs`` with the fine
+    chords that the answer ``x_new`` leaves uncovered (neither (a) nor, with rows, (b)) given
+    rows linearised at ``x_new``'s drift, δ raised to cover them; None when all are."""
+    every = np.union1d(cs.nodes, nodes).astype(np.int64)
+    fine = _near(drift, x_new, every, 0.0)
+    keys, local, direction, accel = _candidates(geo, drift, fine, 0.0)
+    by_rows = np.isin(keys, cs.keys) & (cg.chord_margin_km(1.0, drift.h_fine_s) * accel
+                                        <= cs.margin_km)  # fmt: skip
+    missing = ~by_rows
+    if not np.any(missing):
+        return None
+    fresh = np.isin(keys, cs.keys, invert=True) & missing
+    points = _body_points(geo, drift, keys[fresh], local[fresh], direction[fresh])
+    all_keys = np.r_[cs.keys, keys[fresh]]
+    order = np.argsort(all_keys, kind="stable")
+    largest = accel_factor * float(np.max(accel, initial=0.0))
+    return BodyChords(
+        every,
+        all_keys[order],
+        np.vstack([cs.points, points])[order],
+        max(cs.margin_km, cg.chord_margin_km(largest, drift.h_fine_s)),
+    )
+
+
+def body_rows(geo: cg.Geometry, drift: BodyDrift, cs: BodyChords) -> AbortRows:
+    """The rows of ``cs``: both ends of fine chord i of coarse chord j of node k in body b's
+    half-space tangent at its point raised by δ, in the body frame at each end's own time:
+    ``(R_p n)ᵀ C Φ(i h_f) Φ(j h_c) x_k ≥ o + nᵀc_b + δ`` (p the end's row of the turn)."""
+    node, j, i, b = _decode(geo, drift, cs.keys)
+    normal = np.empty((cs.keys.size, 3))
+    offset = np.empty(cs.keys.size)
+    for body, (centre, axes) in enumerate(cg.ellipsoids(geo)):
+        sel = b == body
+        normal[sel], offset[sel] = cg.tangent_planes(axes, cs.points[sel])
+        if centre is not None:  # nᵀ(ρ − c) ≥ o ⇔ nᵀρ ≥ o + nᵀc
+            offset[sel] += normal[sel] @ centre
+    offset += cs.margin_km
+    ends = []
+    for end in (i, i + 1):
+        phi = np.einsum("eab,ebc->eac", drift.fine[end, :3, :], drift.coarse.phis[j])
+        turned = normal
+        if drift.rotation is not None:  # nᵀ ρ = (R n)ᵀ r
+            turned = np.einsum("eab,eb->ea", drift.rotation[_rows(drift, node, j, end)], normal)
+        ends.append(np.einsum("ea,eab->eb", turned, phi))
+    return AbortRows(np.r_[node, node], np.vstack(ends), np.r_[offset, offset])
+
+
+def _measure_bodies(
+    x: FloatArray, steps: IntArray, geo: cg.Geometry, drift: BodyDrift, time_s: float
+) -> AbortSafety:
+    """:func:`measure_abort` of a zone of several bodies or a turning one (module docstring):
+    the coarse chords that the enclosing-sphere test does not clear, or that may hold the
+    minimum, re-sampled every h_f; there the exact distance to the union of bodies, in the
+    body frame at each sample's own time."""
+    count = drift.coarse.phis.shape[0] - 1
+    sphere = np.full(3, drift.radius_km)
+    rooms = np.empty((steps.size, count))
+    best = math.inf  # the smallest upper bound of the distance over the coarse samples
+    for part, d in _chunks(drift.coarse, x[steps]):
+        rooms[part], _ = _ball_test(sphere, drift.n_rad_s, drift.coarse.h_s, d)
+        rho = d[:, :-1, :3]
+        if drift.rotation is not None:
+            rows = _rows(drift, steps[part, None], np.arange(count)[None, :], np.zeros(1, int))
+            rho = np.einsum("kjba,kjb->kja", drift.rotation[rows], rho)
+        for centre, axes in cg.ellipsoids(geo):
+            local = rho if centre is None else rho - centre
+            best = min(best, float(np.min(cg._ellipsoid_distance_bounds(local, axes)[1])))
+    near_k, near_j = np.nonzero((rooms < 0.0) | (rooms <= best))
+    unsafe = np.zeros(steps.size, dtype=bool)
+    lowest = best
+    per = max(1, _CHUNK // (drift.per + 1))
+    for start in range(0, near_k.size, per):
+        kk, jj = near_k[start : start + per], near_j[start : start + per]
+        node = steps[kk].astype(np.int64)
+        first = np.einsum("fab,fb->fa", drift.coarse.phis[jj], x[node])
+        points = np.einsum("iab,fb->fia", drift.fine[:, :3, :], first)
+        if drift.rotation is not None:
+            rows = _rows(drift, node[:, None], jj[:, None], np.arange(drift.per + 1)[None, :])
+            points = np.einsum("fiba,fib->fia", drift.rotation[rows], points)
+        unsafe[kk[np.any(cg._inside_keep_out(points, geo), axis=1)]] = True
+        flat = points.reshape(-1, 3)
+        low = np.full(flat.shape[0], np.inf)
+        for centre, axes in cg.ellipsoids(geo):
+            local = flat if centre is None else flat - centre
+            low = np.minimum(low, cg._ellipsoid_distance_bounds(local, axes)[0])
+        maybe = low <= lowest  # only where the bounds allow the minimum: exact there
+        if np.any(maybe):
+            lowest = min(lowest, float(np.min(cg.keep_out_distance(flat[maybe], geo))))
+    return AbortSafety(time_s, lowest, int(np.count_nonzero(unsafe)), int(steps.size))
+
+
+#: What the planner's drift is: one ellipsoid standing still (:class:`DriftTable`) or
+#: several bodies or a turning zone (:class:`BodyDrift`).
+Drift = DriftTable | BodyDrift
+#: Its chord set.
+Chords = ChordSet | BodyChords
+
+
+def planner_drift(
+    n_rad_s: float,
+    time_s: float,
+    geo: cg.Geometry,
+    dt_s: float,
+    turn: cg.BodyMotion | None = None,
+) -> Drift:
+    """The planner's drift samples over ``time_s``: :func:`drift_table` for one ellipsoid
+    standing still, else :func:`body_drift` (``turn``: the predicted attitude at
+    t_0 + p Δt, p = 0 … N + :func:`turn_steps`)."""
+    if turn is None and geo.bodies_centre_km is None:
+        return drift_table(n_rad_s, time_s)
+    return body_drift(n_rad_s, time_s, geo, dt_s, turn)
+
+
+def chords_near(
+    geo: cg.Geometry,
+    n_rad_s: float,
+    drift: Drift,
+    x_bar: FloatArray,
+    nodes: IntArray,
+    buffer_km: float,
+    accel_factor: float,
+) -> Chords:
+    """:func:`chord_set` or :func:`body_chord_set`, as ``drift`` is."""
+    if isinstance(drift, BodyDrift):
+        return body_chord_set(geo, drift, x_bar, nodes, buffer_km, accel_factor)
+    assert geo.semi_axes_km is not None
+    return chord_set(geo.semi_axes_km, n_rad_s, drift, x_bar, nodes, buffer_km, accel_factor)
+
+
+def widen(
+    geo: cg.Geometry,
+    n_rad_s: float,
+    drift: Drift,
+    cs: Chords,
+    x_new: FloatArray,
+    nodes: IntArray,
+    accel_factor: float,
+) -> Chords | None:
+    """:func:`widened` or :func:`body_widened`, as ``drift`` is."""
+    if isinstance(drift, BodyDrift):
+        assert isinstance(cs, BodyChords)
+        return body_widened(geo, drift, cs, x_new, nodes, accel_factor)
+    assert geo.semi_axes_km is not None and isinstance(cs, ChordSet)
+    return widened(geo.semi_axes_km, n_rad_s, drift, cs, x_new, nodes, accel_factor)
+
+
+def rows_for(geo: cg.Geometry, drift: Drift, cs: Chords) -> AbortRows:
+    """:func:`rows_of` or :func:`body_rows`, as ``drift`` is."""
+    if isinstance(drift, BodyDrift):
+        assert isinstance(cs, BodyChords)
+        return body_rows(geo, drift, cs)
+    assert geo.semi_axes_km is not None and isinstance(cs, ChordSet)
+    return rows_of(geo.semi_axes_km, drift, cs)

@@ -83,7 +83,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -122,6 +122,9 @@ __all__ = [
     "tangent_planes",
     "to_body",
 ]
+
+#: A float or an array of them (the bounds below work elementwise).
+Num = TypeVar("Num", float, FloatArray)
 
 #: Bisection steps of the ellipsoid distance (geometric, on a range of at most 1e40):
 #: each halves the logarithm of the bracket, 100 reach the float resolution.
@@ -252,18 +255,19 @@ def rate_bounds(omega_max_rad_s: float, n_rad_s: float) -> tuple[float, float]:
 
 
 def body_acceleration_bound(
-    accel_km_s2: float,
-    r_km: float,
-    v_km_s: float,
+    accel_km_s2: Num,
+    r_km: Num,
+    v_km_s: Num,
     rate_rad_s: float,
     rate_dot_rad_s2: float,
     dt_s: float,
-) -> float:
+) -> Num:
     """A bound on ‖ρ̈‖, the body-frame acceleration, over a step [km/s²] (module docstring).
 
     ``A + (‖Ω̇‖ + ‖Ω‖²) R + 2‖Ω‖ V`` with A = ``accel_km_s2`` (a bound of ‖r̈‖ over
     the step, :func:`acceleration_bound` from ‖r_k‖ = ``r_km``, ‖v_k‖ =
-    ``v_km_s``), ``R = ‖r_k‖ + ‖v_k‖Δt + AΔt²`` and ``V = ‖v_k‖ + AΔt``.
+    ``v_km_s``), ``R = ‖r_k‖ + ‖v_k‖Δt + AΔt²`` and ``V = ‖v_k‖ + AΔt``; elementwise
+    on arrays (abort safety's drift chords).
     """
     r_step = r_km + v_km_s * dt_s + accel_km_s2 * dt_s**2
     v_step = v_km_s + accel_km_s2 * dt_s
@@ -457,8 +461,9 @@ def acceleration_bound(
     return (u_max_km_s2 + gravity) / denominator
 
 
-def step_excursion_km(v_km_s: float, accel_km_s2: float, dt_s: float) -> float:
-    """``‖v_k‖Δt + ½AΔt²`` [km]: how far the arc of a step gets from its first node."""
+def step_excursion_km(v_km_s: Num, accel_km_s2: Num, dt_s: float) -> Num:
+    """``‖v_k‖Δt + ½AΔt²`` [km]: how far the arc of a step gets from its first node
+    (elementwise on arrays)."""
     return v_km_s * dt_s + 0.5 * accel_km_s2 * dt_s**2
 
 

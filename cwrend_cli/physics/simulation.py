@@ -455,7 +455,7 @@ def simulate(
         trace_q=log.trace_q,
         target_attitude=target_attitude,
         sensor=problem.sensor.model,
-        abort=_abort_safety(problem, log.x),
+        abort=_abort_safety(problem, log.x, target_attitude is not None),
     )
 
 
@@ -640,23 +640,27 @@ def _knowledge_error(
 
 
 def _predicted_motion(
-    problem: Problem, known: _Knowledge, k_from: int, steps: int
+    problem: Problem, known: _Knowledge, k_from: int, steps: int, substeps: int | None = None
 ) -> safety_geometry.BodyMotion:
-    """The body's turn the guidance predicts at the nodes k_from … k_from + steps."""
+    """The body's turn the guidance predicts at the nodes k_from … k_from + steps.
+
+    ``substeps`` (abort safety's drifts, which reach beyond the run: issue 34 item 4):
+    predicted with this many integration intervals a step, from the attitude known at
+    ``k_from`` even when known exactly (:func:`cwrend_cli.physics.attitude.predict`)."""
     truth = known.truth
     assert truth is not None
     every = truth.substeps
-    if known.error is None:  # exact: the truth's own attitude at the nodes
+    if known.error is None and substeps is None:  # exact: the truth's own at the nodes
         return _body_motion(problem, truth, k_from * every, (k_from + steps) * every + 1, every)
     sc = problem.scenario
     model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
     i = k_from * every
-    d_theta, d_w = known.error
+    d_theta, d_w = known.error if known.error is not None else (np.zeros(3), np.zeros(3))
     if d_theta.ndim == 2:  # drawn at every re-solve: this one's (row k_from)
         d_theta, d_w = d_theta[k_from], d_w[k_from]
     believed, q_hb, w = attitude.predict(
         model, truth.q_hb[i], truth.w_rad_s[i], float(truth.t_s[i]), steps, sc.dt_s,
-        (d_theta, d_w), every,
+        (d_theta, d_w), every if substeps is None else substeps,
     )  # fmt: skip
     return attitude.body_motion(believed, q_hb, w)
 
@@ -684,16 +688,31 @@ def _safety(
     )
 
 
-def _abort_safety(problem: Problem, x_true: FloatArray) -> abort_safety.AbortSafety | None:
+def _abort_safety(
+    problem: Problem, x_true: FloatArray, tumbling: bool = False
+) -> abort_safety.AbortSafety | None:
     """The abort safety of the true trajectory (issue 34 item 4): every step's true state
     drifted freely by CW (:func:`~cwrend_cli.physics.abort_safety.measure_abort`); None
-    without ``constraints.abort_safe_s``."""
+    without ``constraints.abort_safe_s``.
+
+    A ``tumbling`` target: against the bodies at the truth's attitude at each drift
+    sample's own time, the truth's torque-free motion propagated from t = 0 past the run's
+    end by the drift time (:func:`cwrend_cli.physics.attitude.target_attitude`, the same
+    integration of the same equations, sampled every Δt/stride)."""
     c = problem.constraints
     if c is None or c.abort_safe_s is None:
         return None
+    sc = problem.scenario
     geo = safety_geometry.geometry(c)
+    turn = None
+    if tumbling:
+        stride = abort_safety.turn_stride(sc.dt_s, abort_safety.MEASURE_SUBSAMPLES)
+        model = attitude.attitude_model(problem.target, sc.mean_motion_rad_s)
+        steps = sc.n_steps + abort_safety.turn_steps(c.abort_safe_s, sc.dt_s)
+        long = attitude.target_attitude(model, steps, sc.dt_s, stride)
+        turn = attitude.body_motion(model, long.q_hb, long.w_rad_s)
     return abort_safety.measure_abort(
-        x_true, problem.scenario.mean_motion_rad_s, geo, c.abort_safe_s
+        x_true, sc.mean_motion_rad_s, geo, c.abort_safe_s, turn=turn, dt_s=sc.dt_s
     )
 
 
@@ -975,9 +994,12 @@ def _constrained_plan(
         warm = model.u_override[k_from : k_from + steps].copy()
     xf = np.asarray(sc.xf, dtype=float)
     geo = safety_geometry.geometry(c)
-    motion = None
+    motion = abort_turn = None
     if known is not None and known.truth is not None:
         motion = _predicted_motion(problem, known, k_from, steps)
+        if c.abort_safe_s is not None:  # the drifts' attitude, predicted every Δt
+            extra = abort_safety.turn_steps(c.abort_safe_s, sc.dt_s)
+            abort_turn = _predicted_motion(problem, known, k_from, steps + extra, 1)
         if geo.port_km is not None:
             port = motion.rotation[-1] @ geo.port_km
             xf = np.concatenate([port, np.cross(motion.rate_rad_s[-1], port)])
@@ -996,6 +1018,7 @@ def _constrained_plan(
         motion=motion,
         abort_safe_s=c.abort_safe_s,
         warm_duals=warm_duals,
+        abort_turn=abort_turn,
     )
     converged = ans.status is guidance.SolveStatus.CONVERGED
     miss = math.nan

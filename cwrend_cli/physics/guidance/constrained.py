@@ -107,7 +107,10 @@ which says how many drift samples and why they suffice) with their own slack
 priced :data:`ABORT_SLACK_PENALTY` per km; the chords the rows left out are
 checked on each answer and the subproblem solved again with their rows (at
 most :data:`ABORT_ROUNDS` solves an iteration; an answer still uncovered is
-not converged).
+not converged). Several bodies, or a tumbling target (``abort_turn``: the
+predicted turn over the drifts): one row per body and fine chord, in the body
+frame at each drift sample's own time (:mod:`cwrend_cli.physics.abort_safety`,
+*Several bodies, a turning target*).
 
 **Infeasibility.** The path rows carry one slack s ≥ 0 (every half-space and
 cone row loosened by s) priced :data:`SLACK_PENALTY` per km in the scaled cost:
@@ -1222,6 +1225,7 @@ def plan(
     abort_safe_s: float | None = None,
     solver: str = "auto",
     warm_duals: Duals | None = None,
+    abort_turn: cg.BodyMotion | None = None,
 ) -> ConstrainedPlan:
     """The constrained cone program from ``x0`` to ``xf`` over ``horizon_s`` (module docstring).
 
@@ -1239,7 +1243,9 @@ def plan(
     whenever the dual answer is not certified; ``"clarabel"`` Clarabel always
     (module docstring, *Solvers*). ``warm_duals``: the dual solver's starting multipliers,
     an earlier plan's :attr:`ConstrainedPlan.duals` moved to this grid by
-    :func:`shift_duals`.
+    :func:`shift_duals`. ``abort_turn`` (abort safety of a turning target): the predicted
+    turn of the body frame at t_0 + pΔt, p = 0 … N + :func:`.abort_safety.turn_steps`, over
+    the drifts (:mod:`cwrend_cli.physics.abort_safety`).
     """
     if solver not in ("auto", "clarabel"):
         raise ValueError(f"solver must be 'auto' or 'clarabel', not {solver!r}")
@@ -1283,7 +1289,11 @@ def plan(
     result = failed
     cost, last_slack = math.inf, math.inf
     fallbacks = 0
-    drift = None if abort_safe_s is None else ab.drift_table(n, abort_safe_s)
+    drift = None
+    if abort_safe_s is not None:
+        if motion is not None and abort_turn is None:
+            raise ValueError("abort safety of a turning target needs abort_turn")
+        drift = ab.planner_drift(n, abort_safe_s, geo, dt_s, abort_turn)
     for scp in range(1, SCP_MAX_ITER + 1):
         margins = _node_margins(
             _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
@@ -1291,12 +1301,12 @@ def plan(
         half_spaces = _half_spaces(geo, modes, r_bar, margins, p_pos_km2, sigma_margin, motion)
         chords, axes = None, geo.semi_axes_km
         if drift is not None and axes is not None:
-            nodes = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, r_bar))
-            chords = ab.chord_set(axes, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
+            nodes = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, r_bar, motion))
+            chords = ab.chords_near(geo, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
         for _ in range(ABORT_ROUNDS):
             rows = None
             if chords is not None and drift is not None and axes is not None:
-                rows = ab.rows_of(axes, drift, chords)
+                rows = ab.rows_for(geo, drift, chords)
             sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
                 half_spaces, trust, motion, rows, solver == "auto", warm_duals,
@@ -1309,8 +1319,8 @@ def plan(
                 break
             assert chords is not None and drift is not None and axes is not None
             x_sol = answer[1]
-            needed = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, x_sol[:, :3]))
-            chords = ab.widened(axes, n, drift, chords, x_sol, needed, ACCEL_FACTOR)
+            needed = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, x_sol[:, :3], motion))
+            chords = ab.widen(geo, n, drift, chords, x_sol, needed, ACCEL_FACTOR)
             if chords is None:
                 break
         if answer is None:
