@@ -43,6 +43,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit, typeof, types
+from numba._dispatcher import compute_fingerprint
 
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
@@ -324,13 +325,31 @@ def compile_steps(
 ) -> None:
     """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
 
-    Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
-    tuples; the CW truth, the ideal actuator, the sample hold, the position
-    sensor, a linear filter and a fixed process noise as ``None``, :func:`_optional`,
+    Runs no step: the argument types :func:`_resolve_loop` hands it
+    (:func:`_steps_types`). A campaign's first run compiles this in a pool
+    worker while the campaign process compiles the re-solves (issue 37 item
+    12); the runs then load it from numba's cache instead of compiling it again.
+    """
+    _steps.compile(_steps_types(model, truth, act, sched, state, log, sensor, ekf, pn))
+
+
+def _steps_types(
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    log: StepLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
+) -> tuple[types.Type, ...]:
+    """The numba types of :func:`_steps`' arguments as :func:`_resolve_loop` calls it.
+
+    The typed tuples as :func:`_resolve_loop` names them again; the CW truth,
+    the ideal actuator, the sample hold, the position sensor, a linear filter
+    and a fixed process noise as ``None`` (:func:`_optional`,
     :func:`_optional_hold`, :func:`_optional_ekf`, :func:`_optional_noise`).
-    A campaign's first run compiles this in a pool worker while the campaign
-    process compiles the re-solves (issue 37 item 12); the compiled loop then
-    loads it from numba's cache instead of compiling it again.
     """
     truth_t, act_t = _optional(truth, act)
     models = (None if truth_t is None else truth, None if act_t is None else act)
@@ -341,7 +360,7 @@ def compile_steps(
     )
     plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
     hold = types.none if _optional_hold(model) is None else types.boolean
-    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], hold, *chosen[2:]))
+    return (*plain[:4], *chosen[:2], *plain[4:], hold, *chosen[2:])
 
 
 @njit(cache=True)
@@ -609,19 +628,154 @@ def resolve_loop(
     succeeded and every step up to the end has run.
 
     Same conventions as :func:`advance`: the typed tuples cross as plain
-    tuples and are named again inside.
+    tuples and are named again inside. The step loop and the solver cross as
+    first-class functions (:func:`compiled_loop`).
     """
-    i, eps, sbar, first = _resolve_loop(
+    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
+    args = _plain_args(i_start, k_start, n_steps, *parts)
+    i, eps, sbar, first = compiled_loop(args, *parts)(_steps, bang_bang_ascent, *args)
+    return i, LoopScalars(eps, sbar, first)
+
+
+def compile_resolve_loop(
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    resolve: ResolveModel,
+    state: LoopState,
+    scalars: LoopScalars,
+    carry: ResolveCarry,
+    log: StepLog,
+    solves: SolveLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
+) -> None:
+    """Compile (or load) :func:`_resolve_loop` for these parts as :func:`resolve_loop` calls it.
+
+    Runs nothing, and compiles neither the step loop nor the solver
+    (:func:`compiled_loop`): a campaign's first run compiles it in a second
+    process while the campaign process compiles the solver (issue 37 item 12).
+    """
+    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
+    compiled_loop(_plain_args(0, 0, n_steps, *parts), *parts, callees=False)
+
+
+def _plain_args(
+    i_start: int,
+    k_start: int,
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    resolve: ResolveModel,
+    state: LoopState,
+    scalars: LoopScalars,
+    carry: ResolveCarry,
+    log: StepLog,
+    solves: SolveLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
+) -> tuple[Any, ...]:
+    """:func:`_resolve_loop`'s arguments after its two functions (:func:`advance`'s conventions)."""
+    return (
         i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
         _optional_hold(model), None if sensor is None else tuple(sensor),
         _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
-    return i, LoopScalars(eps, sbar, first)
+
+
+#: The numba types :func:`_steps` and the solver return, as :func:`_resolve_loop` calls them
+#: through their first-class function types: ``(ε, s̄, first)`` and ``(status, iterations,
+#: rp, rv)``. A different compiled return type fails the call (numba compares them).
+STEPS_RETURN = types.Tuple((types.float64, types.float64, types.boolean))  # type: ignore[no-untyped-call]
+SOLVER_RETURN = types.Tuple((types.int64, types.int64, types.float64, types.float64))  # type: ignore[no-untyped-call]
+
+#: The compiled :func:`_resolve_loop` of each argument fingerprint (:func:`compiled_loop`).
+_COMPILED_LOOPS: dict[bytes, Any] = {}
+
+
+def compiled_loop(
+    args: tuple[Any, ...],
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    resolve: ResolveModel,
+    state: LoopState,
+    scalars: LoopScalars,
+    carry: ResolveCarry,
+    log: StepLog,
+    solves: SolveLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
+    callees: bool = True,
+) -> Any:
+    """The compiled :func:`_resolve_loop` for ``args`` (:func:`_plain_args` of these parts).
+
+    Compiled (or loaded) on first use. Its first two arguments, the step loop
+    and the solver, are first-class functions (numba's ``FunctionType``): it
+    calls them through their addresses, taken when it is called, so neither
+    is compiled into it nor needs to be compiled before it (issue 37 item 12:
+    numba links a callee's whole call tree into its caller, where LLVM
+    optimises and emits it once more; the loop's top carried the step loop
+    and the solver, and compiled only after both). The numbers are those of
+    the direct calls: the same compiled functions, called once per re-solve.
+    Returns the compiled function's entry point, which takes ``(_steps,
+    bang_bang_ascent, *args)``. Looked up by the arguments' numba fingerprint
+    (numba's own dispatch key, about a microsecond): their numba types, in
+    Python, take milliseconds, and this is called once per re-solve that
+    ends in Python. ``callees``: also compile (or load) the step loop and the
+    solver for these types, as a call needs them; by their argument types
+    alone, the key numba's cache holds them under (the call itself would ask
+    with the return type too, a key of its own, and compile them again).
+    """
+    try:
+        key: bytes | None = compute_fingerprint(args)
+    except Exception:  # a value numba fingerprints not: typed below at every call
+        key = None
+    done = _COMPILED_LOOPS.get(key) if key is not None else None
+    if done is not None:
+        return done
+    steps_t = _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
+    solver_t = _solver_types(model, resolve, state, carry)
+    sig = (
+        types.FunctionType(STEPS_RETURN(*steps_t)),
+        types.FunctionType(SOLVER_RETURN(*solver_t)),
+        *(typeof(a) for a in args),  # type: ignore[no-untyped-call]
+    )
+    entry = _resolve_loop.compile(sig)
+    if not callees:
+        return entry
+    _steps.compile(steps_t)
+    bang_bang_ascent.compile(solver_t)
+    if key is not None:
+        _COMPILED_LOOPS[key] = entry
+    return entry
+
+
+def _solver_types(
+    model: LoopModel, resolve: ResolveModel, state: LoopState, carry: ResolveCarry
+) -> tuple[types.Type, ...]:
+    """The numba types of the solver's arguments as :func:`_resolve_loop` calls it."""
+    f, i = types.float64, types.int64
+    vec = (typeof(state.x_hat), typeof(resolve.xf))  # type: ignore[no-untyped-call]
+    nodes = (typeof(model.gl_x), typeof(model.gl_w))  # type: ignore[no-untyped-call]
+    settings = typeof(resolve.newton)  # type: ignore[no-untyped-call]
+    n, warm = typeof(model.n), typeof(carry.warm)  # type: ignore[no-untyped-call]
+    return (n, *vec, f, f, typeof(model.u_max), types.float64[:, ::1], *nodes, i, settings, i, warm)  # type: ignore[no-untyped-call]
 
 
 @njit(cache=True)
 def _resolve_loop(
+    steps: Any,
+    solve: Any,
     i_start: int,
     k_start: int,
     n_steps: int,
@@ -640,7 +794,8 @@ def _resolve_loop(
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
     pn_t: tuple[Any, ...] | None,
 ) -> tuple[int, float, float, bool]:
-    """:func:`resolve_loop` on the plain tuples of its typed arguments."""
+    """:func:`resolve_loop` on the plain tuples of its typed arguments; ``steps``:
+    :func:`_steps`, ``solve``: the solver (first-class functions, :func:`compiled_loop`)."""
     m = LoopModel(*model_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
@@ -660,7 +815,7 @@ def _resolve_loop(
     n_resolves = rs.steps.shape[0]
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
-        eps, sbar, first = _steps(
+        eps, sbar, first = steps(
             k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
             mean_hold, sensor, ekf, pn,
         )  # fmt: skip
@@ -676,7 +831,7 @@ def _resolve_loop(
             back = model_costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
             copy_into(np.dot(back, carry.older), starts[1])
         t0 = monotonic_s()
-        status, iters, rp, rv = bang_bang_ascent(
+        status, iters, rp, rv = solve(
             m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
             n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm,
         )  # fmt: skip
@@ -702,7 +857,7 @@ def _resolve_loop(
         else:
             copy_into(np.dot(m.lam_step, carry.warm), lam)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
-    eps, sbar, first = _steps(
+    eps, sbar, first = steps(
         k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
         mean_hold, sensor, ekf, pn,
     )  # fmt: skip

@@ -195,3 +195,28 @@ def compile_ahead(
         simulation.compile_loop(
             problem, first[method], standard_normal, actuator_draws, fault_draws
         )
+
+
+def compile_loop_top(
+    problem: Problem,
+    archs: Iterable[Architecture],
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> None:
+    """Compile a first run's compiled loop's top in a second process (issue 37 item 12).
+
+    The top of the closed loop with its re-solves (``_resolve_loop``) of the
+    first shooting architecture among ``archs``
+    (:func:`cwrend_cli.physics.simulation.compile_loop_top`), after
+    :func:`compile_ahead` and the solver's switching-time Newton: it calls
+    the step loop and the solver as first-class functions, so it compiles
+    without either, and the campaign process, compiling the solver
+    meanwhile, then loads it. Arguments as :func:`compile_ahead`'s.
+    """
+    from cwrend_cli.physics import simulation
+
+    for arch in archs:
+        if arch.resolved_method(problem.guidance) == "shooting":
+            simulation.compile_loop_top(problem, arch, standard_normal, actuator_draws, fault_draws)
+            return

@@ -569,18 +569,55 @@ def compile_loop(
     re-solves: a campaign compiles those of the references meanwhile
     (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
     """
-    sc = problem.scenario
-    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
-    x0 = np.asarray(sc.x0, dtype=float)
-    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
-    scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
+    loop, scalars = _idle_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
     if arch.resolved_method(problem.guidance) == "socp":
-        loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
+        loop.advance(0, -1, problem.scenario.n_steps, scalars)  # k_stop < k_start: no step runs
     else:
         sk.compile_steps(
             loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
             loop.ekf, loop.pn,
         )  # fmt: skip
+
+
+def compile_loop_top(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> None:
+    """Compile (or load) the top of ``arch``'s compiled loop with its re-solves; run nothing.
+
+    The shooting method's :func:`~cwrend_cli.physics._loop_kernels.compile_resolve_loop`,
+    for the argument types :func:`simulate` gives it (the arguments as
+    :func:`compile_loop`'s); it needs neither the step loop nor the solver
+    compiled (issue 37 item 12). Nothing for the cone program, whose loop has
+    no top of its own.
+    """
+    if arch.resolved_method(problem.guidance) == "socp":
+        return
+    loop, scalars = _idle_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
+    settings = solver_settings(problem)
+    resolve, carry, rows = _resolve_parts(problem, settings, resolve_steps(problem), False)
+    sk.compile_resolve_loop(
+        problem.scenario.n_steps, loop.model, loop.truth, loop.act, loop.sched, resolve,
+        loop.state, scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
+    )  # fmt: skip
+
+
+def _idle_loop(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None,
+    fault_draws: sensors.FaultDraws | None,
+) -> tuple[_Loop, sk.LoopScalars]:
+    """The compiled loop's parts of a run of ``arch`` that has not started, to compile it."""
+    sc = problem.scenario
+    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
+    x0 = np.asarray(sc.x0, dtype=float)
+    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
+    return loop, sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
 
 
 def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
@@ -739,33 +776,7 @@ def _shooting_resolves(
     xf = np.asarray(sc.xf, dtype=float)
     count = len(schedule)
     design = _shooting_design(problem, socp=False)
-    resolve = sk.ResolveModel(
-        steps=np.asarray(schedule, dtype=np.int64),
-        xf=xf,
-        horizon_s=sc.horizon_s,
-        correct=correct,
-        success_residual=settings.success_residual,
-        newton=settings.newton_fields,
-        switching_max_iter=settings.switching_max_iter,
-        stop_every=observe is not None,
-    )
-    carry = sk.ResolveCarry(
-        older=np.zeros(6),
-        k_older=np.full(1, -1, dtype=np.int64),
-        warm=np.zeros(6),
-        starts=np.zeros((2, 6)),
-        n_starts=np.zeros(1, dtype=np.int64),
-    )
-    rows = sk.SolveLog(
-        t_s=np.empty(count),
-        horizon_s=np.empty(count),
-        eps=np.empty(count),
-        status=np.empty(count, dtype=np.int64),
-        iterations=np.empty(count, dtype=np.int64),
-        residual_km=np.empty(count),
-        wall_time_ms=np.empty(count),
-        success=np.empty(count, dtype=np.bool_),
-    )
+    resolve, carry, rows = _resolve_parts(problem, settings, schedule, observe is not None)
     ended: dict[int, SolveRecord] = {}  # the re-solves ended here (after the compiled warm attempt)
     lam = state.lam
     i, k_start = 0, 0
@@ -817,6 +828,43 @@ def _shooting_resolves(
         or SolveRecord("resolve", k, t, h, e, _STATUS_NAMES[c], "warm", it, res, wall, ok)
         for j, (k, t, h, e, c, it, res, wall, ok) in enumerate(columns)
     ]
+
+
+def _resolve_parts(
+    problem: Problem, settings: guidance.SolverSettings, schedule: list[int], stop_every: bool
+) -> tuple[sk.ResolveModel, sk.ResolveCarry, sk.SolveLog]:
+    """What the compiled loop's re-solves of a run hold, hand on and log
+    (:func:`_shooting_resolves`)."""
+    sc = problem.scenario
+    count = len(schedule)
+    resolve = sk.ResolveModel(
+        steps=np.asarray(schedule, dtype=np.int64),
+        xf=np.asarray(sc.xf, dtype=float),
+        horizon_s=sc.horizon_s,
+        correct=problem.guidance.resolve_timing == "correct",
+        success_residual=settings.success_residual,
+        newton=settings.newton_fields,
+        switching_max_iter=settings.switching_max_iter,
+        stop_every=stop_every,
+    )
+    carry = sk.ResolveCarry(
+        older=np.zeros(6),
+        k_older=np.full(1, -1, dtype=np.int64),
+        warm=np.zeros(6),
+        starts=np.zeros((2, 6)),
+        n_starts=np.zeros(1, dtype=np.int64),
+    )
+    rows = sk.SolveLog(
+        t_s=np.empty(count),
+        horizon_s=np.empty(count),
+        eps=np.empty(count),
+        status=np.empty(count, dtype=np.int64),
+        iterations=np.empty(count, dtype=np.int64),
+        residual_km=np.empty(count),
+        wall_time_ms=np.empty(count),
+        success=np.empty(count, dtype=np.bool_),
+    )
+    return resolve, carry, rows
 
 
 #: Status names of the kernels' status codes (``SolveRecord.status``).
