@@ -45,6 +45,7 @@ import numpy as np
 from numba import njit, typeof, types
 from numba._dispatcher import compute_fingerprint
 
+from cwrend_cli.physics import _calls
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import zoh_step
@@ -394,7 +395,7 @@ def _advance(
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)  # called by handle or from Python, never from C
 def _steps(
     k_start: int,
     k_stop: int,
@@ -629,38 +630,13 @@ def resolve_loop(
 
     Same conventions as :func:`advance`: the typed tuples cross as plain
     tuples and are named again inside. The step loop and the solver cross as
-    first-class functions (:func:`compiled_loop`).
+    handles (:func:`compiled_loop`).
     """
     parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
     args = _plain_args(i_start, k_start, n_steps, *parts)
-    i, eps, sbar, first = compiled_loop(args, *parts)(_steps, bang_bang_ascent, *args)
+    entry, steps, solve = compiled_loop(args, *parts)
+    i, eps, sbar, first = entry(steps, solve, *args)
     return i, LoopScalars(eps, sbar, first)
-
-
-def compile_resolve_loop(
-    n_steps: int,
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None = None,
-    ekf: EkfModel | None = None,
-    pn: ProcessNoiseModel | None = None,
-) -> None:
-    """Compile (or load) :func:`_resolve_loop` for these parts as :func:`resolve_loop` calls it.
-
-    Runs nothing, and compiles neither the step loop nor the solver
-    (:func:`compiled_loop`): a campaign's first run compiles it in a second
-    process while the campaign process compiles the solver (issue 37 item 12).
-    """
-    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
-    compiled_loop(_plain_args(0, 0, n_steps, *parts), *parts, callees=False)
 
 
 def _plain_args(
@@ -691,13 +667,13 @@ def _plain_args(
 
 
 #: The numba types :func:`_steps` and the solver return, as :func:`_resolve_loop` calls them
-#: through their first-class function types: ``(ε, s̄, first)`` and ``(status, iterations,
-#: rp, rv)``. A different compiled return type fails the call (numba compares them).
+#: (:mod:`cwrend_cli.physics._calls`): ``(ε, s̄, first)`` and ``(status, iterations, rp, rv)``.
 STEPS_RETURN = types.Tuple((types.float64, types.float64, types.boolean))  # type: ignore[no-untyped-call]
 SOLVER_RETURN = types.Tuple((types.int64, types.int64, types.float64, types.float64))  # type: ignore[no-untyped-call]
 
-#: The compiled :func:`_resolve_loop` of each argument fingerprint (:func:`compiled_loop`).
-_COMPILED_LOOPS: dict[bytes, Any] = {}
+#: The compiled :func:`_resolve_loop` and its callees' handles of each argument fingerprint
+#: (:func:`compiled_loop`).
+_COMPILED_LOOPS: dict[bytes, tuple[Any, _calls.Handle, _calls.Handle]] = {}
 
 
 def compiled_loop(
@@ -715,49 +691,77 @@ def compiled_loop(
     sensor: SensorModel | None,
     ekf: EkfModel | None,
     pn: ProcessNoiseModel | None,
-    callees: bool = True,
-) -> Any:
-    """The compiled :func:`_resolve_loop` for ``args`` (:func:`_plain_args` of these parts).
+) -> tuple[Any, _calls.Handle, _calls.Handle]:
+    """The compiled :func:`_resolve_loop` for ``args`` (:func:`_plain_args` of these parts),
+    with the handles of the step loop and of the solver it takes first.
 
-    Compiled (or loaded) on first use. Its first two arguments, the step loop
-    and the solver, are first-class functions (numba's ``FunctionType``): it
-    calls them through their addresses, taken when it is called, so neither
-    is compiled into it nor needs to be compiled before it (issue 37 item 12:
-    numba links a callee's whole call tree into its caller, where LLVM
-    optimises and emits it once more; the loop's top carried the step loop
-    and the solver, and compiled only after both). The numbers are those of
-    the direct calls: the same compiled functions, called once per re-solve.
-    Returns the compiled function's entry point, which takes ``(_steps,
-    bang_bang_ascent, *args)``. Looked up by the arguments' numba fingerprint
-    (numba's own dispatch key, about a microsecond): their numba types, in
-    Python, take milliseconds, and this is called once per re-solve that
-    ends in Python. ``callees``: also compile (or load) the step loop and the
-    solver for these types, as a call needs them; by their argument types
-    alone, the key numba's cache holds them under (the call itself would ask
-    with the return type too, a key of its own, and compile them again).
+    Compiled (or loaded) on first use, with the step loop and the solver.
+    The compiled loop calls them by their addresses
+    (:mod:`cwrend_cli.physics._calls`), so that neither is compiled into it
+    (issue 37 item 12: numba links a callee's whole call tree into its
+    caller, where LLVM optimises and emits it once more; the loop's top
+    carried the step loop and the solver, and compiled only after both).
+    Returns ``(entry, steps, solve)``: call ``entry(steps, solve, *args)``.
+    Looked up by the arguments' numba fingerprint (numba's own dispatch
+    key, about a microsecond): their numba types, in Python, take
+    milliseconds, and this is called once per re-solve that ends in Python.
     """
     try:
         key: bytes | None = compute_fingerprint(args)
-    except Exception:  # a value numba fingerprints not: typed below at every call
+    except Exception:  # a value numba does not fingerprint: typed below at every call
         key = None
     done = _COMPILED_LOOPS.get(key) if key is not None else None
     if done is not None:
         return done
     steps_t = _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
     solver_t = _solver_types(model, resolve, state, carry)
+    entry = _compile_top(args, steps_t, solver_t)
+    steps = _calls.handle(_steps, steps_t, STEPS_RETURN)
+    solve = _calls.handle(bang_bang_ascent, solver_t, SOLVER_RETURN)
+    if key is not None:
+        _COMPILED_LOOPS[key] = (entry, steps, solve)
+    return entry, steps, solve
+
+
+def compile_resolve_loop(
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    resolve: ResolveModel,
+    state: LoopState,
+    scalars: LoopScalars,
+    carry: ResolveCarry,
+    log: StepLog,
+    solves: SolveLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
+) -> None:
+    """Compile (or load) :func:`_resolve_loop` for these parts as :func:`resolve_loop` calls it.
+
+    Runs nothing, and compiles neither the step loop nor the solver
+    (:func:`compiled_loop`): a campaign's first run compiles it in a second
+    process while the campaign process compiles the solver (issue 37 item 12).
+    """
+    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
+    steps_t = _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
+    solver_t = _solver_types(model, resolve, state, carry)
+    _compile_top(_plain_args(0, 0, n_steps, *parts), steps_t, solver_t)
+
+
+def _compile_top(
+    args: tuple[Any, ...], steps_t: tuple[types.Type, ...], solver_t: tuple[types.Type, ...]
+) -> Any:
+    """Compile (or load) :func:`_resolve_loop` for ``args`` and callees of these argument
+    types; its entry point."""
     sig = (
-        types.FunctionType(STEPS_RETURN(*steps_t)),
-        types.FunctionType(SOLVER_RETURN(*solver_t)),
+        _calls.handle_type(steps_t, STEPS_RETURN),
+        _calls.handle_type(solver_t, SOLVER_RETURN),
         *(typeof(a) for a in args),  # type: ignore[no-untyped-call]
     )
-    entry = _resolve_loop.compile(sig)
-    if not callees:
-        return entry
-    _steps.compile(steps_t)
-    bang_bang_ascent.compile(solver_t)
-    if key is not None:
-        _COMPILED_LOOPS[key] = entry
-    return entry
+    return _resolve_loop.compile(sig)
 
 
 def _solver_types(
@@ -772,7 +776,7 @@ def _solver_types(
     return (n, *vec, f, f, typeof(model.u_max), types.float64[:, ::1], *nodes, i, settings, i, warm)  # type: ignore[no-untyped-call]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cfunc_wrapper=True)  # called by handle or from Python, never from C
 def _resolve_loop(
     steps: Any,
     solve: Any,
@@ -795,7 +799,7 @@ def _resolve_loop(
     pn_t: tuple[Any, ...] | None,
 ) -> tuple[int, float, float, bool]:
     """:func:`resolve_loop` on the plain tuples of its typed arguments; ``steps``:
-    :func:`_steps`, ``solve``: the solver (first-class functions, :func:`compiled_loop`)."""
+    :func:`_steps`, ``solve``: the solver, as handles (:func:`compiled_loop`)."""
     m = LoopModel(*model_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
@@ -815,9 +819,10 @@ def _resolve_loop(
     n_resolves = rs.steps.shape[0]
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
-        eps, sbar, first = steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-            mean_hold, sensor, ekf, pn,
+        eps, sbar, first = _calls.call(  # type: ignore[call-arg]
+            steps,
+            (k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+             mean_hold, sensor, ekf, pn),
         )  # fmt: skip
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -831,9 +836,10 @@ def _resolve_loop(
             back = model_costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
             copy_into(np.dot(back, carry.older), starts[1])
         t0 = monotonic_s()
-        status, iters, rp, rv = solve(
-            m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
-            n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm,
+        status, iters, rp, rv = _calls.call(
+            solve,
+            (m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
+             n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm),
         )  # fmt: skip
         wall = monotonic_s() - t0
         residual = np.hypot(rp, rv)
@@ -857,8 +863,9 @@ def _resolve_loop(
         else:
             copy_into(np.dot(m.lam_step, carry.warm), lam)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
-    eps, sbar, first = steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-        mean_hold, sensor, ekf, pn,
+    eps, sbar, first = _calls.call(  # type: ignore[call-arg]
+        steps,
+        (k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+         mean_hold, sensor, ekf, pn),
     )  # fmt: skip
     return n_resolves, eps, sbar, first
