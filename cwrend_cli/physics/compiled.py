@@ -77,8 +77,8 @@ def _entry_points(part: str) -> tuple[Any, ...]:
 
     if part == "references":
         return (_switching_kernels.bang_bang_ascent,)
-    if part == "shooting":
-        return (_loop_kernels._resolve_loop,)
+    if part == "shooting":  # the loop's top calls the step loop by its address: both
+        return (_loop_kernels._resolve_loop, _loop_kernels._steps)
     return (_loop_kernels._advance, _grid_kernels.grid_dual_ascent)
 
 
@@ -181,8 +181,9 @@ def compile_ahead(
     only after the ascent (about 10 CPU s), by when the step loop (about 7 s)
     is done, and the ascent's switching-time search, which the Newton calls
     too, is cached by then, so neither process compiles it a second time.
-    What is left for the runs is the compiled loop's top (``_resolve_loop``,
-    which carries the solver, and the cone program's grid kernels).
+    Then the same process compiles the compiled loop's top
+    (:func:`compile_loop_top`); what is left for the runs is the cone
+    program's grid kernels.
     ``problem`` and the draws: those of the campaign's first run, so that
     the argument types are the runs' own.
     """
