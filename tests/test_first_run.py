@@ -235,8 +235,8 @@ def test_the_loop_top_compiled_ahead_is_the_one_the_runs_call(tree: dict[str, An
     cfg = config_from_dict(tree)
     campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)
     before = _loop_kernels._resolve_loop.signatures
-    simulation.compile_loop_top(
-        problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0)
+    simulation.compile_loop(
+        problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0), top=True
     )
     assert _loop_kernels._resolve_loop.signatures == before  # no signature of its own
 
@@ -251,8 +251,8 @@ from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import _loop_kernels as lk, simulation
 from cwrend_cli.physics.guidance import _kernels as k, _switching_kernels as s
 cfg = config_from_dict({})
-simulation.compile_loop_top(
-    problem_of(cfg), ARCHITECTURES["mtf_fixed"], worker.standard_normal_for(cfg, 0)
+simulation.compile_loop(
+    problem_of(cfg), ARCHITECTURES["mtf_fixed"], worker.standard_normal_for(cfg, 0), top=True
 )
 print(len(lk._steps.signatures), len(s.bang_bang_ascent.signatures),
       len(s.switching_newton.signatures), len(k.newton_ascent.signatures),

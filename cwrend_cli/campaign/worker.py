@@ -34,6 +34,7 @@ drawn only for the fault kinds some window of the run switches on.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import signal
 import sys
@@ -310,12 +311,12 @@ def compile_ahead(task: Task) -> None:
 def compile_top(task: Task) -> None:
     """Compile a first run's compiled loop's top for ``task``'s runs (in a pool worker).
 
-    :func:`cwrend_cli.physics.compiled.compile_loop_top`, as :func:`compile_ahead`
+    :func:`cwrend_cli.physics.compiled.compile_ahead` of the loop's top, as :func:`compile_ahead`
     (after it and :func:`compile_newton`; issue 37 item 12).
     """
     from cwrend_cli.physics import compiled
 
-    _compile_for(task, compiled.compile_loop_top)
+    _compile_for(task, functools.partial(compiled.compile_ahead, top=True))
 
 
 def _compile_for(task: Task, compile_: Any) -> None:

@@ -395,7 +395,7 @@ def _advance(
     )  # fmt: skip
 
 
-@njit(cache=True, no_cfunc_wrapper=True)  # called by handle or from Python, never from C
+@njit(cache=True)
 def _steps(
     k_start: int,
     k_stop: int,
@@ -593,25 +593,29 @@ class SolveLog(NamedTuple):
     success: np.ndarray  # (R,) bool: converged and residual below success_residual
 
 
+class LoopParts(NamedTuple):
+    """What :func:`resolve_loop` runs: the loop's parts and its re-solves' (see :func:`advance`)."""
+
+    model: LoopModel
+    truth: TruthModel
+    act: ActuatorModel
+    sched: ScheduleParams
+    resolve: ResolveModel
+    state: LoopState
+    scalars: LoopScalars
+    carry: ResolveCarry
+    log: StepLog
+    solves: SolveLog
+    sensor: SensorModel | None = None  # None: the position sensor
+    ekf: EkfModel | None = None  # None: a linear filter
+    pn: ProcessNoiseModel | None = None  # None: the fixed process noise
+
+
 def resolve_loop(
-    i_start: int,
-    k_start: int,
-    n_steps: int,
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None = None,
-    ekf: EkfModel | None = None,
-    pn: ProcessNoiseModel | None = None,
+    i_start: int, k_start: int, n_steps: int, parts: LoopParts
 ) -> tuple[int, LoopScalars]:
-    """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
+    """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of
+    ``parts.resolve.steps``.
 
     Each re-solve is its warm attempt (:func:`~cwrend_cli.physics.guidance.
     _switching_kernels.bang_bang_ascent`, from the propagated costate and, at
@@ -632,37 +636,20 @@ def resolve_loop(
     tuples and are named again inside. The step loop and the solver cross as
     handles (:func:`compiled_loop`).
     """
-    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
-    args = _plain_args(i_start, k_start, n_steps, *parts)
-    entry, steps, solve = compiled_loop(args, *parts)
+    args = _plain_args(i_start, k_start, n_steps, parts)
+    entry, steps, solve = compiled_loop(args, parts)
     i, eps, sbar, first = entry(steps, solve, *args)
     return i, LoopScalars(eps, sbar, first)
 
 
-def _plain_args(
-    i_start: int,
-    k_start: int,
-    n_steps: int,
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None,
-    ekf: EkfModel | None,
-    pn: ProcessNoiseModel | None,
-) -> tuple[Any, ...]:
+def _plain_args(i_start: int, k_start: int, n_steps: int, parts: LoopParts) -> tuple[Any, ...]:
     """:func:`_resolve_loop`'s arguments after its two functions (:func:`advance`'s conventions)."""
+    p = parts
     return (
-        i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
-        tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
-        _optional_hold(model), None if sensor is None else tuple(sensor),
-        _optional_ekf(ekf), _optional_noise(pn),
+        i_start, k_start, n_steps, tuple(p.model), *_optional(p.truth, p.act), tuple(p.sched),
+        tuple(p.resolve), tuple(p.state), tuple(p.scalars), tuple(p.carry), tuple(p.log),
+        tuple(p.solves), _optional_hold(p.model), None if p.sensor is None else tuple(p.sensor),
+        _optional_ekf(p.ekf), _optional_noise(p.pn),
     )  # fmt: skip
 
 
@@ -677,20 +664,7 @@ _COMPILED_LOOPS: dict[bytes, tuple[Any, _calls.Handle, _calls.Handle]] = {}
 
 
 def compiled_loop(
-    args: tuple[Any, ...],
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None,
-    ekf: EkfModel | None,
-    pn: ProcessNoiseModel | None,
+    args: tuple[Any, ...], parts: LoopParts
 ) -> tuple[Any, _calls.Handle, _calls.Handle]:
     """The compiled :func:`_resolve_loop` for ``args`` (:func:`_plain_args` of these parts),
     with the handles of the step loop and of the solver it takes first.
@@ -713,8 +687,7 @@ def compiled_loop(
     done = _COMPILED_LOOPS.get(key) if key is not None else None
     if done is not None:
         return done
-    steps_t = _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
-    solver_t = _solver_types(model, resolve, state, carry)
+    steps_t, solver_t = _callee_types(parts)
     entry = _compile_top(args, steps_t, solver_t)
     steps = _calls.handle(_steps, steps_t, STEPS_RETURN)
     solve = _calls.handle(bang_bang_ascent, solver_t, SOLVER_RETURN)
@@ -723,32 +696,14 @@ def compiled_loop(
     return entry, steps, solve
 
 
-def compile_resolve_loop(
-    n_steps: int,
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None = None,
-    ekf: EkfModel | None = None,
-    pn: ProcessNoiseModel | None = None,
-) -> None:
+def compile_resolve_loop(n_steps: int, parts: LoopParts) -> None:
     """Compile (or load) :func:`_resolve_loop` for these parts as :func:`resolve_loop` calls it.
 
     Runs nothing, and compiles neither the step loop nor the solver
     (:func:`compiled_loop`): a campaign's first run compiles it in a second
     process while the campaign process compiles the solver (issue 37 item 12).
     """
-    parts = (model, truth, act, sched, resolve, state, scalars, carry, log, solves, sensor, ekf, pn)
-    steps_t = _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
-    solver_t = _solver_types(model, resolve, state, carry)
-    _compile_top(_plain_args(0, 0, n_steps, *parts), steps_t, solver_t)
+    _compile_top(_plain_args(0, 0, n_steps, parts), *_callee_types(parts))
 
 
 def _compile_top(
@@ -764,6 +719,14 @@ def _compile_top(
     return _resolve_loop.compile(sig)
 
 
+def _callee_types(parts: LoopParts) -> tuple[tuple[types.Type, ...], tuple[types.Type, ...]]:
+    """The numba types of the arguments of :func:`_steps` and of the solver as
+    :func:`_resolve_loop` calls them."""
+    p = parts
+    steps_t = _steps_types(p.model, p.truth, p.act, p.sched, p.state, p.log, p.sensor, p.ekf, p.pn)
+    return steps_t, _solver_types(p.model, p.resolve, p.state, p.carry)
+
+
 def _solver_types(
     model: LoopModel, resolve: ResolveModel, state: LoopState, carry: ResolveCarry
 ) -> tuple[types.Type, ...]:
@@ -776,7 +739,7 @@ def _solver_types(
     return (n, *vec, f, f, typeof(model.u_max), types.float64[:, ::1], *nodes, i, settings, i, warm)  # type: ignore[no-untyped-call]
 
 
-@njit(cache=True, no_cfunc_wrapper=True)  # called by handle or from Python, never from C
+@njit(cache=True)
 def _resolve_loop(
     steps: Any,
     solve: Any,

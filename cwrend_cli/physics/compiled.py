@@ -169,6 +169,7 @@ def compile_ahead(
     standard_normal: FloatArray,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
+    top: bool = False,
 ) -> None:
     """Compile a first run's step loop in a second process (issue 37 item 12).
 
@@ -181,9 +182,12 @@ def compile_ahead(
     only after the ascent (about 10 CPU s), by when the step loop (about 7 s)
     is done, and the ascent's switching-time search, which the Newton calls
     too, is cached by then, so neither process compiles it a second time.
-    Then the same process compiles the compiled loop's top
-    (:func:`compile_loop_top`); what is left for the runs is the cone
-    program's grid kernels.
+    Then the same process compiles the compiled loop's top (``top``: the
+    top of the first shooting architecture's loop,
+    ``_resolve_loop``, with ``simulation.compile_loop``'s ``top``), which
+    calls the step loop and the solver by their addresses and so compiles
+    without either; what is left for the runs is the cone program's grid
+    kernels.
     ``problem`` and the draws: those of the campaign's first run, so that
     the argument types are the runs' own.
     """
@@ -192,32 +196,8 @@ def compile_ahead(
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)
-    for method in sorted(first):  # shooting's step loop first: the cone program's links it
+    methods = ["shooting"] if top and "shooting" in first else [] if top else sorted(first)
+    for method in methods:  # shooting's step loop first: the cone program's links it
         simulation.compile_loop(
-            problem, first[method], standard_normal, actuator_draws, fault_draws
+            problem, first[method], standard_normal, actuator_draws, fault_draws, top
         )
-
-
-def compile_loop_top(
-    problem: Problem,
-    archs: Iterable[Architecture],
-    standard_normal: FloatArray,
-    actuator_draws: actuator.ActuatorDraws | None = None,
-    fault_draws: sensors.FaultDraws | None = None,
-) -> None:
-    """Compile a first run's compiled loop's top in a second process (issue 37 item 12).
-
-    The top of the closed loop with its re-solves (``_resolve_loop``) of the
-    first shooting architecture among ``archs``
-    (:func:`cwrend_cli.physics.simulation.compile_loop_top`), after
-    :func:`compile_ahead` and the solver's switching-time Newton: it calls
-    the step loop and the solver as first-class functions, so it compiles
-    without either, and the campaign process, compiling the solver
-    meanwhile, then loads it. Arguments as :func:`compile_ahead`'s.
-    """
-    from cwrend_cli.physics import simulation
-
-    for arch in archs:
-        if arch.resolved_method(problem.guidance) == "shooting":
-            simulation.compile_loop_top(problem, arch, standard_normal, actuator_draws, fault_draws)
-            return

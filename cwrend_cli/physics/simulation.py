@@ -558,6 +558,7 @@ def compile_loop(
     standard_normal: FloatArray,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
+    top: bool = False,
 ) -> None:
     """Compile (or load) the kernels below the re-solves of ``arch``'s closed loop; run nothing.
 
@@ -568,56 +569,30 @@ def compile_loop(
     :func:`~cwrend_cli.physics._loop_kernels.advance` of no step. Not the
     re-solves: a campaign compiles those of the references meanwhile
     (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
+    ``top``: instead, the top of the shooting method's loop, with its re-solves
+    (:func:`~cwrend_cli.physics._loop_kernels.compile_resolve_loop`), which
+    needs neither the step loop nor the solver compiled; nothing for the cone
+    program, whose loop has no top of its own.
     """
-    loop, scalars = _idle_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
-    if arch.resolved_method(problem.guidance) == "socp":
-        loop.advance(0, -1, problem.scenario.n_steps, scalars)  # k_stop < k_start: no step runs
+    socp = arch.resolved_method(problem.guidance) == "socp"
+    if top and socp:
+        return
+    sc = problem.scenario
+    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
+    x0 = np.asarray(sc.x0, dtype=float)
+    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
+    scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
+    if top:
+        schedule = resolve_steps(problem)
+        resolve, carry, rows = _resolve_parts(problem, solver_settings(problem), schedule, False)
+        sk.compile_resolve_loop(sc.n_steps, loop.parts(resolve, scalars, carry, rows))
+    elif socp:
+        loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
     else:
         sk.compile_steps(
             loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
             loop.ekf, loop.pn,
         )  # fmt: skip
-
-
-def compile_loop_top(
-    problem: Problem,
-    arch: Architecture,
-    standard_normal: FloatArray,
-    actuator_draws: actuator.ActuatorDraws | None = None,
-    fault_draws: sensors.FaultDraws | None = None,
-) -> None:
-    """Compile (or load) the top of ``arch``'s compiled loop with its re-solves; run nothing.
-
-    The shooting method's :func:`~cwrend_cli.physics._loop_kernels.compile_resolve_loop`,
-    for the argument types :func:`simulate` gives it (the arguments as
-    :func:`compile_loop`'s); it needs neither the step loop nor the solver
-    compiled (issue 37 item 12). Nothing for the cone program, whose loop has
-    no top of its own.
-    """
-    if arch.resolved_method(problem.guidance) == "socp":
-        return
-    loop, scalars = _idle_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
-    settings = solver_settings(problem)
-    resolve, carry, rows = _resolve_parts(problem, settings, resolve_steps(problem), False)
-    sk.compile_resolve_loop(
-        problem.scenario.n_steps, loop.model, loop.truth, loop.act, loop.sched, resolve,
-        loop.state, scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
-    )  # fmt: skip
-
-
-def _idle_loop(
-    problem: Problem,
-    arch: Architecture,
-    standard_normal: FloatArray,
-    actuator_draws: actuator.ActuatorDraws | None,
-    fault_draws: sensors.FaultDraws | None,
-) -> tuple[_Loop, sk.LoopScalars]:
-    """The compiled loop's parts of a run of ``arch`` that has not started, to compile it."""
-    sc = problem.scenario
-    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
-    x0 = np.asarray(sc.x0, dtype=float)
-    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
-    return loop, sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
 
 
 def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:
@@ -739,6 +714,19 @@ class _Loop:
     ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
     pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
+    def parts(
+        self,
+        resolve: sk.ResolveModel,
+        scalars: sk.LoopScalars,
+        carry: sk.ResolveCarry,
+        solves: sk.SolveLog,
+    ) -> sk.LoopParts:
+        """:class:`~cwrend_cli.physics._loop_kernels.LoopParts` of these parts and re-solves."""
+        return sk.LoopParts(
+            self.model, self.truth, self.act, self.sched, resolve, self.state, scalars, carry,
+            self.log, solves, self.sensor, self.ekf, self.pn,
+        )  # fmt: skip
+
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
     ) -> sk.LoopScalars:
@@ -781,10 +769,7 @@ def _shooting_resolves(
     lam = state.lam
     i, k_start = 0, 0
     while True:
-        i, scalars = sk.resolve_loop(
-            i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
-        )  # fmt: skip
+        i, scalars = sk.resolve_loop(i, k_start, n_steps, loop.parts(resolve, scalars, carry, rows))
         if i == count:
             break
         k = schedule[i]
