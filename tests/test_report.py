@@ -29,6 +29,7 @@ from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.tables import references_table, steps_table, summary_row
 from cwrend_cli.physics import simulation
 from cwrend_cli.report import load_results, write_compare_figure, write_report
+from cwrend_cli.report.html import report_html
 from cwrend_cli.report.labels import consistency_text, format_value, param_label, param_setting
 from cwrend_cli.report.load import references_file
 from cwrend_cli.report.markdown import report_md
@@ -607,9 +608,24 @@ def test_report_html_is_self_contained(ablation_report: Path) -> None:
     pngs = list((ablation_report / "report").glob("*.png"))
     assert page.count('src="data:image/png;base64,') == len(pngs) == len(PER_SEED + MULTI_SEED) + 2
     assert re.findall(r'src="(?!data:)', page) == []  # nothing to fetch beside the file
-    assert "<th>mean miss [m]</th>" in page and "]*</td>" in page  # the tables, with intervals
+    assert re.search(r"<th[^>]*>mean miss \[m\]</th>", page) and "]*</td>" in page  # the tables
     assert "<code>abc</code>" in page  # the config hash
     assert "beta = 0.25" in page  # the resolved config, as TOML
+
+
+def test_report_html_aligns_text_columns_left_and_number_columns_right() -> None:
+    table = (
+        "| campaign | architecture | mean miss [m] (95 % CI) | Δv [km/s] |\n"
+        "|---|---|---|---|\n"
+        "| cw | mtf_fixed | 7.60 [7.1, 8.2] | – |\n"
+        "| ss | plain_adaptive | -0.02 [-0.1, 0.1] | **0.1130** |\n"
+    )
+    page = report_html(table, {}, None, "abc", title="t", made="now", version="0")
+    header = re.findall(r"<th([^>]*)>", page)
+    assert header == ["", "", ' class="num"', ' class="num"']
+    assert "<td>plain_adaptive</td>" in page  # a text column after the first, left
+    assert '<td class="num">-0.02 [-0.1, 0.1]</td>' in page
+    assert '<td class="num">–</td>' in page  # a missing value sits with its numbers
 
 
 def test_report_html_says_what_it_is_when_and_by_which_cwrend(ablation_report: Path) -> None:

@@ -20,8 +20,8 @@ from collections.abc import Mapping
 _STYLE = """
 body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em; }
 table { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-th:first-child, td:first-child { text-align: left; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; }
+th.num, td.num { text-align: right; }
 th { background: #f0f4f8; }
 img { max-width: 100%; }
 pre { background: #f6f6f6; padding: 1em; overflow-x: auto; font-size: 0.85em; }
@@ -43,10 +43,35 @@ def _cells(line: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
+_NUMBER = re.compile(r"(\*\*)?[-+\u2212]?(\d|\.\d)|[\u2013\u2014-]$|nan$|inf$")
+"""A cell that reads as a number (``12.3``, ``-4e-05``, ``0.84 [0.82, 0.86]``) or as
+the dash of a missing value: right-aligned, so the digits line up."""
+
+
+def _numeric_columns(rows: list[list[str]], width: int) -> list[bool]:
+    """For each column: True when every non-empty body cell reads as a number."""
+    return [
+        all(_NUMBER.match(r[j]) for r in rows if j < len(r) and r[j])
+        and any(j < len(r) and r[j] for r in rows)
+        for j in range(width)
+    ]
+
+
 def _table(lines: list[str]) -> str:
-    header, *rows = [ln for ln in lines if not re.fullmatch(r"\|[-|]+\|", ln.strip())]
-    out = ["<table>", "<tr>" + "".join(f"<th>{_inline(c)}</th>" for c in _cells(header)) + "</tr>"]
-    out += ["<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in _cells(r)) + "</tr>" for r in rows]
+    """A markdown table as HTML: text columns aligned left, number columns right."""
+    header, *body = [ln for ln in lines if not re.fullmatch(r"\|[-:|]+\|", ln.strip())]
+    head_cells = _cells(header)
+    rows = [_cells(r) for r in body]
+    numeric = _numeric_columns(rows, len(head_cells))
+
+    def cell(tag: str, j: int, text: str) -> str:
+        kind = ' class="num"' if j < len(numeric) and numeric[j] else ""
+        return f"<{tag}{kind}>{_inline(text)}</{tag}>"
+
+    def row(tag: str, cells: list[str]) -> str:
+        return "<tr>" + "".join(cell(tag, j, c) for j, c in enumerate(cells)) + "</tr>"
+
+    out = ["<table>", row("th", head_cells), *(row("td", r) for r in rows)]
     return "\n".join([*out, "</table>"])
 
 
