@@ -261,7 +261,7 @@ print(len(lk._steps.signatures), len(s.bang_bang_ascent.signatures),
 
 
 def test_the_loop_top_compiles_without_the_step_loop_or_the_solver(tmp_path: Path) -> None:
-    # the top calls them as first-class functions: a second process compiles it while the
+    # the top calls them by their addresses: a second process compiles it while the
     # campaign process compiles the solver, and the top's code does not carry theirs
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run(

@@ -665,13 +665,14 @@ def _compile_first_run(
     the compile, while a pool worker compiles what does not depend on it,
     the closed loop's step kernels, then the solver's switching-time Newton,
     then the compiled loop's top, which calls the step loop and the solver
-    as first-class functions and so needs neither
+    by their addresses and so needs neither
     (:func:`~cwrend_cli.campaign.worker.compile_ahead`,
     :func:`~cwrend_cli.campaign.worker.compile_newton`,
     :func:`~cwrend_cli.campaign.worker.compile_top`); this process waits for
     the Newton before it computes the first point's references, and the
-    first task waits for the step kernels and the loop's top, so that whichever process needs
-    them loads them rather than compiling them a second time. ``executor``
+    first task waits for the step kernels and the loop's top, so that
+    whichever process needs them loads them rather than compiling them a
+    second time. ``executor``
     ``None``: the tasks run in-process (one task, the paper ablation's), and
     a helper process does the worker's part
     (:func:`~cwrend_cli.campaign.executors.helper_process`).
