@@ -20,8 +20,11 @@ LLVM), 31.2 CPU s the command, against 35.5 and 37.6 before issue 37 item
 12's fourth step (``compiled.tune_for_compiling``, the solver's two halves
 in two processes); the solver 16.7 CPU s with its callees (the dual ascent
 10.0, the switching-time Newton 4.6), the compiled loop's top 11.3 (its step
-loop 6.1). ``COMPILE_TREE=1`` prints the call tree too. For the two
-processes of a real campaign, log numba's ``numba:compile`` events in each
+loop 6.1). Since the loop's top calls the step loop and the solver by address
+(issue 37 item 12's fifth step; load average 3): compiling 21.7 and 24.6 CPU s against
+23.6 and 25.4 before, in two interleaved pairs; the loop's top 2.6 CPU s with its callees
+(9.9 before, the step loop compiled inside it). ``COMPILE_TREE=1`` prints the call tree
+too. For the two processes of a real campaign, log numba's ``numba:compile`` events in each
 (a listener installed before the command starts, e.g. from a
 ``sitecustomize`` module on ``PYTHONPATH``) with the process's CPU time.
 """

@@ -147,8 +147,9 @@ def test_the_paper_loop_passes_no_truth_or_actuator_model_to_compile() -> None:
     from cwrend_cli.physics import _loop_kernels
 
     campaign.run_case(config_from_dict({}), (ARCHITECTURES["plain_adaptive"],), 0)
-    # arguments 4 and 5: the CW truth and the ideal actuator cross as None (pruned)
-    paper = [(str(sig[4]), str(sig[5])) for sig in _loop_kernels._resolve_loop.signatures]
+    # arguments 6 and 7 (after the step loop and the solver): the CW truth and the ideal
+    # actuator cross as None (pruned)
+    paper = [(str(sig[6]), str(sig[7])) for sig in _loop_kernels._resolve_loop.signatures]
     assert ("none", "none") in paper
 
 
@@ -219,6 +220,69 @@ def test_compile_loop_ahead_gives_the_step_loop_the_signature_the_runs_use(
         problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0)
     )
     assert _loop_kernels._steps.signatures == before  # compiled ahead: no signature of its own
+
+
+@pytest.mark.parametrize(
+    "tree",
+    [{}, {"sensor": {"model": "range_bearing"}}, {"truth": {"model": "two_body"}}],
+    ids=["paper", "range_bearing", "two_body"],
+)
+def test_the_loop_top_compiled_ahead_is_the_one_the_runs_call(tree: dict[str, Any]) -> None:
+    from cwrend_cli.campaign import worker
+    from cwrend_cli.config.adapt import problem_of
+    from cwrend_cli.physics import _loop_kernels, simulation
+
+    cfg = config_from_dict(tree)
+    campaign.run_case(cfg, (ARCHITECTURES["mtf_adaptive"],), 0)
+    before = _loop_kernels._resolve_loop.signatures
+    simulation.compile_loop(
+        problem_of(cfg), ARCHITECTURES["mtf_adaptive"], worker.standard_normal_for(cfg, 0), top=True
+    )
+    assert _loop_kernels._resolve_loop.signatures == before  # no signature of its own
+
+
+#: Compiles (or loads) the paper loop's top as a second process does on a first run, then
+#: prints how many signatures of the step loop and of the solver's kernels this process
+#: compiled or loaded on the way, and of the loop's top.
+_TOP_ALONE = """
+from cwrend_cli.campaign import worker
+from cwrend_cli.config import ARCHITECTURES, config_from_dict
+from cwrend_cli.config.adapt import problem_of
+from cwrend_cli.physics import _loop_kernels as lk, simulation
+from cwrend_cli.physics.guidance import _kernels as k, _switching_kernels as s
+cfg = config_from_dict({})
+simulation.compile_loop(
+    problem_of(cfg), ARCHITECTURES["mtf_fixed"], worker.standard_normal_for(cfg, 0), top=True
+)
+print(len(lk._steps.signatures), len(s.bang_bang_ascent.signatures),
+      len(s.switching_newton.signatures), len(k.newton_ascent.signatures),
+      len(lk._resolve_loop.signatures))
+"""
+
+
+def test_the_loop_top_compiles_without_the_step_loop_or_the_solver(tmp_path: Path) -> None:
+    # the top calls them by their addresses: a second process compiles it while the
+    # campaign process compiles the solver, and the top's code does not carry theirs
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run(
+        [sys.executable, "-c", _TOP_ALONE], env=env, capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == ["0", "0", "0", "0", "1"]
+
+
+def test_a_second_call_of_the_compiled_loop_does_not_type_its_arguments_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from cwrend_cli.physics import _loop_kernels
+
+    cfg = config_from_dict({})
+    campaign.run_case(cfg, (ARCHITECTURES["mtf_fixed"],), 0)
+
+    def typed(*args: object) -> None:
+        raise AssertionError("typed again")  # milliseconds in Python, at every re-solve's return
+
+    monkeypatch.setattr(_loop_kernels, "_steps_types", typed)
+    campaign.run_case(cfg, (ARCHITECTURES["mtf_fixed"],), 1)  # the same types: looked up
 
 
 class _Submitted:
@@ -314,7 +378,8 @@ def _first_run_calls(
 
 
 def _expected(cold: bool) -> list[tuple[object, ...]]:
-    """Cold: the step loop and the switching-time Newton ahead; the ascent and the references."""
+    """Cold: the step loop, the switching-time Newton and the loop's top ahead; the ascent and
+    the references."""
     from cwrend_cli.campaign import worker
 
     if not cold:
@@ -322,6 +387,7 @@ def _expected(cold: bool) -> list[tuple[object, ...]]:
     return [
         (worker.compile_ahead, _TASK),
         (worker.compile_newton,),
+        (worker.compile_top, _TASK),
         ("ascent", _TASK.problem),
         ("references", _TASK),
     ]

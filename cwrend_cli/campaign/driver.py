@@ -74,6 +74,7 @@ from cwrend_cli.campaign.worker import (
     TaskOutcome,
     compile_ahead,
     compile_newton,
+    compile_top,
     execute_task,
     references_id,
     references_key,
@@ -663,12 +664,16 @@ def _compile_first_run(
     after an install or upgrade; :mod:`cwrend_cli.physics.compiled`). This
     process compiles the shooting solver's dual ascent, the longest chain of
     the compile, while a pool worker compiles what does not depend on it,
-    the closed loop's step kernels, and then the solver's switching-time
-    Newton (:func:`~cwrend_cli.campaign.worker.compile_ahead`,
-    :func:`~cwrend_cli.campaign.worker.compile_newton`); this process waits for
+    the closed loop's step kernels, then the solver's switching-time Newton,
+    then the compiled loop's top, which calls the step loop and the solver
+    by their addresses and so needs neither
+    (:func:`~cwrend_cli.campaign.worker.compile_ahead`,
+    :func:`~cwrend_cli.campaign.worker.compile_newton`,
+    :func:`~cwrend_cli.campaign.worker.compile_top`); this process waits for
     the Newton before it computes the first point's references, and the
-    first task waits for the step kernels, so that whichever process needs
-    them loads them rather than compiling them a second time. ``executor``
+    first task waits for the step kernels and the loop's top, so that
+    whichever process needs them loads them rather than compiling them a
+    second time. ``executor``
     ``None``: the tasks run in-process (one task, the paper ablation's), and
     a helper process does the worker's part
     (:func:`~cwrend_cli.campaign.executors.helper_process`).
@@ -690,11 +695,13 @@ def _compile_beside(executor: Executor, task: Task, references: _PointReferences
 
     loop = executor.submit(compile_ahead, task)
     newton = executor.submit(compile_newton)
+    top = executor.submit(compile_top, task)  # the loop's top: needs neither of the above
     compiled.compile_ascent(task.problem)
     _wait_for(newton)  # the solver's other half: loaded below, not compiled a second time
     with contextlib.suppress(OSError):  # the first task's own call reports it
         references.of(task)
     _wait_for(loop)
+    _wait_for(top)
 
 
 def _wait_for(future: Future[None]) -> None:

@@ -34,6 +34,7 @@ drawn only for the fault kinds some window of the run switches on.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import signal
 import sys
@@ -309,10 +310,27 @@ def compile_ahead(task: Task) -> None:
     """
     from cwrend_cli.physics import compiled
 
+    _compile_for(task, compiled.compile_ahead)
+
+
+def compile_top(task: Task) -> None:
+    """Compile a first run's compiled loop's top for ``task``'s runs (in a pool worker).
+
+    :func:`cwrend_cli.physics.compiled.compile_ahead` of the loop's top, as :func:`compile_ahead`
+    (after it and :func:`compile_newton`; issue 37 item 12).
+    """
+    from cwrend_cli.physics import compiled
+
+    _compile_for(task, functools.partial(compiled.compile_ahead, top=True))
+
+
+def _compile_for(task: Task, compile_: Any) -> None:
+    """``compile_`` with the problem and draws of ``task``'s first run and its architectures;
+    a failure swallowed (:func:`compile_ahead`)."""
     try:
         spec = task.runs[0]
         problem = with_values(task.problem, spec.dispersed)
-        compiled.compile_ahead(
+        compile_(
             problem,
             [ALL_ARCHITECTURES[r.arch] for r in task.runs],
             standard_normal(task.noise, spec.seed, problem.scenario.n_steps),

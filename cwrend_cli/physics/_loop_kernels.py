@@ -43,7 +43,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit, typeof, types
+from numba._dispatcher import compute_fingerprint
 
+from cwrend_cli.physics import _calls
 from cwrend_cli.physics._clock import monotonic_s
 from cwrend_cli.physics.actuator import ActuatorModel, actuate
 from cwrend_cli.physics.dynamics import zoh_step
@@ -324,13 +326,31 @@ def compile_steps(
 ) -> None:
     """Compile (or load) :func:`_steps` for these parts as :func:`resolve_loop` calls it.
 
-    Runs no step: the argument types :func:`_resolve_loop` hands it (the typed
-    tuples; the CW truth, the ideal actuator, the sample hold, the position
-    sensor, a linear filter and a fixed process noise as ``None``, :func:`_optional`,
+    Runs no step: the argument types :func:`_resolve_loop` hands it
+    (:func:`_steps_types`). A campaign's first run compiles this in a pool
+    worker while the campaign process compiles the re-solves (issue 37 item
+    12); the runs then load it from numba's cache instead of compiling it again.
+    """
+    _steps.compile(_steps_types(model, truth, act, sched, state, log, sensor, ekf, pn))
+
+
+def _steps_types(
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    log: StepLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
+) -> tuple[types.Type, ...]:
+    """The numba types of :func:`_steps`' arguments as :func:`_resolve_loop` calls it.
+
+    The typed tuples as :func:`_resolve_loop` names them again; the CW truth,
+    the ideal actuator, the sample hold, the position sensor, a linear filter
+    and a fixed process noise as ``None`` (:func:`_optional`,
     :func:`_optional_hold`, :func:`_optional_ekf`, :func:`_optional_noise`).
-    A campaign's first run compiles this in a pool worker while the campaign
-    process compiles the re-solves (issue 37 item 12); the compiled loop then
-    loads it from numba's cache instead of compiling it again.
     """
     truth_t, act_t = _optional(truth, act)
     models = (None if truth_t is None else truth, None if act_t is None else act)
@@ -341,7 +361,7 @@ def compile_steps(
     )
     plain = tuple(typeof(a) for a in (0, 0, 0, model, sched, state, 0.0, 0.0, True, log))  # type: ignore[no-untyped-call]
     hold = types.none if _optional_hold(model) is None else types.boolean
-    _steps.compile((*plain[:4], *chosen[:2], *plain[4:], hold, *chosen[2:]))
+    return (*plain[:4], *chosen[:2], *plain[4:], hold, *chosen[2:])
 
 
 @njit(cache=True)
@@ -573,25 +593,29 @@ class SolveLog(NamedTuple):
     success: np.ndarray  # (R,) bool: converged and residual below success_residual
 
 
+class LoopParts(NamedTuple):
+    """What :func:`resolve_loop` runs: the loop's parts and its re-solves' (see :func:`advance`)."""
+
+    model: LoopModel
+    truth: TruthModel
+    act: ActuatorModel
+    sched: ScheduleParams
+    resolve: ResolveModel
+    state: LoopState
+    scalars: LoopScalars
+    carry: ResolveCarry
+    log: StepLog
+    solves: SolveLog
+    sensor: SensorModel | None = None  # None: the position sensor
+    ekf: EkfModel | None = None  # None: a linear filter
+    pn: ProcessNoiseModel | None = None  # None: the fixed process noise
+
+
 def resolve_loop(
-    i_start: int,
-    k_start: int,
-    n_steps: int,
-    model: LoopModel,
-    truth: TruthModel,
-    act: ActuatorModel,
-    sched: ScheduleParams,
-    resolve: ResolveModel,
-    state: LoopState,
-    scalars: LoopScalars,
-    carry: ResolveCarry,
-    log: StepLog,
-    solves: SolveLog,
-    sensor: SensorModel | None = None,
-    ekf: EkfModel | None = None,
-    pn: ProcessNoiseModel | None = None,
+    i_start: int, k_start: int, n_steps: int, parts: LoopParts
 ) -> tuple[int, LoopScalars]:
-    """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of ``resolve.steps``.
+    """Run the loop from step ``k_start`` through the re-solves ``i_start, …`` of
+    ``parts.resolve.steps``.
 
     Each re-solve is its warm attempt (:func:`~cwrend_cli.physics.guidance.
     _switching_kernels.bang_bang_ascent`, from the propagated costate and, at
@@ -609,19 +633,116 @@ def resolve_loop(
     succeeded and every step up to the end has run.
 
     Same conventions as :func:`advance`: the typed tuples cross as plain
-    tuples and are named again inside.
+    tuples and are named again inside. The step loop and the solver cross as
+    handles (:func:`compiled_loop`).
     """
-    i, eps, sbar, first = _resolve_loop(
-        i_start, k_start, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
-        tuple(resolve), tuple(state), tuple(scalars), tuple(carry), tuple(log), tuple(solves),
-        _optional_hold(model), None if sensor is None else tuple(sensor),
-        _optional_ekf(ekf), _optional_noise(pn),
-    )  # fmt: skip
+    args = _plain_args(i_start, k_start, n_steps, parts)
+    entry, steps, solve = compiled_loop(args, parts)
+    i, eps, sbar, first = entry(steps, solve, *args)
     return i, LoopScalars(eps, sbar, first)
+
+
+def _plain_args(i_start: int, k_start: int, n_steps: int, parts: LoopParts) -> tuple[Any, ...]:
+    """:func:`_resolve_loop`'s arguments after its two functions (:func:`advance`'s conventions)."""
+    p = parts
+    return (
+        i_start, k_start, n_steps, tuple(p.model), *_optional(p.truth, p.act), tuple(p.sched),
+        tuple(p.resolve), tuple(p.state), tuple(p.scalars), tuple(p.carry), tuple(p.log),
+        tuple(p.solves), _optional_hold(p.model), None if p.sensor is None else tuple(p.sensor),
+        _optional_ekf(p.ekf), _optional_noise(p.pn),
+    )  # fmt: skip
+
+
+#: The numba types :func:`_steps` and the solver return, as :func:`_resolve_loop` calls them
+#: (:mod:`cwrend_cli.physics._calls`): ``(ε, s̄, first)`` and ``(status, iterations, rp, rv)``.
+STEPS_RETURN = types.Tuple((types.float64, types.float64, types.boolean))  # type: ignore[no-untyped-call]
+SOLVER_RETURN = types.Tuple((types.int64, types.int64, types.float64, types.float64))  # type: ignore[no-untyped-call]
+
+#: The compiled :func:`_resolve_loop` and its callees' handles of each argument fingerprint
+#: (:func:`compiled_loop`).
+_COMPILED_LOOPS: dict[bytes, tuple[Any, _calls.Handle, _calls.Handle]] = {}
+
+
+def compiled_loop(
+    args: tuple[Any, ...], parts: LoopParts
+) -> tuple[Any, _calls.Handle, _calls.Handle]:
+    """The compiled :func:`_resolve_loop` for ``args`` (:func:`_plain_args` of these parts),
+    with the handles of the step loop and of the solver it takes first.
+
+    Compiled (or loaded) on first use, with the step loop and the solver.
+    The compiled loop calls them by their addresses
+    (:mod:`cwrend_cli.physics._calls`), so that neither is compiled into it
+    (issue 37 item 12: numba links a callee's whole call tree into its
+    caller, where LLVM optimises and emits it once more; the loop's top
+    carried the step loop and the solver, and compiled only after both).
+    Returns ``(entry, steps, solve)``: call ``entry(steps, solve, *args)``.
+    Looked up by the arguments' numba fingerprint (numba's own dispatch
+    key, about a microsecond): their numba types, in Python, take
+    milliseconds, and this is called once per re-solve that ends in Python.
+    """
+    try:
+        key: bytes | None = compute_fingerprint(args)
+    except Exception:  # a value numba does not fingerprint: typed below at every call
+        key = None
+    done = _COMPILED_LOOPS.get(key) if key is not None else None
+    if done is not None:
+        return done
+    steps_t, solver_t = _callee_types(parts)
+    entry = _compile_top(args, steps_t, solver_t)
+    steps = _calls.handle(_steps, steps_t, STEPS_RETURN)
+    solve = _calls.handle(bang_bang_ascent, solver_t, SOLVER_RETURN)
+    if key is not None:
+        _COMPILED_LOOPS[key] = (entry, steps, solve)
+    return entry, steps, solve
+
+
+def compile_resolve_loop(n_steps: int, parts: LoopParts) -> None:
+    """Compile (or load) :func:`_resolve_loop` for these parts as :func:`resolve_loop` calls it.
+
+    Runs nothing, and compiles neither the step loop nor the solver
+    (:func:`compiled_loop`): a campaign's first run compiles it in a second
+    process while the campaign process compiles the solver (issue 37 item 12).
+    """
+    _compile_top(_plain_args(0, 0, n_steps, parts), *_callee_types(parts))
+
+
+def _compile_top(
+    args: tuple[Any, ...], steps_t: tuple[types.Type, ...], solver_t: tuple[types.Type, ...]
+) -> Any:
+    """Compile (or load) :func:`_resolve_loop` for ``args`` and callees of these argument
+    types; its entry point."""
+    sig = (
+        _calls.handle_type(steps_t, STEPS_RETURN),
+        _calls.handle_type(solver_t, SOLVER_RETURN),
+        *(typeof(a) for a in args),  # type: ignore[no-untyped-call]
+    )
+    return _resolve_loop.compile(sig)
+
+
+def _callee_types(parts: LoopParts) -> tuple[tuple[types.Type, ...], tuple[types.Type, ...]]:
+    """The numba types of the arguments of :func:`_steps` and of the solver as
+    :func:`_resolve_loop` calls them."""
+    p = parts
+    steps_t = _steps_types(p.model, p.truth, p.act, p.sched, p.state, p.log, p.sensor, p.ekf, p.pn)
+    return steps_t, _solver_types(p.model, p.resolve, p.state, p.carry)
+
+
+def _solver_types(
+    model: LoopModel, resolve: ResolveModel, state: LoopState, carry: ResolveCarry
+) -> tuple[types.Type, ...]:
+    """The numba types of the solver's arguments as :func:`_resolve_loop` calls it."""
+    f, i = types.float64, types.int64
+    vec = (typeof(state.x_hat), typeof(resolve.xf))  # type: ignore[no-untyped-call]
+    nodes = (typeof(model.gl_x), typeof(model.gl_w))  # type: ignore[no-untyped-call]
+    settings = typeof(resolve.newton)  # type: ignore[no-untyped-call]
+    n, warm = typeof(model.n), typeof(carry.warm)  # type: ignore[no-untyped-call]
+    return (n, *vec, f, f, typeof(model.u_max), types.float64[:, ::1], *nodes, i, settings, i, warm)  # type: ignore[no-untyped-call]
 
 
 @njit(cache=True)
 def _resolve_loop(
+    steps: Any,
+    solve: Any,
     i_start: int,
     k_start: int,
     n_steps: int,
@@ -640,7 +761,8 @@ def _resolve_loop(
     ekf_t: tuple[tuple[Any, ...], np.ndarray] | None,
     pn_t: tuple[Any, ...] | None,
 ) -> tuple[int, float, float, bool]:
-    """:func:`resolve_loop` on the plain tuples of its typed arguments."""
+    """:func:`resolve_loop` on the plain tuples of its typed arguments; ``steps``:
+    :func:`_steps`, ``solve``: the solver, as handles (:func:`compiled_loop`)."""
     m = LoopModel(*model_t)
     truth = None if truth_t is None else TruthModel(*truth_t)
     act = None if act_t is None else ActuatorModel(*act_t)
@@ -660,9 +782,10 @@ def _resolve_loop(
     n_resolves = rs.steps.shape[0]
     for i in range(i_start, n_resolves):
         k = rs.steps[i]
-        eps, sbar, first = _steps(
-            k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-            mean_hold, sensor, ekf, pn,
+        eps, sbar, first = _calls.call(  # type: ignore[call-arg]
+            steps,
+            (k_next, k, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+             mean_hold, sensor, ekf, pn),
         )  # fmt: skip
         k_next = k + 1
         k_from = k + 1 if rs.correct else k
@@ -676,9 +799,10 @@ def _resolve_loop(
             back = model_costate_stm(m.n, (k_from - carry.k_older[0]) * m.dt)
             copy_into(np.dot(back, carry.older), starts[1])
         t0 = monotonic_s()
-        status, iters, rp, rv = bang_bang_ascent(
-            m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
-            n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm,
+        status, iters, rp, rv = _calls.call(
+            solve,
+            (m.n, state.x_hat, rs.xf, horizon, eps, m.u_max, starts, m.gl_x, m.gl_w,
+             n_cells(horizon), rs.newton, rs.switching_max_iter, carry.warm),
         )  # fmt: skip
         wall = monotonic_s() - t0
         residual = np.hypot(rp, rv)
@@ -702,8 +826,9 @@ def _resolve_loop(
         else:
             copy_into(np.dot(m.lam_step, carry.warm), lam)
         m.override[k + 1 :] = False  # a costate plan: no held controls from here on
-    eps, sbar, first = _steps(
-        k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
-        mean_hold, sensor, ekf, pn,
+    eps, sbar, first = _calls.call(  # type: ignore[call-arg]
+        steps,
+        (k_next, n_steps, n_steps, m, truth, act, sched, state, eps, sbar, first, log,
+         mean_hold, sensor, ekf, pn),
     )  # fmt: skip
     return n_resolves, eps, sbar, first

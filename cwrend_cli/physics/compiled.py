@@ -26,23 +26,26 @@ if TYPE_CHECKING:
 #: CPU seconds of the first compile of each entry point's kernels, with what it calls.
 #: Measured in one process (``python -m benchmarks.compile_costs``: the paper ablation with
 #: ``--workers 1`` into an empty ``NUMBA_CACHE_DIR``) on a 2-core AMD EPYC (znver4,
-#: 2026-12-02, load average 10 from other jobs): the solver 16.7 CPU s, the compiled loop
-#: 11.3 s with its step loop (6.1 s), 31.2 CPU s for the whole command (37.6 s before
-#: issue 37 item 12's fourth step, :func:`tune_for_compiling`; 47.8 s before the third).
+#: 2026-12-02, load average 10 from other jobs): the solver 16.7 CPU s, 31.2 CPU s for the
+#: whole command (37.6 s before issue 37 item 12's fourth step, :func:`tune_for_compiling`;
+#: 47.8 s before the third). The compiled loop, since its top calls the step loop and the
+#: solver by their addresses (the fifth step; load average 4-5): its step loop 5.7 CPU s,
+#: its top 3.2 s (was 11.3 s with the step loop, the top carrying both).
 #: Machines differ by about 2x: the notice is the slower machine's figure. The cone
 #: program's part was not measured again (24 s before the fourth step, less the same 17 %).
 #: An estimate for the notice only: the machine and the scenario (a nonlinear truth, an
 #: actuator with errors, a nonlinear sensor, an EKF) move it.
 _COMPILE_CPU_S = {
     "references": 17.0,  # bang_bang_ascent: the open-loop references and every first plan
-    "shooting": 11.5,  # _resolve_loop: the closed loop with its compiled re-solves
+    "shooting": 9.0,  # _steps and _resolve_loop: the closed loop with its compiled re-solves
     "socp": 20.0,  # _advance and the cone program's grid kernels
 }
 #: Of each part, the CPU seconds a second process compiles (the step loop below the
-#: re-solves, :func:`compile_ahead`: 6.1 s; then the solver's switching-time Newton less
-#: its burn prediction: 2.5 s) while the campaign process compiles the references' dual
-#: ascent (:func:`compile_ascent`); on 2 cores or more they overlap it.
-_AHEAD_CPU_S = {"references": 2.5, "shooting": 6.0, "socp": 4.0}
+#: re-solves, :func:`compile_ahead`: 5.7 s; then the solver's switching-time Newton less
+#: its burn prediction: 2.5 s; then the compiled loop's top: 3.2 s) while the campaign
+#: process compiles the references' dual ascent (:func:`compile_ascent`); on 2 cores or more
+#: they overlap it.
+_AHEAD_CPU_S = {"references": 2.5, "shooting": 9.0, "socp": 4.0}
 
 
 #: The cyclic garbage collector's thresholds in cwrend's processes (Python's default:
@@ -77,8 +80,8 @@ def _entry_points(part: str) -> tuple[Any, ...]:
 
     if part == "references":
         return (_switching_kernels.bang_bang_ascent,)
-    if part == "shooting":
-        return (_loop_kernels._resolve_loop,)
+    if part == "shooting":  # the loop's top calls the step loop by its address: both
+        return (_loop_kernels._resolve_loop, _loop_kernels._steps)
     return (_loop_kernels._advance, _grid_kernels.grid_dual_ascent)
 
 
@@ -169,6 +172,7 @@ def compile_ahead(
     standard_normal: FloatArray,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
+    top: bool = False,
 ) -> None:
     """Compile a first run's step loop in a second process (issue 37 item 12).
 
@@ -181,8 +185,12 @@ def compile_ahead(
     only after the ascent (about 10 CPU s), by when the step loop (about 7 s)
     is done, and the ascent's switching-time search, which the Newton calls
     too, is cached by then, so neither process compiles it a second time.
-    What is left for the runs is the compiled loop's top (``_resolve_loop``,
-    which carries the solver, and the cone program's grid kernels).
+    Then the same process compiles the compiled loop's top (``top``: the
+    top of the first shooting architecture's loop,
+    ``_resolve_loop``, with ``simulation.compile_loop``'s ``top``), which
+    calls the step loop and the solver by their addresses and so compiles
+    without either; what is left for the runs is the cone program's grid
+    kernels.
     ``problem`` and the draws: those of the campaign's first run, so that
     the argument types are the runs' own.
     """
@@ -191,7 +199,8 @@ def compile_ahead(
     first: dict[str, Architecture] = {}
     for arch in archs:
         first.setdefault(arch.resolved_method(problem.guidance), arch)
-    for method in sorted(first):  # shooting's step loop first: the cone program's links it
+    methods = ["shooting"] if top and "shooting" in first else [] if top else sorted(first)
+    for method in methods:  # shooting's step loop first: the cone program's links it
         simulation.compile_loop(
-            problem, first[method], standard_normal, actuator_draws, fault_draws
+            problem, first[method], standard_normal, actuator_draws, fault_draws, top
         )

@@ -567,6 +567,7 @@ def compile_loop(
     standard_normal: FloatArray,
     actuator_draws: actuator.ActuatorDraws | None = None,
     fault_draws: sensors.FaultDraws | None = None,
+    top: bool = False,
 ) -> None:
     """Compile (or load) the kernels below the re-solves of ``arch``'s closed loop; run nothing.
 
@@ -577,13 +578,24 @@ def compile_loop(
     :func:`~cwrend_cli.physics._loop_kernels.advance` of no step. Not the
     re-solves: a campaign compiles those of the references meanwhile
     (issue 37 item 12, :func:`cwrend_cli.physics.compiled.compile_ahead`).
+    ``top``: instead, the top of the shooting method's loop, with its re-solves
+    (:func:`~cwrend_cli.physics._loop_kernels.compile_resolve_loop`), which
+    needs neither the step loop nor the solver compiled; nothing for the cone
+    program, whose loop has no top of its own.
     """
+    socp = arch.resolved_method(problem.guidance) == "socp"
+    if top and socp:
+        return
     sc = problem.scenario
     sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
     x0 = np.asarray(sc.x0, dtype=float)
     loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
     scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
-    if arch.resolved_method(problem.guidance) == "socp":
+    if top:
+        schedule = resolve_steps(problem)
+        resolve, carry, rows = _resolve_parts(problem, solver_settings(problem), schedule, False)
+        sk.compile_resolve_loop(sc.n_steps, loop.parts(resolve, scalars, carry, rows))
+    elif socp:
         loop.advance(0, -1, sc.n_steps, scalars)  # k_stop < k_start: no step runs
     else:
         sk.compile_steps(
@@ -730,6 +742,19 @@ class _Loop:
     ekf: ekf.EkfModel | None = None  # the extended Kalman filter's dynamics; None: linear
     pn: process_noise.ProcessNoiseModel | None = None  # None: estimator.q_process at every step
 
+    def parts(
+        self,
+        resolve: sk.ResolveModel,
+        scalars: sk.LoopScalars,
+        carry: sk.ResolveCarry,
+        solves: sk.SolveLog,
+    ) -> sk.LoopParts:
+        """:class:`~cwrend_cli.physics._loop_kernels.LoopParts` of these parts and re-solves."""
+        return sk.LoopParts(
+            self.model, self.truth, self.act, self.sched, resolve, self.state, scalars, carry,
+            self.log, solves, self.sensor, self.ekf, self.pn,
+        )  # fmt: skip
+
     def advance(
         self, k_start: int, k_stop: int, n_steps: int, scalars: sk.LoopScalars
     ) -> sk.LoopScalars:
@@ -767,41 +792,12 @@ def _shooting_resolves(
     xf = np.asarray(sc.xf, dtype=float)
     count = len(schedule)
     design = _shooting_design(problem, socp=False)
-    resolve = sk.ResolveModel(
-        steps=np.asarray(schedule, dtype=np.int64),
-        xf=xf,
-        horizon_s=sc.horizon_s,
-        correct=correct,
-        success_residual=settings.success_residual,
-        newton=settings.newton_fields,
-        switching_max_iter=settings.switching_max_iter,
-        stop_every=observe is not None,
-    )
-    carry = sk.ResolveCarry(
-        older=np.zeros(6),
-        k_older=np.full(1, -1, dtype=np.int64),
-        warm=np.zeros(6),
-        starts=np.zeros((2, 6)),
-        n_starts=np.zeros(1, dtype=np.int64),
-    )
-    rows = sk.SolveLog(
-        t_s=np.empty(count),
-        horizon_s=np.empty(count),
-        eps=np.empty(count),
-        status=np.empty(count, dtype=np.int64),
-        iterations=np.empty(count, dtype=np.int64),
-        residual_km=np.empty(count),
-        wall_time_ms=np.empty(count),
-        success=np.empty(count, dtype=np.bool_),
-    )
+    resolve, carry, rows = _resolve_parts(problem, settings, schedule, observe is not None)
     ended: dict[int, SolveRecord] = {}  # the re-solves ended here (after the compiled warm attempt)
     lam = state.lam
     i, k_start = 0, 0
     while True:
-        i, scalars = sk.resolve_loop(
-            i, k_start, n_steps, model, loop.truth, loop.act, loop.sched, resolve, state,
-            scalars, carry, loop.log, rows, loop.sensor, loop.ekf, loop.pn,
-        )  # fmt: skip
+        i, scalars = sk.resolve_loop(i, k_start, n_steps, loop.parts(resolve, scalars, carry, rows))
         if i == count:
             break
         k = schedule[i]
@@ -845,6 +841,43 @@ def _shooting_resolves(
         or SolveRecord("resolve", k, t, h, e, _STATUS_NAMES[c], "warm", it, res, wall, ok)
         for j, (k, t, h, e, c, it, res, wall, ok) in enumerate(columns)
     ]
+
+
+def _resolve_parts(
+    problem: Problem, settings: guidance.SolverSettings, schedule: list[int], stop_every: bool
+) -> tuple[sk.ResolveModel, sk.ResolveCarry, sk.SolveLog]:
+    """What the compiled loop's re-solves of a run hold, hand on and log
+    (:func:`_shooting_resolves`)."""
+    sc = problem.scenario
+    count = len(schedule)
+    resolve = sk.ResolveModel(
+        steps=np.asarray(schedule, dtype=np.int64),
+        xf=np.asarray(sc.xf, dtype=float),
+        horizon_s=sc.horizon_s,
+        correct=problem.guidance.resolve_timing == "correct",
+        success_residual=settings.success_residual,
+        newton=settings.newton_fields,
+        switching_max_iter=settings.switching_max_iter,
+        stop_every=stop_every,
+    )
+    carry = sk.ResolveCarry(
+        older=np.zeros(6),
+        k_older=np.full(1, -1, dtype=np.int64),
+        warm=np.zeros(6),
+        starts=np.zeros((2, 6)),
+        n_starts=np.zeros(1, dtype=np.int64),
+    )
+    rows = sk.SolveLog(
+        t_s=np.empty(count),
+        horizon_s=np.empty(count),
+        eps=np.empty(count),
+        status=np.empty(count, dtype=np.int64),
+        iterations=np.empty(count, dtype=np.int64),
+        residual_km=np.empty(count),
+        wall_time_ms=np.empty(count),
+        success=np.empty(count, dtype=np.bool_),
+    )
+    return resolve, carry, rows
 
 
 #: Status names of the kernels' status codes (``SolveRecord.status``).
