@@ -343,7 +343,7 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = np.r_[0, np.flatnonzero(modes >= _KEEP_OUT)]
+    nodes = np.concatenate((np.zeros(1, np.int64), np.flatnonzero(modes >= _KEEP_OUT)))
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = rho_bar if centre is None else rho_bar - centre
@@ -389,8 +389,7 @@ def _pairs(
     # every ellipsoid has the same nodes
     pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
     normals, offsets = _planes(half_spaces, pairs, motion)
-    left_out = _trust_floor(normals, r_bar, pairs[:, 0], trust_km) >= offsets + SCP_TOL_KM
-    return pairs[~left_out], pairs[left_out]
+    return _trust_split(pairs, normals, offsets, r_bar, trust_km)
 
 
 @njit(cache=True)
@@ -411,18 +410,33 @@ def _pair_rows(has: np.ndarray, modes: np.ndarray, bodies: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _trust_floor(
-    normals: np.ndarray, r_bar: np.ndarray, nodes: np.ndarray, trust_km: float
-) -> np.ndarray:
-    """``nᵀ r̄_k − trust ‖n‖₁`` of each row (normal (P, 3), node (P,)): the smallest nᵀr over
-    the node's trust box [km] (:func:`_pairs`; numpy's sums in their order)."""
-    out = np.empty(nodes.size)
-    for p in range(nodes.size):
-        k = nodes[p]
+def _trust_split(
+    pairs: np.ndarray, normals: np.ndarray, offsets: np.ndarray, r_bar: np.ndarray, trust_km: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(kept, left out) of the rows ``pairs`` (P, 3) with planes (normals (P, 3), offsets
+    (P,)): a row is left out when ``nᵀ r̄_k − trust ‖n‖₁``, the smallest nᵀr over its node's
+    trust box [km], is at least its offset + :data:`SCP_TOL_KM` (:func:`_pairs`; numpy's
+    sums in their order, the same bits)."""
+    left = np.empty(pairs.shape[0], dtype=np.bool_)
+    count = 0
+    for p in range(pairs.shape[0]):
+        k = pairs[p, 0]
         n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
         dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-        out[p] = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
-    return out
+        low = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
+        left[p] = low >= offsets[p] + SCP_TOL_KM
+        count += left[p]
+    kept = np.empty((pairs.shape[0] - count, 3), dtype=np.int64)
+    out = np.empty((count, 3), dtype=np.int64)
+    i = o = 0
+    for p in range(pairs.shape[0]):
+        if left[p]:
+            out[o] = pairs[p]
+            o += 1
+        else:
+            kept[i] = pairs[p]
+            i += 1
+    return kept, out
 
 
 def _planes(
@@ -629,11 +643,27 @@ def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """The trust rows that the positions ``r`` (N + 1, 3) break by more than
     :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
     the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
-    boxed = np.flatnonzero(sub.modes > 0)
-    d = r[boxed] - sub.r_bar[boxed]
-    broken = np.hstack([d, -d]) < -(sub.trust_km + DUAL_TOL_KM)
-    at, comp = np.nonzero(broken)
-    return boxed[at], comp.astype(np.int64)
+    return _box_broken(sub.modes, r, sub.r_bar, -(sub.trust_km + DUAL_TOL_KM))
+
+
+@njit(cache=True)
+def _box_broken(
+    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, components) of :func:`_broken_trust`, node by node: component i < 3 where
+    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``."""
+    nodes = np.empty(6 * modes.size, dtype=np.int64)
+    comps = np.empty(6 * modes.size, dtype=np.int64)
+    count = 0
+    for k in range(modes.size):
+        if modes[k] <= 0:
+            continue
+        for i in range(6):
+            d = r[k, i % 3] - r_bar[k, i % 3]
+            if (d if i < 3 else -d) < floor_km:
+                nodes[count], comps[count] = k, i
+                count += 1
+    return nodes[:count], comps[:count]
 
 
 def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:

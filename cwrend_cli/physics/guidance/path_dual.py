@@ -74,6 +74,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from cwrend_cli.physics.constraints import row_norms
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
 from cwrend_cli.physics.guidance._grid_kernels import step_law
 from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
@@ -643,7 +644,7 @@ def solve(
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
         if start is not None:  # the next round's homotopy starts where this one's did
             y[:] = start
-    norms = np.linalg.norm(u, axis=1)
+    norms = row_norms(u)
     cost = float(np.sum(c1 * norms + weight * norms**2))
     controls = u * u_max
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
