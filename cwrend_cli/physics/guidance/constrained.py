@@ -828,17 +828,18 @@ def _dual_solve(
     keep = None
     if weight < convex.DUAL_MIN_WEIGHT:
         keep = _thrust_guess(sub.u_bar, sub.u_max, sub.eps)
+    products = path_dual.grid_products(sub.n, sub.dt_s, sub.u_max, steps)
     while True:
         ans = path_dual.solve(
             sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
-            keep=keep,
+            keep=keep, products=products,
         )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
-                _guess_active(rows, kind, sub.r_bar), keep=keep,
+                _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:
