@@ -722,7 +722,7 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
         return y
     residual = (
         np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
-    ) / np.linalg.norm(rows.coeffs[hs, :3], axis=1)
+    ) / cg.row_norms(rows.coeffs[hs, :3])
     close = hs[residual <= GUESS_KM]
     if close.size == 0:
         return y
