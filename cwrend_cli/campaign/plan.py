@@ -469,8 +469,7 @@ def check_design_models(problem: Problem, archs: Sequence[Architecture]) -> None
     from cwrend_cli.physics.design_models import unsupported
 
     for arch in archs:
-        constrained = problem.constraints is not None and problem.constraints.enforce
-        reason = unsupported(problem.model, arch, problem.guidance, constrained)
+        reason = unsupported(problem.model, arch, problem.guidance, problem.constraints is not None)
         if reason is not None:
             raise ConfigError(reason)
 

@@ -352,7 +352,6 @@ _DIMENSIONLESS_KEYS = (
     "solver.max_iter",
     "solver.quadrature_nodes",
     "constraints.sigma_margin",
-    "constraints.enforce",
     "constraints.corridor.axis",
     "target.",
 )
