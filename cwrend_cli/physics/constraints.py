@@ -87,6 +87,7 @@ from typing import NamedTuple, TypeVar
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from cwrend_cli.physics.params import Constraints, Corridor, FloatArray, KeepOut
 
@@ -275,9 +276,39 @@ def body_acceleration_bound(
     return accel_km_s2 + spin * r_step + 2.0 * rate_rad_s * v_step
 
 
+@njit(cache=True)
+def _row_norms(w: FloatArray) -> FloatArray:
+    """Euclidean norms of rows w (K, 3): ``np.linalg.norm``'s sum of squares in its order."""
+    out = np.empty(w.shape[0])
+    for k in range(w.shape[0]):
+        out[k] = math.sqrt(w[k, 0] * w[k, 0] + w[k, 1] * w[k, 1] + w[k, 2] * w[k, 2])
+    return out
+
+
+def row_norms(w: FloatArray) -> FloatArray:
+    """``np.linalg.norm(w, axis=-1)`` of vectors w (..., 3), the same bits, without numpy's
+    slow reduction over a short last axis."""
+    w = np.asarray(w, dtype=np.float64)
+    return _row_norms(np.ascontiguousarray(w.reshape(-1, 3))).reshape(w.shape[:-1])
+
+
+@njit(cache=True)
+def _levels(r: FloatArray, a: FloatArray) -> FloatArray:
+    """:func:`ellipsoid_level` of rows r (K, 3): numpy's arithmetic in its order."""
+    out = np.empty(r.shape[0])
+    for k in range(r.shape[0]):
+        x, y, z = r[k, 0] / a[0], r[k, 1] / a[1], r[k, 2] / a[2]
+        out[k] = x * x + y * y + z * z
+    return out
+
+
 def ellipsoid_level(r_km: FloatArray, semi_axes_km: FloatArray) -> FloatArray:
     """``(x/a)² + (y/b)² + (z/c)²`` of positions ``r_km`` (..., 3) [-]: < 1 inside."""
-    return np.asarray(np.sum((r_km / semi_axes_km) ** 2, axis=-1), dtype=np.float64)
+    r = np.asarray(r_km, dtype=np.float64)
+    a = np.asarray(semi_axes_km, dtype=np.float64)
+    if a.shape != (3,):  # axes per position: numpy's broadcasting
+        return np.asarray(np.sum((r / a) ** 2, axis=-1), dtype=np.float64)
+    return _levels(np.ascontiguousarray(r.reshape(-1, 3)), a).reshape(r.shape[:-1])
 
 
 def ellipsoid_signed_distance(r_km: FloatArray, semi_axes_km: FloatArray) -> FloatArray:
@@ -391,12 +422,26 @@ def tangent_planes(semi_axes_km: FloatArray, r_bar_km: FloatArray) -> tuple[Floa
     """:func:`linearise_keep_out` at K points at once, untightened: (unit normals (K, 3),
     offsets (K,) [km]) of the half-spaces ``nᵀ r ≥ offset``; rows r̄ ≠ 0."""
     a = np.asarray(semi_axes_km, dtype=np.float64)
-    r_bar = np.asarray(r_bar_km, dtype=np.float64)
-    grad = 2.0 * r_bar / a**2
-    size = np.sqrt(np.sum(grad * grad, axis=1))
-    normals = grad / size[:, None]
-    g = ellipsoid_level(r_bar, a)
-    return normals, np.sum(normals * r_bar, axis=1) + (1.0 - g) / size
+    r_bar = np.ascontiguousarray(r_bar_km, dtype=np.float64)
+    return _tangent_planes(a, r_bar)
+
+
+@njit(cache=True)
+def _tangent_planes(a: FloatArray, r: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`tangent_planes`, row by row: ∇g = 2r/a², n = ∇g/‖∇g‖, offset
+    ``nᵀr + (1 − g)/‖∇g‖`` (numpy's arithmetic in its order: the same bits)."""
+    normals = np.empty((r.shape[0], 3))
+    offsets = np.empty(r.shape[0])
+    level = _levels(r, a)
+    for k in range(r.shape[0]):
+        g0 = 2.0 * r[k, 0] / (a[0] * a[0])
+        g1 = 2.0 * r[k, 1] / (a[1] * a[1])
+        g2 = 2.0 * r[k, 2] / (a[2] * a[2])
+        size = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        n0, n1, n2 = g0 / size, g1 / size, g2 / size
+        normals[k, 0], normals[k, 1], normals[k, 2] = n0, n1, n2
+        offsets[k] = (n0 * r[k, 0] + n1 * r[k, 1] + n2 * r[k, 2]) + (1.0 - level[k]) / size
+    return normals, offsets
 
 
 @dataclass(frozen=True)
@@ -424,7 +469,7 @@ class SecondOrderCone:
         """``cᵀ r + d − ‖A r + b‖`` [km]: ≥ 0 inside the (tightened) cone."""
         a, b, c, d = self.rows()
         r = np.asarray(r_km, dtype=np.float64)
-        return np.asarray(r @ c + d - np.linalg.norm(r @ a.T + b, axis=-1), dtype=np.float64)
+        return np.asarray(r @ c + d - row_norms(r @ a.T + b), dtype=np.float64)
 
 
 def corridor_cone(geo: Geometry, margin_km: float) -> SecondOrderCone:

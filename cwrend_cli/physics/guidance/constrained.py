@@ -145,6 +145,7 @@ from typing import Any, NamedTuple
 import clarabel
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from cwrend_cli.physics import abort_safety as ab
 from cwrend_cli.physics import constraints as cg
@@ -342,7 +343,7 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = np.r_[0, np.flatnonzero(modes >= _KEEP_OUT)]
+    nodes = np.concatenate((np.zeros(1, np.int64), np.flatnonzero(modes >= _KEEP_OUT)))
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = rho_bar if centre is None else rho_bar - centre
@@ -385,21 +386,57 @@ def _pairs(
     solver's feasibility tolerance), so the trust rows imply it: the program,
     and its answer, are the same with and without it.
     """
-    k = np.arange(1, modes.size - 1)
-    has = half_spaces[0].index >= 0  # every ellipsoid has the same nodes
-    own = k[has[k]]
-    before = k[has[k - 1] & (modes[k] != 0)]
-    bodies = range(len(half_spaces))
-    pairs = np.concatenate(
-        [np.column_stack([own, own, np.full(own.size, b)]) for b in bodies]
-        + [np.column_stack([before, before - 1, np.full(before.size, b)]) for b in bodies]
-    ).astype(np.int64)
-    # node by node, own plane first, ellipsoid by ellipsoid
-    pairs = pairs[np.lexsort((pairs[:, 2], -pairs[:, 1], pairs[:, 0]))]
+    # every ellipsoid has the same nodes
+    pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
     normals, offsets = _planes(half_spaces, pairs, motion)
-    low = np.sum(normals * r_bar[pairs[:, 0]], axis=1) - trust_km * np.sum(np.abs(normals), axis=1)
-    left_out = low >= offsets + SCP_TOL_KM
-    return pairs[~left_out], pairs[left_out]
+    return _trust_split(pairs, normals, offsets, r_bar, trust_km)
+
+
+@njit(cache=True)
+def _pair_rows(has: np.ndarray, modes: np.ndarray, bodies: int) -> np.ndarray:
+    """The rows (node k, half-space j, ellipsoid b) of :func:`_pairs` before the trust
+    test: node by node, its own plane first (j = k, where node k has one: ``has``), then
+    its predecessor's (j = k − 1, where node k − 1 has one and node k is constrained),
+    ellipsoid by ellipsoid."""
+    out = np.empty((2 * bodies * modes.size, 3), dtype=np.int64)
+    count = 0
+    for k in range(1, modes.size - 1):
+        for j in (k, k - 1):
+            if has[j] and (j == k or modes[k] != 0):
+                for b in range(bodies):
+                    out[count, 0], out[count, 1], out[count, 2] = k, j, b
+                    count += 1
+    return out[:count]
+
+
+@njit(cache=True)
+def _trust_split(
+    pairs: np.ndarray, normals: np.ndarray, offsets: np.ndarray, r_bar: np.ndarray, trust_km: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(kept, left out) of the rows ``pairs`` (P, 3) with planes (normals (P, 3), offsets
+    (P,)): a row is left out when ``nᵀ r̄_k − trust ‖n‖₁``, the smallest nᵀr over its node's
+    trust box [km], is at least its offset + :data:`SCP_TOL_KM` (:func:`_pairs`; numpy's
+    sums in their order, the same bits)."""
+    left = np.empty(pairs.shape[0], dtype=np.bool_)
+    count = 0
+    for p in range(pairs.shape[0]):
+        k = pairs[p, 0]
+        n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
+        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+        low = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
+        left[p] = low >= offsets[p] + SCP_TOL_KM
+        count += left[p]
+    kept = np.empty((pairs.shape[0] - count, 3), dtype=np.int64)
+    out = np.empty((count, 3), dtype=np.int64)
+    i = o = 0
+    for p in range(pairs.shape[0]):
+        if left[p]:
+            out[o] = pairs[p]
+            o += 1
+        else:
+            kept[i] = pairs[p]
+            i += 1
+    return kept, out
 
 
 def _planes(
@@ -606,11 +643,27 @@ def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """The trust rows that the positions ``r`` (N + 1, 3) break by more than
     :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
     the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
-    boxed = np.flatnonzero(sub.modes > 0)
-    d = r[boxed] - sub.r_bar[boxed]
-    broken = np.hstack([d, -d]) < -(sub.trust_km + DUAL_TOL_KM)
-    at, comp = np.nonzero(broken)
-    return boxed[at], comp.astype(np.int64)
+    return _box_broken(sub.modes, r, sub.r_bar, -(sub.trust_km + DUAL_TOL_KM))
+
+
+@njit(cache=True)
+def _box_broken(
+    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, components) of :func:`_broken_trust`, node by node: component i < 3 where
+    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``."""
+    nodes = np.empty(6 * modes.size, dtype=np.int64)
+    comps = np.empty(6 * modes.size, dtype=np.int64)
+    count = 0
+    for k in range(modes.size):
+        if modes[k] <= 0:
+            continue
+        for i in range(6):
+            d = r[k, i % 3] - r_bar[k, i % 3]
+            if (d if i < 3 else -d) < floor_km:
+                nodes[count], comps[count] = k, i
+                count += 1
+    return nodes[:count], comps[:count]
 
 
 def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:
@@ -669,7 +722,7 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
         return y
     residual = (
         np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
-    ) / np.linalg.norm(rows.coeffs[hs, :3], axis=1)
+    ) / cg.row_norms(rows.coeffs[hs, :3])
     close = hs[residual <= GUESS_KM]
     if close.size == 0:
         return y
@@ -775,17 +828,18 @@ def _dual_solve(
     keep = None
     if weight < convex.DUAL_MIN_WEIGHT:
         keep = _thrust_guess(sub.u_bar, sub.u_max, sub.eps)
+    products = path_dual.grid_products(sub.n, sub.dt_s, sub.u_max, steps)
     while True:
         ans = path_dual.solve(
             sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
-            keep=keep,
+            keep=keep, products=products,
         )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
-                _guess_active(rows, kind, sub.r_bar), keep=keep,
+                _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:
@@ -847,10 +901,6 @@ def _reduced_solve(
     trust_km, motion, abort_rows = sub.trust_km, sub.motion, sub.abort_rows
     steps = modes.size - 1
     pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km, motion)
-    first = _first_node(modes, pairs)
-    if abort_rows is not None and abort_rows.nodes.size:  # their nodes' states are variables
-        first = min(first, int(np.min(abort_rows.nodes)))
-    thrust = _thrust_guess(u_bar, u_max, eps)
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used, fallback = 0, 0
@@ -859,6 +909,11 @@ def _reduced_solve(
         if dual is not None:
             return dual, used, dual_answer, 0
         fallback = 1
+    # Clarabel's reductions (ii) and (iii), made only when it solves the program
+    first = _first_node(modes, pairs)
+    if abort_rows is not None and abort_rows.nodes.size:  # their nodes' states are variables
+        first = min(first, int(np.min(abort_rows.nodes)))
+    thrust = _thrust_guess(u_bar, u_max, eps)
     for attempt in range(0 if reduce else REDUCED_ROUNDS, REDUCED_ROUNDS + 1):
         if attempt == REDUCED_ROUNDS:  # the whole program (rows implied by trust aside)
             first, thrust = 1, np.arange(steps)
@@ -1151,11 +1206,25 @@ def _answer(
     return u, x, float(x_sol[i_x + 6 * n_x])
 
 
+@njit(cache=True)
+def _largest_norms(x: np.ndarray) -> tuple[float, float]:
+    """(max ‖r_k‖ [km], max ‖v_k‖ [km/s]) over states (N + 1, 6): ``np.linalg.norm``'s sum
+    of squares in its order, so the same bits; NaN if a state is NaN."""
+    r2, v2, nan = 0.0, 0.0, False
+    for k in range(x.shape[0]):
+        a = x[k, 0] * x[k, 0] + x[k, 1] * x[k, 1] + x[k, 2] * x[k, 2]
+        b = x[k, 3] * x[k, 3] + x[k, 4] * x[k, 4] + x[k, 5] * x[k, 5]
+        nan = nan or a != a or b != b
+        r2, v2 = max(r2, a), max(v2, b)
+    if nan:
+        return math.nan, math.nan
+    return math.sqrt(r2), math.sqrt(v2)
+
+
 def _accel(n: float, dt_s: float, u_max: float, x: np.ndarray, extra_km: float) -> float:
     """The acceleration bound of the chord margin over a plan's states (module docstring)."""
-    r = float(np.max(np.linalg.norm(x[:, :3], axis=1))) + extra_km
-    v = float(np.max(np.linalg.norm(x[:, 3:], axis=1)))
-    return cg.acceleration_bound(r, v, u_max, n, dt_s)
+    r, v = _largest_norms(np.ascontiguousarray(x, dtype=np.float64))
+    return cg.acceleration_bound(r + extra_km, v, u_max, n, dt_s)
 
 
 def _step_margins(

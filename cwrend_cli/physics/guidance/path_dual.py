@@ -74,7 +74,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from cwrend_cli.physics.constraints import row_norms
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
+from cwrend_cli.physics.guidance import feasibility
 from cwrend_cli.physics.guidance._grid_kernels import step_law
 from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
 
@@ -342,6 +344,7 @@ def _blocking_step(
 @njit(cache=True)
 def projected_newton(
     a: np.ndarray,
+    aat: np.ndarray,
     h: np.ndarray,
     f: np.ndarray,
     nodes: np.ndarray,
@@ -359,18 +362,12 @@ def projected_newton(
 
     Returns ``(status, iterations)``: ``STATUS_CONVERGED`` when the KKT
     conditions hold to ``tol`` (module docstring), else ``STATUS_FAILED``.
+    ``aat`` (N, 6, 6): the products ``A_j A_jᵀ`` of ``a`` (:func:`block_products`).
     ``metric`` (R,): the Levenberg–Marquardt metric ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` of
     each row, negative where not yet computed (filled as rows need it).
     """
     steps = a.shape[0]
     count = nodes.size
-    aat = np.empty((steps, 6, 6))
-    for j in range(steps):
-        for r in range(6):
-            for c in range(6):
-                aat[j, r, c] = (
-                    a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[j, c, 2]
-                )
     gram = np.zeros((steps + 1, 6, 6))
     for j in range(steps):
         for r in range(6):
@@ -498,6 +495,48 @@ def projected_newton(
 
 
 @njit(cache=True)
+def block_products(a: np.ndarray) -> np.ndarray:
+    """``A_j A_jᵀ`` (N, 6, 6) of the blocks ``a`` (N, 6, 3): what :func:`projected_newton`'s
+    Hessian adds up step by step."""
+    aat = np.empty((a.shape[0], 6, 6))
+    for j in range(a.shape[0]):
+        for r in range(6):
+            for c in range(6):
+                aat[j, r, c] = (
+                    a[j, r, 0] * a[j, c, 0] + a[j, r, 1] * a[j, c, 1] + a[j, r, 2] * a[j, c, 2]
+                )
+    return aat
+
+
+#: :func:`grid_products` kept, by (n, Δt, u_max): the longest stack made so far.
+_PRODUCTS: dict[tuple[float, float, float], np.ndarray] = {}
+#: Stacks kept in :data:`_PRODUCTS` at most (the oldest dropped) [-].
+PRODUCTS_KEPT = 8
+
+
+def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
+    """:func:`block_products` of the scaled terminal blocks ``Φ^{N−1−j} Γ u_max`` of a
+    ``steps``-step grid (:func:`~.feasibility.grid_problem`'s blocks times u_max), read-only.
+
+    Each step's product is its own block's, and the last ``steps`` blocks of a longer grid
+    are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the longest
+    stack made for ``(n, Δt, u_max)`` is kept and sliced: the same bits as made afresh,
+    once per closed loop instead of once per program (a re-solve's horizon only shrinks)."""
+    key = (float(n), float(dt_s), float(u_max))
+    cached = _PRODUCTS.get(key)
+    if cached is None or cached.shape[0] < steps:
+        zero = np.zeros(6)
+        blocks = feasibility.grid_problem(n, zero, zero, steps * dt_s, dt_s, u_max).blocks
+        cached = block_products(np.ascontiguousarray(blocks * u_max))
+        cached.flags.writeable = False
+        _PRODUCTS.pop(key, None)
+        while len(_PRODUCTS) >= PRODUCTS_KEPT:
+            _PRODUCTS.pop(next(iter(_PRODUCTS)))
+        _PRODUCTS[key] = cached
+    return cached[cached.shape[0] - steps :]
+
+
+@njit(cache=True)
 def _row_vectors(
     n: float, dt_s: float, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
 ) -> None:
@@ -529,6 +568,7 @@ def held_norms(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, y: np.ndarray) -
 
 def _homotopy(
     a: np.ndarray,
+    aat: np.ndarray,
     h: np.ndarray,
     f: np.ndarray,
     nodes: np.ndarray,
@@ -553,7 +593,7 @@ def _homotopy(
         last = level == weight
         tol = rows.tol if last else rows.tol * SETTLED
         status, iterations = projected_newton(
-            a, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER
+            a, aat, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER
         )
         total += iterations
         if first is not None and level == HOMOTOPY_FROM:
@@ -580,6 +620,7 @@ def solve(
     warm: np.ndarray | None = None,
     max_iter: int = MAX_ITER,
     keep: np.ndarray | None = None,
+    products: np.ndarray | None = None,
 ) -> DualAnswer:
     """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
     terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
@@ -592,13 +633,18 @@ def solve(
     held at zero, as are those the warm multipliers screen (:data:`WAKE_MARGIN`);
     the answer is accepted only when every held step's zero minimises its Lagrangian
     (``‖A_jᵀλ_j‖ ≤ 1 − ε``, :func:`held_norms`), else the steps that fail wake and
-    the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step)."""
+    the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step).
+    ``products``: :func:`block_products` of ``blocks × u_max`` when the caller has them
+    (:func:`grid_products`), else made here."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
     free_states = zoh_rollout(
         phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
     )
     a_all = np.ascontiguousarray(blocks * u_max)
+    aat_all = block_products(a_all) if products is None else products
+    if aat_all.shape != (steps, 6, 6):
+        raise ValueError(f"products must be ({steps}, 6, 6), not {aat_all.shape}")
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
     f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
@@ -618,12 +664,12 @@ def solve(
             keep = None
         if keep is None:
             status, iterations = _homotopy(
-                a_all, h, f, rows.nodes, rows, c1, weight, y, u, max_iter, start
+                a_all, aat_all, h, f, rows.nodes, rows, c1, weight, y, u, max_iter, start
             )
         else:  # the rows at node k act on the kept steps before k: renumber the nodes
             u_kept = np.zeros((keep.size, 3))
             status, iterations = _homotopy(
-                np.ascontiguousarray(a_all[keep]), h, f,
+                np.ascontiguousarray(a_all[keep]), np.ascontiguousarray(aat_all[keep]), h, f,
                 np.searchsorted(keep, rows.nodes).astype(np.int64), rows, c1, weight, y,
                 u_kept, max_iter, start,
             )  # fmt: skip
@@ -643,7 +689,7 @@ def solve(
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
         if start is not None:  # the next round's homotopy starts where this one's did
             y[:] = start
-    norms = np.linalg.norm(u, axis=1)
+    norms = row_norms(u)
     cost = float(np.sum(c1 * norms + weight * norms**2))
     controls = u * u_max
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
