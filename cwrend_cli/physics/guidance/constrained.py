@@ -56,6 +56,25 @@ at every iterate, and more iterations only repeat the program
 (docs/guide/tumbling-target.md, *The cost of a turning set*). A fixed target keeps
 the rule above (its plans are pinned bit for bit).
 
+**A moved target.** The first program is linearised at the warm start (the plan the
+re-solve replaces, from the new estimate) and keeps every node within the trust box of
+it. Its only rows without a slack are the dynamics, ``‖ũ_j‖ ≤ 1``, the terminal
+equality and the trust box (the path rows share the slack s below, the abort rows have
+their own), so it has an answer exactly when some bounded control reaches x_f with every
+node within the box. When x_f moved (a tumbling port predicted afresh, issue 34) the last
+nodes cannot follow and the program is infeasible though the problem is not (the
+*artificial infeasibility* of successive convexification, which Mao, Szmuk & Açıkmeşe
+2016, arXiv:1608.05133, meet with virtual controls). The SCP then restarts from the unconstrained plan (:func:`.convex.plan_controls`,
+the cold start's first iterate), which meets those rows by construction (bounded controls
+that reach x_f, at the centre of its own box), so its first program has an answer and every
+later one too (each is linearised at the previous answer). The restart is taken a priori
+when the warm plan's end is farther than one trust radius from x_f in some axis
+(:func:`out_of_reach`), and a posteriori when the first program has no answer while the
+unconstrained program has a plan (the box blocked it). The blocked program counts in
+``scp_iterations`` but not against :data:`SCP_MAX_ITER`; ``ConstrainedPlan.restarted``
+says so. Where the warm start reaches x_f within its box (a fixed target, a port that
+moved less) nothing changes.
+
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
 cannot reach its plane is left out (:func:`_pairs`: implied by the trust rows,
