@@ -3,8 +3,8 @@
 The study (docs/guide/safe-approach.md, *The safe-approach study*): on
 campaigns/safe_approach.toml, with the CW and the two-body truths, the four
 cone-program architectures constrained with ``constraints.sigma_margin`` 0 and
-3, the same unconstrained (``[constraints]`` removed, ``scenario.xf`` the port
-at rest: :func:`benchmarks.bench_constrained.configs`) and the four shooting
+3, the same unconstrained (``constraints.enforce = false``: measure only, the
+guidance of the config without ``[constraints]``) and the four shooting
 architectures in the constrained config (measured on the truth, not
 constrained). Each cell's runs of seeds 0…S−1 are timed in process CPU time
 (``time.process_time``): the closed loop, the safety measurement on the truth
@@ -36,20 +36,18 @@ from cwrend_cli.physics import simulation
 
 SECTION = "safe-approach study (CPU s a run)"
 TRUTHS = ("cw", "two_body")
-#: ``sigma_margin`` of the constrained cells; None: the unconstrained twin.
+#: ``sigma_margin`` of the constrained cells; None: the unconstrained twin (measure only).
 MARGINS: tuple[float | None, ...] = (0.0, 3.0, None)
 #: Seeds of the study the estimate is for [-].
 STUDY_SEEDS = 1000
 
 
 def config(margin: float | None, truth: str) -> CwrendConfig:
-    """campaigns/safe_approach.toml with ``sigma_margin`` = ``margin`` (None: without
-    ``[constraints]``, ``scenario.xf`` the port at rest) and ``truth.model`` = ``truth``."""
+    """campaigns/safe_approach.toml with ``sigma_margin`` = ``margin`` (None:
+    ``constraints.enforce = false``, measure only) and ``truth.model`` = ``truth``."""
     data: dict[str, Any] = tomllib.loads(CAMPAIGN.read_text(encoding="utf-8"))
     if margin is None:
-        port = data["constraints"]["corridor"]["port_km"]
-        data.pop("constraints")
-        data.setdefault("scenario", {})["xf"] = [*port, 0.0, 0.0, 0.0]
+        data["constraints"]["enforce"] = False
     else:
         data["constraints"]["sigma_margin"] = margin
     data.setdefault("truth", {})["model"] = truth

@@ -68,6 +68,7 @@ def test_a_constrained_report_holds_the_two_safety_figures(constrained_report: P
     # a fixed target: no body-frame view (issue 34), no docking-error columns
     assert not (constrained_report / "safety_body_frame.png").exists()
     assert "dock position error" not in md
+    assert "Measured only" not in md  # the cone program was constrained (enforce = true)
 
 
 def test_the_paths_are_drawn_with_the_keep_out_zone_and_corridor_in_three_planes(

@@ -469,7 +469,8 @@ def check_design_models(problem: Problem, archs: Sequence[Architecture]) -> None
     from cwrend_cli.physics.design_models import unsupported
 
     for arch in archs:
-        reason = unsupported(problem.model, arch, problem.guidance, problem.constraints is not None)
+        constrained = problem.constraints is not None and problem.constraints.enforce
+        reason = unsupported(problem.model, arch, problem.guidance, constrained)
         if reason is not None:
             raise ConfigError(reason)
 

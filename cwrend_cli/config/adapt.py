@@ -71,6 +71,7 @@ def constraints_of(cfg: CwrendConfig) -> params.Constraints | None:
         corridor=None if c.corridor is None else _mirror(params.Corridor, c.corridor),
         sigma_margin=c.sigma_margin,
         abort_safe_s=c.abort_safe_s,
+        enforce=c.enforce,
     )
 
 

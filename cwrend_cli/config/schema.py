@@ -1157,6 +1157,12 @@ class ConstraintsConfig(_FrozenModel):
         "normal n, in [0, 100] [-]",
     )
 
+    enforce: Annotated[bool, Strict()] = Field(
+        True,
+        description="true: the cone-program (socp) guidance plans with the keep-out zone and "
+        "the corridor; false: measure only, the guidance plans as without [constraints] (the "
+        "same terminal state) while every run is measured against them as with true [-]",
+    )
     abort_safe_s: Float | None = Field(
         None,
         gt=0,
@@ -1171,7 +1177,40 @@ class ConstraintsConfig(_FrozenModel):
         # an unset zone or corridor is left out (TOML has no null; a dotted key can then
         # create it: --set constraints.corridor.half_angle_deg=…)
         out: dict[str, Any] = handler(self)
+        if self.enforce:
+            out.pop("enforce", None)  # the default: written as before (same hashes)
         return {k: v for k, v in out.items() if v is not None}
+
+    @model_validator(mode="after")
+    def _measure_only_rules(self) -> Self:
+        # enforce = false: nothing the guidance would use may be set (it would do nothing)
+        if self.enforce:
+            return self
+        if self.keep_out is None:
+            raise rules_error(
+                [
+                    (
+                        "enforce",
+                        False,
+                        "measure-only needs a keep-out zone to measure against (without one "
+                        "nothing is enforced either): set constraints.keep_out.semi_axes_km, "
+                        "or leave enforce out",
+                    )
+                ]
+            )
+        if self.sigma_margin != 0.0:
+            raise rules_error(
+                [
+                    (
+                        "sigma_margin",
+                        self.sigma_margin,
+                        "with constraints.enforce = false the guidance plans without the "
+                        "constraints, so the margin would do nothing: leave it 0, or set "
+                        "enforce = true",
+                    )
+                ]
+            )
+        return self
 
     @model_validator(mode="after")
     def _abort_needs_a_zone(self) -> Self:
@@ -1646,6 +1685,16 @@ class CwrendConfig(_FrozenModel):
                         getattr(self.target, name),
                         "the attitude knowledge is used by the constrained guidance only, "
                         "which needs a keep-out zone: add [constraints.keep_out] or leave it 0",
+                    )
+                )
+            elif getattr(self.target, name) > 0.0 and not self.constraints.enforce:
+                problems.append(
+                    (
+                        f"target.{name}",
+                        getattr(self.target, name),
+                        "the attitude knowledge is used by the constrained guidance only, "
+                        "which constraints.enforce = false turns off: leave it 0, or set "
+                        "enforce = true",
                     )
                 )
         start = start_in_keep_out(self)

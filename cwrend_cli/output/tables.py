@@ -352,6 +352,7 @@ _DIMENSIONLESS_KEYS = (
     "solver.max_iter",
     "solver.quadrature_nodes",
     "constraints.sigma_margin",
+    "constraints.enforce",
     "constraints.corridor.axis",
     "target.",
 )

@@ -418,11 +418,19 @@ class Constraints:
     #: abort safety (issue 34 item 4, :mod:`.abort_safety`): the free drift from every node
     #: stays outside the keep-out zone for this time [s]; None: off
     abort_safe_s: float | None = None
+    #: True: the cone-program guidance plans with them; False: measure only, the guidance
+    #: plans as without them and the runs are measured as with them
+    enforce: bool = True
 
     @property
     def active(self) -> bool:
         """True when a keep-out zone or a corridor is configured."""
         return self.keep_out is not None or self.corridor is not None
+
+    @property
+    def planned(self) -> bool:
+        """True when the cone-program guidance plans with them: a keep-out zone, enforced."""
+        return self.enforce and self.keep_out is not None
 
 
 @dataclass(frozen=True)

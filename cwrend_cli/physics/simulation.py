@@ -969,7 +969,7 @@ def _initial_constrained_plan(
     horizon = problem.scenario.horizon_s
     key = None
     c = problem.constraints
-    if c is None or c.keep_out is None:  # no constrained plan (:func:`_constrained_plan`)
+    if c is None or not c.planned:  # no constrained plan (:func:`_constrained_plan`)
         return None
     if plans is not None and (known is None or known.truth is None):
         start = time.perf_counter()
@@ -997,7 +997,8 @@ def _constrained_plan(
     known: _Knowledge | None = None,
     warm_duals: constrained.Duals | None = None,
 ) -> tuple[guidance.SolveResult, tuple[int, float, float], constrained.Duals | None] | None:
-    """A re-solve by the constrained cone program (issue 32), None without a keep-out zone.
+    """A re-solve by the constrained cone program (issue 32), None without a keep-out zone
+    or with ``constraints.enforce = false`` (measure only: the unconstrained program).
 
     From the estimate ``x_hat`` at step ``k_from`` over ``horizon_s``, with the
     filter's position covariance (``p[:3, :3]``, held over the horizon) for
@@ -1017,7 +1018,7 @@ def _constrained_plan(
     attitude at ``k_from`` turned by it.
     """
     c = problem.constraints
-    if c is None or c.keep_out is None:
+    if c is None or not c.planned:
         return None
     sc = problem.scenario
     steps = max(1, round(horizon_s / sc.dt_s))

@@ -306,6 +306,12 @@ def _safety_lines(data: ReportData) -> list[str]:
             else ""
         )
         + (
+            " Measured only (constraints.enforce = false): the cone-program guidance planned "
+            "without the keep-out zone and the corridor, as without [constraints]."
+            if data.point_config is not None and not data.point_config.constraints.enforce
+            else ""
+        )
+        + (
             " Dock errors (a tumbling target): the distance to the moving port and the "
             "speed relative to it at the end, over the seeds (runs.parquet)."
             if any(c in data.ok_runs().columns for c in DOCKING_COLUMNS)
