@@ -480,8 +480,10 @@ def _re_solve(q_later: tuple[float, ...]) -> tuple[cp.ConstrainedPlan, np.ndarra
     for u in first.controls[:MOVED_AFTER]:
         x = phi @ x + gam @ u
     motion, q, xf_later = _study_motion(q_later, steps, MOVED_AFTER)
-    later = cp.plan(N_MOTION, DT, U_MAX, x, xf_later, MOVED_HORIZON_S - MOVED_AFTER * DT, 0.0,
-                    geo, warm_controls=first.controls[MOVED_AFTER:].copy(), motion=motion)  # fmt: skip
+    warm = first.controls[MOVED_AFTER:].copy()
+    left = MOVED_HORIZON_S - MOVED_AFTER * DT
+    later = cp.plan(N_MOTION, DT, U_MAX, x, xf_later, left, 0.0, geo, warm_controls=warm,
+                    motion=motion)  # fmt: skip
     return later, x, xf_later, xf, q
 
 

@@ -64,10 +64,11 @@ their own), so it has an answer exactly when some bounded control reaches x_f wi
 node within the box. When x_f moved (a tumbling port predicted afresh, issue 34) the last
 nodes cannot follow and the program is infeasible though the problem is not (the
 *artificial infeasibility* of successive convexification, which Mao, Szmuk & Açıkmeşe
-2016, arXiv:1608.05133, meet with virtual controls). The SCP then restarts from the unconstrained plan (:func:`.convex.plan_controls`,
-the cold start's first iterate), which meets those rows by construction (bounded controls
-that reach x_f, at the centre of its own box), so its first program has an answer and every
-later one too (each is linearised at the previous answer). The restart is taken a priori
+2016, arXiv:1608.05133, meet with virtual controls). The SCP then restarts from the
+unconstrained plan (:func:`.convex.plan_controls`, the cold start's first iterate), which
+meets those rows by construction (bounded controls that reach x_f, at the centre of its
+own box), so its first program has an answer and every later one too (each is linearised
+at the previous answer). The restart is taken a priori
 when the warm plan's end is farther than one trust radius from x_f in some axis
 (:func:`out_of_reach`), and a posteriori when the first program has no answer while the
 unconstrained program has a plan (the box blocked it). The blocked program counts in
