@@ -297,3 +297,35 @@ def test_a_left_out_half_space_row_holds_on_the_whole_trust_box() -> None:
             box = r_bar[k] + trust * corners
             h = half_spaces[int(b)][int(j)]
             assert np.all(h.residual_km(box) >= cp.SCP_TOL_KM * (1 - 1e-9))
+
+
+def test_a_re_solve_whose_trust_box_blocks_the_terminal_velocity_restarts() -> None:
+    """A plan round a 100 m sphere (its trust radius 100 m) from 1 km out to a point 300 m
+    beyond it, flown 10 steps and re-solved warm to the same point at 20 m/s: the warm plan
+    ends on the point (within the trust box's reach of its position), but turning its end
+    velocity by 20 m/s at the thrust left moves the last nodes about 250 m, so the trust box
+    blocks the first program (before: the re-solve ``infeasible``, though the unconstrained
+    program reaches the point). The SCP restarts from the unconstrained plan, reaches the
+    new terminal state (1e-8 km, 1e-9 km/s: the equality rows' tolerance) and no point of
+    the plan, checked every Δt/40, is inside the sphere."""
+    axes = np.array([0.1, 0.1, 0.1])
+    geo = cg.geometry(Constraints(keep_out=KeepOut(tuple(axes))))
+    x0 = np.array([0.0, 0.05, 1.0, 0.0, 0.0, 0.0])
+    xf = np.array([0.0, 0.0, -0.3, 0.0, 0.0, 0.0])
+    first = cp.plan(N_MOTION, DT, U_MAX, x0, xf, 150.0, 0.0, geo)
+    assert first.status is SolveStatus.CONVERGED
+    phi, gam = _zoh(N_MOTION, DT)
+    x = x0.copy()
+    for u in first.controls[:10]:
+        x = phi @ x + gam @ u
+    moved = xf + np.array([0.0, 0.0, 0.0, 0.0, 0.02, 0.0])
+    later = cp.plan(N_MOTION, DT, U_MAX, x, moved, 140.0, 0.0, geo,
+                    warm_controls=first.controls[10:].copy())  # fmt: skip
+    assert later.status is SolveStatus.CONVERGED and later.slack_km == 0.0
+    assert later.restarted
+    end = x.copy()
+    for u in later.controls:
+        end = phi @ end + gam @ u
+    assert np.linalg.norm(end[:3] - moved[:3]) <= 1e-8
+    assert np.linalg.norm(end[3:] - moved[3:]) <= 1e-9
+    assert np.all(np.sum((_dense(x, later.controls) / axes) ** 2, axis=1) >= 1.0)

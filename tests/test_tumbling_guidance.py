@@ -432,3 +432,85 @@ def test_a_turning_plans_settled_slack_stops_the_scp_before_its_cap() -> None:
     for res in softened:
         assert res.status is SolveStatus.CONVERGED
         assert res.scp_iterations < cp.SCP_MAX_ITER
+
+
+#: The study's target (campaigns/tumbling_study.toml): a bus and two panels, the port 100 m
+#: out on body −x with a 30° corridor; its trust radius is the largest semi-axis, 100 m.
+STUDY_TARGET = Constraints(
+    keep_out=KeepOut((0.08, 0.06, 0.06), (KeepOutBody((0.0, 0.16, 0.0), (0.01, 0.1, 0.05)),
+                                          KeepOutBody((0.0, -0.16, 0.0), (0.01, 0.1, 0.05)))),
+    corridor=Corridor((-0.1, 0.0, 0.0), (-1.0, 0.0, 0.0), 30.0),
+)  # fmt: skip
+#: Its 2 °/s tumble (ω(0) [°/s], principal moments [-]).
+STUDY_RATES, STUDY_INERTIA = (0.291, 0.3881, 1.9403), (1.0, 1.4, 1.9)
+#: Horizon of the re-aimed problems [s] and the steps flown before the re-solve [-].
+MOVED_HORIZON_S, MOVED_AFTER = 200.0, 10
+
+
+def _study_motion(
+    q0: tuple[float, ...], steps: int, first: int = 0
+) -> tuple[cg.BodyMotion, np.ndarray, np.ndarray]:
+    """The study target's turn from attitude ``q0`` at t = 0, at nodes ``first`` … ``steps``
+    (its :class:`.BodyMotion`), the attitude every Δt/:data:`DENSE` over them, and the
+    port's state at the last node (position R p, velocity Ω × R p) [km, km/s]."""
+    model = attitude.attitude_model(Target("tumbling", q0, STUDY_RATES, STUDY_INERTIA), N_MOTION)
+    att = attitude.target_attitude(model, steps, DT, DENSE)
+    q, w = att.q_hb[first * DENSE :], att.w_rad_s[first * DENSE :]
+    motion = attitude.body_motion(model, q[::DENSE], w[::DENSE])
+    assert STUDY_TARGET.corridor is not None
+    port = motion.rotation[-1] @ np.array(STUDY_TARGET.corridor.port_km)
+    return motion, q, np.r_[port, np.cross(motion.rate_rad_s[-1], port)]
+
+
+def _re_solve(q_later: tuple[float, ...]) -> tuple[cp.ConstrainedPlan, np.ndarray, np.ndarray,
+                                                   np.ndarray, np.ndarray]:  # fmt: skip
+    """A plan from 1 km out to the port of the study target (2 °/s, attitude 1 at t = 0),
+    flown :data:`MOVED_AFTER` steps, then re-solved warm from its remaining controls (the
+    closed loop's re-solve) to the port predicted from attitude ``q_later`` at t = 0 (the
+    same attitude: the same prediction). Returns the re-solve, its start state, its
+    terminal target, the first plan's end state and the attitude over the re-solve."""
+    steps = round(MOVED_HORIZON_S / DT)
+    geo = cg.geometry(STUDY_TARGET)
+    x0 = np.array([0.0, 0.02, 1.0, 0.0, 0.0, 0.0])
+    motion, _, xf = _study_motion((1.0, 0.0, 0.0, 0.0), steps)
+    first = cp.plan(N_MOTION, DT, U_MAX, x0, xf, MOVED_HORIZON_S, 0.0, geo, motion=motion)
+    assert first.status is SolveStatus.CONVERGED
+    phi, gam = _zoh(N_MOTION, DT)
+    x = x0.copy()
+    for u in first.controls[:MOVED_AFTER]:
+        x = phi @ x + gam @ u
+    motion, q, xf_later = _study_motion(q_later, steps, MOVED_AFTER)
+    warm = first.controls[MOVED_AFTER:].copy()
+    left = MOVED_HORIZON_S - MOVED_AFTER * DT
+    later = cp.plan(N_MOTION, DT, U_MAX, x, xf_later, left, 0.0, geo, warm_controls=warm,
+                    motion=motion)  # fmt: skip
+    return later, x, xf_later, xf, q
+
+
+def test_a_re_solve_to_a_port_moved_beyond_the_trust_box_reaches_it_safely() -> None:
+    """The port predicted 195 m (≥ 150 m) from the end of the warm plan (the attitude
+    turned by 180° about body z: a re-solve of ``knowledge_draw = "resolve"`` meets such
+    jumps) is out of the 100 m trust box's reach: the SCP restarts from the unconstrained
+    plan (before: its first program infeasible, the re-solve ``infeasible``), ends on the
+    moved port's position and velocity to the solver's tolerance (1e-8 km, 1e-9 km/s, as
+    above), and no point of the plan, checked every Δt/40, is in the set turned to that
+    sub-sample's predicted attitude."""
+    later, x, xf, xf_before, q = _re_solve((0.0, 0.0, 0.0, 1.0))
+    assert np.linalg.norm(xf[:3] - xf_before[:3]) >= 0.15
+    assert later.status is SolveStatus.CONVERGED and later.slack_km == 0.0
+    assert later.restarted
+    phi, gam = _zoh(N_MOTION, DT)
+    end = x.copy()
+    for u in later.controls:
+        end = phi @ end + gam @ u
+    assert np.linalg.norm(end[:3] - xf[:3]) <= 1e-8
+    assert np.linalg.norm(end[3:] - xf[3:]) <= 1e-9
+    assert not _unsafe_in_body_frame(_dense(x, later.controls, DENSE), q, STUDY_TARGET).any()
+
+
+def test_a_re_solve_to_the_same_port_keeps_its_warm_start() -> None:
+    """The same re-solve with the same prediction (the warm plan ends on the port, up to
+    the solver's tolerance) is warm-started from the plan as before: no restart."""
+    later, *_ = _re_solve((1.0, 0.0, 0.0, 0.0))
+    assert later.status is SolveStatus.CONVERGED
+    assert not later.restarted

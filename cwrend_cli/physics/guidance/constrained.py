@@ -56,6 +56,26 @@ at every iterate, and more iterations only repeat the program
 (docs/guide/tumbling-target.md, *The cost of a turning set*). A fixed target keeps
 the rule above (its plans are pinned bit for bit).
 
+**A moved target.** The first program is linearised at the warm start (the plan the
+re-solve replaces, from the new estimate) and keeps every node within the trust box of
+it. Its only rows without a slack are the dynamics, ``‖ũ_j‖ ≤ 1``, the terminal
+equality and the trust box (the path rows share the slack s below, the abort rows have
+their own), so it has an answer exactly when some bounded control reaches x_f with every
+node within the box. When x_f moved (a tumbling port predicted afresh, issue 34) the last
+nodes cannot follow and the program is infeasible though the problem is not (the
+*artificial infeasibility* of successive convexification, which Mao, Szmuk & Açıkmeşe
+2016, arXiv:1608.05133, meet with virtual controls). The SCP then restarts from the
+unconstrained plan (:func:`.convex.plan_controls`, the cold start's first iterate), which
+meets those rows by construction (bounded controls that reach x_f, at the centre of its
+own box), so its first program has an answer and every later one too (each is linearised
+at the previous answer). The restart is taken a priori
+when the warm plan's end is farther than one trust radius from x_f in some axis
+(:func:`out_of_reach`), and a posteriori when the first program has no answer while the
+unconstrained program has a plan (the box blocked it). The blocked program counts in
+``scp_iterations`` but not against :data:`SCP_MAX_ITER`; ``ConstrainedPlan.restarted``
+says so. Where the warm start reaches x_f within its box (a fixed target, a port that
+moved less) nothing changes.
+
 **Reductions.** Each iteration's program is solved smaller, with the same
 answer (to Clarabel's tolerance): (i) a half-space row whose node's trust box
 cannot reach its plane is left out (:func:`_pairs`: implied by the trust rows,
@@ -234,6 +254,7 @@ class ConstrainedPlan:
     abort_slack_km: float = 0.0  # the abort rows' softening (0: every drift covered) [km]
     fallbacks: int = 0  # programs the dual solver left to Clarabel (module docstring) [-]
     duals: Duals | None = None  # the last program's row multipliers (dual solver only)
+    restarted: bool = False  # a warm start out of reach, replaced by the unconstrained plan
 
 
 def node_positions(
@@ -1277,6 +1298,35 @@ def _node_margins(step_margins: np.ndarray) -> np.ndarray:
     return out
 
 
+def _unconstrained_plan(
+    n: float,
+    dt_s: float,
+    u_max_km_s2: float,
+    x0: np.ndarray,
+    xf: np.ndarray,
+    horizon_s: float,
+    eps: float,
+) -> tuple[bool, np.ndarray, int]:
+    """The first iterate of a cold plan: whether the unconstrained cone program
+    (:func:`.convex.plan_controls`) from ``x0`` to ``xf`` has a plan, its controls (N, 3)
+    [km/s²] (zeros when it has none) and its solver iterations [-]."""
+    g = feasibility.grid_problem(n, x0, xf, horizon_s, dt_s, u_max_km_s2)
+    status, controls, _, iterations = convex.plan_controls(g, eps, n)
+    converged = status is SolveStatus.CONVERGED
+    if not converged:
+        controls = np.zeros((max(1, round(horizon_s / dt_s)), 3))
+    return converged, controls, iterations
+
+
+def out_of_reach(end_state: np.ndarray, xf: np.ndarray, trust_km: float) -> bool:
+    """True when a warm plan ending at ``end_state`` (its terminal node, 6 or 3 components
+    [km, km/s]) cannot be moved onto the terminal target ``xf`` within the trust box of the
+    first SCP program: its end position is farther than ``trust_km`` from the target's in
+    some axis (module docstring, *A moved target*)."""
+    gap = np.asarray(end_state, dtype=np.float64)[:3] - np.asarray(xf, dtype=np.float64)[:3]
+    return bool(np.max(np.abs(gap)) > trust_km)
+
+
 def plan(
     n: float,
     dt_s: float,
@@ -1323,16 +1373,21 @@ def plan(
     x0 = np.asarray(x0, dtype=np.float64)
     xf = np.asarray(xf, dtype=np.float64)
     used = 0
-    if warm_controls is None or warm_controls.shape != (steps, 3):
-        g = feasibility.grid_problem(n, x0, xf, horizon_s, dt_s, u_max_km_s2)
-        status, warm_controls, _, iterations = convex.plan_controls(g, eps, n)
-        used += iterations
-        if status is not SolveStatus.CONVERGED:
-            warm_controls = np.zeros((steps, 3))
-    x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
-    u_bar = warm_controls
     sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
     trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
+    warm = warm_controls is not None and warm_controls.shape == (steps, 3)
+    if not warm:
+        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+    assert warm_controls is not None
+    x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
+    restarted = warm and out_of_reach(r_bar[-1], xf, trust)
+    if restarted:
+        # the warm plan ends beyond the trust box's reach of the terminal target: restart from
+        # the unconstrained plan, which reaches it (module docstring, *A moved target*)
+        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+        x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
+        warm_duals = None
+    u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
     failed = ConstrainedPlan(
         SolveStatus.FAILED,
@@ -1354,6 +1409,7 @@ def plan(
             0,
             used,
             time.perf_counter() - start,
+            restarted=restarted,
         )
     result = failed
     cost, last_slack = math.inf, math.inf
@@ -1363,7 +1419,9 @@ def plan(
         if motion is not None and abort_turn is None:
             raise ValueError("abort safety of a turning target needs abort_turn")
         drift = ab.planner_drift(n, abort_safe_s, geo, dt_s, abort_turn)
-    for scp in range(1, SCP_MAX_ITER + 1):
+    scp, cap = 0, SCP_MAX_ITER
+    while scp < cap:
+        scp += 1
         margins = _node_margins(
             _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
         )
@@ -1392,6 +1450,19 @@ def plan(
             chords = ab.widen(geo, n, drift, chords, x_sol, needed, ACCEL_FACTOR)
             if chords is None:
                 break
+        if answer is None and scp == 1 and warm and not restarted:
+            # the warm start's trust box blocked the first program (its only rows without a
+            # slack are the dynamics, thrust, terminal and trust rows): restart from the
+            # unconstrained plan when there is one (module docstring, *A moved target*)
+            exists, controls, iterations = _unconstrained_plan(
+                n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+            )
+            used += iterations
+            if exists:
+                x_bar, r_bar = node_positions(n, dt_s, x0, controls)
+                u_bar, modes, warm_duals = controls, _modes(geo, r_bar, motion), None
+                restarted, cap = True, cap + 1  # the blocked program is not an SCP iterate
+                continue
         if answer is None:
             status = (
                 SolveStatus.INFEASIBLE if sol.status in convex._INFEASIBLE else SolveStatus.FAILED
@@ -1406,6 +1477,7 @@ def plan(
                 used,
                 time.perf_counter() - start,
                 fallbacks=fallbacks,
+                restarted=restarted,
             )
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
@@ -1432,6 +1504,7 @@ def plan(
             abort_slack if abort_slack > SLACK_TOL_KM else 0.0,
             fallbacks,
             warm_duals,
+            restarted,
         )
         x_bar, r_bar, u_bar = x_new, x_new[:, :3], u
         settled = moved <= SCP_TOL_KM or cost - float(sol.obj_val) <= SCP_COST_RTOL * abs(cost)
