@@ -64,3 +64,61 @@ def test_the_second_run_of_a_point_takes_the_initial_plan_and_is_the_same_run(
         monkeypatch.setattr(simulation, "_constrained_plan", plan)
         assert _same(alone, shared)
     assert len(cold) == 1 and len(memo) == 1
+
+
+#: A 200 s tumbling case (2 °/s, a bus and a panel, a port with a corridor; issue 34), as
+#: test_tumbling_guidance's closed loops.
+TUMBLING = SHORT.replace(
+    "[constraints.keep_out]\nsemi_axes_km = [0.2, 0.2, 0.2]",
+    "[target]\n"
+    'attitude = "tumbling"\n'
+    "body_rates_deg_s = [0.3, 0.4, 2.0]\n"
+    "inertia = [1.0, 1.4, 1.9]\n"
+    "[constraints.keep_out]\n"
+    "semi_axes_km = [0.08, 0.06, 0.06]\n"
+    "[[constraints.keep_out.bodies]]\n"
+    "centre_km = [0.0, 0.16, 0.0]\n"
+    "semi_axes_km = [0.01, 0.1, 0.05]",
+).replace("port_km = [0.0, 0.0, -0.25]\naxis = [0.0, 0.0, -1.0]",
+          "port_km = [-0.1, 0.0, 0.0]\naxis = [-1.0, 0.0, 0.0]")  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("knowledge", "cold_plans"),
+    [("", 1), ("knowledge_sigma_deg = 2.0\nknowledge_sigma_deg_s = 0.2\n", 2)],
+    ids=["known exactly", "knowledge error"],
+)
+def test_a_tumbling_point_takes_the_initial_plan_when_the_attitude_is_known_exactly(
+    monkeypatch: pytest.MonkeyPatch, knowledge: str, cold_plans: int
+) -> None:
+    """Seeds 0 and 1 of a tumbling case: known exactly, the guidance predicts from the
+    truth's attitude, the same for every seed, so the initial plan is made once (issue 34's
+    study); with an attitude-knowledge error (drawn per seed) it is made for each. Each run
+    is the run without the memo, bit for bit."""
+    from cwrend_cli.campaign import worker
+
+    cfg = config_from_dict(tomllib.loads(TUMBLING.replace("[target]\n", "[target]\n" + knowledge)))
+    problem = problem_of(cfg)
+    assert problem.target.tumbling
+    refs = simulation.open_loop_references(problem)
+    arch = ALL_ARCHITECTURES["mtf_fixed_socp"]
+    cold: list[int] = []
+    plan = simulation._constrained_plan
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        if args[6] == 0:  # k_from: the initial plan
+            cold.append(1)
+        return plan(*args, **kwargs)
+
+    memo: simulation.InitialPlans = {}
+    for seed in (0, 1):
+        noise = campaign.standard_normal_for(cfg, seed)
+        draws = worker.attitude_draws(problem, cfg.noise.seed, seed)
+        alone = simulation.simulate(problem, arch, noise, refs, seed=seed, attitude_draws=draws)
+        monkeypatch.setattr(simulation, "_constrained_plan", counted)
+        shared = simulation.simulate(
+            problem, arch, noise, refs, seed=seed, attitude_draws=draws, initial_plans=memo
+        )
+        monkeypatch.setattr(simulation, "_constrained_plan", plan)
+        assert _same(alone, shared)
+    assert len(cold) == cold_plans and len(memo) == 2 - cold_plans

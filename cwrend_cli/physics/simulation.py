@@ -964,14 +964,15 @@ def _initial_constrained_plan(
     set of inputs — the problem, the estimate, ε and the covariance, pickled — and a
     copy returned after that (its ``wall_time_s`` that of the look-up). A cold plan is
     a function of exactly these (no warm start, no random draw), so the copy is the plan
-    bit for bit. Not with a tumbling target's attitude knowledge (``known``: drawn per
-    seed), which is planned every time."""
+    bit for bit. A tumbling target known exactly too (issue 34): the attitude it predicts
+    from is the truth's, a function of the problem (:func:`_target_attitude`). Not with an
+    attitude-knowledge error (``known.error``: drawn per seed), planned every time."""
     horizon = problem.scenario.horizon_s
     key = None
     c = problem.constraints
     if c is None or not c.planned:  # no constrained plan (:func:`_constrained_plan`)
         return None
-    if plans is not None and (known is None or known.truth is None):
+    if plans is not None and (known is None or known.truth is None or known.error is None):
         start = time.perf_counter()
         key = pickle.dumps((problem, x_hat, eps, p), protocol=pickle.HIGHEST_PROTOCOL)
         hit = plans.get(key)

@@ -1270,23 +1270,63 @@ def _step_margins(
         return np.full(
             steps, cg.chord_margin_km(factor * _accel(n, dt_s, u_max, x, extra_km), dt_s)
         )
-    r = np.linalg.norm(x[:, :3], axis=1)
-    v = np.linalg.norm(x[:, 3:], axis=1)
-    r_step = np.maximum(r[:-1], r[1:]) + extra_km
-    v_step = np.maximum(v[:-1], v[1:])
+    cg.acceleration_bound(0.0, 0.0, u_max, n, dt_s)  # its ValueError when nΔt is too large
     rate, rate_dot = motion.rate_bound_rad_s, motion.rate_dot_bound_rad_s2
-    return np.array(
-        [
-            cg.chord_margin_km(
-                factor
-                * cg.body_acceleration_bound(
-                    cg.acceleration_bound(ri, vi, u_max, n, dt_s), ri, vi, rate, rate_dot, dt_s
-                ),
-                dt_s,
-            )
-            for ri, vi in zip(r_step.tolist(), v_step.tolist(), strict=True)
-        ]
-    )
+    # the powers of the scalars as the scalar functions take them (Python's), then per step
+    # only + − × ÷ in their order: the same bits as the scalar functions step by step
+    return _turning_margins(
+        np.ascontiguousarray(x, dtype=np.float64), extra_km, factor, u_max,
+        1.0 - 3.0 * (n * dt_s) ** 2 - 2.0 * n * dt_s, 3.0 * n**2, 2.0 * n, dt_s, dt_s**2,
+        rate_dot + rate**2, 2.0 * rate,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _larger(a: float, b: float) -> float:
+    """``np.maximum`` of two floats: NaN when either is NaN."""
+    return math.nan if a != a or b != b else (a if a >= b else b)
+
+
+@njit(cache=True)
+def _turning_margins(
+    x: np.ndarray,
+    extra_km: float,
+    factor: float,
+    u_max: float,
+    denominator: float,
+    gravity_r: float,
+    gravity_v: float,
+    dt_s: float,
+    dt2_s2: float,
+    spin: float,
+    coriolis: float,
+) -> np.ndarray:
+    """:func:`_step_margins` of a turning body (N,) [km]: each step's
+    :func:`~cwrend_cli.physics.constraints.chord_margin_km` of ``factor`` ×
+    :func:`~cwrend_cli.physics.constraints.body_acceleration_bound` of
+    :func:`~cwrend_cli.physics.constraints.acceleration_bound` from the larger of its two
+    nodes' ‖r‖ (+ ``extra_km``) and ‖v‖ — their arithmetic in their order, with their
+    scalar powers given (``denominator`` 1 − 3(nΔt)² − 2nΔt, ``gravity_r`` 3n²,
+    ``gravity_v`` 2n, ``dt2_s2`` Δt², ``spin`` ‖Ω̇‖ + ‖Ω‖², ``coriolis`` 2‖Ω‖); the norms
+    ``np.linalg.norm``'s sums of squares in its order; NaN where a state is NaN
+    (``np.maximum``'s)."""
+    steps = x.shape[0] - 1
+    out = np.empty(steps)
+    r0 = math.sqrt(x[0, 0] * x[0, 0] + x[0, 1] * x[0, 1] + x[0, 2] * x[0, 2])
+    v0 = math.sqrt(x[0, 3] * x[0, 3] + x[0, 4] * x[0, 4] + x[0, 5] * x[0, 5])
+    for k in range(steps):
+        s = x[k + 1]
+        r1 = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+        v1 = math.sqrt(s[3] * s[3] + s[4] * s[4] + s[5] * s[5])
+        r = _larger(r0, r1) + extra_km
+        v = _larger(v0, v1)
+        accel = (u_max + (gravity_r * (r + v * dt_s) + gravity_v * v)) / denominator
+        r_step = r + v * dt_s + accel * dt2_s2
+        v_step = v + accel * dt_s
+        body = accel + spin * r_step + coriolis * v_step
+        out[k] = factor * body * dt2_s2 / 8.0
+        r0, v0 = r1, v1
+    return out
 
 
 def _node_margins(step_margins: np.ndarray) -> np.ndarray:
