@@ -606,17 +606,37 @@ def _ellipsoid_distance_bounds(
     return np.where(outside, near, -ray), np.where(outside, ray, -near)
 
 
+#: Relative margin over the smallest upper bound within which a point is measured exactly
+#: among several bodies (:func:`_min_signed_distance`) [-]: 1e-9 of the distance plus the
+#: largest semi-axis, some 1e6 times the bisection's rounding and the axis nudge
+#: (:data:`_AXIS_NUDGE`).
+_PRUNE_MARGIN = 1e-9
+
+
 def _min_signed_distance(points: FloatArray, geo: Geometry, d_c: FloatArray | None) -> float:
     """min φ over ``points`` (M, 3) [km], exact, computing d_E only where it can be the minimum.
 
     φ's bounds from :func:`_ellipsoid_distance_bounds` (d_C is exact and cheap):
     only the points whose lower bound is at most the smallest upper bound can
-    hold the minimum. With several bodies, d_E of every point (exact).
+    hold the minimum. With several bodies (issue 34), d_E's bounds are the smallest of
+    the bodies' bounds, and the points kept those within :data:`_PRUNE_MARGIN` of the
+    smallest upper bound (far above the bisection's rounding and the axis nudge): d_E is
+    computed point by point, so the minimum is the one over every point, to the bit.
     """
     assert geo.semi_axes_km is not None
     if geo.bodies_centre_km is not None:
-        d_e = keep_out_distance(points, geo)
-        return float(np.min(d_e if d_c is None else np.maximum(d_e, -d_c)))
+        low = high = np.full(points.shape[0], np.inf)
+        for centre, axes in ellipsoids(geo):
+            body = _ellipsoid_distance_bounds(points if centre is None else points - centre, axes)
+            low, high = np.minimum(low, body[0]), np.minimum(high, body[1])
+        if d_c is not None:
+            low, high = np.maximum(low, -d_c), np.maximum(high, -d_c)
+        best = int(np.argmin(high))
+        size = max(float(np.max(axes)) for _, axes in ellipsoids(geo))
+        keep = low <= high[best] + _PRUNE_MARGIN * (abs(high[best]) + size)
+        keep[best] = True
+        d_e = keep_out_distance(points[keep], geo)
+        return float(np.min(d_e if d_c is None else np.maximum(d_e, -d_c[keep])))
     low, high = _ellipsoid_distance_bounds(points, geo.semi_axes_km)
     if d_c is not None:
         low, high = np.maximum(low, -d_c), np.maximum(high, -d_c)
