@@ -508,32 +508,43 @@ def block_products(a: np.ndarray) -> np.ndarray:
     return aat
 
 
-#: :func:`grid_products` kept, by (n, Δt, u_max): the longest stack made so far.
-_PRODUCTS: dict[tuple[float, float, float], np.ndarray] = {}
+#: :func:`grid_arrays` kept, by (n, Δt, u_max): the longest stacks made so far.
+_PRODUCTS: dict[tuple[float, float, float], tuple[np.ndarray, np.ndarray]] = {}
 #: Stacks kept in :data:`_PRODUCTS` at most (the oldest dropped) [-].
 PRODUCTS_KEPT = 8
 
 
-def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
-    """:func:`block_products` of the scaled terminal blocks ``Φ^{N−1−j} Γ u_max`` of a
-    ``steps``-step grid (:func:`~.feasibility.grid_problem`'s blocks times u_max), read-only.
+def grid_arrays(n: float, dt_s: float, u_max: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled terminal blocks ``A_j = Φ^{N−1−j} Γ u_max`` (N, 6, 3) of a ``steps``-step
+    grid (:func:`~.feasibility.grid_problem`'s blocks times u_max) and their
+    :func:`block_products` (N, 6, 6), read-only.
 
-    Each step's product is its own block's, and the last ``steps`` blocks of a longer grid
-    are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the longest
-    stack made for ``(n, Δt, u_max)`` is kept and sliced: the same bits as made afresh,
-    once per closed loop instead of once per program (a re-solve's horizon only shrinks)."""
+    Each step's block and product are its own, and the last ``steps`` blocks of a longer
+    grid are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the
+    longest stacks made for ``(n, Δt, u_max)`` are kept and sliced: the same bits as made
+    afresh, once per closed loop instead of once per program (a re-solve's horizon only
+    shrinks)."""
     key = (float(n), float(dt_s), float(u_max))
     cached = _PRODUCTS.get(key)
-    if cached is None or cached.shape[0] < steps:
+    if cached is None or cached[0].shape[0] < steps:
         zero = np.zeros(6)
         blocks = feasibility.grid_problem(n, zero, zero, steps * dt_s, dt_s, u_max).blocks
-        cached = block_products(np.ascontiguousarray(blocks * u_max))
-        cached.flags.writeable = False
+        scaled = np.ascontiguousarray(blocks * u_max)
+        cached = (scaled, block_products(scaled))
+        for array in cached:
+            array.flags.writeable = False
         _PRODUCTS.pop(key, None)
         while len(_PRODUCTS) >= PRODUCTS_KEPT:
             _PRODUCTS.pop(next(iter(_PRODUCTS)))
         _PRODUCTS[key] = cached
-    return cached[cached.shape[0] - steps :]
+    size = cached[0].shape[0]
+    return cached[0][size - steps :], cached[1][size - steps :]
+
+
+def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
+    """:func:`block_products` of the scaled terminal blocks of a ``steps``-step grid, read-only
+    (:func:`grid_arrays`'s second)."""
+    return grid_arrays(n, dt_s, u_max, steps)[1]
 
 
 @njit(cache=True)
@@ -621,6 +632,7 @@ def solve(
     max_iter: int = MAX_ITER,
     keep: np.ndarray | None = None,
     products: np.ndarray | None = None,
+    scaled: np.ndarray | None = None,
 ) -> DualAnswer:
     """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
     terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
@@ -635,15 +647,16 @@ def solve(
     (``‖A_jᵀλ_j‖ ≤ 1 − ε``, :func:`held_norms`), else the steps that fail wake and
     the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step).
     ``products``: :func:`block_products` of ``blocks × u_max`` when the caller has them
-    (:func:`grid_products`), else made here."""
+    (:func:`grid_products`), else made here; ``scaled``: ``blocks × u_max`` itself when the
+    caller has it (:func:`grid_arrays`)."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
     free_states = zoh_rollout(
         phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
     )
-    a_all = np.ascontiguousarray(blocks * u_max)
+    a_all = np.ascontiguousarray(blocks * u_max) if scaled is None else scaled
     aat_all = block_products(a_all) if products is None else products
-    if aat_all.shape != (steps, 6, 6):
+    if aat_all.shape != (steps, 6, 6) or a_all.shape != (steps, 6, 3):
         raise ValueError(f"products must be ({steps}, 6, 6), not {aat_all.shape}")
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
