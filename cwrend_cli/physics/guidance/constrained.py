@@ -792,11 +792,23 @@ def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:
     warm = sub.warm_duals
     if warm is None or warm.codes.size == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    codes = warm.codes[(warm.codes % _CODE_NODE) // _CODE_KIND == 2]
-    nodes, comps = codes // _CODE_NODE, codes % _CODE_KIND
-    keep = (nodes < sub.modes.size) & (comps < 6)
-    keep[keep] = sub.modes[nodes[keep]] > 0
-    return nodes[keep], comps[keep]
+    return _trust_codes(warm.codes, sub.modes)
+
+
+@njit(cache=True)
+def _trust_codes(codes: np.ndarray, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, components) of :func:`_warm_trust`, code by code in their order: the trust rows
+    (kind 2) of ``codes`` at a constrained node (``modes > 0``) with a component below 6."""
+    nodes = np.empty(codes.size, dtype=np.int64)
+    comps = np.empty(codes.size, dtype=np.int64)
+    count = 0
+    for code in codes:
+        node, comp = code // _CODE_NODE, code % _CODE_KIND
+        kind = (code % _CODE_NODE) // _CODE_KIND
+        if kind == 2 and node < modes.size and comp < 6 and modes[node] > 0:
+            nodes[count], comps[count] = node, comp
+            count += 1
+    return nodes[:count], comps[:count]
 
 
 def shift_duals(duals: Duals | None, steps: int) -> Duals | None:
