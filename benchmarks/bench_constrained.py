@@ -19,11 +19,6 @@ seeds), so that the two differ only by the tumble.
 With ``--abort-safe-s T`` both of the tumbling pair fly abort-safe for T (issue 34
 item 4: the turning drift rows beside the fixed composite's).
 
-Each loop pair is timed after one untimed loop of seed 0 of each of the two: the first
-re-solve in a process otherwise carries the process's one-time costs (numba loading
-the cached machine code of every kernel the loop calls, 0.2–0.5 s, and the grid stacks
-the later re-solves slice), which made it the maximum and 0.5 ms of a 390-re-solve mean.
-
 Run alone: ``python -m benchmarks.bench_constrained [--seeds S] [--tumbling-seeds T]
 [--abort-safe-s T]``.
 """
@@ -143,8 +138,6 @@ def _rows(
     rows = []
     for base in bases:
         slug = f"{base}_socp"
-        for cfg in pair:  # untimed: the process's one-time costs (module docstring)
-            _loops(cfg, slug, 1)
         t, scp, softened, (fallbacks, programs) = _loops(measured, slug, seeds)
         t0, scp0, _, _ = _loops(reference, slug, seeds)
         label = f"{slug}: {what} re-solve, seeds 0–{seeds - 1}"
