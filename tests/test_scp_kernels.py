@@ -96,22 +96,30 @@ def _pairs_before(
     return pairs[~left_out], pairs[left_out]
 
 
+def _random_rows(
+    rng: np.random.Generator, steps: int, bodies: int
+) -> tuple[np.ndarray, list[cp.HalfSpaces], np.ndarray, float]:
+    """Random modes, unit-normal half-spaces of ``bodies`` ellipsoids at the keep-out nodes,
+    positions r̄ [km] and a trust radius [km]: what ``_pairs`` reads."""
+    modes = rng.integers(0, 4, steps + 1).astype(np.int8)
+    modes[0] = modes[-1] = 0
+    nodes = np.r_[0, np.flatnonzero(modes >= 2)]
+    half_spaces = []
+    for _b in range(bodies):
+        normals = rng.normal(size=(nodes.size, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        half_spaces.append(
+            cp.HalfSpaces(nodes, normals, 0.1 * rng.normal(size=nodes.size), steps + 1)
+        )
+    return modes, half_spaces, 0.3 * rng.normal(size=(steps + 1, 3)), float(rng.uniform(0.0, 0.3))
+
+
 @pytest.mark.parametrize("bodies", [1, 3])
 def test_the_half_space_rows_and_those_left_out_are_those_of_before(bodies: int) -> None:
     rng = np.random.default_rng(5 + bodies)
     for _ in range(200):
         steps = int(rng.integers(3, 200))
-        modes = rng.integers(0, 4, steps + 1).astype(np.int8)
-        modes[0] = modes[-1] = 0
-        nodes = np.r_[0, np.flatnonzero(modes >= 2)]
-        half_spaces = []
-        for _b in range(bodies):
-            normals = rng.normal(size=(nodes.size, 3))
-            normals /= np.linalg.norm(normals, axis=1)[:, None]
-            half_spaces.append(
-                cp.HalfSpaces(nodes, normals, 0.1 * rng.normal(size=nodes.size), steps + 1)
-            )
-        r_bar, trust = 0.3 * rng.normal(size=(steps + 1, 3)), float(rng.uniform(0.0, 0.3))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
         got, want = (
             cp._pairs(modes, r_bar, half_spaces, trust),
             _pairs_before(modes, r_bar, half_spaces, trust),
@@ -186,17 +194,7 @@ def test_the_kept_rows_planes_are_those_planes_reads(bodies: int, turning: bool)
     rng = np.random.default_rng(7 + bodies)
     for _ in range(100):
         steps = int(rng.integers(3, 150))
-        modes = rng.integers(0, 4, steps + 1).astype(np.int8)
-        modes[0] = modes[-1] = 0
-        nodes = np.r_[0, np.flatnonzero(modes >= 2)]
-        half_spaces = []
-        for _b in range(bodies):
-            normals = rng.normal(size=(nodes.size, 3))
-            normals /= np.linalg.norm(normals, axis=1)[:, None]
-            half_spaces.append(
-                cp.HalfSpaces(nodes, normals, 0.1 * rng.normal(size=nodes.size), steps + 1)
-            )
-        r_bar, trust = 0.3 * rng.normal(size=(steps + 1, 3)), float(rng.uniform(0.0, 0.3))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
         motion = _turns(rng, steps + 1) if turning else None
         kept, _, (normals, offsets) = cp._pairs_planes(modes, r_bar, half_spaces, trust, motion)
         want = cp._planes(half_spaces, kept, motion)

@@ -168,7 +168,27 @@ def _evaluate(
     grad: np.ndarray,
 ) -> float:
     """``D(y)``; writes ``ũ(y)`` (N, 3), the gradient (R,) and per step the curvature
-    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring)."""
+    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring):
+    :func:`_value` then :func:`_gradient`."""
+    value = _value(a, h, f, nodes, y, c1, c2, u, curv)
+    _gradient(a, h, f, nodes, u, grad)
+    return value
+
+
+@njit(cache=True)
+def _value(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    y: np.ndarray,
+    c1: float,
+    c2: float,
+    u: np.ndarray,
+    curv: np.ndarray,
+) -> float:
+    """``D(y)``; writes ``ũ(y)`` and the curvature of :func:`_evaluate` (the backward pass
+    over the steps; the gradient, the forward pass, is :func:`_gradient`'s)."""
     steps = a.shape[0]
     count = nodes.size
     lam = np.zeros(6)
@@ -191,9 +211,25 @@ def _evaluate(
         curv[j, 1] = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
         for i in range(6):
             curv[j, 2 + i] = a[j, i, 0] * h0 + a[j, i, 1] * h1 + a[j, i, 2] * h2
-    s = np.zeros(6)
     p = 0
     value = 0.0
+    for j in range(steps):  # Σ y_i f_i in the rows' order (that of the forward pass)
+        while p < count and nodes[p] == j + 1:
+            value += y[p] * f[p]
+            p += 1
+    return value - conj
+
+
+@njit(cache=True)
+def _gradient(
+    a: np.ndarray, h: np.ndarray, f: np.ndarray, nodes: np.ndarray, u: np.ndarray, grad: np.ndarray
+) -> None:
+    """Writes the gradient (R,) of ``D`` at the controls ``u`` = ``ũ(y)`` (:func:`_value`'s):
+    each row's residual ``f_i − h_iᵀ Σ_{j<k_i} A_j ũ_j``, one forward pass over the steps."""
+    steps = a.shape[0]
+    count = nodes.size
+    s = np.zeros(6)
+    p = 0
     for j in range(steps):
         for i in range(6):
             s[i] += a[j, i, 0] * u[j, 0] + a[j, i, 1] * u[j, 1] + a[j, i, 2] * u[j, 2]
@@ -202,9 +238,7 @@ def _evaluate(
             for i in range(6):
                 acc += h[p, i] * s[i]
             grad[p] = f[p] - acc
-            value += y[p] * f[p]
             p += 1
-    return value - conj
 
 
 @njit(cache=True)
@@ -467,13 +501,17 @@ def projected_newton(
                     i = bound[p]
                     y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
                     gain += grad[i] * (y_t[i] - y[i])
-                value_t = _evaluate(a, h, f, nodes, y_t, c1, c2, u_t, curv_t, grad_t)
+                # the trial's gradient only where it is read (an accepted or a flat step)
+                value_t = _value(a, h, f, nodes, y_t, c1, c2, u_t, curv_t)
                 if gain > 0.0 and value_t >= value + _ARMIJO * gain:
+                    _gradient(a, h, f, nodes, u_t, grad_t)
                     accepted = True
                     break
                 # a full step that leaves D flat to rounding (near the optimum, along a
                 # nearly dependent pair of rows) is taken when it reduces the KKT errors
                 flat = alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300)
+                if flat:
+                    _gradient(a, h, f, nodes, u_t, grad_t)
                 if flat and _merit(grad_t, free, n_free, tol) < _merit(grad, free, n_free, tol):
                     accepted = True
                     break
