@@ -1529,16 +1529,7 @@ def plan(
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
-    failed = ConstrainedPlan(
-        SolveStatus.FAILED,
-        np.zeros((steps, 3)),
-        np.full((steps + 1, 3), np.nan),
-        modes,
-        math.nan,
-        0,
-        used,
-        0.0,
-    )
+    first_modes, first_used = modes, used  # of the placeholder result (made when needed)
     if not np.any(modes):  # nothing is unsafe: the unconstrained plan
         return ConstrainedPlan(
             SolveStatus.CONVERGED,
@@ -1551,7 +1542,7 @@ def plan(
             time.perf_counter() - start,
             restarted=restarted,
         )
-    result = failed
+    result: ConstrainedPlan | None = None
     cost, last_slack = math.inf, math.inf
     fallbacks = 0
     drift = None
@@ -1609,8 +1600,8 @@ def plan(
             )
             return ConstrainedPlan(
                 status,
-                failed.controls,
-                failed.positions,
+                np.zeros((steps, 3)),
+                np.full((steps + 1, 3), np.nan),
                 modes,
                 math.nan,
                 scp,
@@ -1659,4 +1650,15 @@ def plan(
         if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
+    if result is None:  # not reached (every SCP iteration sets it or returns); kept as it was
+        return ConstrainedPlan(
+            SolveStatus.FAILED,
+            np.zeros((steps, 3)),
+            np.full((steps + 1, 3), np.nan),
+            first_modes,
+            math.nan,
+            0,
+            first_used,
+            0.0,
+        )
     return result

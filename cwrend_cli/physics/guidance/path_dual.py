@@ -420,10 +420,17 @@ def projected_newton(
     bound = np.empty(count, dtype=np.int64)
     in_free = np.zeros(count, dtype=np.bool_)
     value = _evaluate(a, h, f, nodes, y, c1, c2, u, curv, grad)
+    # an accepted trial's arrays become the iterate's by swapping (no copy); the caller's
+    # ``y`` and ``u`` receive the last iterate on return when it is held in the others
+    y_out, u_out = y, u
+    swapped = False
     damping = 0.0
     for it in range(max_iter + 1):
         ok, _ = _kkt_error(y, grad, equality, tol)
         if ok:
+            if swapped:
+                y_out[:] = y
+                u_out[:, :] = u
             return STATUS_CONVERGED, it
         if it == max_iter:
             break
@@ -524,11 +531,15 @@ def projected_newton(
                 damping = max(10.0 * damping, 1e-4)
         if not accepted:
             break
-        y[:] = y_t
-        u[:, :] = u_t
-        curv[:, :] = curv_t
-        grad[:] = grad_t
+        y, y_t = y_t, y
+        u, u_t = u_t, u
+        curv, curv_t = curv_t, curv
+        grad, grad_t = grad_t, grad
         value = value_t
+        swapped = not swapped
+    if swapped:
+        y_out[:] = y
+        u_out[:, :] = u
     return STATUS_FAILED, it
 
 
