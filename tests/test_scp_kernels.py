@@ -16,7 +16,7 @@ from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics import dynamics
 from cwrend_cli.physics.guidance import constrained as cp
 from cwrend_cli.physics.guidance import feasibility, path_dual
-from cwrend_cli.physics.params import Constraints, KeepOut
+from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
 
 N_MOTION = 0.00104218449  # rad/s, the paper's
 U_MAX = 8e-4  # km/s²
@@ -259,3 +259,21 @@ def test_the_warm_trust_rows_are_those_of_before() -> None:
         keep[keep] = modes[nodes[keep]] > 0
         got = cp._trust_codes(codes, modes)
         assert np.array_equal(got[0], nodes[keep]) and np.array_equal(got[1], comps[keep])
+
+
+def test_the_kept_corridor_rows_are_the_geometrys_own() -> None:
+    """``_untightened_corridor``: the rows of ``corridor_cone(geo, 0)`` of the geometry asked,
+    bit for bit, when the geometries alternate (the one kept is replaced, never mixed up)."""
+    geos = [
+        cg.geometry(
+            Constraints(
+                keep_out=KeepOut((0.2, 0.2, 0.2)),
+                corridor=Corridor((0.0, 0.0, -0.25), (0.1 * i, 0.0, -1.0), 20.0 + 5 * i),
+            )
+        )
+        for i in range(2)
+    ]
+    for geo in (geos[0], geos[1], geos[1], geos[0]):
+        _, rows = cp._untightened_corridor(geo)
+        fresh = cg.corridor_cone(geo, 0.0).rows()
+        assert all(np.array_equal(g, w) for g, w in zip(rows, fresh, strict=True))

@@ -280,12 +280,33 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
+    cone, rows = _untightened_corridor(geo)
+    inside = cone.residual_km(cg.to_body(motion, r_bar), rows) >= -SCP_TOL_KM
     first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
     modes[first:steps] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
     return modes
+
+
+#: The last geometry's untightened corridor cone and its rows (:func:`_untightened_corridor`).
+_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...]]] = []
+
+
+def _untightened_corridor(
+    geo: cg.Geometry,
+) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """``corridor_cone(geo, 0)`` and its rows, kept for the geometry last asked (a closed
+    loop's re-solves share one, and :func:`_modes` reads it twice a re-solve): the same
+    arrays as made afresh (the geometry is held, so the identity test cannot be fooled)."""
+    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] is not geo:
+        cone = cg.corridor_cone(geo, 0.0)
+        rows = cone.rows()
+        for array in rows[:3]:
+            array.flags.writeable = False
+        _CORRIDOR_KEPT[:] = [(geo, cone, rows)]
+    _, cone, rows = _CORRIDOR_KEPT[0]
+    return cone, (rows[0], rows[1], rows[2], rows[3])
 
 
 class HalfSpaces(Mapping[int, cg.HalfSpace]):
