@@ -508,6 +508,9 @@ def projected_newton(
                     i = bound[p]
                     y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
                     gain += grad[i] * (y_t[i] - y[i])
+                if not gain > 0.0 and alpha != 1.0:  # neither test below can pass: skip D
+                    alpha *= 0.5
+                    continue
                 # the trial's gradient only where it is read (an accepted or a flat step)
                 value_t = _value(a, h, f, nodes, y_t, c1, c2, u_t, curv_t)
                 if gain > 0.0 and value_t >= value + _ARMIJO * gain:
