@@ -1537,23 +1537,33 @@ def plan(
     sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
     trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
     warm = warm_controls is not None and warm_controls.shape == (steps, 3)
+    exists = True  # whether the first iterate, when unconstrained, has a plan
     if not warm:
-        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+        exists, warm_controls, used = _unconstrained_plan(
+            n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+        )
     assert warm_controls is not None
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
     restarted = warm and out_of_reach(r_bar[-1], xf, trust)
     if restarted:
         # the warm plan ends beyond the trust box's reach of the terminal target: restart from
         # the unconstrained plan, which reaches it (module docstring, *A moved target*)
-        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+        exists, warm_controls, used = _unconstrained_plan(
+            n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+        )
         x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
     first_modes, first_used = modes, used  # of the placeholder result (made when needed)
     if not np.any(modes):  # nothing is unsafe: the unconstrained plan
+        if warm and not restarted:  # a one-step horizon: no node to constrain, still re-plan
+            exists, warm_controls, used = _unconstrained_plan(
+                n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+            )
+            r_bar = node_positions(n, dt_s, x0, warm_controls)[1]
         return ConstrainedPlan(
-            SolveStatus.CONVERGED,
+            SolveStatus.CONVERGED if exists else SolveStatus.FAILED,
             warm_controls,
             r_bar,
             modes,
