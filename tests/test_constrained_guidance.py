@@ -329,3 +329,22 @@ def test_a_re_solve_whose_trust_box_blocks_the_terminal_velocity_restarts() -> N
     assert np.linalg.norm(end[:3] - moved[:3]) <= 1e-8
     assert np.linalg.norm(end[3:] - moved[3:]) <= 1e-9
     assert np.all(np.sum((_dense(x, later.controls) / axes) ** 2, axis=1) >= 1.0)
+
+
+def test_a_one_step_re_solve_re_plans_instead_of_keeping_its_warm_start() -> None:
+    """With one step left no node is constrained (the start is x̂, the end is x_f), so the
+    plan is the unconstrained one from the new estimate, warm start or not: the warm
+    controls (zero thrust here) are not handed back as if solved. The start is made so that
+    one held control u* (half the thrust limit, in the corridor) lands exactly on the port at
+    rest: x0 = Φ(Δt)⁻¹ (x_f − Γ(Δt) u*), Φ and Γ by the matrix exponential here."""
+    geo = _geometry(np.array([0.2, 0.2, 0.2]), np.array([0, 0, -0.25]), np.array([0, 0, -1]), 30)
+    xf = np.array([0.0, 0.0, -0.25, 0.0, 0.0, 0.0])
+    u_star = np.array([0.0, 0.0, 0.5 * U_MAX])
+    phi, gam = _zoh(N_MOTION, DT)
+    x0 = np.linalg.solve(phi, xf - gam @ u_star)
+    cold = cp.plan(N_MOTION, DT, U_MAX, x0, xf, DT, 1.0, geo)
+    warm = cp.plan(N_MOTION, DT, U_MAX, x0, xf, DT, 1.0, geo, warm_controls=np.zeros((1, 3)))
+    assert cold.status is SolveStatus.CONVERGED and warm.status is SolveStatus.CONVERGED
+    assert np.array_equal(warm.controls, cold.controls)
+    # the one control that lands on x_f, to the cone solver's tolerance (1e-8 relative)
+    assert np.allclose(warm.controls[0], u_star, rtol=0.0, atol=1e-8 * U_MAX)

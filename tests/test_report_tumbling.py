@@ -187,3 +187,20 @@ def test_a_sweep_over_the_tumble_rate_runs_end_to_end(tmp_path: Path) -> None:
     result = runner.invoke(app, ["report", str(root)], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     assert (root / "report" / BODY_FIGURE).exists()
+
+
+def test_the_abort_text_says_the_zones_turn_with_a_tumbling_target() -> None:
+    """The safety section's abort-safety sentence names the keep-out zones turning with the
+    target's attitude for a tumbling target, and one fixed keep-out zone otherwise (only the
+    reported point's configuration is read)."""
+    from types import SimpleNamespace
+
+    from cwrend_cli.config.io import load_config
+    from cwrend_cli.report.markdown import _abort_text
+
+    def text(campaign: str) -> str:
+        return _abort_text(SimpleNamespace(point_config=load_config(CAMPAIGNS / campaign)))
+
+    assert "turning with the target's attitude" in text("tumbling_target.toml")
+    assert "turning" not in text("safe_approach.toml")
+    assert "enters the keep-out zone within" in text("safe_approach.toml")

@@ -16,7 +16,7 @@ from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics import dynamics
 from cwrend_cli.physics.guidance import constrained as cp
 from cwrend_cli.physics.guidance import feasibility, path_dual
-from cwrend_cli.physics.params import Constraints, KeepOut
+from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
 
 N_MOTION = 0.00104218449  # rad/s, the paper's
 U_MAX = 8e-4  # km/s²
@@ -96,22 +96,30 @@ def _pairs_before(
     return pairs[~left_out], pairs[left_out]
 
 
+def _random_rows(
+    rng: np.random.Generator, steps: int, bodies: int
+) -> tuple[np.ndarray, list[cp.HalfSpaces], np.ndarray, float]:
+    """Random modes, unit-normal half-spaces of ``bodies`` ellipsoids at the keep-out nodes,
+    positions r̄ [km] and a trust radius [km]: what ``_pairs`` reads."""
+    modes = rng.integers(0, 4, steps + 1).astype(np.int8)
+    modes[0] = modes[-1] = 0
+    nodes = np.r_[0, np.flatnonzero(modes >= 2)]
+    half_spaces = []
+    for _b in range(bodies):
+        normals = rng.normal(size=(nodes.size, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        half_spaces.append(
+            cp.HalfSpaces(nodes, normals, 0.1 * rng.normal(size=nodes.size), steps + 1)
+        )
+    return modes, half_spaces, 0.3 * rng.normal(size=(steps + 1, 3)), float(rng.uniform(0.0, 0.3))
+
+
 @pytest.mark.parametrize("bodies", [1, 3])
 def test_the_half_space_rows_and_those_left_out_are_those_of_before(bodies: int) -> None:
     rng = np.random.default_rng(5 + bodies)
     for _ in range(200):
         steps = int(rng.integers(3, 200))
-        modes = rng.integers(0, 4, steps + 1).astype(np.int8)
-        modes[0] = modes[-1] = 0
-        nodes = np.r_[0, np.flatnonzero(modes >= 2)]
-        half_spaces = []
-        for _b in range(bodies):
-            normals = rng.normal(size=(nodes.size, 3))
-            normals /= np.linalg.norm(normals, axis=1)[:, None]
-            half_spaces.append(
-                cp.HalfSpaces(nodes, normals, 0.1 * rng.normal(size=nodes.size), steps + 1)
-            )
-        r_bar, trust = 0.3 * rng.normal(size=(steps + 1, 3)), float(rng.uniform(0.0, 0.3))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
         got, want = (
             cp._pairs(modes, r_bar, half_spaces, trust),
             _pairs_before(modes, r_bar, half_spaces, trust),
@@ -156,3 +164,116 @@ def test_grid_products_are_the_blocks_own_products_however_the_stack_was_made() 
         assert got.shape == (steps, 6, 6)
         assert np.array_equal(got, path_dual.block_products(np.ascontiguousarray(a)))
         np.testing.assert_allclose(got, expected, rtol=1e-15, atol=0)
+
+
+def test_the_grids_scaled_blocks_are_its_blocks_times_u_max_however_the_stack_was_made() -> None:
+    """:func:`.path_dual.grid_arrays`' first: ``A_j = Φ^{N−1−j} Γ u_max`` of the grid's own
+    blocks, bit for bit, and beside them their products."""
+    path_dual._PRODUCTS.clear()
+    for steps in (50, 300, 120, 301):
+        blocks = feasibility.grid_problem(
+            N_MOTION, np.zeros(6), np.zeros(6), float(steps), 1.0, U_MAX
+        ).blocks
+        scaled, products = path_dual.grid_arrays(N_MOTION, 1.0, U_MAX, steps)
+        assert np.array_equal(scaled, blocks * U_MAX)
+        assert np.array_equal(products, path_dual.block_products(np.ascontiguousarray(scaled)))
+
+
+def _turns(rng: np.random.Generator, count: int) -> cg.BodyMotion:
+    """Random rotations at ``count`` nodes (what :func:`.constrained._planes` reads)."""
+    q = rng.normal(size=(count, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    return cg.BodyMotion(cg.rotation_matrices(q), np.zeros((count, 3)), 0.0, 0.0)
+
+
+@pytest.mark.parametrize(("bodies", "turning"), [(1, False), (3, False), (2, True)])
+def test_the_kept_rows_planes_are_those_planes_reads(bodies: int, turning: bool) -> None:
+    """``_pairs_planes``: the kept rows' (normals, offsets) equal to ``_planes`` of the kept
+    rows, bit for bit (fixed target: one pass; turning: the rows' planes turned to their
+    nodes' times); the rows themselves are ``_pairs``' (tested against numpy above)."""
+    rng = np.random.default_rng(7 + bodies)
+    for _ in range(100):
+        steps = int(rng.integers(3, 150))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
+        motion = _turns(rng, steps + 1) if turning else None
+        kept, _, (normals, offsets) = cp._pairs_planes(modes, r_bar, half_spaces, trust, motion)
+        want = cp._planes(half_spaces, kept, motion)
+        assert np.array_equal(normals, want[0]) and np.array_equal(offsets, want[1])
+
+
+def test_the_keep_out_nodes_tangent_planes_are_those_of_before() -> None:
+    """``_node_planes``: the formula of before, by numpy: the points r (outside) or
+    (r + shift)/√level(r + shift) (inside), their tangent planes, + the nodes' margins."""
+    rng = np.random.default_rng(8)
+    for rows in range(2, 300, 7):
+        a = rng.uniform(0.05, 0.5, 3)
+        r = rng.normal(size=(rows, 3)) * a * rng.uniform(0.2, 2.0, (rows, 1))  # in and out
+        nodes = np.r_[0, np.flatnonzero(rng.random(rows - 1) < 0.7) + 1].astype(np.int64)
+        shift = float(np.max(a)) * rng.normal(size=3)
+        margins = rng.uniform(0.0, 1e-3, rows)
+        level = cg.ellipsoid_level(r, a)
+        points = np.array(r[nodes], dtype=np.float64)
+        inside = level[nodes] < 1.0
+        shifted = points[inside] + shift
+        points[inside] = shifted / np.sqrt(cg.ellipsoid_level(shifted, a))[:, None]
+        want_normals, want_offsets = cg.tangent_planes(a, points)
+        got = cp._node_planes(a, r, level, nodes, shift, margins)
+        assert np.array_equal(got[0], want_normals)
+        assert np.array_equal(got[1], want_offsets + margins[nodes])
+
+
+def test_the_warm_multipliers_are_those_of_before() -> None:
+    """``_warm_multipliers`` by its kernel (codes that do not repeat) gives numpy's sorted
+    look-up of before; with a repeated code the kernel declines (numpy's sort decides)."""
+    rng = np.random.default_rng(9)
+    for _ in range(300):
+        codes = rng.choice(1 << 24, size=int(rng.integers(1, 60)), replace=False)
+        warm = cp.Duals(codes.astype(np.int64), rng.random(codes.size))
+        code = np.r_[rng.choice(codes, size=codes.size // 2), rng.integers(0, 1 << 24, 20)]
+        guess = rng.random(code.size)
+        order = np.argsort(warm.codes)
+        at = np.clip(np.searchsorted(warm.codes[order], code), 0, codes.size - 1)
+        hit = warm.codes[order][at] == code
+        want = guess.copy()
+        want[hit] = warm.values[order][at[hit]]
+        assert np.array_equal(cp._warm_multipliers(warm, code, guess), want)
+    repeated = np.array([5, 7, 5], dtype=np.int64)
+    assert not cp._carry_unique(repeated, np.ones(3), np.array([5]), np.zeros(1))
+
+
+def test_the_warm_trust_rows_are_those_of_before() -> None:
+    """``_trust_codes``: the kind-2 codes (node × 2²⁰ + 2 × 2¹⁶ + component) at constrained
+    nodes with a component below 6, in their order, as numpy selected them before."""
+    rng = np.random.default_rng(10)
+    for _ in range(200):
+        modes = rng.integers(0, 4, int(rng.integers(2, 100))).astype(np.int8)
+        count = int(rng.integers(0, 80))
+        codes = (
+            rng.integers(1, modes.size + 5, count) * cp._CODE_NODE
+            + rng.integers(0, 5, count) * cp._CODE_KIND
+            + rng.integers(0, 8, count)
+        ).astype(np.int64)
+        sel = codes[(codes % cp._CODE_NODE) // cp._CODE_KIND == 2]
+        nodes, comps = sel // cp._CODE_NODE, sel % cp._CODE_KIND
+        keep = (nodes < modes.size) & (comps < 6)
+        keep[keep] = modes[nodes[keep]] > 0
+        got = cp._trust_codes(codes, modes)
+        assert np.array_equal(got[0], nodes[keep]) and np.array_equal(got[1], comps[keep])
+
+
+def test_the_kept_corridor_rows_are_the_geometrys_own() -> None:
+    """``_untightened_corridor``: the rows of ``corridor_cone(geo, 0)`` of the geometry asked,
+    bit for bit, when the geometries alternate (the one kept is replaced, never mixed up)."""
+    geos = [
+        cg.geometry(
+            Constraints(
+                keep_out=KeepOut((0.2, 0.2, 0.2)),
+                corridor=Corridor((0.0, 0.0, -0.25), (0.1 * i, 0.0, -1.0), 20.0 + 5 * i),
+            )
+        )
+        for i in range(2)
+    ]
+    for geo in (geos[0], geos[1], geos[1], geos[0]):
+        _, rows = cp._untightened_corridor(geo)
+        fresh = cg.corridor_cone(geo, 0.0).rows()
+        assert all(np.array_equal(g, w) for g, w in zip(rows, fresh, strict=True))

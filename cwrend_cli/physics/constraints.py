@@ -465,9 +465,14 @@ class SecondOrderCone:
         c = self.tan_half * self.axis
         return proj, -proj @ self.apex_km, c, float(-c @ self.apex_km - self.offset_km)
 
-    def residual_km(self, r_km: FloatArray) -> FloatArray:
-        """``cᵀ r + d − ‖A r + b‖`` [km]: ≥ 0 inside the (tightened) cone."""
-        a, b, c, d = self.rows()
+    def residual_km(
+        self,
+        r_km: FloatArray,
+        rows: tuple[FloatArray, FloatArray, FloatArray, float] | None = None,
+    ) -> FloatArray:
+        """``cᵀ r + d − ‖A r + b‖`` [km]: ≥ 0 inside the (tightened) cone; ``rows``: its
+        :meth:`rows` when the caller keeps them."""
+        a, b, c, d = self.rows() if rows is None else rows
         r = np.asarray(r_km, dtype=np.float64)
         return np.asarray(r @ c + d - row_norms(r @ a.T + b), dtype=np.float64)
 

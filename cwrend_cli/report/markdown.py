@@ -285,6 +285,21 @@ def _median_max(runs: pd.DataFrame, column: str) -> str:
     return f"{_fmt(values.median(), spec)} ({_fmt(values.max(), spec)})"
 
 
+def _abort_text(data: ReportData) -> str:
+    """What the abort-safety columns measure, with the zone turning for a tumbling target."""
+    tumbling = data.point_config is not None and data.point_config.target.attitude == "tumbling"
+    zone = (
+        "the keep-out zones, turning with the target's attitude,"
+        if tumbling
+        else "the keep-out zone"
+    )
+    return (
+        " Abort-unsafe (constraints.abort_safe_s): a step before the final approach whose "
+        f"free drift (CW, no thrust) enters {zone} within that time; worst drift "
+        "distance: the run's smallest signed distance of those drifts to the zone."
+    )
+
+
 def _safety_lines(data: ReportData) -> list[str]:
     """The safety section of a constrained campaign (none otherwise)."""
     table = safety_table(data)
@@ -298,13 +313,7 @@ def _safety_lines(data: ReportData) -> list[str]:
         "Violated: the run entered the unsafe set (95 % Wilson interval); min distance: the "
         "run's smallest signed distance to the unsafe set (negative: inside), over the seeds "
         "(95 % bootstrap interval)."
-        + (
-            " Abort-unsafe (constraints.abort_safe_s): a step before the final approach whose "
-            "free drift (CW, no thrust) enters the keep-out zone within that time; worst drift "
-            "distance: the run's smallest signed distance of those drifts to the zone."
-            if "abort-unsafe" in table
-            else ""
-        )
+        + (_abort_text(data) if "abort-unsafe" in table else "")
         + (
             " Measured only (constraints.enforce = false): the cone-program guidance planned "
             "without the keep-out zone and the corridor, as without [constraints]."

@@ -280,12 +280,33 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    inside = cg.corridor_cone(geo, 0.0).residual_km(cg.to_body(motion, r_bar)) >= -SCP_TOL_KM
+    cone, rows = _untightened_corridor(geo)
+    inside = cone.residual_km(cg.to_body(motion, r_bar), rows) >= -SCP_TOL_KM
     first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
     modes[first:steps] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
     return modes
+
+
+#: The last geometry's untightened corridor cone and its rows (:func:`_untightened_corridor`).
+_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...]]] = []
+
+
+def _untightened_corridor(
+    geo: cg.Geometry,
+) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """``corridor_cone(geo, 0)`` and its rows, kept for the geometry last asked (a closed
+    loop's re-solves share one, and :func:`_modes` reads it twice a re-solve): the same
+    arrays as made afresh (the geometry is held, so the identity test cannot be fooled)."""
+    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] is not geo:
+        cone = cg.corridor_cone(geo, 0.0)
+        rows = cone.rows()
+        for array in rows[:3]:
+            array.flags.writeable = False
+        _CORRIDOR_KEPT[:] = [(geo, cone, rows)]
+    _, cone, rows = _CORRIDOR_KEPT[0]
+    return cone, (rows[0], rows[1], rows[2], rows[3])
 
 
 class HalfSpaces(Mapping[int, cg.HalfSpace]):
@@ -311,16 +332,20 @@ class HalfSpaces(Mapping[int, cg.HalfSpace]):
         return int(self.nodes.size)
 
 
-def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
+def _detour_side(
+    semi_axes: np.ndarray, r_bar: np.ndarray, level: np.ndarray | None = None
+) -> np.ndarray:
     """The side (a unit vector) on which an iterate that crosses the zone goes round it.
 
     At the deepest node k* the component of r̄_k* across the path's direction
     there (r̄_k*+1 − r̄_k*−1); a path straight through the centre has none, and
     gets the coordinate axis least aligned with its direction, made
     perpendicular to it (a deterministic choice; the other side costs the same
-    by symmetry).
+    by symmetry). ``level``: :func:`.constraints.ellipsoid_level` of ``r_bar`` when the
+    caller has it.
     """
-    level = cg.ellipsoid_level(r_bar, semi_axes)
+    if level is None:
+        level = cg.ellipsoid_level(r_bar, semi_axes)
     k = int(np.argmin(level))
     ahead, behind = r_bar[min(k + 1, len(r_bar) - 1)], r_bar[max(k - 1, 0)]
     direction = ahead - behind
@@ -333,16 +358,38 @@ def _detour_side(semi_axes: np.ndarray, r_bar: np.ndarray) -> np.ndarray:
     return np.asarray(side / np.linalg.norm(side), dtype=np.float64)
 
 
-def _tangent_points(semi_axes: np.ndarray, r: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """The points (K, 3) whose tangent planes bound the nodes r (K, 3): r itself outside the
-    zone; inside, the radial projection onto the surface of r moved by the largest
-    semi-axis towards ``side`` (so the nodes of a crossing iterate all go round on one
-    side)."""
-    out = np.array(r, dtype=np.float64)
-    inside = cg.ellipsoid_level(out, semi_axes) < 1.0
-    shifted = out[inside] + float(np.max(semi_axes)) * side
-    out[inside] = shifted / np.sqrt(cg.ellipsoid_level(shifted, semi_axes))[:, None]
-    return out
+@njit(cache=True)
+def _node_planes(
+    a: np.ndarray,
+    r: np.ndarray,
+    level: np.ndarray,
+    nodes: np.ndarray,
+    shift: np.ndarray,
+    margins_km: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The tangent planes of :func:`_half_spaces` at ``nodes``, tightened by their margins:
+    (unit normals (K, 3), offsets (K,) [km]) of ellipsoid ``a`` (3,) at the points whose
+    planes bound the nodes' positions ``r[nodes]``: the position itself outside the zone
+    (``level`` ≥ 1, :func:`.constraints.ellipsoid_level` of ``r``); inside, the radial
+    projection onto the surface of the position moved by ``shift`` (the largest semi-axis
+    towards the detour side, :func:`_detour_side`, so that the nodes of a crossing iterate
+    all go round on one side): s = r + shift, s / √(level of s). The planes by
+    :func:`.constraints.tangent_planes`' kernel, then + ``margins_km[nodes]`` (numpy's
+    arithmetic in its order: the same bits)."""
+    points = np.empty((nodes.size, 3))
+    for i in range(nodes.size):
+        k = nodes[i]
+        if level[k] < 1.0:
+            s0, s1, s2 = r[k, 0] + shift[0], r[k, 1] + shift[1], r[k, 2] + shift[2]
+            x, y, z = s0 / a[0], s1 / a[1], s2 / a[2]
+            root = math.sqrt(x * x + y * y + z * z)
+            points[i, 0], points[i, 1], points[i, 2] = s0 / root, s1 / root, s2 / root
+        else:
+            points[i, 0], points[i, 1], points[i, 2] = r[k, 0], r[k, 1], r[k, 2]
+    normals, offsets = cg._tangent_planes(a, points)
+    for i in range(nodes.size):
+        offsets[i] = offsets[i] + margins_km[nodes[i]]
+    return normals, offsets
 
 
 def _half_spaces(
@@ -367,10 +414,13 @@ def _half_spaces(
     nodes = np.concatenate((np.zeros(1, np.int64), np.flatnonzero(modes >= _KEEP_OUT)))
     out = []
     for centre, axes in cg.ellipsoids(geo):
-        local = rho_bar if centre is None else rho_bar - centre
-        side = _detour_side(axes, local)
-        normals, offsets = cg.tangent_planes(axes, _tangent_points(axes, local[nodes], side))
-        offsets = offsets + margins_km[nodes]
+        local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
+        level = cg.ellipsoid_level(local, axes)
+        side = _detour_side(axes, local, level)
+        normals, offsets = _node_planes(
+            np.asarray(axes, dtype=np.float64), local, level, nodes,
+            float(np.max(axes)) * side, np.asarray(margins_km, dtype=np.float64),
+        )  # fmt: skip
         if sigma_margin > 0.0 and p_pos_km2 is not None:
             if motion is None:
                 offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
@@ -407,10 +457,77 @@ def _pairs(
     solver's feasibility tolerance), so the trust rows imply it: the program,
     and its answer, are the same with and without it.
     """
+    kept, left_out, _ = _pairs_planes(modes, r_bar, half_spaces, trust_km, motion)
+    return kept, left_out
+
+
+def _pairs_planes(
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    half_spaces: list[HalfSpaces],
+    trust_km: float,
+    motion: cg.BodyMotion | None = None,
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """:func:`_pairs` and the kept rows' planes (normals (P, 3), offsets (P,) [km]): those
+    :func:`_planes` gives for them, taken from the trust test's (the same bits)."""
+    if motion is None:  # the three steps below in one pass (the same rows, the same bits)
+        kept, left_out, kept_normals, kept_offsets = _fixed_pairs(
+            half_spaces[0].index,
+            np.stack([hs.normals for hs in half_spaces]),
+            np.stack([hs.offsets for hs in half_spaces]),
+            modes,
+            r_bar,
+            trust_km,
+        )
+        return kept, left_out, (kept_normals, kept_offsets)
     # every ellipsoid has the same nodes
     pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
     normals, offsets = _planes(half_spaces, pairs, motion)
-    return _trust_split(pairs, normals, offsets, r_bar, trust_km)
+    kept, left_out, left = _trust_split(pairs, normals, offsets, r_bar, trust_km)
+    return kept, left_out, (normals[~left], offsets[~left])
+
+
+@njit(cache=True)
+def _fixed_pairs(
+    index: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_pairs_planes` of a fixed target in one pass: the rows of :func:`_pair_rows` in
+    its order, each row's plane as :func:`_planes` reads it (``index`` (N + 1,) a node's
+    plane, −1 for none; ``normals`` (B, K, 3), ``offsets`` (B, K) of the B ellipsoids) and
+    :func:`_trust_split`'s test with its arithmetic: (kept, left out, kept normals, kept
+    offsets)."""
+    size = 2 * normals.shape[0] * modes.size
+    kept = np.empty((size, 3), dtype=np.int64)
+    out = np.empty((size, 3), dtype=np.int64)
+    kept_normals = np.empty((size, 3))
+    kept_offsets = np.empty(size)
+    i = o = 0
+    for k in range(1, modes.size - 1):
+        for j in (k, k - 1):
+            if index[j] >= 0 and (j == k or modes[k] != 0):
+                for b in range(normals.shape[0]):
+                    n0, n1, n2 = (
+                        normals[b, index[j], 0],
+                        normals[b, index[j], 1],
+                        normals[b, index[j], 2],
+                    )
+                    offset = offsets[b, index[j]]
+                    dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+                    low = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
+                    if low >= offset + SCP_TOL_KM:
+                        out[o, 0], out[o, 1], out[o, 2] = k, j, b
+                        o += 1
+                    else:
+                        kept[i, 0], kept[i, 1], kept[i, 2] = k, j, b
+                        kept_normals[i, 0], kept_normals[i, 1], kept_normals[i, 2] = n0, n1, n2
+                        kept_offsets[i] = offset
+                        i += 1
+    return kept[:i], out[:o], kept_normals[:i], kept_offsets[:i]
 
 
 @njit(cache=True)
@@ -433,11 +550,11 @@ def _pair_rows(has: np.ndarray, modes: np.ndarray, bodies: int) -> np.ndarray:
 @njit(cache=True)
 def _trust_split(
     pairs: np.ndarray, normals: np.ndarray, offsets: np.ndarray, r_bar: np.ndarray, trust_km: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """(kept, left out) of the rows ``pairs`` (P, 3) with planes (normals (P, 3), offsets
-    (P,)): a row is left out when ``nᵀ r̄_k − trust ‖n‖₁``, the smallest nᵀr over its node's
-    trust box [km], is at least its offset + :data:`SCP_TOL_KM` (:func:`_pairs`; numpy's
-    sums in their order, the same bits)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(kept, left out, the left-out mask (P,)) of the rows ``pairs`` (P, 3) with planes
+    (normals (P, 3), offsets (P,)): a row is left out when ``nᵀ r̄_k − trust ‖n‖₁``, the
+    smallest nᵀr over its node's trust box [km], is at least its offset + :data:`SCP_TOL_KM`
+    (:func:`_pairs`; numpy's sums in their order, the same bits)."""
     left = np.empty(pairs.shape[0], dtype=np.bool_)
     count = 0
     for p in range(pairs.shape[0]):
@@ -457,7 +574,7 @@ def _trust_split(
         else:
             kept[i] = pairs[p]
             i += 1
-    return kept, out
+    return kept, out, left
 
 
 def _planes(
@@ -592,58 +709,61 @@ def _dual_rows(
     pairs: np.ndarray,
     row_scale: np.ndarray,
     box: tuple[np.ndarray, np.ndarray],
+    planes: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
     """The linear rows of the program of ``sub`` (module docstring; the corridor cones
     aside, and of the trust rows only those of ``box``: (nodes, components) of
     :func:`_trust_rows`) for :func:`.path_dual.solve`, sorted by node, each row's kind
     (0 terminal, 1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows
-    scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`)."""
+    scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`).
+    ``planes``: :func:`_planes` of ``pairs`` when the caller has them (:func:`_pairs_planes`).
+    Written into arrays of the final size, block by block (terminal, half-space, trust,
+    abort rows), then sorted stably by node."""
     steps = sub.modes.size - 1
     s_p = float(row_scale[0])
-    nodes, coeffs, offsets, tol, kinds, keys = [], [], [], [], [], []
+    n_hs, n_tr = pairs.shape[0], box[0].size
+    abort = sub.abort_rows if sub.abort_rows is not None and sub.abort_rows.nodes.size else None
+    total = 6 + n_hs + n_tr + (0 if abort is None else abort.nodes.size)
+    node = np.empty(total, np.int64)
+    coeffs = np.zeros((total, 6))
+    offsets, tol = np.empty(total), np.empty(total)
+    kinds, keys = np.empty(total, np.int64), np.empty(total, np.int64)
     # terminal state: x_N = x_f
-    nodes.append(np.full(6, steps))
-    coeffs.append(np.diag(row_scale))
-    offsets.append(row_scale * sub.xf)
-    tol.append(row_scale * np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)])
-    kinds.append(np.zeros(6, np.int64))
-    keys.append(np.arange(6))
-    if pairs.size:  # nᵀ r_k ≥ offset
-        normals, offs = _planes(sub.half_spaces, pairs, sub.motion)
-        nodes.append(pairs[:, 0])
-        coeffs.append(np.hstack([normals, np.zeros_like(normals)]) * s_p)
-        offsets.append(offs * s_p)
-        tol.append(np.full(pairs.shape[0], DUAL_TOL_KM * s_p))
-        kinds.append(np.ones(pairs.shape[0], np.int64))
-        keys.append(pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2])
-    if box[0].size:  # the trust rows given (:func:`_trust_rows`)
+    node[:6], kinds[:6], keys[:6] = steps, 0, np.arange(6)
+    coeffs[np.arange(6), np.arange(6)] = row_scale
+    offsets[:6] = row_scale * sub.xf
+    tol[:6] = row_scale * _TERMINAL_TOL
+    i = 6
+    if n_hs:  # nᵀ r_k ≥ offset
+        normals, offs = _planes(sub.half_spaces, pairs, sub.motion) if planes is None else planes
+        rows = slice(i, i + n_hs)
+        node[rows], kinds[rows] = pairs[:, 0], 1
+        coeffs[rows, :3] = normals * s_p
+        offsets[rows], tol[rows] = offs * s_p, DUAL_TOL_KM * s_p
+        keys[rows] = pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2]
+        i += n_hs
+    if n_tr:  # the trust rows given (:func:`_trust_rows`)
         t_node, t_coeffs, t_offsets, _ = _trust_rows(sub, box[0], box[1], s_p)
-        nodes.append(t_node)
-        coeffs.append(t_coeffs)
-        offsets.append(t_offsets)
-        tol.append(np.full(t_node.size, DUAL_TOL_KM * s_p))
-        kinds.append(np.full(t_node.size, 2, np.int64))
-        keys.append(box[1])
-    if sub.abort_rows is not None and sub.abort_rows.nodes.size:  # cᵀ x_k ≥ o
-        count = sub.abort_rows.nodes.size
-        nodes.append(sub.abort_rows.nodes)
-        coeffs.append(sub.abort_rows.coeffs * s_p)
-        offsets.append(sub.abort_rows.offsets_km * s_p)
-        tol.append(np.full(count, DUAL_TOL_KM * s_p))
-        kinds.append(np.full(count, 3, np.int64))
-        keys.append(np.full(count, 999))
-    node = np.concatenate(nodes).astype(np.int64)
+        rows = slice(i, i + n_tr)
+        node[rows], coeffs[rows], offsets[rows] = t_node, t_coeffs, t_offsets
+        tol[rows], kinds[rows], keys[rows] = DUAL_TOL_KM * s_p, 2, box[1]
+        i += n_tr
+    if abort is not None:  # cᵀ x_k ≥ o
+        rows = slice(i, total)
+        node[rows], coeffs[rows] = abort.nodes, abort.coeffs * s_p
+        offsets[rows], tol[rows] = abort.offsets_km * s_p, DUAL_TOL_KM * s_p
+        kinds[rows], keys[rows] = 3, 999
     order = np.argsort(node, kind="stable")
-    kind = np.concatenate(kinds)[order]
-    code = node[order] * _CODE_NODE + kind * _CODE_KIND + np.concatenate(keys)[order]
-    rows = path_dual.DualRows(
-        node[order],
-        np.ascontiguousarray(np.concatenate(coeffs)[order]),
-        np.concatenate(offsets)[order],
-        kind == 0,
-        np.concatenate(tol)[order],
+    kind = kinds[order]
+    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
+    dual_rows = path_dual.DualRows(
+        node[order], coeffs[order], offsets[order], kind == 0, tol[order]
     )
-    return rows, kind, code
+    return dual_rows, kind, code
+
+
+#: The terminal rows' tolerances before scaling: position [km], velocity [km/s].
+_TERMINAL_TOL = np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)]
 
 
 def _trust_rows(
@@ -693,11 +813,23 @@ def _warm_trust(sub: _Subproblem) -> tuple[np.ndarray, np.ndarray]:
     warm = sub.warm_duals
     if warm is None or warm.codes.size == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    codes = warm.codes[(warm.codes % _CODE_NODE) // _CODE_KIND == 2]
-    nodes, comps = codes // _CODE_NODE, codes % _CODE_KIND
-    keep = (nodes < sub.modes.size) & (comps < 6)
-    keep[keep] = sub.modes[nodes[keep]] > 0
-    return nodes[keep], comps[keep]
+    return _trust_codes(warm.codes, sub.modes)
+
+
+@njit(cache=True)
+def _trust_codes(codes: np.ndarray, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, components) of :func:`_warm_trust`, code by code in their order: the trust rows
+    (kind 2) of ``codes`` at a constrained node (``modes > 0``) with a component below 6."""
+    nodes = np.empty(codes.size, dtype=np.int64)
+    comps = np.empty(codes.size, dtype=np.int64)
+    count = 0
+    for code in codes:
+        node, comp = code // _CODE_NODE, code % _CODE_KIND
+        kind = (code % _CODE_NODE) // _CODE_KIND
+        if kind == 2 and node < modes.size and comp < 6 and modes[node] > 0:
+            nodes[count], comps[count] = node, comp
+            count += 1
+    return nodes[:count], comps[:count]
 
 
 def shift_duals(duals: Duals | None, steps: int) -> Duals | None:
@@ -716,6 +848,10 @@ def _warm_multipliers(warm: Duals | None, code: np.ndarray, guess: np.ndarray) -
     code, else ``guess`` (:func:`_guess_active`)."""
     if warm is None or warm.codes.size == 0:
         return guess
+    out = guess.copy()
+    if _carry_unique(warm.codes, warm.values, code, out):
+        return out
+    # codes repeated (abort rows share one): numpy's sort decides which value is read
     order = np.argsort(warm.codes)
     sorted_codes = warm.codes[order]
     at = np.clip(np.searchsorted(sorted_codes, code), 0, sorted_codes.size - 1)
@@ -723,6 +859,28 @@ def _warm_multipliers(warm: Duals | None, code: np.ndarray, guess: np.ndarray) -
     out = guess.copy()
     out[hit] = warm.values[order][at[hit]]
     return out
+
+
+@njit(cache=True)
+def _carry_unique(codes: np.ndarray, values: np.ndarray, code: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`_warm_multipliers` when no code repeats in ``codes``: ``out[i]`` = the value of
+    the row of ``codes`` equal to ``code[i]``, where there is one (a copy: no arithmetic).
+    False (``out`` untouched) when a code repeats."""
+    order = np.argsort(codes, kind="mergesort")
+    for p in range(1, order.size):
+        if codes[order[p]] == codes[order[p - 1]]:
+            return False
+    for i in range(code.size):
+        lo, hi = 0, order.size
+        while lo < hi:  # the first sorted code ≥ code[i]
+            mid = (lo + hi) // 2
+            if codes[order[mid]] < code[i]:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < order.size and codes[order[lo]] == code[i]:
+            out[i] = values[order[lo]]
+    return True
 
 
 #: A half-space row whose plane passes within this of the previous iterate's node starts
@@ -771,6 +929,8 @@ def _cone_cuts(
     cutting planes); ρ = R_kᵀ r with ``motion``.
     """
     nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
+    if nodes.size == 0:  # no corridor node (most programs): no cut
+        return nodes, np.zeros((0, 6)), np.zeros(0), nodes * _CODE_NODE
     rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
     out_nodes, coeffs, offsets = [], [], []
     for i, k in enumerate(nodes.tolist()):
@@ -821,7 +981,7 @@ def _with_rows(
 
 
 def _dual_solve(
-    sub: _Subproblem, pairs: np.ndarray
+    sub: _Subproblem, pairs: np.ndarray, planes: tuple[np.ndarray, np.ndarray] | None = None
 ) -> tuple[_DualSolution, int, tuple[np.ndarray, np.ndarray, float]] | tuple[None, int, None]:
     """The whole program of ``sub`` by the projected dual Newton method of
     :mod:`.path_dual` (module docstring, *Solvers*): (solution, iterations, (controls, states,
@@ -837,7 +997,7 @@ def _dual_solve(
     (with multiplier 0) meets the whole program's KKT conditions: the same answer."""
     steps = sub.modes.size - 1
     g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
-    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub))
+    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub), planes)
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
     s_p = float(g.row_scale[0])
@@ -849,11 +1009,11 @@ def _dual_solve(
     keep = None
     if weight < convex.DUAL_MIN_WEIGHT:
         keep = _thrust_guess(sub.u_bar, sub.u_max, sub.eps)
-    products = path_dual.grid_products(sub.n, sub.dt_s, sub.u_max, steps)
+    scaled, products = path_dual.grid_arrays(sub.n, sub.dt_s, sub.u_max, steps)
     while True:
         ans = path_dual.solve(
             sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
-            keep=keep, products=products,
+            keep=keep, products=products, scaled=scaled,
         )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
@@ -861,6 +1021,7 @@ def _dual_solve(
             ans = path_dual.solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
                 _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
+                scaled=scaled,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:
@@ -921,12 +1082,12 @@ def _reduced_solve(
     modes, r_bar, u_bar, half_spaces = sub.modes, sub.r_bar, sub.u_bar, sub.half_spaces
     trust_km, motion, abort_rows = sub.trust_km, sub.motion, sub.abort_rows
     steps = modes.size - 1
-    pairs, dropped = _pairs(modes, r_bar, half_spaces, trust_km, motion)
+    pairs, dropped, planes = _pairs_planes(modes, r_bar, half_spaces, trust_km, motion)
     if not reduce:
         pairs, dropped = np.concatenate([pairs, dropped]), dropped[:0]
     used, fallback = 0, 0
     if reduce and sub.first_order:
-        dual, used, dual_answer = _dual_solve(sub, pairs)
+        dual, used, dual_answer = _dual_solve(sub, pairs, planes)
         if dual is not None:
             return dual, used, dual_answer, 0
         fallback = 1
@@ -1416,32 +1577,33 @@ def plan(
     sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
     trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
     warm = warm_controls is not None and warm_controls.shape == (steps, 3)
+    exists = True  # whether the first iterate, when unconstrained, has a plan
     if not warm:
-        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+        exists, warm_controls, used = _unconstrained_plan(
+            n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+        )
     assert warm_controls is not None
     x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
     restarted = warm and out_of_reach(r_bar[-1], xf, trust)
     if restarted:
         # the warm plan ends beyond the trust box's reach of the terminal target: restart from
         # the unconstrained plan, which reaches it (module docstring, *A moved target*)
-        _, warm_controls, used = _unconstrained_plan(n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps)
+        exists, warm_controls, used = _unconstrained_plan(
+            n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+        )
         x_bar, r_bar = node_positions(n, dt_s, x0, warm_controls)
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
-    failed = ConstrainedPlan(
-        SolveStatus.FAILED,
-        np.zeros((steps, 3)),
-        np.full((steps + 1, 3), np.nan),
-        modes,
-        math.nan,
-        0,
-        used,
-        0.0,
-    )
+    first_modes, first_used = modes, used  # of the placeholder result (made when needed)
     if not np.any(modes):  # nothing is unsafe: the unconstrained plan
+        if warm and not restarted:  # a one-step horizon: no node to constrain, still re-plan
+            exists, warm_controls, used = _unconstrained_plan(
+                n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
+            )
+            r_bar = node_positions(n, dt_s, x0, warm_controls)[1]
         return ConstrainedPlan(
-            SolveStatus.CONVERGED,
+            SolveStatus.CONVERGED if exists else SolveStatus.FAILED,
             warm_controls,
             r_bar,
             modes,
@@ -1451,7 +1613,7 @@ def plan(
             time.perf_counter() - start,
             restarted=restarted,
         )
-    result = failed
+    result: ConstrainedPlan | None = None
     cost, last_slack = math.inf, math.inf
     fallbacks = 0
     drift = None
@@ -1509,8 +1671,8 @@ def plan(
             )
             return ConstrainedPlan(
                 status,
-                failed.controls,
-                failed.positions,
+                np.zeros((steps, 3)),
+                np.full((steps + 1, 3), np.nan),
                 modes,
                 math.nan,
                 scp,
@@ -1559,4 +1721,15 @@ def plan(
         if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
+    if result is None:  # not reached (every SCP iteration sets it or returns); kept as it was
+        return ConstrainedPlan(
+            SolveStatus.FAILED,
+            np.zeros((steps, 3)),
+            np.full((steps + 1, 3), np.nan),
+            first_modes,
+            math.nan,
+            0,
+            first_used,
+            0.0,
+        )
     return result

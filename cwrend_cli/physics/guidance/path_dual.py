@@ -168,7 +168,27 @@ def _evaluate(
     grad: np.ndarray,
 ) -> float:
     """``D(y)``; writes ``ũ(y)`` (N, 3), the gradient (R,) and per step the curvature
-    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring)."""
+    ``(iso, rad, A_j ŷ_j)`` (N, 8) of ``J_j = iso I + rad ŷŷᵀ`` (module docstring):
+    :func:`_value` then :func:`_gradient`."""
+    value = _value(a, h, f, nodes, y, c1, c2, u, curv)
+    _gradient(a, h, f, nodes, u, grad)
+    return value
+
+
+@njit(cache=True)
+def _value(
+    a: np.ndarray,
+    h: np.ndarray,
+    f: np.ndarray,
+    nodes: np.ndarray,
+    y: np.ndarray,
+    c1: float,
+    c2: float,
+    u: np.ndarray,
+    curv: np.ndarray,
+) -> float:
+    """``D(y)``; writes ``ũ(y)`` and the curvature of :func:`_evaluate` (the backward pass
+    over the steps; the gradient, the forward pass, is :func:`_gradient`'s)."""
     steps = a.shape[0]
     count = nodes.size
     lam = np.zeros(6)
@@ -191,9 +211,25 @@ def _evaluate(
         curv[j, 1] = (1.0 / (2.0 * c2) if ramp else 0.0) - iso
         for i in range(6):
             curv[j, 2 + i] = a[j, i, 0] * h0 + a[j, i, 1] * h1 + a[j, i, 2] * h2
-    s = np.zeros(6)
     p = 0
     value = 0.0
+    for j in range(steps):  # Σ y_i f_i in the rows' order (that of the forward pass)
+        while p < count and nodes[p] == j + 1:
+            value += y[p] * f[p]
+            p += 1
+    return value - conj
+
+
+@njit(cache=True)
+def _gradient(
+    a: np.ndarray, h: np.ndarray, f: np.ndarray, nodes: np.ndarray, u: np.ndarray, grad: np.ndarray
+) -> None:
+    """Writes the gradient (R,) of ``D`` at the controls ``u`` = ``ũ(y)`` (:func:`_value`'s):
+    each row's residual ``f_i − h_iᵀ Σ_{j<k_i} A_j ũ_j``, one forward pass over the steps."""
+    steps = a.shape[0]
+    count = nodes.size
+    s = np.zeros(6)
+    p = 0
     for j in range(steps):
         for i in range(6):
             s[i] += a[j, i, 0] * u[j, 0] + a[j, i, 1] * u[j, 1] + a[j, i, 2] * u[j, 2]
@@ -202,9 +238,7 @@ def _evaluate(
             for i in range(6):
                 acc += h[p, i] * s[i]
             grad[p] = f[p] - acc
-            value += y[p] * f[p]
             p += 1
-    return value - conj
 
 
 @njit(cache=True)
@@ -386,10 +420,17 @@ def projected_newton(
     bound = np.empty(count, dtype=np.int64)
     in_free = np.zeros(count, dtype=np.bool_)
     value = _evaluate(a, h, f, nodes, y, c1, c2, u, curv, grad)
+    # an accepted trial's arrays become the iterate's by swapping (no copy); the caller's
+    # ``y`` and ``u`` receive the last iterate on return when it is held in the others
+    y_out, u_out = y, u
+    swapped = False
     damping = 0.0
     for it in range(max_iter + 1):
         ok, _ = _kkt_error(y, grad, equality, tol)
         if ok:
+            if swapped:
+                y_out[:] = y
+                u_out[:, :] = u
             return STATUS_CONVERGED, it
         if it == max_iter:
             break
@@ -467,13 +508,20 @@ def projected_newton(
                     i = bound[p]
                     y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
                     gain += grad[i] * (y_t[i] - y[i])
-                value_t = _evaluate(a, h, f, nodes, y_t, c1, c2, u_t, curv_t, grad_t)
+                if not gain > 0.0 and alpha != 1.0:  # neither test below can pass: skip D
+                    alpha *= 0.5
+                    continue
+                # the trial's gradient only where it is read (an accepted or a flat step)
+                value_t = _value(a, h, f, nodes, y_t, c1, c2, u_t, curv_t)
                 if gain > 0.0 and value_t >= value + _ARMIJO * gain:
+                    _gradient(a, h, f, nodes, u_t, grad_t)
                     accepted = True
                     break
                 # a full step that leaves D flat to rounding (near the optimum, along a
                 # nearly dependent pair of rows) is taken when it reduces the KKT errors
                 flat = alpha == 1.0 and value_t >= value - 1e-13 * (abs(value) + 1e-300)
+                if flat:
+                    _gradient(a, h, f, nodes, u_t, grad_t)
                 if flat and _merit(grad_t, free, n_free, tol) < _merit(grad, free, n_free, tol):
                     accepted = True
                     break
@@ -486,11 +534,15 @@ def projected_newton(
                 damping = max(10.0 * damping, 1e-4)
         if not accepted:
             break
-        y[:] = y_t
-        u[:, :] = u_t
-        curv[:, :] = curv_t
-        grad[:] = grad_t
+        y, y_t = y_t, y
+        u, u_t = u_t, u
+        curv, curv_t = curv_t, curv
+        grad, grad_t = grad_t, grad
         value = value_t
+        swapped = not swapped
+    if swapped:
+        y_out[:] = y
+        u_out[:, :] = u
     return STATUS_FAILED, it
 
 
@@ -508,32 +560,43 @@ def block_products(a: np.ndarray) -> np.ndarray:
     return aat
 
 
-#: :func:`grid_products` kept, by (n, Δt, u_max): the longest stack made so far.
-_PRODUCTS: dict[tuple[float, float, float], np.ndarray] = {}
+#: :func:`grid_arrays` kept, by (n, Δt, u_max): the longest stacks made so far.
+_PRODUCTS: dict[tuple[float, float, float], tuple[np.ndarray, np.ndarray]] = {}
 #: Stacks kept in :data:`_PRODUCTS` at most (the oldest dropped) [-].
 PRODUCTS_KEPT = 8
 
 
-def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
-    """:func:`block_products` of the scaled terminal blocks ``Φ^{N−1−j} Γ u_max`` of a
-    ``steps``-step grid (:func:`~.feasibility.grid_problem`'s blocks times u_max), read-only.
+def grid_arrays(n: float, dt_s: float, u_max: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled terminal blocks ``A_j = Φ^{N−1−j} Γ u_max`` (N, 6, 3) of a ``steps``-step
+    grid (:func:`~.feasibility.grid_problem`'s blocks times u_max) and their
+    :func:`block_products` (N, 6, 6), read-only.
 
-    Each step's product is its own block's, and the last ``steps`` blocks of a longer grid
-    are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the longest
-    stack made for ``(n, Δt, u_max)`` is kept and sliced: the same bits as made afresh,
-    once per closed loop instead of once per program (a re-solve's horizon only shrinks)."""
+    Each step's block and product are its own, and the last ``steps`` blocks of a longer
+    grid are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the
+    longest stacks made for ``(n, Δt, u_max)`` are kept and sliced: the same bits as made
+    afresh, once per closed loop instead of once per program (a re-solve's horizon only
+    shrinks)."""
     key = (float(n), float(dt_s), float(u_max))
     cached = _PRODUCTS.get(key)
-    if cached is None or cached.shape[0] < steps:
+    if cached is None or cached[0].shape[0] < steps:
         zero = np.zeros(6)
         blocks = feasibility.grid_problem(n, zero, zero, steps * dt_s, dt_s, u_max).blocks
-        cached = block_products(np.ascontiguousarray(blocks * u_max))
-        cached.flags.writeable = False
+        scaled = np.ascontiguousarray(blocks * u_max)
+        cached = (scaled, block_products(scaled))
+        for array in cached:
+            array.flags.writeable = False
         _PRODUCTS.pop(key, None)
         while len(_PRODUCTS) >= PRODUCTS_KEPT:
             _PRODUCTS.pop(next(iter(_PRODUCTS)))
         _PRODUCTS[key] = cached
-    return cached[cached.shape[0] - steps :]
+    size = cached[0].shape[0]
+    return cached[0][size - steps :], cached[1][size - steps :]
+
+
+def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
+    """:func:`block_products` of the scaled terminal blocks of a ``steps``-step grid, read-only
+    (:func:`grid_arrays`'s second)."""
+    return grid_arrays(n, dt_s, u_max, steps)[1]
 
 
 @njit(cache=True)
@@ -621,6 +684,7 @@ def solve(
     max_iter: int = MAX_ITER,
     keep: np.ndarray | None = None,
     products: np.ndarray | None = None,
+    scaled: np.ndarray | None = None,
 ) -> DualAnswer:
     """The program (module docstring) from ``x0`` over the grid of ``blocks`` (N, 6, 3), the
     terminal blocks Φ^{N−1−j}Γ of :func:`~.feasibility.grid_problem` [s, s²], with
@@ -635,15 +699,16 @@ def solve(
     (``‖A_jᵀλ_j‖ ≤ 1 − ε``, :func:`held_norms`), else the steps that fail wake and
     the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step).
     ``products``: :func:`block_products` of ``blocks × u_max`` when the caller has them
-    (:func:`grid_products`), else made here."""
+    (:func:`grid_products`), else made here; ``scaled``: ``blocks × u_max`` itself when the
+    caller has it (:func:`grid_arrays`)."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
     free_states = zoh_rollout(
         phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
     )
-    a_all = np.ascontiguousarray(blocks * u_max)
+    a_all = np.ascontiguousarray(blocks * u_max) if scaled is None else scaled
     aat_all = block_products(a_all) if products is None else products
-    if aat_all.shape != (steps, 6, 6):
+    if aat_all.shape != (steps, 6, 6) or a_all.shape != (steps, 6, 3):
         raise ValueError(f"products must be ({steps}, 6, 6), not {aat_all.shape}")
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
