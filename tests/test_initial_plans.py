@@ -37,13 +37,13 @@ def _same(a: simulation.RunResult, b: simulation.RunResult) -> bool:
     return True
 
 
-def test_the_second_run_of_a_point_takes_the_initial_plan_and_is_the_same_run(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """Seeds 0 and 1 of a constrained fixed-ε case (a 200 s horizon 1 km above a 200 m
-    sphere): with the memo, the initial plan is made once (one cold plan for two runs);
-    each run is the run without the memo, bit for bit."""
-    cfg = config_from_dict(tomllib.loads(SHORT))
+def _two_seeds(monkeypatch: pytest.MonkeyPatch, toml: str) -> tuple[int, int]:
+    """Seeds 0 and 1 of ``mtf_fixed_socp`` on the config ``toml``, each run alone and with
+    one memo shared by the two (a worker's): asserts that each pair is the same run, bit for
+    bit; returns (cold initial plans made with the memo, plans in the memo)."""
+    from cwrend_cli.campaign import worker
+
+    cfg = config_from_dict(tomllib.loads(toml))
     problem = problem_of(cfg)
     refs = simulation.open_loop_references(problem)
     arch = ALL_ARCHITECTURES["mtf_fixed_socp"]
@@ -58,12 +58,24 @@ def test_the_second_run_of_a_point_takes_the_initial_plan_and_is_the_same_run(
     memo: simulation.InitialPlans = {}
     for seed in (0, 1):
         noise = campaign.standard_normal_for(cfg, seed)
-        alone = simulation.simulate(problem, arch, noise, refs, seed=seed)
+        draws = worker.attitude_draws(problem, cfg.noise.seed, seed)
+        alone = simulation.simulate(problem, arch, noise, refs, seed=seed, attitude_draws=draws)
         monkeypatch.setattr(simulation, "_constrained_plan", counted)
-        shared = simulation.simulate(problem, arch, noise, refs, seed=seed, initial_plans=memo)
+        shared = simulation.simulate(
+            problem, arch, noise, refs, seed=seed, attitude_draws=draws, initial_plans=memo
+        )
         monkeypatch.setattr(simulation, "_constrained_plan", plan)
         assert _same(alone, shared)
-    assert len(cold) == 1 and len(memo) == 1
+    return len(cold), len(memo)
+
+
+def test_the_second_run_of_a_point_takes_the_initial_plan_and_is_the_same_run(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Seeds 0 and 1 of a constrained fixed-ε case (a 200 s horizon 1 km above a 200 m
+    sphere): with the memo, the initial plan is made once (one cold plan for two runs);
+    each run is the run without the memo, bit for bit."""
+    assert _two_seeds(monkeypatch, SHORT) == (1, 1)
 
 
 #: A 200 s tumbling case (2 °/s, a bus and a panel, a port with a corridor; issue 34), as
@@ -95,30 +107,6 @@ def test_a_tumbling_point_takes_the_initial_plan_when_the_attitude_is_known_exac
     truth's attitude, the same for every seed, so the initial plan is made once (issue 34's
     study); with an attitude-knowledge error (drawn per seed) it is made for each. Each run
     is the run without the memo, bit for bit."""
-    from cwrend_cli.campaign import worker
-
-    cfg = config_from_dict(tomllib.loads(TUMBLING.replace("[target]\n", "[target]\n" + knowledge)))
-    problem = problem_of(cfg)
-    assert problem.target.tumbling
-    refs = simulation.open_loop_references(problem)
-    arch = ALL_ARCHITECTURES["mtf_fixed_socp"]
-    cold: list[int] = []
-    plan = simulation._constrained_plan
-
-    def counted(*args: Any, **kwargs: Any) -> Any:
-        if args[6] == 0:  # k_from: the initial plan
-            cold.append(1)
-        return plan(*args, **kwargs)
-
-    memo: simulation.InitialPlans = {}
-    for seed in (0, 1):
-        noise = campaign.standard_normal_for(cfg, seed)
-        draws = worker.attitude_draws(problem, cfg.noise.seed, seed)
-        alone = simulation.simulate(problem, arch, noise, refs, seed=seed, attitude_draws=draws)
-        monkeypatch.setattr(simulation, "_constrained_plan", counted)
-        shared = simulation.simulate(
-            problem, arch, noise, refs, seed=seed, attitude_draws=draws, initial_plans=memo
-        )
-        monkeypatch.setattr(simulation, "_constrained_plan", plan)
-        assert _same(alone, shared)
-    assert len(cold) == cold_plans and len(memo) == 2 - cold_plans
+    toml = TUMBLING.replace("[target]\n", "[target]\n" + knowledge)
+    assert config_from_dict(tomllib.loads(toml)).target.attitude == "tumbling"
+    assert _two_seeds(monkeypatch, toml) == (cold_plans, 2 - cold_plans)
