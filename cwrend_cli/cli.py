@@ -983,8 +983,9 @@ def sweep(
         typer.Option(
             "--param",
             "-p",
-            help="Swept key: dotted.key=v1,v2,v3 or dotted.key=start:stop:num (repeatable; "
-            "adds to / replaces the config's [sweep] table).",
+            help="Swept key: dotted.key=v1,v2,v3, dotted.key=start:stop:num or a TOML array "
+            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' (vectors) (repeatable; adds to / replaces "
+            "the config's [sweep] table).",
             metavar="KEY=VALUES",
         ),
     ] = None,

@@ -71,13 +71,29 @@ def test_param_list_values_are_read_as_toml() -> None:
     )
 
 
+def test_param_toml_array_lists_the_values_as_a_sweep_table_does() -> None:
+    assert parse_param("schedule.beta=[0.1, 0.5]") == ("schedule.beta", (0.1, 0.5))
+    rates = "target.body_rates_deg_s=[[0.0, 0.0, 0.0], [0.291, 0.3881, 1.9403]]"
+    assert parse_param(rates) == (
+        "target.body_rates_deg_s",
+        ([0.0, 0.0, 0.0], [0.291, 0.3881, 1.9403]),
+    )
+
+
+def test_a_quoted_key_is_refused_naming_the_unquoted_form() -> None:
+    with pytest.raises(ConfigError, match="quoted key components"):
+        parse_param('sweep."target.body_rates_deg_s"=[[0, 0, 0]]')
+
+
 def test_param_range_is_start_stop_num() -> None:
     key, values = parse_param("schedule.beta=0.1:0.5:5")
     assert key == "schedule.beta"
     assert values == pytest.approx((0.1, 0.2, 0.3, 0.4, 0.5))
 
 
-@pytest.mark.parametrize("text", ["schedule.beta", "schedule.beta=0.1,,0.2", "x=1:2:zero"])
+@pytest.mark.parametrize(
+    "text", ["schedule.beta", "schedule.beta=0.1,,0.2", "x=1:2:zero", "schedule.beta=[]"]
+)
 def test_malformed_param_is_refused(text: str) -> None:
     with pytest.raises(ConfigError):
         parse_param(text)

@@ -83,7 +83,13 @@ def _parse_value(raw: str, key: str) -> Any:
 
 
 def _split_key(key: str) -> list[str]:
-    """Split a dotted key, rejecting empty components."""
+    """Split a dotted key, rejecting empty and quoted components."""
+    if '"' in key or "'" in key:
+        raise ConfigError(
+            f"malformed key {key[:80]!r}: quoted key components are not read; write the "
+            "key unquoted (e.g. target.body_rates_deg_s), and sweep a key with --param "
+            "KEY=v1,v2 or --param 'KEY=[v1, v2]' (vectors: 'KEY=[[1, 2, 3], [4, 5, 6]]')"
+        )
     parts = [p.strip() for p in key.split(".")]
     if not key.strip() or any(not p for p in parts):
         raise ConfigError(f"malformed key {key[:80]!r}: empty key component")
@@ -251,10 +257,12 @@ def point_tree(
 
 
 def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
-    """``key=v1,v2,v3`` or ``key=start:stop:num`` into ``(key, values)``.
+    """``key=v1,v2,v3``, ``key=[v1, v2, v3]`` or ``key=start:stop:num`` into ``(key, values)``.
 
     Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
-    word is a string. A range gives ``num`` evenly spaced floats.
+    word is a string. A TOML array lists the values as a file's ``[sweep]`` does, so a
+    vector-valued key is swept as ``key=[[1, 2, 3], [4, 5, 6]]``. A range gives ``num``
+    evenly spaced floats.
     """
     if "=" not in text:
         raise ConfigError(
@@ -263,6 +271,10 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
         )
     key, raw = parse_override(text)
     raw_text = text.split("=", 1)[1].strip()
+    if isinstance(raw, list):  # a TOML array: the values, as a file's [sweep] lists them
+        if not raw:
+            raise ConfigError(f"--param {text!r}: the list of values is empty")
+        return key, tuple(raw)
     if isinstance(raw, str) and raw.count(":") == 2 and "," not in raw_text:
         return key, _range_values(key, raw)
     if isinstance(raw, str) and ":" in raw and "," not in raw_text and _numbers(raw.split(":")):
