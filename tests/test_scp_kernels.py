@@ -150,7 +150,7 @@ def test_the_broken_trust_rows_are_those_of_before() -> None:
         assert np.array_equal(got[0], boxed[at]) and np.array_equal(got[1], comp.astype(np.int64))
 
 
-def test_grid_products_are_the_blocks_own_products_however_the_stack_was_made() -> None:
+def test_the_grids_block_products_are_its_own_however_the_stack_was_made() -> None:
     """Sliced from a longer stack or made after a shorter one: each step's ``A_j A_jᵀ`` is
     that of the grid's own blocks × u_max, bit for bit."""
     path_dual._PRODUCTS.clear()
@@ -160,7 +160,7 @@ def test_grid_products_are_the_blocks_own_products_however_the_stack_was_made() 
         ).blocks
         a = blocks * U_MAX
         expected = np.einsum("jrk,jck->jrc", a, a)  # rounding of a 3-term sum
-        got = path_dual.grid_products(N_MOTION, 1.0, U_MAX, steps)
+        got = path_dual.grid_arrays(N_MOTION, 1.0, U_MAX, steps)[1]
         assert got.shape == (steps, 6, 6)
         assert np.array_equal(got, path_dual.block_products(np.ascontiguousarray(a)))
         np.testing.assert_allclose(got, expected, rtol=1e-15, atol=0)

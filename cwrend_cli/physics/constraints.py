@@ -631,13 +631,14 @@ def _min_signed_distance(points: FloatArray, geo: Geometry, d_c: FloatArray | No
     assert geo.semi_axes_km is not None
     if geo.bodies_centre_km is not None:
         low = high = np.full(points.shape[0], np.inf)
+        size = 0.0  # the largest semi-axis [km]
         for centre, axes in ellipsoids(geo):
             body = _ellipsoid_distance_bounds(points if centre is None else points - centre, axes)
             low, high = np.minimum(low, body[0]), np.minimum(high, body[1])
+            size = max(size, float(np.max(axes)))
         if d_c is not None:
             low, high = np.maximum(low, -d_c), np.maximum(high, -d_c)
         best = int(np.argmin(high))
-        size = max(float(np.max(axes)) for _, axes in ellipsoids(geo))
         keep = low <= high[best] + _PRUNE_MARGIN * (abs(high[best]) + size)
         keep[best] = True
         d_e = keep_out_distance(points[keep], geo)

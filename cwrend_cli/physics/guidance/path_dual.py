@@ -593,12 +593,6 @@ def grid_arrays(n: float, dt_s: float, u_max: float, steps: int) -> tuple[np.nda
     return cached[0][size - steps :], cached[1][size - steps :]
 
 
-def grid_products(n: float, dt_s: float, u_max: float, steps: int) -> np.ndarray:
-    """:func:`block_products` of the scaled terminal blocks of a ``steps``-step grid, read-only
-    (:func:`grid_arrays`'s second)."""
-    return grid_arrays(n, dt_s, u_max, steps)[1]
-
-
 @njit(cache=True)
 def _row_vectors(
     n: float, dt_s: float, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
@@ -698,9 +692,8 @@ def solve(
     the answer is accepted only when every held step's zero minimises its Lagrangian
     (``‖A_jᵀλ_j‖ ≤ 1 − ε``, :func:`held_norms`), else the steps that fail wake and
     the program is solved again, warm (:data:`WAKE_ROUNDS`, then every step).
-    ``products``: :func:`block_products` of ``blocks × u_max`` when the caller has them
-    (:func:`grid_products`), else made here; ``scaled``: ``blocks × u_max`` itself when the
-    caller has it (:func:`grid_arrays`)."""
+    ``scaled``, ``products``: ``blocks × u_max`` and its :func:`block_products` when the
+    caller has them (:func:`grid_arrays`), else made here."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
     free_states = zoh_rollout(
@@ -709,7 +702,10 @@ def solve(
     a_all = np.ascontiguousarray(blocks * u_max) if scaled is None else scaled
     aat_all = block_products(a_all) if products is None else products
     if aat_all.shape != (steps, 6, 6) or a_all.shape != (steps, 6, 3):
-        raise ValueError(f"products must be ({steps}, 6, 6), not {aat_all.shape}")
+        raise ValueError(
+            f"scaled and products must be ({steps}, 6, 3) and ({steps}, 6, 6), "
+            f"not {a_all.shape} and {aat_all.shape}"
+        )
     h = np.empty_like(rows.coeffs)
     _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
     f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
