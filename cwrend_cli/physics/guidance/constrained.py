@@ -499,34 +499,27 @@ def _fixed_pairs(
     """:func:`_pairs_planes` of a fixed target in one pass: the rows of :func:`_pair_rows` in
     its order, each row's plane as :func:`_planes` reads it (``index`` (N + 1,) a node's
     plane, −1 for none; ``normals`` (B, K, 3), ``offsets`` (B, K) of the B ellipsoids) and
-    :func:`_trust_split`'s test with its arithmetic: (kept, left out, kept normals, kept
+    :func:`_box_low`'s trust test: (kept, left out, kept normals, kept
     offsets)."""
-    size = 2 * normals.shape[0] * modes.size
+    pairs = _pair_rows(index >= 0, modes, normals.shape[0])
+    size = pairs.shape[0]
     kept = np.empty((size, 3), dtype=np.int64)
     out = np.empty((size, 3), dtype=np.int64)
     kept_normals = np.empty((size, 3))
     kept_offsets = np.empty(size)
     i = o = 0
-    for k in range(1, modes.size - 1):
-        for j in (k, k - 1):
-            if index[j] >= 0 and (j == k or modes[k] != 0):
-                for b in range(normals.shape[0]):
-                    n0, n1, n2 = (
-                        normals[b, index[j], 0],
-                        normals[b, index[j], 1],
-                        normals[b, index[j], 2],
-                    )
-                    offset = offsets[b, index[j]]
-                    dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-                    low = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
-                    if low >= offset + SCP_TOL_KM:
-                        out[o, 0], out[o, 1], out[o, 2] = k, j, b
-                        o += 1
-                    else:
-                        kept[i, 0], kept[i, 1], kept[i, 2] = k, j, b
-                        kept_normals[i, 0], kept_normals[i, 1], kept_normals[i, 2] = n0, n1, n2
-                        kept_offsets[i] = offset
-                        i += 1
+    for p in range(size):
+        k, row, b = pairs[p, 0], index[pairs[p, 1]], pairs[p, 2]
+        n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
+        offset = offsets[b, row]
+        if _box_low(n0, n1, n2, r_bar, k, trust_km) >= offset + SCP_TOL_KM:
+            out[o] = pairs[p]
+            o += 1
+        else:
+            kept[i] = pairs[p]
+            kept_normals[i, 0], kept_normals[i, 1], kept_normals[i, 2] = n0, n1, n2
+            kept_offsets[i] = offset
+            i += 1
     return kept[:i], out[:o], kept_normals[:i], kept_offsets[:i]
 
 
@@ -548,6 +541,14 @@ def _pair_rows(has: np.ndarray, modes: np.ndarray, bodies: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _box_low(n0: float, n1: float, n2: float, r_bar: np.ndarray, k: int, trust_km: float) -> float:
+    """``nᵀ r̄_k − trust ‖n‖₁``: the smallest nᵀr over node k's trust box [km] (numpy's sums
+    in their order)."""
+    dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+    return float(dot - trust_km * (abs(n0) + abs(n1) + abs(n2)))
+
+
+@njit(cache=True)
 def _trust_split(
     pairs: np.ndarray, normals: np.ndarray, offsets: np.ndarray, r_bar: np.ndarray, trust_km: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -558,11 +559,8 @@ def _trust_split(
     left = np.empty(pairs.shape[0], dtype=np.bool_)
     count = 0
     for p in range(pairs.shape[0]):
-        k = pairs[p, 0]
         n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
-        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-        low = dot - trust_km * (abs(n0) + abs(n1) + abs(n2))
-        left[p] = low >= offsets[p] + SCP_TOL_KM
+        left[p] = _box_low(n0, n1, n2, r_bar, pairs[p, 0], trust_km) >= offsets[p] + SCP_TOL_KM
         count += left[p]
     kept = np.empty((pairs.shape[0] - count, 3), dtype=np.int64)
     out = np.empty((count, 3), dtype=np.int64)
@@ -1595,7 +1593,6 @@ def plan(
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
-    first_modes, first_used = modes, used  # of the placeholder result (made when needed)
     if not np.any(modes):  # nothing is unsafe: the unconstrained plan
         if warm and not restarted:  # a one-step horizon: no node to constrain, still re-plan
             exists, warm_controls, used = _unconstrained_plan(
@@ -1721,15 +1718,5 @@ def plan(
         if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
             break
         modes = new_modes
-    if result is None:  # not reached (every SCP iteration sets it or returns); kept as it was
-        return ConstrainedPlan(
-            SolveStatus.FAILED,
-            np.zeros((steps, 3)),
-            np.full((steps + 1, 3), np.nan),
-            first_modes,
-            math.nan,
-            0,
-            first_used,
-            0.0,
-        )
+    assert result is not None  # every SCP iteration sets it, returns or restarts
     return result
