@@ -17,15 +17,13 @@ loops across platforms within its tolerance).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
-from test_same_numbers import platform_signature
+from test_same_numbers import assert_pinned_plans, write_pinned_plans
 
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
@@ -78,15 +76,9 @@ def _plans() -> list[dict[str, Any]]:
 
 
 def test_a_fixed_targets_constrained_plans_are_those_before_issue_34() -> None:
-    stored = json.loads(FIXTURE.read_text(encoding="utf-8"))
-    if stored["platform"] != platform_signature():
-        pytest.skip("bits are compared on the fixture's platform only (module docstring)")
-    assert _plans() == stored["plans"]
+    assert_pinned_plans(FIXTURE, _plans)
 
 
 if __name__ == "__main__":
-    FIXTURE.write_text(
-        json.dumps({"platform": platform_signature(), "plans": _plans()}, indent=1) + "\n",
-        encoding="utf-8",
-    )
+    write_pinned_plans(FIXTURE, _plans())
     sys.exit(0)

@@ -67,6 +67,7 @@ import json
 import math
 import platform
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +148,24 @@ def platform_signature() -> dict[str, str]:
         "scipy": scipy.__version__,
         "numba": numba.__version__,
     }
+
+
+def assert_pinned_plans(fixture: Path, make: Callable[[], list[dict[str, Any]]]) -> None:
+    """``make()`` equals the plans stored in ``fixture`` (a JSON of ``platform`` and
+    ``plans``), compared on the fixture's platform only (:func:`platform_signature`:
+    elsewhere the test is skipped, before ``make`` runs)."""
+    stored = json.loads(fixture.read_text(encoding="utf-8"))
+    if stored["platform"] != platform_signature():
+        pytest.skip("bits are compared on the fixture's platform only (module docstring)")
+    assert make() == stored["plans"]
+
+
+def write_pinned_plans(fixture: Path, plans: list[dict[str, Any]]) -> None:
+    """Store ``plans`` with this platform's signature for :func:`assert_pinned_plans`."""
+    fixture.write_text(
+        json.dumps({"platform": platform_signature(), "plans": plans}, indent=1) + "\n",
+        encoding="utf-8",
+    )
 
 
 def _column_summary(values: pd.Series) -> dict[str, Any]:
