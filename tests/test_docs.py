@@ -157,6 +157,19 @@ def test_the_readme_links_to_files_that_exist() -> None:
         assert (REPO / target).exists(), target
 
 
+def test_the_readme_lists_every_page_of_the_manual() -> None:
+    """The README's documentation list is the manual's table of contents: a page in the
+    mkdocs nav that the README does not link is a page a reader of the front page never
+    finds (the home page and the changelog, linked as CHANGELOG.md, aside)."""
+    nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8").split("\nnav:", 1)[1]
+    pages = re.findall(r":\s*(\S+\.md)\s*$", nav, re.MULTILINE)
+    assert len(pages) > 20
+    linked = set(re.findall(r"\]\((docs/[^)#\s]+)", README))
+    unlinked = [p for p in pages if f"docs/{p}" not in linked]
+    missing = [p for p in unlinked if p not in ("index.md", "changelog.md")]
+    assert missing == []
+
+
 def test_shipped_files_cite_the_paper_not_the_teams_spec() -> None:
     """campaigns/paper.toml cited "SPEC §6", a document that is not shipped: what a user
     reads cites the paper (or the authors' code)."""
