@@ -10,9 +10,11 @@ compares the paper campaigns' columns to its fixture's too).
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.dataset as ds
@@ -23,6 +25,7 @@ from typer.testing import CliRunner
 from cwrend_cli.cli import app
 from cwrend_cli.output.tables import unit_of
 from cwrend_cli.physics import constraints as cg
+from cwrend_cli.physics.guidance import constrained
 from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
 
 R = 0.2  # km
@@ -207,6 +210,32 @@ def test_the_constrained_socp_flies_round_the_zone_and_shooting_does_not(tmp_pat
     assert (socp["fallback_step"] == "socp_scp").all()
     assert (socp["scp_iterations"] >= 1).all() and (socp["slack_km"] == 0.0).all()
     assert (solves[solves["arch"] == "mtf_fixed"]["scp_iterations"] == 0).all()
+
+
+def test_the_solves_count_the_programs_left_to_clarabel(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``fallback_programs`` is the re-solve's ``ConstrainedPlan.fallbacks`` (0 for a
+    shooting re-solve): the plans are marked with 7 fallbacks here, and every constrained
+    re-solve's row carries 7; its ``iterations`` sum every program's, so at least one a
+    program."""
+    real = constrained.plan
+
+    def marked(*args: Any, **kwargs: Any) -> constrained.ConstrainedPlan:
+        return dataclasses.replace(real(*args, **kwargs), fallbacks=7)
+
+    monkeypatch.setattr(constrained, "plan", marked)
+    config = tmp_path / "short.toml"
+    config.write_text(SHORT, encoding="utf-8")
+    out = tmp_path / "run"
+    args = ["run", str(config), "-a", "mtf_fixed,mtf_adaptive_socp", "--no-rrd", "-o", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    solves = pq.read_table(out / "solves.parquet").to_pandas()
+    socp = solves[solves["arch"] == "mtf_adaptive_socp"]
+    assert len(socp) > 5 and (socp["fallback_programs"] == 7).all()
+    assert (socp["iterations"] >= socp["scp_iterations"]).all()
+    assert (solves[solves["arch"] == "mtf_fixed"]["fallback_programs"] == 0).all()
 
 
 def test_a_constrained_campaign_states_its_violation_rate(tmp_path: Path) -> None:

@@ -213,7 +213,10 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
         "iterations of the solver that answered, summed over the steps of the fallback "
         "chain: Newton iterations of the shooting ascent; for a cone program, of its dual "
         "ascent where the quadratic weight max(eps, 1e-6) is at least 1e-3, else Clarabel's "
-        "interior-point iterations",
+        "interior-point iterations; for a constrained cone program (scp_iterations > 0), "
+        "the iterations of every convex program of the re-solve summed: the dual Newton "
+        "method's, certified or not, and Clarabel's on the programs it was left "
+        "(fallback_programs)",
         "-",
     ),
     "residual_km": _col("terminal residual norm of the solve"),
@@ -278,6 +281,11 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "scp_iterations": _col(
         "convex programs the constrained cone program solved (sequential convex "
         "programming); 0: not a constrained solve",
+        "-",
+    ),
+    "fallback_programs": _col(
+        "convex programs of the constrained cone program that the dual Newton method could "
+        "not certify and Clarabel solved (0: every program solved by the dual method)",
         "-",
     ),
     "slack_km": _col(
@@ -687,6 +695,7 @@ def _solves_columns(results: Sequence[RunResult]) -> dict[str, Any]:
     if _has_safety(results):
         cols["scp_iterations"] = [s.scp_iterations for r in results for s in r.solves]
         cols["slack_km"] = [s.slack_km for r in results for s in r.solves]
+        cols["fallback_programs"] = [s.fallback_programs for r in results for s in r.solves]
     if _has_abort(results):
         cols["abort_slack_km"] = [s.abort_slack_km for r in results for s in r.solves]
     return cols
@@ -698,7 +707,11 @@ def _has_abort(results: Sequence[RunResult]) -> bool:
 
 
 #: The solves' columns of the constrained cone program (issue 32), only with constraints.
-SCP_SOLVE_FIELDS = [pa.field("scp_iterations", pa.int64()), pa.field("slack_km", pa.float64())]
+SCP_SOLVE_FIELDS = [
+    pa.field("scp_iterations", pa.int64()),
+    pa.field("slack_km", pa.float64()),
+    pa.field("fallback_programs", pa.int64()),
+]
 #: The solves' abort-safety column (issue 34 item 4), only with constraints.abort_safe_s.
 ABORT_SOLVE_FIELDS = [pa.field("abort_slack_km", pa.float64())]
 

@@ -105,6 +105,7 @@ class SolveRecord:
     scp_iterations: int = 0  # constrained cone program (issue 32): its convex programs
     slack_km: float = 0.0  # constrained cone program: the path softening it needed [km]
     abort_slack_km: float = 0.0  # … and the abort-safety softening (issue 34 item 4) [km]
+    fallback_programs: int = 0  # constrained cone program: programs left to Clarabel
 
 
 @dataclass(frozen=True)
@@ -263,13 +264,16 @@ def _record(
     t_s: float,
     result: guidance.SolveResult,
     threshold: float,
-    scp: tuple[int, float, float] | None = None,
+    scp: tuple[int, float, float, int] | None = None,
 ) -> SolveRecord:
-    scp_iterations, slack_km, abort_slack_km = (0, 0.0, 0.0) if scp is None else scp
+    scp_iterations, slack_km, abort_slack_km, fallback_programs = (
+        (0, 0.0, 0.0, 0) if scp is None else scp
+    )
     return SolveRecord(
         scp_iterations=scp_iterations,
         slack_km=slack_km,
         abort_slack_km=abort_slack_km,
+        fallback_programs=fallback_programs,
         kind=kind,
         step=step,
         t_s=t_s,
@@ -944,7 +948,7 @@ def _cone_resolves(
 #: The initial constrained plans a campaign worker made, by the pickled inputs of
 #: :func:`_initial_constrained_plan` (at most :data:`INITIAL_PLANS_KEPT`, the oldest dropped).
 InitialPlans = dict[
-    bytes, tuple[guidance.SolveResult, tuple[int, float, float], "constrained.Duals | None"]
+    bytes, tuple[guidance.SolveResult, tuple[int, float, float, int], "constrained.Duals | None"]
 ]
 #: Initial plans a worker keeps (:data:`InitialPlans`) [-].
 INITIAL_PLANS_KEPT = 64
@@ -957,7 +961,7 @@ def _initial_constrained_plan(
     p: FloatArray,
     known: _Knowledge | None,
     plans: InitialPlans | None,
-) -> tuple[guidance.SolveResult, tuple[int, float, float], constrained.Duals | None] | None:
+) -> tuple[guidance.SolveResult, tuple[int, float, float, int], constrained.Duals | None] | None:
     """:func:`_constrained_plan` from ``x_hat`` at step 0 over the whole horizon, cold.
 
     With ``plans`` (:func:`simulate`'s ``initial_plans``) a plan is made once for each
@@ -997,7 +1001,7 @@ def _constrained_plan(
     k_from: int,
     known: _Knowledge | None = None,
     warm_duals: constrained.Duals | None = None,
-) -> tuple[guidance.SolveResult, tuple[int, float, float], constrained.Duals | None] | None:
+) -> tuple[guidance.SolveResult, tuple[int, float, float, int], constrained.Duals | None] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone
     or with ``constraints.enforce = false`` (measure only: the unconstrained program).
 
@@ -1072,7 +1076,7 @@ def _constrained_plan(
         controls=ans.controls if converged else None,
     )
     slack = 0.0 if math.isnan(ans.slack_km) else ans.slack_km
-    return result, (ans.scp_iterations, slack, ans.abort_slack_km), ans.duals
+    return result, (ans.scp_iterations, slack, ans.abort_slack_km, ans.fallbacks), ans.duals
 
 
 def _min_miss_if_infeasible(

@@ -240,7 +240,8 @@ class ConstrainedPlan:
     (row 0 the start) are zero/NaN unless converged; ``modes`` (N+1,) per node:
     0 none, 1 corridor, 2 keep-out, 3 both; ``slack_km`` the softening used
     (0: every path constraint held); ``scp_iterations`` the convex programs
-    solved, ``solver_iterations`` Clarabel's iterations summed.
+    solved, ``solver_iterations`` the iterations of all of them summed (the dual Newton
+    method's, certified or not, and Clarabel's on the ``fallbacks``).
     """
 
     status: SolveStatus
