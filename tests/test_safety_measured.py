@@ -191,16 +191,22 @@ half_angle_deg = 30.0
 """
 
 
+def _run_short(tmp_path: Path, archs: str) -> Path:
+    """``cwrend run`` of :data:`SHORT` with the architectures ``archs``: its output folder."""
+    config = tmp_path / "short.toml"
+    config.write_text(SHORT, encoding="utf-8")
+    out = tmp_path / "run"
+    args = ["run", str(config), "-a", archs, "--no-rrd", "-o", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    return out
+
+
 def test_the_constrained_socp_flies_round_the_zone_and_shooting_does_not(tmp_path: Path) -> None:
     """1 km above a 200 m sphere, the port below it: the shooting plan goes through, the
     cone program's constrained re-solves keep the true path out (sigma_margin 0: its
     margin is the chord's; the true path is the estimate's, 1 m σ away)."""
-    config = tmp_path / "short.toml"
-    config.write_text(SHORT, encoding="utf-8")
-    out = tmp_path / "run"
-    args = ["run", str(config), "-a", "mtf_fixed,mtf_fixed_socp", "--no-rrd", "-o", str(out)]
-    result = runner.invoke(app, args)
-    assert result.exit_code == 0, result.output
+    out = _run_short(tmp_path, "mtf_fixed,mtf_fixed_socp")
     rows = {r["arch"]: r for r in pq.read_table(out / "summary.parquet").to_pylist()}
     assert rows["mtf_fixed"]["safety_violated"] is True
     assert rows["mtf_fixed_socp"]["safety_violated"] is False
@@ -225,12 +231,7 @@ def test_the_solves_count_the_programs_left_to_clarabel(
         return dataclasses.replace(real(*args, **kwargs), fallbacks=7)
 
     monkeypatch.setattr(constrained, "plan", marked)
-    config = tmp_path / "short.toml"
-    config.write_text(SHORT, encoding="utf-8")
-    out = tmp_path / "run"
-    args = ["run", str(config), "-a", "mtf_fixed,mtf_adaptive_socp", "--no-rrd", "-o", str(out)]
-    result = runner.invoke(app, args)
-    assert result.exit_code == 0, result.output
+    out = _run_short(tmp_path, "mtf_fixed,mtf_adaptive_socp")
     solves = pq.read_table(out / "solves.parquet").to_pandas()
     socp = solves[solves["arch"] == "mtf_adaptive_socp"]
     assert len(socp) > 5 and (socp["fallback_programs"] == 7).all()
