@@ -12,8 +12,10 @@ state, warm controls and shifted row multipliers (what the closed loop does). Ma
 running this module as a script on the code before the kernels (``main`` at 20532b2,
 ``PYTHONPATH=<that tree> python tests/test_dual_plan_numbers.py``).
 
-Bits are compared on the fixture's platform only (``test_same_numbers.platform_signature``),
-as in ``test_fixed_target_numbers``; elsewhere the test is skipped.
+Bits are compared on the fixture's platform (``test_same_numbers.platform_signature``) and
+on those its ``also_on`` lists, where the same code gave the same plans bit for bit
+(``python tests/test_dual_plan_numbers.py --also-here``), as in
+``test_fixed_target_numbers``; elsewhere the test is skipped.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from test_same_numbers import assert_pinned_plans, write_pinned_plans
+from test_same_numbers import assert_pinned_plans, confirm_pinned_plans, write_pinned_plans
 
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
@@ -84,5 +86,9 @@ def test_the_dual_solvers_constrained_plans_are_those_before_the_kernels() -> No
 
 
 if __name__ == "__main__":
+    # no argument: rewrite the fixture (only when an issue moves the plans on purpose);
+    # --also-here: add this platform to its ``also_on`` if the plans are the same here
+    if sys.argv[1:] == ["--also-here"]:
+        sys.exit(confirm_pinned_plans(FIXTURE, _plans()))
     write_pinned_plans(FIXTURE, _plans())
     sys.exit(0)

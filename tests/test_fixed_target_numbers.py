@@ -11,8 +11,10 @@ worktree).
 
 Bits can only be compared on the platform the fixture was made on
 (``test_same_numbers.platform_signature``: OpenBLAS, numpy and Clarabel's roundings
-differ by CPU); elsewhere the test is skipped (``test_same_numbers`` compares closed
-loops across platforms within its tolerance).
+differ by CPU) and on those its ``also_on`` lists, where the same code gave the same
+plans bit for bit (``python tests/test_fixed_target_numbers.py --also-here``; an Intel
+``rocketlake`` was added so, 2026-12-03); elsewhere the test is skipped
+(``test_same_numbers`` compares closed loops across platforms within its tolerance).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from test_same_numbers import assert_pinned_plans, write_pinned_plans
+from test_same_numbers import assert_pinned_plans, confirm_pinned_plans, write_pinned_plans
 
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
@@ -80,5 +82,9 @@ def test_a_fixed_targets_constrained_plans_are_those_before_issue_34() -> None:
 
 
 if __name__ == "__main__":
+    # no argument: rewrite the fixture (only when an issue moves the plans on purpose);
+    # --also-here: add this platform to its ``also_on`` if the plans are the same here
+    if sys.argv[1:] == ["--also-here"]:
+        sys.exit(confirm_pinned_plans(FIXTURE, _plans()))
     write_pinned_plans(FIXTURE, _plans())
     sys.exit(0)

@@ -151,21 +151,39 @@ def platform_signature() -> dict[str, str]:
 
 
 def assert_pinned_plans(fixture: Path, make: Callable[[], list[dict[str, Any]]]) -> None:
-    """``make()`` equals the plans stored in ``fixture`` (a JSON of ``platform`` and
-    ``plans``), compared on the fixture's platform only (:func:`platform_signature`:
-    elsewhere the test is skipped, before ``make`` runs)."""
+    """``make()`` equals the plans stored in ``fixture`` (a JSON of ``platform``, ``plans``
+    and optionally ``also_on``), compared on the fixture's platform and on the platforms
+    ``also_on`` lists, where the same code gave the same plans bit for bit
+    (:func:`confirm_pinned_plans`); elsewhere the test is skipped, before ``make`` runs."""
     stored = json.loads(fixture.read_text(encoding="utf-8"))
-    if stored["platform"] != platform_signature():
-        pytest.skip("bits are compared on the fixture's platform only (module docstring)")
+    if platform_signature() not in [stored["platform"], *stored.get("also_on", [])]:
+        pytest.skip("bits are compared on the fixture's platforms only (module docstring)")
     assert make() == stored["plans"]
 
 
 def write_pinned_plans(fixture: Path, plans: list[dict[str, Any]]) -> None:
     """Store ``plans`` with this platform's signature for :func:`assert_pinned_plans`."""
-    fixture.write_text(
-        json.dumps({"platform": platform_signature(), "plans": plans}, indent=1) + "\n",
-        encoding="utf-8",
-    )
+    _write_plans(fixture, {"platform": platform_signature(), "plans": plans})
+
+
+def confirm_pinned_plans(fixture: Path, plans: list[dict[str, Any]]) -> int:
+    """Add this platform to ``fixture``'s ``also_on`` when ``plans``, made here by the code
+    that reproduces the fixture on its own platform, equal the stored ones bit for bit: 0;
+    else nothing is written and 1 (the platforms round differently: the test stays skipped
+    here)."""
+    stored = json.loads(fixture.read_text(encoding="utf-8"))
+    if plans != stored["plans"]:
+        print(f"{fixture.name}: the plans made here differ from the stored ones", file=sys.stderr)
+        return 1
+    here = platform_signature()
+    if here not in [stored["platform"], *stored.get("also_on", [])]:
+        stored["also_on"] = [*stored.get("also_on", []), here]
+        _write_plans(fixture, stored)
+    return 0
+
+
+def _write_plans(fixture: Path, stored: dict[str, Any]) -> None:
+    fixture.write_text(json.dumps(stored, indent=1) + "\n", encoding="utf-8")
 
 
 def _column_summary(values: pd.Series) -> dict[str, Any]:
@@ -364,6 +382,20 @@ def test_every_platform_copy_holds_the_primary_numbers() -> None:
         held = json.loads(copy.read_text())
         assert held["platform"] != primary["platform"], copy.name
         assert _differences(held, primary) == [], copy.name
+
+
+def test_a_platform_joins_pinned_plans_only_when_its_plans_are_the_same(tmp_path: Path) -> None:
+    """``confirm_pinned_plans`` lists this platform under ``also_on`` for the same plans, once;
+    for plans that differ by one bit it writes nothing and answers 1."""
+    plans = [{"status": "converged", "controls": [(0.1).hex()]}]
+    fixture = tmp_path / "plans.json"
+    _write_plans(fixture, {"platform": {"cpu": "elsewhere"}, "plans": plans})
+    moved = [{"status": "converged", "controls": [math.nextafter(0.1, 1.0).hex()]}]
+    assert confirm_pinned_plans(fixture, moved) == 1
+    assert "also_on" not in json.loads(fixture.read_text(encoding="utf-8"))
+    assert confirm_pinned_plans(fixture, plans) == 0
+    assert confirm_pinned_plans(fixture, plans) == 0
+    assert json.loads(fixture.read_text(encoding="utf-8"))["also_on"] == [platform_signature()]
 
 
 def _changed(
