@@ -117,6 +117,20 @@ def test_the_distance_figure_draws_the_stored_distances_and_the_zero_line(
     assert len(data.windows) == 2 and len(ax.patches) >= 2  # the degradation windows shaded
 
 
+def test_the_close_up_marks_the_deepest_point_inside_with_its_depth(constrained: Path) -> None:
+    """The shooting run goes through the zone: the close-up marks the least stored φ and
+    labels its depth in metres and its time."""
+    data = load_results(constrained)
+    near = fig_safety_distance(data).axes[1]
+    (mark,) = [line for line in near.get_lines() if line.get_gid() == "deepest"]
+    deepest = data.steps.loc[data.steps["safety_distance_km"].idxmin()]
+    assert mark.get_ydata()[0] == deepest["safety_distance_km"] < 0
+    assert mark.get_xdata()[0] == deepest["t_s"]
+    (label,) = near.texts
+    assert f"{-deepest['safety_distance_km'] * 1e3:.3g} m inside" in label.get_text()
+    assert f"t = {deepest['t_s']:g} s" in label.get_text()
+
+
 def _row(md: str, label: str) -> list[str]:
     section = md.split("## Safety (path constraints)", 1)[1].split("\n## ", 1)[0]
     line = next(ln for ln in section.splitlines() if ln.startswith(f"| {label} |"))

@@ -1061,6 +1061,7 @@ def fig_safety_distance(data: ReportData) -> Figure:
     hi = max(float(tail.max()) if tail.size else near, 0.0)
     pad = 0.06 * (hi - lo or 1.0)
     ax_near.set_ylim(lo - pad, hi + pad)
+    _mark_deepest(ax_near, data.steps[data.steps["t_s"] >= start])
     values = data.steps["safety_distance_km"].to_numpy(dtype=float)
     values = values[np.isfinite(values)]
     if values.size:
@@ -1073,6 +1074,23 @@ def fig_safety_distance(data: ReportData) -> Figure:
     fig.suptitle(f"Distance to the unsafe set, the keep-out zone outside the corridor "
                  f"({_title(data)})")  # fmt: skip
     return _finished(fig)
+
+
+def _mark_deepest(ax: Axes, steps: pd.DataFrame) -> None:
+    """Mark and label the deepest point inside the unsafe set (the least φ < 0) of
+    ``steps``: a violation of centimetres to metres is a sliver on a close-up whose
+    scale is the approach's kilometre, and the label gives its depth and time."""
+    phi = steps["safety_distance_km"].to_numpy(dtype=float)
+    if not np.any(phi < 0.0):
+        return
+    k = int(np.nanargmin(phi))
+    t, depth = float(steps["t_s"].iloc[k]), float(phi[k])
+    ax.plot([t], [depth], marker="x", color="black", ms=9, mew=2, ls="none", gid="deepest")
+    ax.annotate(
+        f"deepest: {-depth * 1e3:.3g} m inside\nat t = {t:g} s ({steps['arch'].iloc[k]})",
+        xy=(t, depth), xytext=(0.45, 0.3), textcoords="axes fraction", fontsize=9,
+        arrowprops={"arrowstyle": "->", "color": "black", "lw": 0.8},
+    )  # fmt: skip
 
 
 def _has_constraints(data: ReportData) -> bool:
@@ -1648,7 +1666,8 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     FigureEntry(
         "safety_distance.png",
         "Signed distance of the reported seed's true paths to the unsafe set (negative: "
-        "inside), the whole run and a close-up of the approach, degradation windows shaded.",
+        "inside), the whole run and a close-up of the approach (its deepest point inside "
+        "marked and labelled), degradation windows shaded.",
         fig_safety_distance,
         _has_safety_distance,
     ),
