@@ -1098,6 +1098,10 @@ def report(
             metavar="KEY",
         ),
     ] = None,
+    quiet: Annotated[
+        bool,
+        typer.Option("--quiet", "-q", help="Print nothing but errors (no file list or notes)."),
+    ] = False,
 ) -> None:
     """Write the paper's figures (PNG), report.md and report.html into RESULTS_DIR/report/.
 
@@ -1116,6 +1120,8 @@ def report(
 
             hold.enter_context(campaign_lock(results_dir))
         summary = write_report(results_dir, seed=seed, point=point)
+        if quiet:
+            return
         for path in summary.files:
             typer.echo(str(path))
         for note in summary.notes:

@@ -150,6 +150,15 @@ def test_report_is_rewritten_in_place(run_dir: Path, run_report, unrendered: Non
     assert names == sorted(expected)  # no temp files left behind
 
 
+def test_a_quiet_report_prints_nothing_and_writes_every_file(
+    run_dir: Path, run_report, unrendered: None
+) -> None:
+    result = _report(run_dir, "-q")
+    assert result.exit_code == 0, result.output
+    assert result.stdout == "" and result.stderr == ""
+    assert (run_dir / "report" / "report.html").stat().st_size > 1_000
+
+
 def test_report_errors(tmp_path: Path, run_dir: Path) -> None:
     missing = _report(tmp_path / "nope")
     assert missing.exit_code == 2 and "error:" in missing.output
