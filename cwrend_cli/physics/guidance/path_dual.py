@@ -81,7 +81,6 @@ from cwrend_cli.physics.guidance._grid_kernels import step_law
 from cwrend_cli.physics.guidance._kernels import STATUS_CONVERGED, STATUS_FAILED, _cholesky_solve
 
 __all__ = [
-    "DIRECT_DAMPING_TRIES",
     "ENTER",
     "HOMOTOPY_FACTOR",
     "HOMOTOPY_FROM",
@@ -120,17 +119,7 @@ WAKE_MARGIN = 0.03
 WAKE_ROUNDS = 3
 _ARMIJO = 1e-4
 _HALVINGS = 4
-#: Damping tries of a Newton iteration before the solve stops, failed [-]: after every
-#: second try the damping (``metric``-scaled Levenberg–Marquardt) is raised tenfold, to at
-#: least 1e-4, so the homotopy's levels (small weights) raise it up to 20 times …
 _DAMPING_TRIES = 40
-#: … and a weight solved directly (at least :data:`HOMOTOPY_FROM`: every adaptive-ε
-#: program) up to 8 times (from 1e-4 to 1e3 when it starts at 0; issue 32: over the 790
-#: re-solves of seeds 0–4 of both adaptive cone-program architectures of
-#: campaigns/safe_approach.toml the plans and Newton iteration counts are those of 40
-#: tries, while an iteration that fails, e.g. a warm start that cannot ascend, stops
-#: after 16 tries instead of 40; docs/solvers.md).
-DIRECT_DAMPING_TRIES = 16
 
 
 class DualRows(NamedTuple):
@@ -402,7 +391,6 @@ def projected_newton(
     u: np.ndarray,
     max_iter: int,
     enter: int,
-    tries: int = _DAMPING_TRIES,
 ) -> tuple[int, int]:
     """Maximise ``D`` over ``y`` (inequality entries ≥ 0) from ``y`` in place; writes ``ũ``.
 
@@ -410,8 +398,7 @@ def projected_newton(
     conditions hold to ``tol`` (module docstring), else ``STATUS_FAILED``.
     ``aat`` (N, 6, 6): the products ``A_j A_jᵀ`` of ``a`` (:func:`block_products`).
     ``metric`` (R,): the Levenberg–Marquardt metric ``h_iᵀ (Σ_{j<k_i} A_j A_jᵀ) h_i`` of
-    each row, negative where not yet computed (filled as rows need it). ``tries``: the
-    damping tries of an iteration before it fails (:data:`_DAMPING_TRIES`).
+    each row, negative where not yet computed (filled as rows need it).
     """
     steps = a.shape[0]
     count = nodes.size
@@ -493,7 +480,7 @@ def projected_newton(
         step = np.empty(n_free)
         mat = np.empty((n_free, n_free))
         accepted = False
-        for _try in range(tries):
+        for _try in range(_DAMPING_TRIES):
             for r in range(n_free):
                 for c in range(n_free):
                     mat[r, c] = hess[r, c]
@@ -658,15 +645,13 @@ def _homotopy(
     homotopy's start: :attr:`DualAnswer.start`)."""
     metric = np.full(nodes.size, -1.0)
     level = max(float(weight), HOMOTOPY_FROM)
-    tries = _DAMPING_TRIES if weight < HOMOTOPY_FROM else DIRECT_DAMPING_TRIES
     total = 0
     while True:
         last = level == weight
         tol = rows.tol if last else rows.tol * SETTLED
         status, iterations = projected_newton(
-            a, aat, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER,
-            tries,
-        )  # fmt: skip
+            a, aat, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER
+        )
         total += iterations
         if first is not None and level == HOMOTOPY_FROM:
             first[:] = y
