@@ -108,6 +108,11 @@ class SolveRecord:
     fallback_programs: int = 0  # constrained cone program: programs left to Clarabel
 
 
+#: A constrained re-solve's figures for its :class:`SolveRecord`: SCP iterations, path
+#: slack [km], abort slack [km] and the programs left to Clarabel.
+ScpFigures = tuple[int, float, float, int]
+
+
 @dataclass(frozen=True)
 class RunResult:
     """Per-step histories of one closed-loop run; row k is time ``t_s[k]``.
@@ -264,7 +269,7 @@ def _record(
     t_s: float,
     result: guidance.SolveResult,
     threshold: float,
-    scp: tuple[int, float, float, int] | None = None,
+    scp: ScpFigures | None = None,
 ) -> SolveRecord:
     scp_iterations, slack_km, abort_slack_km, fallback_programs = (
         (0, 0.0, 0.0, 0) if scp is None else scp
@@ -947,9 +952,7 @@ def _cone_resolves(
 
 #: The initial constrained plans a campaign worker made, by the pickled inputs of
 #: :func:`_initial_constrained_plan` (at most :data:`INITIAL_PLANS_KEPT`, the oldest dropped).
-InitialPlans = dict[
-    bytes, tuple[guidance.SolveResult, tuple[int, float, float, int], "constrained.Duals | None"]
-]
+InitialPlans = dict[bytes, tuple[guidance.SolveResult, ScpFigures, "constrained.Duals | None"]]
 #: Initial plans a worker keeps (:data:`InitialPlans`) [-].
 INITIAL_PLANS_KEPT = 64
 
@@ -961,7 +964,7 @@ def _initial_constrained_plan(
     p: FloatArray,
     known: _Knowledge | None,
     plans: InitialPlans | None,
-) -> tuple[guidance.SolveResult, tuple[int, float, float, int], constrained.Duals | None] | None:
+) -> tuple[guidance.SolveResult, ScpFigures, constrained.Duals | None] | None:
     """:func:`_constrained_plan` from ``x_hat`` at step 0 over the whole horizon, cold.
 
     With ``plans`` (:func:`simulate`'s ``initial_plans``) a plan is made once for each
@@ -1001,7 +1004,7 @@ def _constrained_plan(
     k_from: int,
     known: _Knowledge | None = None,
     warm_duals: constrained.Duals | None = None,
-) -> tuple[guidance.SolveResult, tuple[int, float, float, int], constrained.Duals | None] | None:
+) -> tuple[guidance.SolveResult, ScpFigures, constrained.Duals | None] | None:
     """A re-solve by the constrained cone program (issue 32), None without a keep-out zone
     or with ``constraints.enforce = false`` (measure only: the unconstrained program).
 

@@ -1055,13 +1055,14 @@ def fig_safety_distance(data: ReportData) -> Figure:
         ax.set_ylabel("distance to the unsafe set φ [km]")
     ax_all.set_yscale("symlog", linthresh=0.1 * float(np.min(geo.semi_axes_km)))
     ax_near.set_xlim(start, horizon)
-    tail = data.steps[data.steps["t_s"] >= start]["safety_distance_km"].to_numpy(dtype=float)
+    approach = data.steps[data.steps["t_s"] >= start]
+    tail = approach["safety_distance_km"].to_numpy(dtype=float)
     tail = tail[np.isfinite(tail)]
     lo = min(float(tail.min()) if tail.size else 0.0, 0.0)
     hi = max(float(tail.max()) if tail.size else near, 0.0)
     pad = 0.06 * (hi - lo or 1.0)
     ax_near.set_ylim(lo - pad, hi + pad)
-    _mark_deepest(ax_near, data.steps[data.steps["t_s"] >= start])
+    _mark_deepest(ax_near, approach)
     values = data.steps["safety_distance_km"].to_numpy(dtype=float)
     values = values[np.isfinite(values)]
     if values.size:
