@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from test_same_numbers import assert_pinned_plans, confirm_pinned_plans, write_pinned_plans
+from test_same_numbers import assert_pinned_plans, pinned_plans_main
 
 from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
@@ -82,9 +82,4 @@ def test_a_fixed_targets_constrained_plans_are_those_before_issue_34() -> None:
 
 
 if __name__ == "__main__":
-    # no argument: rewrite the fixture (only when an issue moves the plans on purpose);
-    # --also-here: add this platform to its ``also_on`` if the plans are the same here
-    if sys.argv[1:] == ["--also-here"]:
-        sys.exit(confirm_pinned_plans(FIXTURE, _plans()))
-    write_pinned_plans(FIXTURE, _plans())
-    sys.exit(0)
+    sys.exit(pinned_plans_main(FIXTURE, _plans))

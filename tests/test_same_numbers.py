@@ -156,7 +156,7 @@ def assert_pinned_plans(fixture: Path, make: Callable[[], list[dict[str, Any]]])
     ``also_on`` lists, where the same code gave the same plans bit for bit
     (:func:`confirm_pinned_plans`); elsewhere the test is skipped, before ``make`` runs."""
     stored = json.loads(fixture.read_text(encoding="utf-8"))
-    if platform_signature() not in [stored["platform"], *stored.get("also_on", [])]:
+    if platform_signature() not in _pinned_platforms(stored):
         pytest.skip("bits are compared on the fixture's platforms only (module docstring)")
     assert make() == stored["plans"]
 
@@ -176,10 +176,28 @@ def confirm_pinned_plans(fixture: Path, plans: list[dict[str, Any]]) -> int:
         print(f"{fixture.name}: the plans made here differ from the stored ones", file=sys.stderr)
         return 1
     here = platform_signature()
-    if here not in [stored["platform"], *stored.get("also_on", [])]:
+    if here not in _pinned_platforms(stored):
         stored["also_on"] = [*stored.get("also_on", []), here]
         _write_plans(fixture, stored)
     return 0
+
+
+def pinned_plans_main(fixture: Path, make: Callable[[], list[dict[str, Any]]]) -> int:
+    """A pinned-plan module run as a script: no argument rewrites ``fixture`` from
+    ``make()`` (only when an issue moves the plans on purpose); ``--also-here`` adds this
+    platform to its ``also_on`` if the plans are the same here (:func:`confirm_pinned_plans`)."""
+    if sys.argv[1:] == ["--also-here"]:
+        return confirm_pinned_plans(fixture, make())
+    if sys.argv[1:]:
+        print("usage: python tests/<module>.py [--also-here]", file=sys.stderr)
+        return 2
+    write_pinned_plans(fixture, make())
+    return 0
+
+
+def _pinned_platforms(stored: dict[str, Any]) -> list[dict[str, str]]:
+    """The platforms a pinned-plan fixture's bits are compared on: its own and ``also_on``."""
+    return [stored["platform"], *stored.get("also_on", [])]
 
 
 def _write_plans(fixture: Path, stored: dict[str, Any]) -> None:
