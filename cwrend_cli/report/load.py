@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
@@ -475,8 +475,13 @@ def _order_archs(names: Iterable[object]) -> tuple[str, ...]:
     return (*known, *sorted(present - set(known)))
 
 
-def _reference_summary(references: pd.DataFrame | None) -> pd.DataFrame:
-    """Δv (trapezoid of ‖u‖) and final distance of each reference trajectory."""
+def _reference_summary(
+    references: pd.DataFrame | None, config: CwrendConfig | None
+) -> pd.DataFrame:
+    """Δv (trapezoid of ‖u‖) and miss of each reference trajectory: its final distance to
+    the terminal position ``scenario.xf`` of ``config`` (the port with a corridor; the
+    target, the origin, without a configuration)."""
+    target = np.zeros(3) if config is None else np.asarray(config.scenario.xf[:3], dtype=float)
     rows = []
     if references is not None:
         for name, g in references.groupby("reference", sort=False, observed=True):
@@ -488,7 +493,11 @@ def _reference_summary(references: pd.DataFrame | None) -> pd.DataFrame:
                     "arch": f"open_loop_{name}",
                     "seed": -1,
                     "delta_v_km_s": float(dv),
-                    "miss_km": float(np.linalg.norm([last["x_km"], last["y_km"], last["z_km"]])),
+                    "miss_km": float(
+                        np.linalg.norm(
+                            np.array([last["x_km"], last["y_km"], last["z_km"]], float) - target
+                        )
+                    ),
                 }
             )
     out = pd.DataFrame(rows, columns=["arch", "seed", "delta_v_km_s", "miss_km"])
@@ -737,10 +746,10 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
     if ref_point is None and "point" in selected.columns and not selected.empty:
         ref_point = str(selected["point"].iloc[0])
     references = _campaign_references(root, ref_point, notes)
-    return ReportData(
+    data = ReportData(
         layout="campaign",
         runs=runs,
-        ref_summary=_reference_summary(references),
+        ref_summary=_reference_summary(None, None),
         steps=steps,
         references=references,
         config=config,
@@ -756,6 +765,8 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         sensitivity=sensitivity,
         nis_offset_given=nis_offset_given(meta),
     )
+    # the references' miss against the reported point's terminal position
+    return replace(data, ref_summary=_reference_summary(references, data.point_config))
 
 
 def _first_design_point(root: Path, runs: pd.DataFrame) -> str | None:
