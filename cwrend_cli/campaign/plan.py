@@ -52,7 +52,7 @@ from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import expand_grid, get_dotted, point_tree
-from cwrend_cli.config.schema import nis_offset_given
+from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
 from cwrend_cli.physics.params import Architecture, DesignModel, Problem
@@ -475,6 +475,30 @@ def check_design_models(problem: Problem, archs: Sequence[Architecture]) -> None
             raise ConfigError(reason)
 
 
+def check_terminal_state(
+    cfg: CwrendConfig, problem: Problem, archs: Sequence[Architecture]
+) -> None:
+    """Refuse a cone-program architecture that would plan into the keep-out zone.
+
+    With the constraints enforced and no corridor, a ``scenario.xf`` inside the zone
+    leaves no safe plan: every re-solve would end softened by the zone's depth. Raises
+    :class:`ConfigError` naming ``scenario.xf`` (:func:`~cwrend_cli.config.schema.
+    end_in_keep_out`); the shooting architectures and ``constraints.enforce = false`` only
+    measure the zone and may end there.
+    """
+    if problem.constraints is None or not problem.constraints.enforce:
+        return
+    planned = [a.slug for a in archs if a.resolved_method(problem.guidance) == "socp"]
+    reason = end_in_keep_out(cfg) if planned else None
+    if reason is not None:
+        xf = ", ".join(str(v) for v in cfg.scenario.xf)
+        raise ConfigError(
+            "invalid configuration",
+            [f"scenario.xf = [{xf}]: {reason} (planned with the constraints by "
+             f"{', '.join(planned)})"],
+        )  # fmt: skip
+
+
 def plan(
     cfg: CwrendConfig,
     archs: Sequence[str],
@@ -547,6 +571,7 @@ def plan(
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
         check_design_models(problem, [ALL_ARCHITECTURES[a] for a in archs])
+        check_terminal_state(point_cfg, problem, [ALL_ARCHITECTURES[a] for a in archs])
         noise_key = (point_cfg.noise.seed, point_cfg.noise.file, problem.scenario.n_steps)
         noise = noises.get(noise_key)
         if noise is None:  # a noise file is hashed and checked once, not once per point

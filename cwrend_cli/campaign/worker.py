@@ -55,6 +55,7 @@ from cwrend_cli.campaign.plan import (
     RunSpec,
     Task,
     check_design_models,
+    check_terminal_state,
     noise_source,
 )
 from cwrend_cli.config import CwrendConfig
@@ -240,6 +241,7 @@ def run_case(
     noise = standard_normal_for(cfg, seed)  # validate input before any computation
     problem = problem_of(cfg)
     check_design_models(problem, archs)
+    check_terminal_state(cfg, problem, archs)
     refs = refs if refs is not None else simulation.open_loop_references(problem)
     draws = actuator_draws(problem, cfg.noise.seed, seed)
     faults = fault_draws(problem, cfg.noise.seed, seed)

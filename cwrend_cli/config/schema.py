@@ -1774,6 +1774,39 @@ def start_in_keep_out(cfg: CwrendConfig) -> str | None:
     )
 
 
+def end_in_keep_out(cfg: CwrendConfig) -> str | None:
+    """Why the terminal position of ``scenario.xf`` lies in the keep-out zone (no corridor:
+    then no safe plan can end there), or ``None`` when it does not. Checked where a
+    cone-program architecture would plan with the constraints
+    (:func:`cwrend_cli.campaign.plan.check_terminal_state`): a shooting run or a
+    measure-only config may end there, measured.
+
+    A fixed target: inside any ellipsoid of the zone. A tumbling target, whose zone has an
+    attitude at T that validation does not propagate: within the centred ellipsoid's
+    smallest semi-axis of the centre, inside it whatever the attitude.
+    """
+    keep_out = cfg.constraints.keep_out
+    if keep_out is None or cfg.constraints.corridor is not None:
+        return None
+    r = cfg.scenario.xf[:3]
+    where = [
+        "constraints.keep_out.semi_axes_km" if i == 0 else f"constraints.keep_out.bodies.{i - 1}"
+        for i, (centre, axes) in enumerate(keep_out.ellipsoids())
+        if sum(((p - c) / a) ** 2 for p, c, a in zip(r, centre, axes, strict=True)) < 1.0
+    ]
+    if cfg.target.attitude == "tumbling":
+        inscribed = min(keep_out.semi_axes_km)
+        where = [w for w in where[:1] if sum(v * v for v in r) < inscribed**2]
+    if not where:
+        return None
+    return (
+        f"the terminal position [{', '.join(fmt_num(float(v)) for v in r)}] km is inside the "
+        f"keep-out zone, in the ellipsoid {where[0]}: no safe plan can end there; add a "
+        "[constraints.corridor] (its port, on the zone's surface or outside it, is then the "
+        "terminal state), set scenario.xf outside the zone, or change " + where[0]
+    )
+
+
 def _noise_file_too_large(file: str | None, n_steps: int) -> str | None:
     """Why ``file`` is too large to be a noise file of ``n_steps`` rows, or ``None``.
 
