@@ -1228,6 +1228,54 @@ class ConstraintsConfig(_FrozenModel):
         return self
 
     @model_validator(mode="after")
+    def _corridor_points_away(self) -> Self:
+        # an axis into the target: the cone holds the target's centre (the centred
+        # ellipsoid's) and would waive the zone's core (other bodies the corridor may cross)
+        corridor = self.corridor
+        if self.keep_out is None or corridor is None:
+            return self
+        w = [-p for p in corridor.port_km]  # from the port to the target's centre
+        length = math.sqrt(sum(v * v for v in w))
+        norm = math.sqrt(sum(a * a for a in corridor.axis))
+        along = sum(a * v for a, v in zip(corridor.axis, w, strict=True)) / norm
+        if length == 0.0 or along < math.cos(math.radians(corridor.half_angle_deg)) * length:
+            return self
+        raise rules_error(
+            [
+                (
+                    "corridor.axis",
+                    list(corridor.axis),
+                    "the corridor holds the target's centre, so it would waive the keep-out "
+                    "zone's core: the axis points outward, from the port away from the target "
+                    f"(e.g. [{', '.join(fmt_num(-a) for a in corridor.axis)}])",
+                )
+            ]
+        )
+        norm = math.sqrt(sum(a * a for a in corridor.axis))
+        axis = [a / norm for a in corridor.axis]
+        cos_half = math.cos(math.radians(corridor.half_angle_deg))
+        for i, (centre, _) in enumerate(self.keep_out.ellipsoids()):
+            w = [c - p for c, p in zip(centre, corridor.port_km, strict=True)]
+            length = math.sqrt(sum(v * v for v in w))
+            if (
+                length > 0.0
+                and sum(a * v for a, v in zip(axis, w, strict=True)) >= cos_half * length
+            ):
+                body = "keep-out zone" if i == 0 else f"keep_out.bodies.{i - 1}"
+                raise rules_error(
+                    [
+                        (
+                            "corridor.axis",
+                            list(corridor.axis),
+                            f"the corridor holds the centre of the {body}, so it would waive "
+                            "the zone's core: the axis points outward, from the port away from "
+                            f"the target (e.g. [{', '.join(fmt_num(-a) for a in corridor.axis)}])",
+                        )
+                    ]
+                )
+        return self
+
+    @model_validator(mode="after")
     def _port_outside_keep_out(self) -> Self:
         if self.keep_out is not None and self.corridor is not None:
             for i, (centre, axes) in enumerate(self.keep_out.ellipsoids()):
