@@ -392,7 +392,10 @@ def run(
         if fmt is not None:  # the rows of the console table, for scripts
             sys.stdout.write(script_table(summary_frame(case), fmt.value))
         elif not quiet:
-            _console().print(summary_console_table(case, title=f"cwrend run · {file}"))
+            from cwrend_cli.physics.params import Sensor  # the run loaded physics already
+
+            dof = Sensor(model=cfg.sensor.model).dimension  # the NIS of a consistent filter
+            _console().print(summary_console_table(case, f"cwrend run · {file}", dof))
             console.print(f"results written to {written}", soft_wrap=True, markup=False)
 
 

@@ -120,11 +120,13 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-def summary_console_table(case: CaseResult, title: str = "") -> Group:
+def summary_console_table(case: CaseResult, title: str = "", nis_dof: int = 3) -> Group:
     """Compact tables: one row per open-loop reference and closed-loop run (fits 80 columns),
     then the filter consistency of each closed-loop run (mean NIS and NEES, faults).
 
-    The seed (one per case) goes into the title, not into a column.
+    The seed (one per case) goes into the title, not into a column. ``nis_dof``: the
+    sensor's measurement dimension m, the mean NIS of a consistent filter (3, or 2 for
+    the angles sensor).
     """
     rows = _summary_rows(case)
     seeds = sorted({int(r["seed"]) for r in rows if r["seed"] >= 0})
@@ -150,7 +152,7 @@ def summary_console_table(case: CaseResult, title: str = "") -> Group:
         )
     table.caption = "solve ms: mean/max per re-solve; inf.: certified infeasible"
     applied = _applied_run_table(rows, case.references.fuel)
-    return Group(table, applied, _consistency_table(case.runs, rows[2:]))
+    return Group(table, applied, _consistency_table(case.runs, rows[2:], nis_dof))
 
 
 def _applied_run_table(rows: Sequence[Mapping[str, Any]], fuel: OpenLoopResult) -> Table:
@@ -181,11 +183,13 @@ def _applied_run_table(rows: Sequence[Mapping[str, Any]], fuel: OpenLoopResult) 
     return table
 
 
-def _consistency_table(runs: Sequence[RunResult], rows: Sequence[Mapping[str, Any]]) -> Table:
+def _consistency_table(
+    runs: Sequence[RunResult], rows: Sequence[Mapping[str, Any]], nis_dof: int
+) -> Table:
     """Filter consistency of the closed-loop runs: mean NIS (nominal periods), mean NEES.
 
-    E[NIS] = 3 and E[NEES] = 6 for a consistent filter (χ² with 3 and 6
-    degrees of freedom, :mod:`cwrend_cli.physics.metrics`).
+    E[NIS] = m (``nis_dof``, the sensor's dimension: 3, or 2 for angles) and E[NEES] = 6 for
+    a consistent filter (χ² with m and 6 degrees of freedom, :mod:`cwrend_cli.physics.metrics`).
     """
     table = _table(None, show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("filter", no_wrap=True)
@@ -200,7 +204,7 @@ def _consistency_table(runs: Sequence[RunResult], rows: Sequence[Mapping[str, An
             str(int(run.outlier.sum())),
         )
     table.caption = (
-        "mean NIS outside the degradation windows (3 if consistent); mean NEES over "
+        f"mean NIS outside the degradation windows ({nis_dof} if consistent); mean NEES over "
         "t > 0 (6 if consistent); steps with a sensor dropout or outlier"
     )
     return table

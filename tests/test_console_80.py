@@ -120,6 +120,18 @@ def test_the_run_table_shows_every_case_and_number_whole_at_80_columns() -> None
         assert f"{applied:.5f}" in cells
 
 
+def test_the_run_table_states_the_consistent_nis_of_its_sensor() -> None:
+    """E[NIS] is the measurement's dimension m: 2 for the angles sensor, not always 3."""
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_from_dict, parse_archs
+    from cwrend_cli.console import summary_console_table
+
+    case = campaign.run_case(config_from_dict({}), parse_archs("mtf_adaptive"), 0)
+    for dof in (3, 2):
+        text = " ".join(_render(summary_console_table(case, "run", dof)).split())
+        assert f"degradation windows ({dof} if consistent)" in text
+
+
 def _stats(archs: list[str], points: int = 1) -> pd.DataFrame:
     rng = np.random.default_rng(3)
     rows = []
