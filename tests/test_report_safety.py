@@ -234,14 +234,11 @@ def test_the_safe_approach_ablation_of_every_cone_program_runs_end_to_end(
     assert all((report / name).exists() for name in SAFETY_FIGURES)
 
 
-@pytest.mark.slow
-def test_a_sweep_over_the_margin_with_a_dispersed_corridor_runs_end_to_end(
-    tmp_path: Path,
-) -> None:
+@pytest.fixture(scope="module")
+def dispersed_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``cwrend sweep`` of campaigns/safe_approach.toml over ``constraints.sigma_margin``
-    with the corridor's half-angle dispersed (±5° about 30°), two seeds: each point's runs
-    carry their margin, each run its own half-angle, the safety columns and statistics per
-    point, the recording and the report."""
+    (0, 3) with the corridor's half-angle dispersed (±5° about 30°), two seeds."""
+    tmp_path = tmp_path_factory.mktemp("sweep")
     config = tmp_path / "safe_dispersed.toml"
     config.write_text(
         (CAMPAIGNS / "safe_approach.toml").read_text(encoding="utf-8")
@@ -254,7 +251,16 @@ def test_a_sweep_over_the_margin_with_a_dispersed_corridor_runs_end_to_end(
             f"output.dir={tmp_path}", "--name", "s"]  # fmt: skip
     result = runner.invoke(app, args, catch_exceptions=False)
     assert result.exit_code == 0, result.output
-    root = tmp_path / "s"
+    return tmp_path / "s"
+
+
+@pytest.mark.slow
+def test_a_sweep_over_the_margin_with_a_dispersed_corridor_runs_end_to_end(
+    dispersed_sweep: Path,
+) -> None:
+    """Each point's runs carry their margin, each run its own half-angle, the safety columns
+    and statistics per point, the recording and the report."""
+    root = dispersed_sweep
     runs = _safety_columns_of_every_ok_run(root, {"mtf_adaptive_socp"})
     assert sorted(runs["param.constraints.sigma_margin"]) == [0.0, 0.0, 3.0, 3.0]
     angles = runs["disp.constraints.corridor.half_angle_deg"]
@@ -264,6 +270,18 @@ def test_a_sweep_over_the_margin_with_a_dispersed_corridor_runs_end_to_end(
     assert violated["point"].nunique() == 2
     assert list((root / "recordings").glob("*.rrd"))
     assert all((_reported(root) / name).exists() for name in SAFETY_FIGURES)
+
+
+@pytest.mark.slow
+def test_a_sweep_report_gives_the_safety_of_every_point(dispersed_sweep: Path) -> None:
+    """The safety table is one point's, which the text names by its values; a second table
+    lists every point's (the margin's effect is what such a sweep is for)."""
+    md = (_reported(dispersed_sweep) / "report.md").read_text(encoding="utf-8")
+    assert "(constraints.sigma_margin = 0; `--point` chooses another)" in md
+    every = md[md.index("### Every grid point") :].split("\n\n")[1]
+    lines = every.splitlines()
+    assert lines[0].startswith("| sigma_margin | architecture | violated (share)")
+    assert [line.split(" | ")[0].strip("| ") for line in lines[2:]] == ["0", "3"]
 
 
 def test_the_open_loop_misses_are_measured_from_the_port(constrained: Path) -> None:

@@ -255,6 +255,44 @@ def safety_table(data: ReportData) -> str | None:
     return markdown_table(header, rows) if rows else None
 
 
+#: Most grid points whose safety :func:`safety_points_table` lists (a sampled design of
+#: hundreds is left to sweep.parquet) [-].
+SAFETY_POINTS_MAX = 24
+
+
+def safety_points_table(data: ReportData) -> str | None:
+    """The safety of every grid point of a sweep, per architecture (issue 32), as stored:
+    the swept values, the share of runs that entered the unsafe set [95 % Wilson] and the
+    median and 1st percentile of the minimum distance (m). ``None`` for one point, without
+    path constraints or safety rows, or for more than :data:`SAFETY_POINTS_MAX` points."""
+    stats = data.stats
+    if data.constraints is None or stats is None or "point" not in stats.columns:
+        return None
+    if not 1 < stats["point"].nunique() <= SAFETY_POINTS_MAX:
+        return None
+    rows_of = stats[(stats["kind"] == "marginal") & stats["metric"].astype(str).str.startswith(
+        "safety_")]  # fmt: skip
+    params = [c for c in stats.columns if str(c).startswith(PARAM_PREFIX)]
+    header = [param_label(str(c)[len(PARAM_PREFIX) :]) for c in params]
+    header += ["architecture", "violated (share) [95 % Wilson]", "median min distance [m]",
+               "p1 min distance [m]"]  # fmt: skip
+    rows = []
+    for keys, g in rows_of.groupby([*params, "arch"], sort=True, observed=True):
+        get = _lookup(g)
+        share = get.get(("safety_violated", "share"))
+        if share is None:
+            continue
+        n = int(share["n"])
+        count = round(float(share["value"]) * n)
+        rows.append([
+            *(format_value(k) for k in keys[:-1]), arch_label(str(keys[-1])),
+            f"{count} of {n}: {_ci(share, SHARE, bootstrap=False)}",
+            _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
+            _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
+        ])  # fmt: skip
+    return markdown_table(header, rows) if rows else None
+
+
 def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
     """The abort-safety cells of an architecture's safety row (issue 34 item 4)."""
     share = get.get(("abort_unsafe", "share"))
@@ -330,6 +368,19 @@ def _safety_lines(data: ReportData) -> list[str]:
         table,
         "",
     ]
+    every = safety_points_table(data)
+    if every is not None and data.stats is not None:  # a sweep: the table is one point's
+        mine = data.stats[data.stats["point"].astype(str) == str(data.point)]
+        values = ", ".join(
+            f"{str(c)[len(PARAM_PREFIX) :]} = {format_value(mine[c].iloc[0])}"
+            for c in mine.columns
+            if str(c).startswith(PARAM_PREFIX) and not mine.empty
+        )
+        lines[2] += (
+            f" The table is grid point {data.point}'s ({values}; `--point` chooses another); "
+            "every point's below."
+        )
+        lines += ["### Every grid point", "", every, ""]
     stats = data.point_stats()
     once = int(data.ok_runs()["seed"].nunique()) > 1  # then the note closes the section above
     safety = (
