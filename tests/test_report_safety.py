@@ -98,6 +98,20 @@ def test_the_paths_are_drawn_with_the_keep_out_zone_and_corridor_in_three_planes
     assert np.asarray(marks.get_offsets()).shape[0] == inside > 0
 
 
+def test_a_corridor_seen_along_its_axis_is_an_outline_not_a_waived_disc(
+    constrained: Path,
+) -> None:
+    """The corridor along −z projects on the x–y plane to a disc round the port that, filled,
+    read as a waiver of the whole zone under it: there it is an outline, named in the
+    panel; in the planes that hold the axis it stays a filled cone."""
+    axes = [ax for ax in fig_safety_trajectories(load_results(constrained)).axes if ax.get_title()]
+    cones = [next(p for p in ax.patches if isinstance(p, Polygon)) for ax in axes]
+    assert [c.get_gid() for c in cones] == ["corridor:along", None, None]
+    assert [c.get_facecolor()[3] for c in cones] == [0.0, 0.15, 0.15]  # no fill, then 15 %
+    assert any("seen along its axis" in t.get_text() for t in axes[0].texts)
+    assert not any("seen along its axis" in t.get_text() for ax in axes[1:] for t in ax.texts)
+
+
 def test_the_distance_figure_draws_the_stored_distances_and_the_zero_line(
     constrained: Path,
 ) -> None:

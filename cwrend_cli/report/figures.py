@@ -43,6 +43,7 @@ Units: km, s, km/s, km/s² (as in the Parquet files); ‖u‖ is drawn in m/s².
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -891,6 +892,14 @@ def _ellipse(centre: np.ndarray, axes: np.ndarray, turn: np.ndarray | None,
     return Ellipse((c[i], c[j]), width, height, angle=angle, **style)
 
 
+def _seen_along_axis(geo: Geometry, plane: tuple[int, int]) -> bool:
+    """Whether the corridor's axis leaves ``plane`` steeply enough that the cone's projection
+    surrounds the port on every side: its in-plane part at most sin θ."""
+    assert geo.axis is not None and geo.half_angle_rad is not None
+    i, j = plane
+    return bool(math.hypot(geo.axis[i], geo.axis[j]) <= math.sin(geo.half_angle_rad))
+
+
 def _safety_planes(
     data: ReportData,
     paths: Sequence[tuple[str, pd.DataFrame]],
@@ -922,8 +931,17 @@ def _safety_planes(
                                   zorder=1))  # fmt: skip
         outline = _cone_outline(shown, plane, half)
         if outline is not None:
-            ax.add_patch(Polygon(outline, closed=True, facecolor=(*corridor, 0.15),
-                                 edgecolor=corridor, lw=1.6, ls="--", zorder=1))  # fmt: skip
+            # seen along its axis (out of the plane) the cone projects to a disc round the
+            # port, which filled would read as a waiver of everything under it: an outline
+            along = _seen_along_axis(shown, plane)
+            fill = "none" if along else (*corridor, 0.15)
+            ax.add_patch(Polygon(outline, closed=True, lw=1.6, ls="--", zorder=1,
+                                 facecolor=fill, edgecolor=corridor,
+                                 gid="corridor:along" if along else None))  # fmt: skip
+            if along:
+                ax.text(0.02, 0.02, "corridor seen along its axis\n(out of the plane)",
+                        transform=ax.transAxes, fontsize=8, color=corridor,
+                        va="bottom")  # fmt: skip
         if port_path is not None:
             ax.plot(port_path[:, i], port_path[:, j], color="black", lw=1.0, ls=":", zorder=2)
         for arch, g in paths:
