@@ -135,6 +135,20 @@ CASES: dict[str, tuple[Setup, str]] = {
         ],
         'sweep = {"a0": [1], ',
     ),
+    # a port typed in metres: the message names the unreachable position and the port
+    "a port out of reach": (
+        lambda d: [
+            "run",
+            str(PAPER.with_name("safe_approach.toml")),
+            "--no-rrd",
+            "--arch",
+            "mtf_adaptive_socp",
+            "--set",
+            "constraints.corridor.port_km=[0, 0, -250]",
+        ],
+        "reaches scenario.xf (position [0, 0, -250] km; with a corridor, "
+        "constraints.corridor.port_km at rest)",
+    ),
     # item 9: a noise file far larger than its rows can take
     "a sparse 100 MiB noise file": (
         lambda d: [

@@ -134,10 +134,13 @@ def fuel_optimal(
         )
         result = guidance.solve(step, lam, settings)
         if result.status is guidance.SolveStatus.INFEASIBLE:
+            where = ", ".join(f"{v:g}" for v in problem.xf[:3])
             raise ScenarioError(
                 "scenario infeasible: no control with |u| <= scenario.u_max_km_s2 = "
-                f"{problem.u_max_km_s2:g} reaches scenario.xf from scenario.x0 within "
-                f"scenario.horizon_s = {problem.horizon_s:g}; increase u_max_km_s2 or horizon_s"
+                f"{problem.u_max_km_s2:g} reaches scenario.xf (position [{where}] km; with a "
+                "corridor, constraints.corridor.port_km at rest) from scenario.x0 within "
+                f"scenario.horizon_s = {problem.horizon_s:g}; increase u_max_km_s2 or horizon_s, "
+                "or check the positions (in km)"
             )
         if not result.converged:
             raise ScenarioError(
