@@ -1221,10 +1221,12 @@ def compare(
             tables = compare_console_tables(result.frame, list(result.groups), "A − B")
             for table in tables:
                 stdout.print(table)
+        if not quiet:  # the notes on stderr, with --format too (stdout holds the table)
             err = _stderr()
             for note in result.notes:
                 err.print(f"note: {note}", markup=False)
-            err.print(f"results written to {_shown(out)}", soft_wrap=True, markup=False)
+            if fmt is None:
+                err.print(f"results written to {_shown(out)}", soft_wrap=True, markup=False)
 
 
 # ---------------------------------------------------------------------------

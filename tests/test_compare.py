@@ -375,3 +375,17 @@ def test_every_metric_name_means_the_same_column_in_compare_and_table() -> None:
         else:  # the filter-consistency means and the safety values: not compared
             with pytest.raises(ConfigError, match=f"--metric '{name}': unknown metric"):
                 compare.parse_metrics(name)
+
+
+def test_the_notes_go_to_stderr_with_a_script_format_too(tmp_path: Path) -> None:
+    """``--format csv`` puts the table on stdout and still tells, on stderr, which
+    architectures were in one campaign only (the note was dropped with --format)."""
+    a = _one_sided(tmp_path / "a", miss_km=1e-3, dv=0.15)
+    runs = pd.read_parquet(a / "runs.parquet")
+    extra = runs.assign(arch="plain_fixed")
+    pd.concat([runs, extra]).to_parquet(a / "runs.parquet")
+    b = _one_sided(tmp_path / "b", miss_km=2e-3, dv=0.14)
+    result = _compare(a, b, "--out", tmp_path / "out", "--format", "csv")
+    assert result.exit_code == 0, result.output
+    assert "note: architecture(s) in one campaign only, not compared: plain_fixed" in result.stderr
+    assert "not compared" not in result.stdout and result.stdout.startswith("kind,arch,")
