@@ -12,6 +12,7 @@ from cwrend_cli.config.io import (
     config_hash,
     load_config,
     resolved_dict,
+    shown_dict,
     to_json,
     to_toml,
 )
@@ -81,6 +82,7 @@ __all__ = [
     "parse_param",
     "resolved_dict",
     "set_dotted",
+    "shown_dict",
     "to_json",
     "to_toml",
 ]

@@ -2,8 +2,8 @@
 
 Loading (:func:`load_config` reads a TOML file and applies ``--set``
 overrides, :func:`config_from_dict` validates a raw tree), serialisation and
-provenance (:func:`resolved_dict`, :func:`config_hash`, :func:`to_toml`,
-:func:`to_json`) and the external noise realisation (:func:`load_noise_file`).
+provenance (:func:`resolved_dict`, :func:`config_hash`, :func:`shown_dict`,
+:func:`to_toml`, :func:`to_json`) and the external noise realisation (:func:`load_noise_file`).
 
 Units: the noise file holds standard-normal draws (dimensionless), one row
 per step, scaled by chol(R_true) at use (the v_k of paper Eq. 13; a convention
@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import tomli_w
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
+from pydantic_core import to_jsonable_python
 
 from cwrend_cli.config.messages import format_validation_error
 from cwrend_cli.config.overrides import apply, nesting_depth, parse_override
@@ -46,6 +47,7 @@ __all__ = [
     "load_config",
     "load_noise_file",
     "resolved_dict",
+    "shown_dict",
     "to_json",
     "to_toml",
 ]
@@ -148,6 +150,32 @@ def resolved_dict(cfg: CwrendConfig) -> dict[str, Any]:
     return cfg.model_dump(mode="json")
 
 
+def _every_field(value: Any) -> Any:
+    """``value`` as JSON-ready data, every field of every model in it by ``model_fields``."""
+    if isinstance(value, BaseModel):
+        return {name: _every_field(getattr(value, name)) for name in type(value).model_fields}
+    if isinstance(value, (tuple, list)):
+        return [_every_field(item) for item in value]
+    if isinstance(value, Mapping):
+        return {str(key): _every_field(item) for key, item in value.items()}
+    return to_jsonable_python(value)
+
+
+def shown_dict(cfg: CwrendConfig) -> dict[str, Any]:
+    """Every field of the schema with its value, as a JSON-ready dict (what ``config show`` prints).
+
+    Walks ``model_fields`` recursively, so no field can be missing: unlike
+    :func:`resolved_dict`, whose model serializers leave default-valued fields
+    out (``[constraints]``, ``[model]``, ``[sensor]``, ``[target]`` at their
+    defaults, ``estimator.process_noise``, …) to keep existing config and
+    campaign hashes unchanged. Unset optional fields are ``None``. Every value
+    the resolved tree holds is here too, equal; the tree reads back
+    (:func:`config_from_dict`) as the same config.
+    """
+    tree: dict[str, Any] = _every_field(cfg)
+    return tree
+
+
 def config_hash(cfg: CwrendConfig) -> str:
     """SHA-256 hex digest of the canonical JSON of the resolved config.
 
@@ -204,17 +232,19 @@ def to_toml(cfg: CwrendConfig, *, show_unset: bool = False) -> str:
     """The resolved config as TOML text that :func:`load_config` reads back unchanged.
 
     TOML has no null, so unset optional fields are left out; with
-    ``show_unset`` each appears as a comment line in its table, e.g.
-    ``# eps_saturation = (unset)``, so every field is listed.
+    ``show_unset`` every field of the schema is listed (:func:`shown_dict`,
+    defaults included) and each unset optional one appears as a comment line in
+    its table, e.g. ``# eps_saturation = (unset)``. Without it, the fields the
+    resolved tree leaves out at their defaults are left out too.
     """
-    tree = resolved_dict(cfg)
+    tree = shown_dict(cfg) if show_unset else resolved_dict(cfg)
     text = tomli_w.dumps(_drop_none(tree))
     return _with_unset_comments(text, _unset_keys(tree)) if show_unset else text
 
 
 def to_json(cfg: CwrendConfig, indent: int | None = 2) -> str:
-    """The resolved config as JSON text."""
-    return json.dumps(resolved_dict(cfg), indent=indent)
+    """Every field of the config (:func:`shown_dict`) as JSON text, unset optional ones null."""
+    return json.dumps(shown_dict(cfg), indent=indent)
 
 
 # ---------------------------------------------------------------------------
