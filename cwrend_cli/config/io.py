@@ -211,6 +211,12 @@ def _unset_keys(tree: Mapping[str, Any], prefix: tuple[str, ...] = ()) -> list[t
     return found
 
 
+def _toml_key(part: str) -> str:
+    """A key as tomli_w writes it in a table header: bare when it can be, else quoted (a
+    dispersion's dotted key, ``"scenario.x0.2"``)."""
+    return part if re.fullmatch(r"[A-Za-z0-9_-]+", part) else json.dumps(part)
+
+
 def _with_unset_comments(text: str, unset: Sequence[tuple[str, ...]]) -> str:
     """Insert ``# key = (unset)`` lines into TOML ``text``, each in its own table."""
     lines = text.splitlines()
@@ -219,7 +225,7 @@ def _with_unset_comments(text: str, unset: Sequence[tuple[str, ...]]) -> str:
         by_table.setdefault(path[:-1], []).append(UNSET_COMMENT.format(key=path[-1]))
     top = by_table.pop((), [])
     for table, comments in by_table.items():
-        header = "[" + ".".join(table) + "]"
+        header = "[" + ".".join(map(_toml_key, table)) + "]"
         if header in lines:
             at = lines.index(header) + 1
             lines[at:at] = comments
