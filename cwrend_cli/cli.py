@@ -527,6 +527,11 @@ def _seeds(seeds: int | None, seed_list: str | None) -> list[int]:
     return values
 
 
+#: ``ablate --until``: seeds per batch, and the seed count it stops at, unless given.
+DEFAULT_BATCH = 50
+DEFAULT_MAX_SEEDS = 1000
+
+
 @dataclass(frozen=True)
 class CampaignOptions:
     """The command-line options shared by ``ablate`` and ``sweep``."""
@@ -550,8 +555,8 @@ class CampaignOptions:
     ranges: tuple[str, ...] = ()  # sweep --design: --range KEY=LOW:HIGH…
     second_order: bool = False  # sweep --design sobol: second-order indices
     until: str | None = None  # ablate: sequential Monte Carlo target
-    batch: int = 50
-    max_seeds: int = 1000
+    batch: int | None = None  # ablate --until (None: not given, DEFAULT_BATCH)
+    max_seeds: int | None = None  # ablate --until (None: not given, DEFAULT_MAX_SEEDS)
     strict: bool = False  # ablate --until: exit 1 when the target is not met
     pairs: tuple[str, ...] = ()  # --pair A:B, compared besides statistics.DEFAULT_PAIRS
     repair_manifest: bool = False  # rebuild a damaged manifest.json from the journal
@@ -680,9 +685,16 @@ def _campaign(
             raise ConfigError(f"--design {opts.design!r}: one of {', '.join(design.DESIGNS)}")
         pairs = campaign_pairs(opts.pairs, archs)
         out = _campaign_dir(cfg, opts.name)
+        batch = opts.batch or DEFAULT_BATCH
+        max_seeds = opts.max_seeds or DEFAULT_MAX_SEEDS
         if opts.until is None:
             if opts.strict:
                 raise ConfigError("--strict: applies to --until only; add --until TARGET")
+            for option, value in (("--batch", opts.batch), ("--max-seeds", opts.max_seeds)):
+                if value is not None:  # else accepted and ignored: a fixed --seeds campaign
+                    raise ConfigError(
+                        f"{option}: applies to --until only; add --until TARGET or drop {option}"
+                    )
             seeds = _seeds(opts.seeds, opts.seed_list)
             plan, summary, statistics = _campaign_step(
                 command, cfg, archs, seeds, params, opts, out, err, pairs, hold
@@ -698,11 +710,11 @@ def _campaign(
             recorded = () if opts.force else pairs_recorded_at(out / MANIFEST)
             remembered = [p for p in recorded if p not in pairs and set(p) <= set(archs)]
             target = sequential.parse_until(opts.until, [*pairs, *remembered], archs, recorded)
-            if opts.max_seeds > limits.MAX_RUNS:
+            if max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []
             n = 0
-            for n in sequential.seed_counts(opts.batch, opts.max_seeds):
+            for n in sequential.seed_counts(batch, max_seeds):
                 plan, summary, statistics = _campaign_step(
                     command, cfg, archs, list(range(n)), params, opts, out, err, pairs, hold
                 )
@@ -710,24 +722,24 @@ def _campaign(
                     break
                 achieved = sequential.achieved(statistics.frame, target, archs)
                 if summary.interrupted or (
-                    sequential.ready(n, opts.batch) and all(a.met for a in achieved)
+                    sequential.ready(n, batch) and all(a.met for a in achieved)
                 ):
                     break
-                if not opts.quiet and n < opts.max_seeds:
-                    err.print(sequential.next_batch_message(n, opts.batch, achieved), markup=False)
+                if not opts.quiet and n < max_seeds:
+                    err.print(sequential.next_batch_message(n, batch, achieved), markup=False)
         _report_campaign(command, plan, summary, statistics, out, opts, err)
         # widths are checked only from sequential.checked_from(batch) seeds: a --max-seeds
         # below that stops with none checked
-        checked = opts.until is None or sequential.ready(n, opts.batch)
+        checked = opts.until is None or sequential.ready(n, batch)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err
             shown.print(until_console_table(achieved, opts.until or "", checked))
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         if unmet and not summary.interrupted and (opts.strict or not opts.quiet):
-            err.print(sequential.unmet_message(achieved, opts.max_seeds), markup=False)
+            err.print(sequential.unmet_message(achieved, max_seeds), markup=False)
         unchecked = bool(achieved) and not checked  # met or not: not known (--strict: exit 1)
         if unchecked and not summary.interrupted and (opts.strict or not opts.quiet):
-            err.print(sequential.unchecked_message(n, opts.batch), markup=False)
+            err.print(sequential.unchecked_message(n, batch), markup=False)
         if summary.interrupted:
             asked = {r.run_key for r in plan.runs}
             done = len(asked & campaign.held_run_keys(out))
@@ -782,6 +794,18 @@ def _campaign_step(
         second_order=opts.second_order,
     )  # fmt: skip
     if not opts.quiet:
+        from cwrend_cli.config import replaced_sweep_keys
+
+        swept = dict(plan.grid)
+        for key in replaced_sweep_keys(cfg.sweep, params):  # the documented override, said
+            table = cfg.sweep[key]
+            written = list(table) if isinstance(table, tuple) else table  # as in the file
+            err.print(
+                f"note: --param {key} replaces the config's [sweep] values of {key} "
+                f"({written!r}); the grid sweeps {key} = {list(swept[key])!r}",
+                soft_wrap=True,
+                markup=False,
+            )
         _announce(err, plan)
     progress = RichProgress(
         err, f"{command} {out.name}", quiet=opts.quiet or opts.table_format is not None,
@@ -937,15 +961,24 @@ def ablate(
         ),
     ] = None,
     batch: Annotated[
-        int,
+        int | None,
         typer.Option(
-            "--batch", min=1, max=limits.MAX_RUNS, help="Seeds per batch with --until.", metavar="N"
+            "--batch",
+            min=1,
+            max=limits.MAX_RUNS,
+            help=f"Seeds per batch with --until (default {DEFAULT_BATCH}).",
+            metavar="N",
         ),
-    ] = 50,
+    ] = None,
     max_seeds: Annotated[
-        int,
-        typer.Option("--max-seeds", min=1, help="Stop --until at this many seeds.", metavar="N"),
-    ] = 1000,
+        int | None,
+        typer.Option(
+            "--max-seeds",
+            min=1,
+            help=f"Stop --until at this many seeds (default {DEFAULT_MAX_SEEDS}).",
+            metavar="N",
+        ),
+    ] = None,
     strict: Annotated[
         bool,
         typer.Option(
@@ -987,8 +1020,8 @@ def sweep(
             "--param",
             "-p",
             help="Swept key: dotted.key=v1,v2,v3, dotted.key=start:stop:num or a TOML array "
-            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' (vectors) (repeatable; adds to / replaces "
-            "the config's [sweep] table).",
+            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' (vectors) (repeatable, one per key; adds "
+            "a key to the config's [sweep] table or replaces its values, with a note).",
             metavar="KEY=VALUES",
         ),
     ] = None,

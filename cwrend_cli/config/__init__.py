@@ -25,6 +25,7 @@ from cwrend_cli.config.overrides import (
     parse_archs,
     parse_override,
     parse_param,
+    replaced_sweep_keys,
     set_dotted,
 )
 from cwrend_cli.config.schema import (
@@ -80,6 +81,7 @@ __all__ = [
     "parse_archs",
     "parse_override",
     "parse_param",
+    "replaced_sweep_keys",
     "resolved_dict",
     "set_dotted",
     "shown_dict",

@@ -43,6 +43,7 @@ __all__ = [
     "parse_archs",
     "parse_override",
     "parse_param",
+    "replaced_sweep_keys",
     "set_dotted",
 ]
 
@@ -353,8 +354,11 @@ def expand_grid(
 ) -> tuple[tuple[str, tuple[Any, ...]], ...]:
     """The swept keys and their values: ``[sweep]`` table, then ``--param`` (which wins).
 
-    At most :data:`~cwrend_cli.limits.MAX_SWEPT_KEYS` keys in all, refused before any
-    is read.
+    A ``--param`` key that is also in ``[sweep]`` replaces the table's values for that
+    key (:func:`replaced_sweep_keys` names them, for the command's note). Refused
+    (:class:`ConfigError`): a key given by two ``--param`` options, a value listed twice
+    for one key, and an ``output.*`` key (it changes no number of a run). At most
+    :data:`~cwrend_cli.limits.MAX_SWEPT_KEYS` keys in all, refused before any is read.
     """
     if (
         len(sweep) + len(cli_params) > MAX_SWEPT_KEYS
@@ -373,8 +377,19 @@ def expand_grid(
                 "lhs|sobol|random --samples N (a grid lists values: [v1, v2] or 'start:stop:num')"
             )
         grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
+    given: dict[str, str] = {}  # --param key -> its values as typed
     for text in cli_params:
         key, values = parse_param(text)
+        raw = text.split("=", 1)[1].strip()
+        if key in given:
+            plain = not any(c in given[key] + raw for c in ":[")  # value lists, not ranges
+            both = f"{given[key]},{raw}" if plain else "V1,V2,…"
+            raise ConfigError(
+                f"--param {key}: given twice ({key}={given[key]} and {key}={raw}); list every "
+                f"value in one option: --param {key}={both} (the grid is the cartesian product "
+                "of different keys)"
+            )
+        given[key] = raw
         grid[key] = values
     for key, values in grid.items():
         if not values:
@@ -383,7 +398,45 @@ def expand_grid(
             raise ConfigError(
                 f"sweep {key}: {len(values):,} values; at most {MAX_VALUES_PER_KEY:,} per key"
             )
+        if key == "output" or key.startswith("output."):
+            raise ConfigError(
+                f"sweep {key}: an [output] setting changes no number of a run, so its grid "
+                f"points would be identical; set it once (--set {key}=VALUE, or in the "
+                "config) instead of sweeping it"
+            )
+        repeated = _first_repeated(values)
+        if repeated is not None:
+            raise ConfigError(
+                f"sweep {key}: the value {repeated!r} is listed twice; a grid point is "
+                "computed once: list each value once"
+            )
     return tuple(grid.items())
+
+
+def replaced_sweep_keys(sweep: Mapping[str, Any], cli_params: Sequence[str]) -> tuple[str, ...]:
+    """The keys of the ``[sweep]`` table whose values a ``--param`` replaces, in its order."""
+    given = {text.split("=", 1)[0].strip() for text in cli_params}
+    return tuple(key for key in sweep if key in given)
+
+
+def _hashable(value: Any) -> Any:
+    """``value`` with lists and tables as tuples, so equal values compare and hash equal."""
+    if isinstance(value, Mapping):
+        return tuple(sorted((str(k), _hashable(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return tuple(_hashable(v) for v in value)
+    return value
+
+
+def _first_repeated(values: Sequence[Any]) -> Any | None:
+    """The first value of ``values`` equal to an earlier one (``0.1`` and ``0.10``), or None."""
+    seen: set[Any] = set()
+    for value in values:
+        frozen = _hashable(value)
+        if frozen in seen:
+            return value
+        seen.add(frozen)
+    return None
 
 
 # ---------------------------------------------------------------------------

@@ -1,0 +1,106 @@
+"""``--param`` and ``[sweep]`` form one grid, and nothing is swept silently.
+
+A user walkthrough found a key given twice with ``--param`` sweeping only the
+last one, ``--param`` replacing a ``[sweep]`` key without a word, a repeated
+value or an ``output.*`` key giving identical points, and ``ablate --batch`` /
+``--max-seeds`` without ``--until`` accepted and ignored (docs/guide/sweep.md).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from cwrend_cli.cli import app
+from cwrend_cli.config.overrides import expand_grid, replaced_sweep_keys
+from cwrend_cli.errors import ConfigError
+
+runner = CliRunner()
+
+
+def _config(tmp_path: Path, sweep: str = "") -> Path:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\n{sweep}')
+    return cfg
+
+
+def test_a_key_given_twice_with_param_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"--param schedule\.beta: given twice") as info:
+        expand_grid({}, ["schedule.beta=0.1", "schedule.beta=0.2"])
+    assert "--param schedule.beta=0.1,0.2" in str(info.value)  # the one option that does it
+
+
+@pytest.mark.parametrize(
+    ("sweep", "params"),
+    [
+        ({}, ["schedule.beta=0.1,0.1"]),
+        ({}, ["schedule.beta=0.1,0.10"]),  # the same number as written twice
+        ({}, ["schedule.beta=0.1:0.1:3"]),  # a range of one value, three times
+        ({}, ["target.body_rates_deg_s=[[0, 0, 1], [0, 0, 1.0]]"]),
+        ({"schedule.beta": (0.25, 0.5, 0.25)}, []),
+    ],
+)
+def test_a_repeated_value_is_refused(
+    sweep: dict[str, tuple[float, ...]], params: list[str]
+) -> None:
+    with pytest.raises(ConfigError, match="is listed twice"):
+        expand_grid(sweep, params)
+
+
+@pytest.mark.parametrize(
+    ("sweep", "params"),
+    [({}, ["output.name=a,b"]), ({"output.steps_seeds": (0, 1)}, []), ({}, ["output.dir=x"])],
+)
+def test_an_output_key_is_not_swept(sweep: dict[str, tuple[int, ...]], params: list[str]) -> None:
+    with pytest.raises(ConfigError, match=r"changes no number of a run"):
+        expand_grid(sweep, params)
+
+
+def test_param_replaces_a_sweep_key_and_names_it() -> None:
+    sweep = {"schedule.beta": (0.1, 0.25), "guidance.hold": ("sample", "mean")}
+    params = ["schedule.beta=0.5", "schedule.kappa_mtf=6,12"]
+    assert dict(expand_grid(sweep, params))["schedule.beta"] == (0.5,)
+    assert replaced_sweep_keys(sweep, params) == ("schedule.beta",)
+    assert replaced_sweep_keys(sweep, ["schedule.kappa_mtf=6"]) == ()
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--param", "schedule.beta=0.1", "--param", "schedule.beta=0.2"], "given twice"),
+        (["--param", "schedule.beta=0.1,0.1"], "is listed twice"),
+        (["--param", "output.name=a,b"], "changes no number of a run"),
+    ],
+)
+def test_the_sweep_command_refuses_them_before_anything_runs(
+    tmp_path: Path, args: list[str], said: str
+) -> None:
+    result = runner.invoke(app, ["sweep", str(_config(tmp_path)), "--seeds", "1", *args])
+    assert result.exit_code == 2, result.output
+    assert said in result.stderr
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "c").exists()  # nothing written
+
+
+def test_the_override_of_a_sweep_key_is_said(tmp_path: Path) -> None:
+    cfg = _config(tmp_path, '[sweep]\n"schedule.beta" = [0.1, 0.25]\n')
+    args = ["sweep", str(cfg), "--param", "schedule.beta=0.5", "--seeds", "1", "--arch",
+            "mtf_adaptive", "-w", "1", "--no-rrd", "--format", "csv"]  # fmt: skip
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert (
+        "note: --param schedule.beta replaces the config's [sweep] values of schedule.beta "
+        "([0.1, 0.25]); the grid sweeps schedule.beta = [0.5]"
+    ) in result.stderr
+
+
+@pytest.mark.parametrize(("option", "value"), [("--batch", "10"), ("--max-seeds", "5")])
+def test_until_options_without_until_are_refused(tmp_path: Path, option: str, value: str) -> None:
+    result = runner.invoke(app, ["ablate", str(_config(tmp_path)), "--seeds", "1", option, value])
+    assert result.exit_code == 2, result.output
+    assert f"{option}: applies to --until only; add --until TARGET or drop {option}" in (
+        result.stderr
+    )
+    assert not (tmp_path / "c").exists()
