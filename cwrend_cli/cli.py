@@ -348,7 +348,7 @@ def run(
     from cwrend_cli.config.adapt import problem_of, windows_of
     from cwrend_cli.console import script_table, summary_console_table, summary_frame
     from cwrend_cli.output import recording
-    from cwrend_cli.output.files import check_output_dir, write_run
+    from cwrend_cli.output.files import check_output_dir, check_run_dir, write_run
     from cwrend_cli.physics.compiled import compiling_notice
 
     with user_errors():
@@ -369,6 +369,7 @@ def run(
                 )
             out = Path(cfg.output.dir) / run_dir(cfg.output.name or "run", slug, seed_)
         check_output_dir(out, "choose another --out or output.dir")  # before computing
+        check_run_dir(out, "choose another --out")  # never beside a campaign's files
         console = _console(stderr=True)
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)

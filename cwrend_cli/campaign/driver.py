@@ -81,7 +81,13 @@ from cwrend_cli.campaign.worker import (
     seeds_to_record,
 )
 from cwrend_cli.errors import CwrendError, InfrastructureError
-from cwrend_cli.output.files import estimated_bytes, make_output_dir, write_json, write_parquet
+from cwrend_cli.output.files import (
+    check_campaign_dir,
+    estimated_bytes,
+    make_output_dir,
+    write_json,
+    write_parquet,
+)
 from cwrend_cli.output.layout import (
     ABLATION_STATS,
     DESIGN,
@@ -393,7 +399,9 @@ def hold_campaign(out_dir: Path, address: str | None = None) -> Iterator[None]:
     sensitivity, report) is written under one lock, so another process (even
     with ``--force``) never writes between them. Reentrant in a process: a
     campaign run inside a command's hold does not lock again. ``address``: a
-    Dask scheduler checked before anything is written.
+    Dask scheduler checked before anything is written. A directory holding a
+    ``cwrend run``'s output is refused before anything is written
+    (:func:`~cwrend_cli.output.files.check_campaign_dir`).
     """
     key = out_dir.resolve()
     if key in _HELD:
@@ -401,6 +409,7 @@ def hold_campaign(out_dir: Path, address: str | None = None) -> Iterator[None]:
         return
     if address:
         check_address(address)  # before anything is written
+    check_campaign_dir(out_dir)  # never beside a cwrend run's files
     make_output_dir(out_dir, "choose another output.dir or output.name")
     check_confined(out_dir)
     with campaign_lock(out_dir):

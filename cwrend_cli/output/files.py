@@ -27,7 +27,10 @@ import pyarrow.parquet as pq
 from cwrend_cli import __version__
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import (
+    EVENTS,
+    MANIFEST,
     RUN_CONFIG,
+    RUN_FILES,
     RUN_REFERENCES,
     RUN_SOLVES,
     RUN_STEPS,
@@ -235,6 +238,62 @@ def check_output_dir(path: str | Path, setting: str) -> Path:
     return out
 
 
+def _there(path: Path, *names: str) -> bool:
+    """Whether one of ``names`` exists in ``path`` (False for a path that cannot be looked
+    at, e.g. a name too long: what writes there says why)."""
+    return any(os.path.lexists(path / name) for name in names)
+
+
+def holds_campaign(path: Path) -> bool:
+    """Whether ``path`` holds a campaign: its manifest, or its journal (a manifest lost)."""
+    return _there(path, MANIFEST, EVENTS)
+
+
+def holds_run(path: Path) -> bool:
+    """Whether ``path`` holds a ``cwrend run``'s output (its config or summary), no campaign."""
+    return _there(path, RUN_CONFIG, RUN_SUMMARY) and not holds_campaign(path)
+
+
+def check_run_dir(path: Path, setting: str) -> None:
+    """Refuse (:class:`ConfigError`, exit 2) a ``cwrend run`` directory that holds a campaign.
+
+    A run's files beside a campaign's would be neither's: ``setting`` names the option or
+    key to change.
+    """
+    if holds_campaign(path):
+        raise ConfigError(
+            f"{path} holds a campaign ({MANIFEST} or {EVENTS}) and cwrend run never writes "
+            f"into a campaign's directory: {setting}, or use the campaign's own commands "
+            "(cwrend ablate / sweep with its config to add runs, cwrend report to report on it)"
+        )
+
+
+def check_campaign_dir(path: Path) -> None:
+    """Refuse (:class:`ConfigError`, exit 2) a campaign directory that holds a ``cwrend run``.
+
+    A campaign's files beside a run's would be neither's, and ``--force`` removes only
+    what a campaign writes, so it is refused with ``--force`` too.
+    """
+    if holds_run(path):
+        raise ConfigError(
+            f"{path} holds the output of cwrend run ({RUN_CONFIG} / {RUN_SUMMARY}, no "
+            f"{MANIFEST}) and a campaign never writes beside a run's files (--force "
+            "included): choose another --name (output.name) or output.dir, or move the run's "
+            "files elsewhere (a new cwrend run into it replaces them)"
+        )
+
+
+def remove_run(path: Path) -> None:
+    """Remove the files of an earlier ``cwrend run`` in ``path`` (:data:`RUN_FILES`), if any.
+
+    :data:`RUN_CONFIG` first: a directory left between the removal and the new
+    run's writes holds no config, so it reads as incomplete rather than as a
+    mix of two runs. Other files in ``path`` are not touched.
+    """
+    for name in RUN_FILES:
+        (path / name).unlink(missing_ok=True)
+
+
 def make_output_dir(path: str | Path, setting: str) -> Path:
     """Create the directory ``path`` (and parents) to write results into, or refuse clearly.
 
@@ -307,9 +366,13 @@ def write_run(
 
     ``config.json`` (resolved config and its hash), ``summary.parquet``,
     ``steps.parquet``, ``solves.parquet`` and ``references.parquet``. The
-    config is written last, so its presence marks a complete output.
+    config is written last, so its presence marks a complete output. The
+    files of an earlier run in ``out_dir`` are removed first
+    (:func:`remove_run`, its recording included): the directory never holds
+    files of two runs.
     """
     out = Path(out_dir)
+    remove_run(out)
     meta = {"config_hash": config_hash}
     rows = [reference_row(refs.energy, refs.fuel), reference_row(refs.fuel, refs.fuel)]
     rows += [summary_row(r, refs.fuel) for r in results]

@@ -20,6 +20,9 @@ RUN_STEPS = "steps.parquet"
 RUN_SOLVES = "solves.parquet"
 RUN_REFERENCES = "references.parquet"
 RUN_RECORDING = "recording.rrd"
+#: Every file of a ``cwrend run`` directory, :data:`RUN_CONFIG` first (its presence marks a
+#: complete output): what a new run into the directory replaces as one set.
+RUN_FILES = (RUN_CONFIG, RUN_SUMMARY, RUN_STEPS, RUN_SOLVES, RUN_REFERENCES, RUN_RECORDING)
 #: Where ``cwrend run`` writes without ``--out``, inside ``output.dir`` (:func:`run_dir`).
 RUNS_DIR = "runs"
 
