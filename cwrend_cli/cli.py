@@ -371,6 +371,16 @@ def run(
         check_output_dir(out, "choose another --out or output.dir")  # before computing
         check_run_dir(out, "choose another --out")  # never beside a campaign's files
         console = _console(stderr=True)
+        ignored = [name for name in ("sweep", "dispersions") if getattr(cfg, name)]
+        if ignored:  # a run is the base config's case: say so, with -q too
+            tables = " and ".join(f"[{name}]" for name in ignored)
+            console.print(
+                f"warning: cwrend run flies the base configuration; its {tables} "
+                f"{'is' if len(ignored) == 1 else 'are'} not applied (cwrend sweep applies "
+                "them: a campaign's seed 0 is not this run)",
+                markup=False,
+                soft_wrap=True,
+            )
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)
         else:
