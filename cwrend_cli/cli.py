@@ -385,8 +385,10 @@ def run(
             case = campaign.run_case(cfg, archs, seed_)
         else:
             guidance = problem_of(cfg).guidance
-            doing = compiling_notice({a.resolved_method(guidance) for a in archs}) or "running…"
-            with console.status(doing, spinner="dots"):
+            notice = compiling_notice({a.resolved_method(guidance) for a in archs})
+            if notice is not None and not console.is_terminal:  # no spinner to show it in
+                console.print(notice, markup=False)
+            with console.status(notice or "running…", spinner="dots"):
                 case = campaign.run_case(cfg, archs, seed_)
         written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:

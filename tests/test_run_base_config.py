@@ -41,3 +41,20 @@ def test_a_run_of_a_plain_config_says_nothing(tmp_path: Path) -> None:
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert result.stderr == ""
+
+
+def test_a_first_run_says_it_compiles_when_stderr_is_not_a_terminal(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The compile notice lived only in the spinner, which a log file or a pipe never
+    shows: a first run into ``2>err`` left nothing but "results written to …"."""
+    from cwrend_cli.physics import compiled
+
+    notice = "compiling kernels (first run only, about 15 s)…"
+    monkeypatch.setattr(compiled, "compiling_notice", lambda methods, fan_out=False: notice)
+    config = tmp_path / "c.toml"
+    config.write_text("", encoding="utf-8")
+    args = ["run", str(config), "-a", "mtf_adaptive", "--no-rrd", "-o", str(tmp_path / "r")]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert result.stderr.startswith(notice)
