@@ -266,7 +266,8 @@ COLUMNS: Mapping[str, tuple[str, str]] = {
     "safety_approach_speed_km_s": _col("speed of the true relative state at T ||v(T)||"),
     "safety_approach_angle_deg": _col(
         "angle between the true velocity at T and the inward corridor axis -a (0: straight "
-        "down the corridor; NaN: no corridor or at rest)"
+        "down the corridor; NaN: no corridor or at rest; near rest the velocity is the "
+        "estimation error's, not the path's direction)"
     ),
     "safety_violated": _col("the true trajectory entered the unsafe set (min distance < 0)", "-"),
     # a tumbling target (issue 34): the docking state error against the moving port
