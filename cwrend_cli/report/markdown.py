@@ -238,15 +238,12 @@ def safety_table(data: ReportData) -> str | None:
     rows = []
     for a in data.archs:
         get = _lookup(rows_of[rows_of["arch"] == a])
-        share = get.get(("safety_violated", "share"))
-        if share is None:
+        cells = _violation_cells(get)
+        if cells is None:
             continue
-        n = int(share["n"])
-        count = round(float(share["value"]) * n)
+        n, violation = cells
         rows.append([
-            arch_label(a), str(n), f"{count} of {n}: {_ci(share, SHARE, bootstrap=False)}",
-            _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
-            _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
+            arch_label(a), str(n), *violation,
             _ci(get.get(("safety_unsafe_time_s", "mean")), UNSAFE_TIME),
             *[_median_max(runs[runs["arch"] == a], c) for c in docking],
         ])  # fmt: skip
@@ -278,19 +275,27 @@ def safety_points_table(data: ReportData) -> str | None:
                "p1 min distance [m]"]  # fmt: skip
     rows = []
     for keys, g in rows_of.groupby([*params, "arch"], sort=True, observed=True):
-        get = _lookup(g)
-        share = get.get(("safety_violated", "share"))
-        if share is None:
-            continue
-        n = int(share["n"])
-        count = round(float(share["value"]) * n)
-        rows.append([
-            *(format_value(k) for k in keys[:-1]), arch_label(str(keys[-1])),
-            f"{count} of {n}: {_ci(share, SHARE, bootstrap=False)}",
-            _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
-            _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
-        ])  # fmt: skip
+        cells = _violation_cells(_lookup(g))
+        if cells is not None:
+            rows.append([*(format_value(k) for k in keys[:-1]), arch_label(str(keys[-1])),
+                         *cells[1]])  # fmt: skip
     return markdown_table(header, rows) if rows else None
+
+
+def _violation_cells(get: dict[tuple[str, str], Any]) -> tuple[int, list[str]] | None:
+    """(runs, [violated: count of runs and share with its Wilson interval, median and 1st
+    percentile of the minimum distance, m]) of an architecture's safety rows (``None``
+    without them)."""
+    share = get.get(("safety_violated", "share"))
+    if share is None:
+        return None
+    n = int(share["n"])
+    count = round(float(share["value"]) * n)
+    return n, [
+        f"{count} of {n}: {_ci(share, SHARE, bootstrap=False)}",
+        _ci(get.get(("safety_min_distance_km", "median")), MISS, M_PER_KM),
+        _ci(get.get(("safety_min_distance_km", "p1")), MISS, M_PER_KM),
+    ]
 
 
 def _abort_cells(get: dict[tuple[str, str], Any]) -> list[str]:
