@@ -291,7 +291,7 @@ def test_a_sweep_report_gives_the_safety_of_every_point(dispersed_sweep: Path) -
     """The safety table is one point's, which the text names by its values; a second table
     lists every point's (the margin's effect is what such a sweep is for)."""
     md = (_reported(dispersed_sweep) / "report.md").read_text(encoding="utf-8")
-    assert "(constraints.sigma_margin = 0; `--point` chooses another)" in md
+    assert "(constraints.sigma_margin=0; `--point` chooses another)" in md
     every = md[md.index("### Every grid point") :].split("\n\n")[1]
     lines = every.splitlines()
     assert lines[0].startswith("| sigma_margin | architecture | violated (share)")

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.output.tables import PARAM_PREFIX, param_columns
 from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
 from cwrend_cli.report.consistency import judged, share_inside, step_ensembles
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs
@@ -44,7 +44,7 @@ from cwrend_cli.report.labels import (
     number,
     param_label,
 )
-from cwrend_cli.report.load import ReportData, arch_label, param_values
+from cwrend_cli.report.load import ReportData, arch_label, param_values, point_values
 
 UNRELIABLE_MARK = "\\*"  # a literal * in markdown
 UNRELIABLE_NOTE = (
@@ -269,8 +269,8 @@ def safety_points_table(data: ReportData) -> str | None:
         return None
     rows_of = stats[(stats["kind"] == "marginal") & stats["metric"].astype(str).str.startswith(
         "safety_")]  # fmt: skip
-    params = [c for c in stats.columns if str(c).startswith(PARAM_PREFIX)]
-    header = [param_label(str(c)[len(PARAM_PREFIX) :]) for c in params]
+    params = param_columns(stats.columns)
+    header = [param_label(c.removeprefix(PARAM_PREFIX)) for c in params]
     header += ["architecture", "violated (share) [95 % Wilson]", "median min distance [m]",
                "p1 min distance [m]"]  # fmt: skip
     rows = []
@@ -374,16 +374,10 @@ def _safety_lines(data: ReportData) -> list[str]:
         "",
     ]
     every = safety_points_table(data)
-    if every is not None and data.stats is not None:  # a sweep: the table is one point's
-        mine = data.stats[data.stats["point"].astype(str) == str(data.point)]
-        values = ", ".join(
-            f"{str(c)[len(PARAM_PREFIX) :]} = {format_value(mine[c].iloc[0])}"
-            for c in mine.columns
-            if str(c).startswith(PARAM_PREFIX) and not mine.empty
-        )
+    if every is not None:  # a sweep: the table above is one point's
         lines[2] += (
-            f" The table is grid point {data.point}'s ({values}; `--point` chooses another); "
-            "every point's below."
+            f" The table is grid point {data.point}'s ({point_values(data.ok_runs())}; "
+            "`--point` chooses another); every point's below."
         )
         lines += ["### Every grid point", "", every, ""]
     stats = data.point_stats()
