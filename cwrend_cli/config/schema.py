@@ -1100,6 +1100,14 @@ class KeepOutConfig(_FrozenModel):
             (b.centre_km, b.semi_axes_km) for b in self.bodies
         ]
 
+    def levels(self, point_km: Sequence[float]) -> list[float]:
+        """``(x/a)² + (y/b)² + (z/c)²`` of ``point_km`` in each ellipsoid of :meth:`ellipsoids`
+        (relative to its centre; < 1: inside it)."""
+        return [
+            sum(((p - c) / a) ** 2 for p, c, a in zip(point_km, centre, axes, strict=True))
+            for centre, axes in self.ellipsoids()
+        ]
+
 
 class CorridorConfig(_FrozenModel):
     """An approach corridor: a cone with apex at the docking port (``[constraints.corridor]``).
@@ -1251,38 +1259,11 @@ class ConstraintsConfig(_FrozenModel):
                 )
             ]
         )
-        norm = math.sqrt(sum(a * a for a in corridor.axis))
-        axis = [a / norm for a in corridor.axis]
-        cos_half = math.cos(math.radians(corridor.half_angle_deg))
-        for i, (centre, _) in enumerate(self.keep_out.ellipsoids()):
-            w = [c - p for c, p in zip(centre, corridor.port_km, strict=True)]
-            length = math.sqrt(sum(v * v for v in w))
-            if (
-                length > 0.0
-                and sum(a * v for a, v in zip(axis, w, strict=True)) >= cos_half * length
-            ):
-                body = "keep-out zone" if i == 0 else f"keep_out.bodies.{i - 1}"
-                raise rules_error(
-                    [
-                        (
-                            "corridor.axis",
-                            list(corridor.axis),
-                            f"the corridor holds the centre of the {body}, so it would waive "
-                            "the zone's core: the axis points outward, from the port away from "
-                            f"the target (e.g. [{', '.join(fmt_num(-a) for a in corridor.axis)}])",
-                        )
-                    ]
-                )
-        return self
 
     @model_validator(mode="after")
     def _port_outside_keep_out(self) -> Self:
         if self.keep_out is not None and self.corridor is not None:
-            for i, (centre, axes) in enumerate(self.keep_out.ellipsoids()):
-                level = sum(
-                    ((p - c) / a) ** 2
-                    for p, c, a in zip(self.corridor.port_km, centre, axes, strict=True)
-                )
+            for i, level in enumerate(self.keep_out.levels(self.corridor.port_km)):
                 if level >= 1.0 - PORT_SURFACE_TOL:
                     continue
                 where = (
@@ -1837,14 +1818,14 @@ def end_in_keep_out(cfg: CwrendConfig) -> str | None:
     if keep_out is None or cfg.constraints.corridor is not None:
         return None
     r = cfg.scenario.xf[:3]
+    if cfg.target.attitude == "tumbling":  # the centred ellipsoid's inscribed ball
+        inside = [0] if sum(v * v for v in r) < min(keep_out.semi_axes_km) ** 2 else []
+    else:
+        inside = [i for i, level in enumerate(keep_out.levels(r)) if level < 1.0]
     where = [
         "constraints.keep_out.semi_axes_km" if i == 0 else f"constraints.keep_out.bodies.{i - 1}"
-        for i, (centre, axes) in enumerate(keep_out.ellipsoids())
-        if sum(((p - c) / a) ** 2 for p, c, a in zip(r, centre, axes, strict=True)) < 1.0
+        for i in inside
     ]
-    if cfg.target.attitude == "tumbling":
-        inscribed = min(keep_out.semi_axes_km)
-        where = [w for w in where[:1] if sum(v * v for v in r) < inscribed**2]
     if not where:
         return None
     return (
