@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
 import dataclasses
 import errno
 import json
@@ -11,12 +13,14 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+import pool_tasks
 import pyarrow.parquet as pq
 import pytest
 from hooked_cwrend import HANG_S, HOOKED, wait_stopped
@@ -27,6 +31,7 @@ from cwrend_cli import campaign
 from cwrend_cli.campaign import driver as driver_module
 from cwrend_cli.campaign import journal
 from cwrend_cli.campaign import worker as worker_module
+from cwrend_cli.campaign.executors import open_executor
 from cwrend_cli.cli import app
 from cwrend_cli.config import CwrendConfig, config_from_dict, expand_grid, load_config, parse_param
 from cwrend_cli.config.adapt import problem_of
@@ -577,6 +582,45 @@ def test_a_killed_worker_is_replaced_and_its_task_rerun(
     _assert_same_as_uninterrupted(out, uninterrupted, seeds=24)
 
 
+def _process_ended(pid: int) -> bool:
+    """Whether ``pid`` has exited (gone, or a zombie its parent has not reaped yet)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return True
+    return fields[0] == "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_a_broken_pool_ends_its_surviving_workers(tmp_path: Path) -> None:
+    """A worker dies: the pool ends the others, even one that a SIGTERM only asks to stop.
+
+    cwrend's workers turn SIGTERM into a stop of their task, so the pool's
+    ``terminate()`` left a survivor waiting for work on a lock its dead
+    sibling held, and the pool's shutdown waited for it for ever (a CI run
+    of the test above hung for 600 s; reproduced 2 in 6 by killing a worker
+    0-0.3 s after the first task). Here the survivor is busy and ignores
+    SIGTERM outright: without a SIGKILL it never ends.
+    """
+    marker = tmp_path / "holder.pid"
+    with open_executor("local", 2) as (pool, _):
+        held = pool.submit(pool_tasks.hold, str(marker))
+        hang = time.monotonic() + HANG_S
+        while not marker.exists() or not marker.read_text():  # a state: the task is running
+            assert time.monotonic() < hang, "the held task never started"
+            time.sleep(0.01)
+        holder = int(marker.read_text())
+        others = [p.pid for p in pool._processes.values() if p.pid not in (holder, None)]
+        os.kill(others[0], signal.SIGKILL)
+        with pytest.raises(BrokenProcessPool):
+            held.result(timeout=HANG_S)
+        while not _process_ended(holder):
+            if time.monotonic() > hang:
+                os.kill(holder, signal.SIGKILL)  # let the pool shut down, then fail
+                pytest.fail("the pool left its surviving worker running: its shutdown would hang")
+            time.sleep(0.01)
+
+
 def test_a_full_disk_stops_the_campaign_with_exit_3_and_records_no_result(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -993,6 +1037,58 @@ def test_resume_with_another_chunking_computes_only_the_missing_runs(tmp_path: P
     steps = _steps(out)
     assert len(steps) == 20 * 801  # nothing computed twice
     pd.testing.assert_frame_equal(steps, _steps(tmp_path / "results" / "whole"), check_exact=True)
+
+
+class _BrokenPool(concurrent.futures.Executor):
+    """A local pool that broke as a task was submitted: its futures never complete.
+
+    What Python's pool leaves when a worker dies as the driver submits (it
+    marks itself broken without the lock ``submit`` holds): broken, its
+    management thread ended, the new task's future pending for ever.
+    """
+
+    _broken = "A child process terminated abruptly, the process pool is not usable anymore"
+    _executor_manager_thread = None
+
+    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> concurrent.futures.Future[Any]:
+        return concurrent.futures.Future()
+
+
+def test_a_task_a_broken_pool_never_completes_runs_again_on_a_fresh_pool(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The driver counts a broken pool's pending futures lost (a state, not a time) and reruns
+    their tasks: the campaign completes instead of waiting for ever."""
+    real_open = driver_module.open_executor
+    openings: list[str] = []
+
+    @contextlib.contextmanager
+    def open_executor(kind: Any, workers: Any, address: Any) -> Iterator[tuple[Any, int]]:
+        openings.append(kind)
+        if len(openings) == 1:
+            yield _BrokenPool(), 1
+        else:
+            with real_open(kind, 1, address) as opened:
+                yield opened
+
+    real_wait = concurrent.futures.wait
+    polls = {"n": 0}
+
+    def guarded_wait(*args: Any, **kwargs: Any) -> Any:
+        polls["n"] += 1  # a guard against a hang only (before the fix it waited for ever)
+        assert polls["n"] < 1_000, "the campaign waits for ever on a broken pool"
+        return real_wait(*args, **kwargs)
+
+    monkeypatch.setattr(driver_module, "open_executor", open_executor)
+    monkeypatch.setattr(driver_module, "wait", guarded_wait)
+    monkeypatch.setattr(driver_module, "_SIGNAL_POLL_S", 0.001)
+    monkeypatch.setattr(driver_module, "RETRY_BACKOFF_S", 0.0)
+    cfg = _write_config(tmp_path / "c.toml", "broken")
+    result = _cli("ablate", str(cfg), "-n", "2", "--arch", "mtf_adaptive", "--workers", "1")
+    assert result.exit_code == 0, result.output
+    assert len(openings) == 2
+    runs = pd.read_parquet(tmp_path / "results" / "broken" / "runs.parquet")
+    assert len(runs) == 2 and (runs["status"] == "ok").all()
 
 
 def test_an_executor_that_lost_its_scheduler_does_not_hang_the_campaign(

@@ -45,6 +45,7 @@ from cwrend_cli.campaign.executors import (
     check_address,
     default_workers,
     executor_alive,
+    executor_broken,
     executor_workers,
     helper_process,
     open_executor,
@@ -632,9 +633,12 @@ def _execute(
     to a fresh executor, up to :data:`MAX_TASK_ATTEMPTS` times, with a
     backoff of :data:`RETRY_BACKOFF_S` doubling per reopening; nothing of it is
     journaled as a result, and the files it wrote are removed before (a
-    surviving worker of a broken pool, stopped by the pool's SIGTERM, writes
-    those of the runs it finished; ``owner``: the journal's, see
-    :func:`~cwrend_cli.campaign.journal.load_journal`). An I/O error writing
+    broken pool ends its surviving workers with SIGKILL, which may leave
+    files of their runs, whole or half-written: :class:`~cwrend_cli.campaign.
+    executors._PoolWorkerProcess`; ``owner``: the journal's, see
+    :func:`~cwrend_cli.campaign.journal.load_journal`). A pool that broke as
+    a task was submitted never completes that task's future: the driver
+    counts it lost when the pool has ended (:func:`executor_broken`). An I/O error writing
     results stops at once (a full disk does not heal by retrying). Raises
     :class:`_StopError` when the campaign cannot go on.
     """
@@ -797,10 +801,12 @@ def _drive(
                     idle_s = idle_s + (now - checked) if executor_workers(executor) == 0 else 0.0
                     checked = now
                 _check_workers(idle_s, plan_.no_worker_timeout_s)
-                if dead_s >= DASK_LOST_AFTER_S:  # its futures would wait forever: all lost
+                broken = executor_broken(executor)
+                if broken or dead_s >= DASK_LOST_AFTER_S:  # its futures would wait forever
+                    cause = "the pool broke" if broken else "the executor lost its scheduler"
                     for token, task in in_flight.values():
                         tally.lost(token)
-                        fault = RuntimeError("the executor lost its scheduler")
+                        fault = RuntimeError(cause)
                         fatal = fatal or _count_attempt(task, fault, attempts)
                         lost.append(task)
                     in_flight.clear()

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import multiprocessing
 import os
 import queue
 import signal
@@ -44,7 +43,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
-from multiprocessing.context import BaseContext
+from multiprocessing.context import BaseContext, SpawnContext, SpawnProcess
 from multiprocessing.queues import Queue
 from types import FrameType
 from typing import Literal, ParamSpec, Protocol, TypeVar
@@ -153,6 +152,35 @@ def _worker_init(runs: Queue[tuple[int, bool]] | None = None) -> None:
     end_without_teardown(lambda: 0)
 
 
+class _PoolWorkerProcess(SpawnProcess):
+    """A pool worker that its pool's ``terminate()`` ends for sure (SIGKILL).
+
+    A ``ProcessPoolExecutor`` one of whose workers dies fails every future
+    it holds, then ends the other workers with ``terminate()`` (SIGTERM) and
+    waits for them and for its call queue's feeder thread. A cwrend worker
+    turns SIGTERM into a stop of its task (:func:`_worker_init`: a batch
+    scheduler's time limit keeps the finished runs), so a survivor went on
+    waiting for work, on the call queue's read lock its dead sibling held,
+    while the feeder waited for room in the pipe only the survivor could
+    read: the pool's shutdown, and the campaign, waited for ever (CI, a
+    worker killed with ``kill -9`` while it waited for work). Ending the
+    survivors loses nothing: their futures have already failed, and the
+    driver submits those tasks again to a fresh pool and removes what the
+    survivors wrote (:func:`cwrend_cli.campaign.journal.remove_orphan_files`).
+    Only the pool calls ``terminate()``; a stop of the campaign sends the
+    workers signals of its own (:func:`ask_workers_to_stop`, :func:`_terminate_workers`).
+    """
+
+    def terminate(self) -> None:
+        self.kill()
+
+
+class _PoolContext(SpawnContext):
+    """The spawn start method, with workers a broken pool ends (:class:`_PoolWorkerProcess`)."""
+
+    Process = _PoolWorkerProcess
+
+
 def _quiet_dask_logs() -> None:
     """Silence Dask's loggers below CRITICAL in this process.
 
@@ -225,6 +253,22 @@ def executor_alive(executor: Executor) -> bool:
     """
     client = getattr(executor, "_client", None)  # distributed.cfexecutor.ClientExecutor
     return client is None or getattr(client, "status", "running") == "running"
+
+
+def executor_broken(executor: Executor) -> bool:
+    """Whether ``executor`` is a local pool that broke and has ended: it delivers nothing more.
+
+    A pool one of whose workers died fails the futures it holds and ends its
+    management thread. Python's pool marks itself broken without the lock
+    its ``submit`` holds, so a task submitted in that instant gets a future
+    nothing will ever complete (seen: a campaign waiting for ever after a
+    worker was killed, the driver submitting as the pool broke). The driver
+    asks this when nothing completes and counts such futures lost.
+    """
+    if not getattr(executor, "_broken", False):
+        return False
+    manager = getattr(executor, "_executor_manager_thread", None)
+    return manager is None or not manager.is_alive()
 
 
 def executor_workers(executor: Executor) -> int | None:
@@ -367,7 +411,7 @@ def helper_process() -> Iterator[ProcessPoolExecutor]:
     workers are (:func:`_stop_signals_blocked`, :func:`_worker_init`: a Ctrl-C
     prints no traceback there) and terminated when the campaign stops.
     """
-    context = multiprocessing.get_context("spawn")
+    context = _PoolContext()
     with _stop_signals_blocked():
         pool = ProcessPoolExecutor(max_workers=1, mp_context=context, initializer=_worker_init)
         pool.submit(_started)  # start it now, while the campaign process prepares
@@ -390,7 +434,7 @@ def open_executor(
         if n == 1:
             yield InlineExecutor(), 1
             return
-        context = multiprocessing.get_context("spawn")
+        context = _PoolContext()
         # the workers and multiprocessing's resource tracker start with the stop signals
         # blocked: the tracker, started by the queue's first semaphore, ignores SIGINT and
         # SIGTERM itself, not SIGHUP; starting, it unblocks SIGINT and SIGTERM here, hence
