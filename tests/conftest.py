@@ -13,6 +13,7 @@ from __future__ import annotations
 import concurrent.futures
 import fcntl
 import os
+import signal
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,6 +26,25 @@ import pytest
 from cwrend_cli.config import CwrendConfig
 from cwrend_cli.config.adapt import problem_of
 from cwrend_cli.physics import guidance, simulation
+
+
+@pytest.fixture(scope="session", autouse=True)
+def ctrl_c_delivered() -> Iterator[None]:
+    """Ctrl-C (SIGINT) reaches the tests' campaigns, however the suite was started.
+
+    A shell without job control starts a background job (``pytest … &``, a
+    script's ``cmd &``) with SIGINT ignored, and cwrend keeps a signal
+    ignored at its start ignored (:func:`cwrend_cli.teardown.stop_on_signals`),
+    so the interruption tests failed there (seen: every run of
+    ``test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run`` started
+    with ``&``). Python's own handler here; the campaigns the tests start
+    inherit the default action (a handler is reset on ``exec``, an ignored
+    signal is not).
+    """
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
 
 #: Set on the controller of a whole-suite run on xdist workers (:func:`pytest_cmdline_main`).
 _DISTRIBUTED = pytest.StashKey[bool]()
