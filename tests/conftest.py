@@ -359,6 +359,25 @@ class _NeverRuns(concurrent.futures.Executor):
 
 
 @pytest.fixture(scope="session")
+def bounded_wait() -> Callable[[int, str], Callable[..., Any]]:
+    """Factory ``(polls, what) ↦ wait``: ``concurrent.futures.wait`` that fails the test with
+    ``what`` after ``polls`` calls. A guard against a hang only, for a driver whose wait is
+    patched (``driver.wait``): it counts the driver's polls, not the time they take."""
+
+    def factory(polls: int, what: str) -> Callable[..., Any]:
+        seen = {"n": 0}
+
+        def wait(*args: Any, **kwargs: Any) -> Any:
+            seen["n"] += 1
+            assert seen["n"] < polls, what
+            return concurrent.futures.wait(*args, **kwargs)
+
+        return wait
+
+    return factory
+
+
+@pytest.fixture(scope="session")
 def stalled_executor() -> Callable[[object], Callable[..., Any]]:
     """Factory ``client ↦ open_executor``: a stand-in for the driver's ``open_executor``
     that opens one worker whose tasks never run, on a Dask ``client`` stand-in (its

@@ -318,24 +318,19 @@ def test_retry_failed_counts_every_run_it_computed_again(tmp_path: Path) -> None
 
 
 def test_a_dask_cluster_without_workers_stops_the_campaign_with_exit_3(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stalled_executor: Callable[..., Any]
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    stalled_executor: Callable[..., Any],
+    bounded_wait: Callable[..., Any],
 ) -> None:
     """Scheduler alive, no worker: the futures would wait for ever (real cluster:
     tests/test_distributed.py)."""
-    import concurrent.futures
 
     class _WorkerlessClient:
         status = "running"  # the scheduler answers
         _scheduler_identity: ClassVar[dict[str, int]] = {"n_workers": 0}  # no worker
 
-    real_wait = concurrent.futures.wait
-    polls = {"n": 0}
-
-    def guarded_wait(*args: Any, **kwargs: Any) -> Any:
-        polls["n"] += 1  # a guard against a hang only (before the fix it waited for ever)
-        assert polls["n"] < 100_000, "the campaign waits for ever on a cluster without workers"
-        return real_wait(*args, **kwargs)
-
+    guarded_wait = bounded_wait(100_000, "the campaign waits for ever on a cluster without workers")
     monkeypatch.setattr(driver_module, "open_executor", stalled_executor(_WorkerlessClient()))
     monkeypatch.setattr(driver_module, "wait", guarded_wait)
     monkeypatch.setattr(driver_module, "_POLL_S", 0.05)
