@@ -264,11 +264,19 @@ def config_show(
     "validate", cls=_Command, short_help="Check a configuration: 'OK <hash>' or the errors."
 )
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
-    """Check a configuration; print 'OK <hash>' or the problems (exit code 2)."""
+    """Check a configuration; print 'OK <hash>' or the problems (exit code 2).
+
+    Besides the values, the checks every campaign makes before it runs: the
+    [dispersions] keys and the noise file (its columns and rows).
+    """
     from cwrend_cli.config import config_hash, load_config
 
     with user_errors():
         cfg = load_config(file, set_ or ())
+        if cfg.dispersions or cfg.noise.file is not None:  # else no numpy to import
+            from cwrend_cli.campaign.plan import check_inputs
+
+            check_inputs(cfg)
         typer.echo(f"OK {config_hash(cfg)}")
 
 

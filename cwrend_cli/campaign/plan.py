@@ -66,6 +66,7 @@ __all__ = [
     "RunSpec",
     "Task",
     "campaign_hash",
+    "check_inputs",
     "default_seeds_per_task",
     "dispersion_seed_sequence",
     "draw_dispersions",
@@ -396,6 +397,29 @@ def _check_typed(problem: Problem, dispersed: Assignment, run_cfg: CwrendConfig,
             "parameters as drawn (disperse single numbers of the scenario, estimator, "
             "schedule, guidance, solver or degradation sections)"
         )
+
+
+def check_inputs(cfg: CwrendConfig) -> None:
+    """Refuse the inputs of ``cfg`` that every campaign of it would refuse before running.
+
+    The checks :func:`plan` makes of each point, made of the base configuration
+    (``cwrend config validate``): the ``[dispersions]`` keys, drawn for seed 0 on
+    top of the base (a key that names no number, a dispersed value that is invalid
+    or cannot be applied to the physics parameters), and the noise file
+    (:func:`~cwrend_cli.config.io.load_noise_file`: its columns and rows). Raises
+    :class:`ConfigError` (or :class:`~cwrend_cli.errors.InputDataError`) with the
+    message :func:`plan` gives.
+    """
+    if cfg.noise.file is not None:
+        load_noise_file(cfg.noise.file, cfg.scenario.n_steps)
+    if not cfg.dispersions:
+        return
+    base = resolved_dict(cfg)
+    base.pop("sweep", None)
+    base.pop("dispersions", None)
+    dispersed = draw_dispersions(cfg.dispersions, base, cfg.noise.seed, 0)
+    run_cfg = _validated(base, dispersed, "dispersed run (seed 0)", nis_offset_given(cfg))
+    _check_typed(problem_of(cfg), dispersed, run_cfg, 0)
 
 
 def campaign_hash(
