@@ -318,3 +318,13 @@ def test_a_bad_swept_truth_value_exits_2_before_any_run(
     assert result.exit_code == 2
     assert message in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "bad").exists()  # refused before anything was written
+
+
+def test_an_eccentricity_the_cw_truth_ignores_is_refused_naming_the_truth_model() -> None:
+    result = runner.invoke(
+        app, ["config", "validate", str(PAPER), "--set", "truth.eccentricity=0.05"]
+    )
+    assert result.exit_code == 2, result.output
+    assert "truth.eccentricity = 0.05: the 'cw' truth (truth.model)" in result.stderr
+    assert "'two_body' or 'j2'" in result.stderr
+    assert "Traceback" not in result.output
