@@ -238,18 +238,34 @@ def point_tree(
     of the base config; a resolved tree has lost that). If not, and ``assignment``
     sets the sensor but not the offset, the offset is left out so that validation
     fills it in for the point's sensor (its measurement dimension m, paper Eq. 24),
-    not kept at the base's resolved value (:func:`apply` otherwise). One place for
-    the campaign that runs the point and the report that draws it.
+    not kept at the base's resolved value (:func:`apply` otherwise). Likewise
+    ``scenario.xf`` of a base with a corridor, where it is the port at rest (filled
+    in or given so: validation requires it): an assignment that moves the port
+    (``constraints.corridor.port_km``) but sets no ``scenario.xf`` leaves it out, so
+    that it is the point's port at rest. One place for the campaign that runs the
+    point and the report that draws it.
     """
     tree = apply(base, assignment)
     keys = [k for k, _ in assignment]
     if (
         not offset_given
-        and any(k == "sensor" or k.startswith("sensor.") for k in keys)
+        and _touches(keys, "sensor")
         and not any(k in ("schedule", "schedule.nis_offset") for k in keys)
     ):
         tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
+    corridor = (base.get("constraints") or {}).get("corridor")
+    if (
+        corridor is not None
+        and _touches(keys, "constraints.corridor.port_km")
+        and not _touches(keys, "scenario.xf")
+    ):
+        tree["scenario"] = {k: v for k, v in tree["scenario"].items() if k != "xf"}
     return tree
+
+
+def _touches(keys: Iterable[str], key: str) -> bool:
+    """Whether one of the dotted ``keys`` sets ``key``: itself, a table above it or a part of it."""
+    return any(k == key or k.startswith(key + ".") or key.startswith(k + ".") for k in keys)
 
 
 # ---------------------------------------------------------------------------
