@@ -51,7 +51,7 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
-from cwrend_cli.config.overrides import expand_grid, get_dotted, point_tree
+from cwrend_cli.config.overrides import expand_grid, get_dotted, missing_key_hint, point_tree
 from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -342,9 +342,10 @@ def draw_dispersions(
             try:
                 base = get_dotted(point_tree, key)
             except (KeyError, IndexError, ValueError, TypeError):
+                hint = missing_key_hint(point_tree, key)
                 raise ConfigError(
                     f"dispersions.{key}: no such config value to disperse "
-                    "(use a dotted key such as scenario.x0.2 or scenario.u_max_km_s2)"
+                    f"(use a dotted key such as scenario.x0.2 or scenario.u_max_km_s2){hint}"
                 ) from None
             if not isinstance(base, (int, float)) or isinstance(base, bool):
                 raise ConfigError(

@@ -16,12 +16,12 @@ import copy
 import functools
 import math
 import tomllib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from decimal import Context, Decimal, localcontext
 from types import MappingProxyType
 from typing import Any
 
-from cwrend_cli.config.messages import did_you_mean
+from cwrend_cli.config.messages import closest_all, did_you_mean
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_NESTING, MAX_SWEPT_KEYS, MAX_VALUES_PER_KEY
@@ -38,6 +38,7 @@ __all__ = [
     "apply",
     "expand_grid",
     "get_dotted",
+    "missing_key_hint",
     "nesting_depth",
     "parse_arch",
     "parse_archs",
@@ -215,6 +216,45 @@ def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
     for part in key.split("."):
         node = node[part] if isinstance(node, Mapping) else node[_array_index(part)]
     return node
+
+
+def missing_key_hint(tree: Mapping[str, Any], key: str) -> str:
+    """Why the dotted ``key`` names no value of ``tree``, as a hint to append, else ``""``.
+
+    A table without the component: ``"; did you mean 'scenario.x0.2'?"``, the closest
+    dotted key of the tree's values (:func:`~cwrend_cli.config.messages.closest`); an
+    index out of range: ``" (scenario.x0 has 6 entries: 0 to 5)"``.
+    """
+    parts = key.split(".")
+    node: Any = tree
+    for i, part in enumerate(parts):
+        if isinstance(node, Mapping) and part in node:
+            node = node[part]
+        elif isinstance(node, list):
+            try:
+                node = node[_array_index(part)]
+            except (ValueError, IndexError):
+                last = f": 0 to {len(node) - 1}" if node else ""
+                return f" ({'.'.join(parts[:i])} has {len(node)} entries{last})"
+        elif isinstance(node, Mapping):
+            near = closest_all(key, list(_dotted_keys(tree)))
+            return f"; did you mean {' or '.join(repr(k) for k in near)}?" if near else ""
+        else:
+            return ""
+    return ""
+
+
+def _dotted_keys(node: Any, prefix: str = "") -> Iterator[str]:
+    """The dotted keys of every value (a leaf: neither a table nor an array) of a tree."""
+    if isinstance(node, Mapping):
+        items: Iterable[tuple[Any, Any]] = node.items()
+    elif isinstance(node, list):
+        items = enumerate(node)
+    else:
+        yield prefix
+        return
+    for k, v in items:
+        yield from _dotted_keys(v, f"{prefix}.{k}" if prefix else str(k))
 
 
 def apply(base: Mapping[str, Any], assignment: Iterable[tuple[str, Any]]) -> dict[str, Any]:
