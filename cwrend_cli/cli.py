@@ -802,7 +802,7 @@ def _campaign_step(
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
     from cwrend_cli.campaign.executors import default_workers
-    from cwrend_cli.console import RichProgress
+    from cwrend_cli.console import RichProgress, phase
 
     design_kind: design.Design | None = opts.design  # type: ignore[assignment]
     executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
@@ -828,15 +828,22 @@ def _campaign_step(
                 markup=False,
             )
         _announce(err, plan)
-    progress = RichProgress(
-        err, f"{command} {out.name}", quiet=opts.quiet or opts.table_format is not None,
-        notice=_first_run_notice(plan, executor_kind == "local" and (workers or 1) > 1),
-    )  # fmt: skip
+    fan_out = executor_kind == "local" and (workers or 1) > 1
+    notice = _first_run_notice(plan, fan_out)
+    quiet = opts.quiet or opts.table_format is not None
+    # cwrend run's check of each scenario, before anything is written: an unreachable
+    # target (a port in metres) exits 2 instead of a campaign of failed runs. On a first
+    # run it compiles the references' kernels (and, fanned out, a helper the step loop's)
+    with phase(err, (notice or "").removesuffix("…"), quiet=quiet or notice is None):
+        references = campaign.check_references(plan, beside=fan_out)
+    left = None if fan_out else notice  # one process: the step loop compiles with the runs
+    progress = RichProgress(err, f"{command} {out.name}", quiet=quiet, notice=left)
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
         argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest, pairs=pairs,
+        references=references,
     )  # fmt: skip
     if summary.set_aside:  # said even with -q: runs were computed again
         err.print(_set_aside_line(summary.set_aside), soft_wrap=True, markup=False)

@@ -65,6 +65,7 @@ __all__ = [
     "NoiseSource",
     "RunSpec",
     "Task",
+    "assignment_text",
     "campaign_hash",
     "check_inputs",
     "default_seeds_per_task",
@@ -373,10 +374,16 @@ def _validated(
     try:
         return config_from_dict(tree, source=what)
     except ConfigError as exc:
-        values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
-        if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
-            values += f", … {len(assignment):,} values in all"
+        values = assignment_text(assignment)
         raise ConfigError(f"{what} ({values}) is invalid:", exc.problems or (str(exc),)) from None
+
+
+def assignment_text(assignment: Assignment) -> str:
+    """``key = value, …`` of a grid point or dispersed run, as its errors name it."""
+    values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
+    if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
+        values += f", … {len(assignment):,} values in all"
+    return values
 
 
 def _check_typed(problem: Problem, dispersed: Assignment, run_cfg: CwrendConfig, seed: int) -> None:
