@@ -302,7 +302,10 @@ def test_a_sweep_over_the_truth_model_and_a_fault_runs_each_point_as_configured(
 @pytest.mark.parametrize(
     ("sweep", "message"),
     [
-        ('"truth.eccentricity" = [0.1, 1.2]', "truth.eccentricity = 1.2: must be < 1"),
+        (  # a two-body chief: the 'cw' truth refuses any eccentricity
+            '"truth.eccentricity" = [0.1, 1.2]\n"truth.model" = ["two_body"]',
+            "truth.eccentricity = 1.2: must be < 1",
+        ),
         ('"truth.model" = ["cw", "kepler"]', "truth.model"),
     ],
 )
