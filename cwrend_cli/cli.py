@@ -1048,7 +1048,8 @@ def sweep(
             "--param",
             "-p",
             help="Swept key: dotted.key=v1,v2,v3, dotted.key=start:stop:num or a TOML array "
-            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' (vectors) (repeatable, one per key; adds "
+            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' or 'dotted.key=[1, 2, 3],[4, 5, 6]' (vectors) "
+            "(repeatable, one per key; adds "
             "a key to the config's [sweep] table or replaces its values, with a note).",
             metavar="KEY=VALUES",
         ),

@@ -319,7 +319,7 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
     Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
     word is a string. A TOML array lists the values as a file's ``[sweep]`` does, so a
     vector-valued key is swept as ``key=[[1, 2, 3], [4, 5, 6]]``. A range gives ``num``
-    evenly spaced floats.
+    evenly spaced floats. Vectors may also be listed with commas, ``key=[1, 2, 3],[4, 5, 6]``.
     """
     if "=" not in text:
         raise ConfigError(
@@ -338,6 +338,10 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
         raise ConfigError(  # 0.1:0.5 (no num) or 0:1:5:2: a range meant, not a string
             f"--param {text!r}: a range is start:stop:num, e.g. {key}=0.1:0.5:5"
         )
+    if raw_text.startswith(("[", "{")):  # vectors or tables listed with commas, [1, 2],[3, 4]:
+        listed = _parse_value(f"[{raw_text}]", key)  # the commas inside them are theirs
+        if isinstance(listed, list):
+            return key, tuple(listed)
     parts = [p.strip() for p in raw_text.split(",")]
     if any(not p for p in parts):
         raise ConfigError(f"--param {text!r}: empty value in the list")
