@@ -264,11 +264,19 @@ def config_show(
     "validate", cls=_Command, short_help="Check a configuration: 'OK <hash>' or the errors."
 )
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
-    """Check a configuration; print 'OK <hash>' or the problems (exit code 2)."""
+    """Check a configuration; print 'OK <hash>' or the problems (exit code 2).
+
+    Besides the values, the checks every campaign makes before it runs: the
+    [dispersions] keys and the noise file (its columns and rows).
+    """
     from cwrend_cli.config import config_hash, load_config
 
     with user_errors():
         cfg = load_config(file, set_ or ())
+        if cfg.dispersions or cfg.noise.file is not None:  # else no numpy to import
+            from cwrend_cli.campaign.plan import check_inputs
+
+            check_inputs(cfg)
         typer.echo(f"OK {config_hash(cfg)}")
 
 
@@ -794,7 +802,7 @@ def _campaign_step(
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
     from cwrend_cli.campaign.executors import default_workers
-    from cwrend_cli.console import RichProgress
+    from cwrend_cli.console import RichProgress, phase
 
     design_kind: design.Design | None = opts.design  # type: ignore[assignment]
     executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
@@ -820,15 +828,22 @@ def _campaign_step(
                 markup=False,
             )
         _announce(err, plan)
-    progress = RichProgress(
-        err, f"{command} {out.name}", quiet=opts.quiet or opts.table_format is not None,
-        notice=_first_run_notice(plan, executor_kind == "local" and (workers or 1) > 1),
-    )  # fmt: skip
+    fan_out = executor_kind == "local" and (workers or 1) > 1
+    notice = _first_run_notice(plan, fan_out)
+    quiet = opts.quiet or opts.table_format is not None
+    # cwrend run's check of each scenario, before anything is written: an unreachable
+    # target (a port in metres) exits 2 instead of a campaign of failed runs. On a first
+    # run it compiles the references' kernels (and, fanned out, a helper the step loop's)
+    with phase(err, (notice or "").removesuffix("…"), quiet=quiet or notice is None):
+        references = campaign.check_references(plan, beside=fan_out)
+    left = None if fan_out else notice  # one process: the step loop compiles with the runs
+    progress = RichProgress(err, f"{command} {out.name}", quiet=quiet, notice=left)
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
         address=opts.address, force=opts.force, retry_failed=opts.retry_failed,
         allow_version_change=opts.allow_version_change, progress=progress,
         argv=command_line(), hold=hold, repair_manifest=opts.repair_manifest, pairs=pairs,
+        references=references,
     )  # fmt: skip
     if summary.set_aside:  # said even with -q: runs were computed again
         err.print(_set_aside_line(summary.set_aside), soft_wrap=True, markup=False)
@@ -1033,7 +1048,8 @@ def sweep(
             "--param",
             "-p",
             help="Swept key: dotted.key=v1,v2,v3, dotted.key=start:stop:num or a TOML array "
-            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' (vectors) (repeatable, one per key; adds "
+            "'dotted.key=[[1, 2, 3], [4, 5, 6]]' or 'dotted.key=[1, 2, 3],[4, 5, 6]' (vectors) "
+            "(repeatable, one per key; adds "
             "a key to the config's [sweep] table or replaces its values, with a note).",
             metavar="KEY=VALUES",
         ),

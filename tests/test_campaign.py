@@ -404,10 +404,26 @@ def test_numbers_do_not_depend_on_workers_or_executor(
 # --- failures and interruption ---------------------------------------------------
 
 
-def test_failing_runs_are_isolated_and_retried(tmp_path: Path) -> None:
-    """u_max = 1e-5 km/s² cannot reach the target: those runs fail, the others go on."""
+def test_failing_runs_are_isolated_and_retried(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The runs of u_max = 7e-4 km/s² fail (made to, in the simulation): the others go on.
+
+    (An unreachable target, which made them fail before, is refused before the campaign
+    starts: test_an_unreachable_port_is_refused_before_anything_is_written.)
+    """
+    from cwrend_cli.physics import simulation
+
+    simulate = simulation.simulate
+
+    def failing(problem: Any, *args: Any, **kwargs: Any) -> Any:
+        if problem.scenario.u_max_km_s2 == 7e-4:
+            raise RuntimeError("a run made to fail")
+        return simulate(problem, *args, **kwargs)
+
+    monkeypatch.setattr(simulation, "simulate", failing)  # --workers 1: in this process
     cfg = _write_config(tmp_path / "c.toml", "fail")
-    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,1e-5", "--arch",
+    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,7e-4", "--arch",
             "mtf_adaptive", "--seeds", "2", "--workers", "1", "-q"]  # fmt: skip
     first = _cli(*args)
     assert first.exit_code == 1  # some runs failed
@@ -415,8 +431,8 @@ def test_failing_runs_are_isolated_and_retried(tmp_path: Path) -> None:
     runs = pd.read_parquet(out / "runs.parquet")
     failed = runs[runs["status"] == "failed"]
     assert len(failed) == 2 and (runs["status"] == "ok").sum() == 2
-    assert failed["error"].str.contains("infeasible").all()
-    assert (failed["param.scenario.u_max_km_s2"] == 1e-5).all()
+    assert failed["error"].str.contains("a run made to fail").all()
+    assert (failed["param.scenario.u_max_km_s2"] == 7e-4).all()
     retry = _cli(*args, "--retry-failed")
     assert retry.exit_code == 1
     events = journal.read_events(out / "events.jsonl")
@@ -1101,3 +1117,50 @@ def test_an_executor_that_lost_its_scheduler_does_not_hang_the_campaign(
     result = _cli("ablate", str(cfg), "-n", "1", "--arch", "mtf_adaptive", "--workers", "1")
     assert result.exit_code == 3, result.output
     assert "was lost 3 times, last: RuntimeError: the executor lost its scheduler" in result.stderr
+
+
+SAFE_APPROACH = Path(__file__).resolve().parents[1] / "campaigns" / "safe_approach.toml"
+#: The safe approach's port typed in metres: out of reach of u_max within the horizon.
+PORT_IN_METRES = "constraints.corridor.port_km=[0, 0, -250]"
+
+
+def test_an_unreachable_port_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    out_dir = f"output.dir={json.dumps(str(tmp_path / 'results'))}"
+    result = _cli("ablate", str(SAFE_APPROACH), "--arch", "plain_adaptive", "--seeds", "1",
+                  "--workers", "1", "--set", PORT_IN_METRES, "--set", out_dir)  # fmt: skip
+    assert result.exit_code == 2, result.output
+    assert "error: scenario infeasible: no control with |u| <= scenario.u_max_km_s2" in (
+        result.stderr
+    )
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_sweep_with_an_unreachable_point_is_refused_naming_the_point(tmp_path: Path) -> None:
+    out_dir = f"output.dir={json.dumps(str(tmp_path / 'results'))}"
+    param = "constraints.corridor.port_km=[[0, 0, -0.25], [0, 0, -250]]"
+    result = _cli("sweep", str(SAFE_APPROACH), "--param", param, "--arch", "plain_adaptive",
+                  "--seeds", "1", "--workers", "1", "--set", out_dir)  # fmt: skip
+    assert result.exit_code == 2, result.output
+    assert "constraints.corridor.port_km = [0, 0, -250]): scenario infeasible" in result.stderr
+    assert not (tmp_path / "results").exists()
+
+
+def test_the_references_checked_before_the_campaign_are_not_computed_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cwrend_cli.physics import simulation
+
+    computed: list[object] = []
+    references = simulation.open_loop_references
+
+    def counted(problem: Any) -> Any:
+        computed.append(problem.scenario)
+        return references(problem)
+
+    monkeypatch.setattr(simulation, "open_loop_references", counted)
+    cfg = _write_config(tmp_path / "c.toml", "once")
+    result = _cli("sweep", str(cfg), "--param", "schedule.beta=0.25,0.5", "--arch",
+                  "mtf_adaptive", "--seeds", "1", "--workers", "1", "-q", "--no-rrd")  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert len(computed) == 1  # one scenario (beta is no part of it), computed once

@@ -98,3 +98,53 @@ def test_the_command_list_says_report_writes_report_html() -> None:
     result = runner.invoke(app, ["--help"], env={"COLUMNS": "80"})
     line = next(x for x in result.stdout.splitlines() if x.strip().startswith("report"))
     assert "report.html" in line and len(line) <= 80
+
+
+def _validate_and_sweep(tmp_path: Path, text: str) -> tuple[str, str]:
+    """The errors of ``config validate`` and of ``sweep`` for one config (both exit 2)."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(text + f"\n[output]\ndir = {json.dumps(str(tmp_path / 'out'))}\n")
+    checked = runner.invoke(app, ["config", "validate", str(cfg)])
+    swept = runner.invoke(app, ["sweep", str(cfg), "-n", "1", "-a", "plain_adaptive", "-q"])
+    assert swept.exit_code == 2, swept.output
+    assert checked.exit_code == 2, checked.output
+    assert "Traceback" not in checked.output
+    assert not (tmp_path / "out").exists()
+    return checked.stderr, swept.stderr
+
+
+def test_validate_refuses_a_misspelt_dispersion_key_as_sweep_does(tmp_path: Path) -> None:
+    checked, swept = _validate_and_sweep(
+        tmp_path, '[dispersions]\n"scenario.xo.2" = { dist = "normal", std = 0.05 }\n'
+    )
+    assert "dispersions.scenario.xo.2: no such config value to disperse" in checked
+    assert checked == swept
+
+
+def test_validate_refuses_a_dispersion_index_out_of_range_as_sweep_does(tmp_path: Path) -> None:
+    checked, swept = _validate_and_sweep(
+        tmp_path, '[dispersions]\n"scenario.x0.9" = { dist = "normal", std = 0.05 }\n'
+    )
+    assert "dispersions.scenario.x0.9: no such config value to disperse" in checked
+    assert checked == swept
+
+
+def test_validate_refuses_a_noise_file_with_bad_columns_as_sweep_does(tmp_path: Path) -> None:
+    (tmp_path / "n.csv").write_text("a,b\n1,2\n")
+    checked, swept = _validate_and_sweep(tmp_path, '[noise]\nfile = "n.csv"\n')
+    assert "missing column(s) n1, n2, n3" in checked
+    assert checked == swept
+
+
+def test_validate_refuses_a_noise_file_with_too_few_rows_as_sweep_does(tmp_path: Path) -> None:
+    (tmp_path / "n.csv").write_text("n1,n2,n3\n" + "0,0,0\n" * 10)
+    checked, swept = _validate_and_sweep(tmp_path, '[noise]\nfile = "n.csv"\n')
+    assert "noise.file" in checked and "10" in checked
+    assert checked == swept
+
+
+def test_validate_accepts_the_shipped_dispersed_campaign() -> None:
+    cfg = REPO / "campaigns" / "sweep_beta_dispersed.toml"
+    result = runner.invoke(app, ["config", "validate", str(cfg)])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.strip() == f"OK {config_hash(load_config(cfg))}"

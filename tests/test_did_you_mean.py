@@ -71,3 +71,43 @@ def test_a_misspelt_design_range_is_answered_with_the_key_meant(tmp_path: Path) 
                 f"{typo}=0.1:1", "--set", out_dir]  # fmt: skip
         assert "did you mean 'schedule.beta'?" in _refused(args)
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+TUMBLING = PAPER.parent / "tumbling_target.toml"
+
+
+def test_a_misspelt_key_of_a_keep_out_body_is_answered_with_the_key_meant() -> None:
+    args = ["config", "validate", str(TUMBLING)]
+    out = _refused([*args, "--set", "constraints.keep_out.bodies.0.center_km=[0, 0.16, 0]"])
+    assert "constraints.keep_out.bodies.0.center_km: unknown key" in out
+    assert "did you mean 'centre_km'?" in out
+
+
+def test_a_misspelt_key_of_an_optional_section_is_answered_with_the_key_meant() -> None:
+    args = ["config", "validate", str(PAPER)]
+    out = _refused([*args, "--set", "constraints.keep_out.semi_axs_km=[0.2, 0.2, 0.2]"])
+    assert "did you mean 'semi_axes_km'?" in out
+
+
+def test_a_misspelt_dispersion_key_is_answered_with_the_keys_meant(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[dispersions]\n"scenario.xo.2" = { dist = "normal", std = 0.05 }\n')
+    out = _refused(["config", "validate", str(cfg)])
+    assert "did you mean 'scenario.x0.2' or 'scenario.xf.2'?" in out
+
+
+def test_a_dispersion_index_out_of_range_names_the_entries(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[dispersions]\n"scenario.x0.9" = { dist = "normal", std = 0.05 }\n')
+    assert "(scenario.x0 has 6 entries: 0 to 5)" in _refused(["config", "validate", str(cfg)])
+
+
+def test_a_malformed_array_says_what_was_given_and_what_is_expected() -> None:
+    out = _refused(["config", "validate", str(PAPER), "--set", "scenario.x0=[1, 2"])
+    assert 'scenario.x0 = "[1, 2": must be an array (written [v1, v2, …]), got a string' in out
+    assert "not a valid TOML array" in out
+
+
+def test_a_number_for_an_array_says_a_number_was_given() -> None:
+    out = _refused(["config", "validate", str(PAPER), "--set", "scenario.x0=5"])
+    assert "scenario.x0 = 5: must be an array (written [v1, v2, …]), got a number" in out

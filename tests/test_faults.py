@@ -301,12 +301,24 @@ def test_a_noise_file_changed_during_a_campaign_stops_it_as_a_changed_input(
     pd.testing.assert_frame_equal(_runs(out), _runs(tmp_path / "results" / "whole"))
 
 
-def test_retry_failed_counts_every_run_it_computed_again(tmp_path: Path) -> None:
+def test_retry_failed_counts_every_run_it_computed_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A task whose runs all failed reruns under its old execution name: still counted."""
+    from cwrend_cli.physics import simulation
+
+    simulate = simulation.simulate
+
+    def failing(problem: Any, *args: Any, **kwargs: Any) -> Any:
+        if problem.scenario.u_max_km_s2 == 7e-4:  # (an unreachable target is refused)
+            raise RuntimeError("a run made to fail")
+        return simulate(problem, *args, **kwargs)
+
+    monkeypatch.setattr(simulation, "simulate", failing)  # --workers 1: in this process
     cfg = _write_config(tmp_path / "c.toml", "retry")
-    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,1e-5", "--arch",
+    args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,7e-4", "--arch",
             "mtf_adaptive", "--seeds", "2", "--workers", "1"]  # fmt: skip
-    assert _cli(*args, "-q").exit_code == 1  # the u_max = 1e-5 point's 2 runs fail
+    assert _cli(*args, "-q").exit_code == 1  # the u_max = 7e-4 point's 2 runs fail
     retry = _cli(*args, "--retry-failed")
     assert retry.exit_code == 1
     assert "2 run(s) computed, 2 already done" in retry.stderr

@@ -104,3 +104,25 @@ def test_until_options_without_until_are_refused(tmp_path: Path, option: str, va
         result.stderr
     )
     assert not (tmp_path / "c").exists()
+
+
+SAFE_APPROACH = Path(__file__).resolve().parents[1] / "campaigns" / "safe_approach.toml"
+
+
+def test_a_swept_corridor_port_moves_the_terminal_state_with_it() -> None:
+    from cwrend_cli import campaign
+    from cwrend_cli.config import load_config
+
+    cfg = load_config(SAFE_APPROACH)
+    param = "constraints.corridor.port_km=[[0, 0, -0.25], [0, 0, -0.3]]"
+    plan = campaign.plan(cfg, ["plain_adaptive_socp"], [0], [param])
+    ends = sorted(tuple(t.problem.scenario.xf) for t in plan.tasks)
+    assert ends == [(0.0, 0.0, -0.3, 0.0, 0.0, 0.0), (0.0, 0.0, -0.25, 0.0, 0.0, 0.0)]
+
+
+def test_vectors_listed_with_commas_are_swept_as_in_one_array() -> None:
+    from cwrend_cli.config.overrides import parse_param
+
+    listed = parse_param("constraints.corridor.port_km=[0,0,-0.25],[0,0,-0.3]")
+    assert listed == parse_param("constraints.corridor.port_km=[[0,0,-0.25],[0,0,-0.3]]")
+    assert listed[1] == ([0, 0, -0.25], [0, 0, -0.3])

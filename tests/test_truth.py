@@ -302,7 +302,10 @@ def test_a_sweep_over_the_truth_model_and_a_fault_runs_each_point_as_configured(
 @pytest.mark.parametrize(
     ("sweep", "message"),
     [
-        ('"truth.eccentricity" = [0.1, 1.2]', "truth.eccentricity = 1.2: must be < 1"),
+        (  # a two-body chief: the 'cw' truth refuses any eccentricity
+            '"truth.eccentricity" = [0.1, 1.2]\n"truth.model" = ["two_body"]',
+            "truth.eccentricity = 1.2: must be < 1",
+        ),
         ('"truth.model" = ["cw", "kepler"]', "truth.model"),
     ],
 )
@@ -318,3 +321,13 @@ def test_a_bad_swept_truth_value_exits_2_before_any_run(
     assert result.exit_code == 2
     assert message in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "bad").exists()  # refused before anything was written
+
+
+def test_an_eccentricity_the_cw_truth_ignores_is_refused_naming_the_truth_model() -> None:
+    result = runner.invoke(
+        app, ["config", "validate", str(PAPER), "--set", "truth.eccentricity=0.05"]
+    )
+    assert result.exit_code == 2, result.output
+    assert "truth.eccentricity = 0.05: the 'cw' truth (truth.model)" in result.stderr
+    assert "'two_body' or 'j2'" in result.stderr
+    assert "Traceback" not in result.output

@@ -32,6 +32,7 @@ from collections.abc import Collection, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Literal, Protocol
 
 import pandas as pd
@@ -67,7 +68,7 @@ from cwrend_cli.campaign.journal import (
     versions_digest,
     wipe,
 )
-from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task
+from cwrend_cli.campaign.plan import CampaignPlan, RunSpec, Task, assignment_text
 from cwrend_cli.campaign.worker import (
     InputChangedError,
     ReferencesKey,
@@ -81,7 +82,7 @@ from cwrend_cli.campaign.worker import (
     references_key,
     seeds_to_record,
 )
-from cwrend_cli.errors import CwrendError, InfrastructureError
+from cwrend_cli.errors import CwrendError, InfrastructureError, ScenarioError
 from cwrend_cli.output.files import (
     check_campaign_dir,
     estimated_bytes,
@@ -121,6 +122,7 @@ __all__ = [
     "CampaignStatistics",
     "CampaignSummary",
     "Progress",
+    "check_references",
     "hold_campaign",
     "no_statistics",
     "run_campaign",
@@ -216,7 +218,8 @@ class _PointReferences:
     before any of the point's tasks is submitted, hence before any of its
     runs is journaled. A computation that fails is remembered as ``None``:
     the tasks then compute the references run by run, so each run fails with
-    its own error, as it would have alone.
+    its own error, as it would have alone. ``known``: references computed
+    already (:func:`check_references`), written when their point's first task is.
     """
 
     def __init__(
@@ -225,12 +228,14 @@ class _PointReferences:
         campaign_hash: str,
         config_hash: str,
         run_timeout_s: float | None = None,
+        known: Mapping[ReferencesKey, simulation.References | None] | None = None,
     ) -> None:
         self._out_dir = out_dir
         self._run_timeout_s = run_timeout_s  # the references get their runs' limit
         self._campaign_hash = campaign_hash
         self._config_hash = config_hash
-        self._by_key: dict[ReferencesKey, simulation.References | None] = {}
+        # those computed before the campaign wrote anything (check_references)
+        self._by_key: dict[ReferencesKey, simulation.References | None] = dict(known or {})
         self._written: set[str] = set()  # reference files written by this invocation
         index = out_dir / REFERENCES_INDEX
         self._indexed = {  # points the index names already (a resumed campaign)
@@ -264,6 +269,60 @@ class _PointReferences:
             append_events(index, [{"point": task.point, "file": rel}], root=self._out_dir)
             self._indexed.add(task.point)
         return refs
+
+
+class _CheckedReferences:
+    """The references of a plan's scenarios, computed before its campaign writes anything."""
+
+    def __init__(self, run_timeout_s: float | None) -> None:
+        self._run_timeout_s = run_timeout_s
+        #: ``None``: failed otherwise (a time limit); the runs compute them, as before
+        self.known: dict[ReferencesKey, simulation.References | None] = {}
+
+    def of(self, task: Task) -> simulation.References | None:
+        """The references of ``task``'s point; :class:`ScenarioError` naming the point if it
+        has none (``None``: another failure, which its runs report one by one)."""
+        key = references_key(task.problem)
+        if key not in self.known:
+            limit = guards.run_timeout_s(self._run_timeout_s, task.problem, first=True)
+            try:
+                with guards.time_limit(limit):
+                    self.known[key] = simulation.open_loop_references(task.problem)
+            except ScenarioError as exc:
+                params = task.runs[0].params if task.runs else ()
+                if not params:  # the base configuration: cwrend run's message
+                    raise
+                where = f"grid point {task.point} ({assignment_text(params)})"
+                raise ScenarioError(f"{where}: {exc}") from None
+            except Exception:  # a time limit: the runs report it, as before
+                self.known[key] = None
+        return self.known[key]
+
+
+def check_references(
+    plan_: CampaignPlan, beside: bool = False
+) -> Mapping[ReferencesKey, simulation.References | None]:
+    """The open-loop references of every scenario of ``plan_``: the check of ``cwrend run``.
+
+    Computed before the campaign writes anything, so that a scenario without them is
+    refused as ``cwrend run`` refuses it: :class:`ScenarioError` (exit 2), e.g. a
+    target no control within ``scenario.u_max_km_s2`` reaches within the horizon (a
+    corridor port typed in metres), naming the grid point of a sweep. A failure of
+    another kind (the run time limit) is left to the runs, which report it one by one
+    (``None``: they compute the references themselves, as :class:`_PointReferences` has
+    them do).
+    Pass the result to :func:`run_campaign` (``references``): nothing is computed twice.
+
+    ``beside``: a local campaign on a machine of several cores; on a first run (the
+    references' kernels not cached) a helper process compiles the step loop meanwhile
+    (:func:`_compile_first_run`).
+    """
+    references = _CheckedReferences(plan_.run_timeout_s)
+    if beside:
+        _compile_first_run(None, plan_.tasks, references)
+    for task in plan_.tasks:
+        references.of(task)
+    return MappingProxyType(references.known)
 
 
 #: Attempts of one task on infrastructure faults before the campaign stops.
@@ -343,6 +402,7 @@ def run_campaign(
     hold: contextlib.ExitStack | None = None,
     repair_manifest: bool = False,
     pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
+    references: Mapping[ReferencesKey, simulation.References | None] | None = None,
 ) -> CampaignSummary:
     """Execute the runs of ``plan_`` not yet in ``out_dir``; keep everything computed.
 
@@ -370,6 +430,8 @@ def run_campaign(
     in the manifest, after those earlier commands added (``--force`` forgets them),
     and the summary's ``pairs`` holds them all: what every later rewrite of the
     statistics compares.
+
+    ``references``: the open-loop references :func:`check_references` computed.
     """
     progress = progress or _NoProgress()
     try:
@@ -379,7 +441,7 @@ def run_campaign(
             )
             return _run_locked(
                 plan_, out_dir, progress, command, executor_kind, workers, address, force,
-                retry_failed, allow_version_change, argv, repair_manifest, pairs,
+                retry_failed, allow_version_change, argv, repair_manifest, pairs, references,
             )  # fmt: skip
     except OSError as exc:  # outside the runs (the lock, the first manifest): nothing computed
         raise InfrastructureError(
@@ -435,6 +497,7 @@ def _run_locked(
     argv: Sequence[str] | None = None,
     repair_manifest: bool = False,
     pairs: Sequence[tuple[str, str]] = statistics.DEFAULT_PAIRS,
+    references: Mapping[ReferencesKey, simulation.References | None] | None = None,
 ) -> CampaignSummary:
     """:func:`run_campaign` once the directory exists, is confined and locked."""
     progress = _SettledProgress(progress)
@@ -475,8 +538,9 @@ def _run_locked(
                 workers = min(cores, len(tasks))
                 beside = workers == 1 < cores
             _execute(
-                tasks, plan_, out_dir, progress, executor_kind, workers, address, beside, owner
-            )
+                tasks, plan_, out_dir, progress, executor_kind, workers, address, beside, owner,
+                references,
+            )  # fmt: skip
     except KeyboardInterrupt:
         interrupted = True
     except _StopError as stop:
@@ -621,6 +685,7 @@ def _execute(
     address: str | None,
     beside: bool = False,
     owner: JournalOwner | None = None,
+    known: Mapping[ReferencesKey, simulation.References | None] | None = None,
 ) -> None:
     """Run ``tasks`` on an executor, reopening it after an infrastructure fault.
 
@@ -644,7 +709,7 @@ def _execute(
     """
     attempts: dict[str, int] = {}
     references = _PointReferences(
-        out_dir, plan_.campaign_hash, plan_.config_hash, plan_.run_timeout_s
+        out_dir, plan_.campaign_hash, plan_.config_hash, plan_.run_timeout_s, known
     )
     pending = list(tasks)
     reopened = 0
@@ -669,7 +734,9 @@ def _execute(
 
 
 def _compile_first_run(
-    executor: Executor | None, tasks: Sequence[Task], references: _PointReferences
+    executor: Executor | None,
+    tasks: Sequence[Task],
+    references: _PointReferences | _CheckedReferences,
 ) -> None:
     """On a first run, compile in two processes at once before the first task (issue 37 item 12).
 
@@ -702,7 +769,9 @@ def _compile_first_run(
         _compile_beside(executor, tasks[0], references)
 
 
-def _compile_beside(executor: Executor, task: Task, references: _PointReferences) -> None:
+def _compile_beside(
+    executor: Executor, task: Task, references: _PointReferences | _CheckedReferences
+) -> None:
     """The solver's ascent and the references here while ``executor`` compiles the rest."""
     from cwrend_cli.physics import compiled
 

@@ -51,7 +51,7 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
-from cwrend_cli.config.overrides import expand_grid, get_dotted, point_tree
+from cwrend_cli.config.overrides import expand_grid, get_dotted, missing_key_hint, point_tree
 from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -65,7 +65,9 @@ __all__ = [
     "NoiseSource",
     "RunSpec",
     "Task",
+    "assignment_text",
     "campaign_hash",
+    "check_inputs",
     "default_seeds_per_task",
     "dispersion_seed_sequence",
     "draw_dispersions",
@@ -341,9 +343,10 @@ def draw_dispersions(
             try:
                 base = get_dotted(point_tree, key)
             except (KeyError, IndexError, ValueError, TypeError):
+                hint = missing_key_hint(point_tree, key)
                 raise ConfigError(
                     f"dispersions.{key}: no such config value to disperse "
-                    "(use a dotted key such as scenario.x0.2 or scenario.u_max_km_s2)"
+                    f"(use a dotted key such as scenario.x0.2 or scenario.u_max_km_s2){hint}"
                 ) from None
             if not isinstance(base, (int, float)) or isinstance(base, bool):
                 raise ConfigError(
@@ -371,10 +374,16 @@ def _validated(
     try:
         return config_from_dict(tree, source=what)
     except ConfigError as exc:
-        values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
-        if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
-            values += f", … {len(assignment):,} values in all"
+        values = assignment_text(assignment)
         raise ConfigError(f"{what} ({values}) is invalid:", exc.problems or (str(exc),)) from None
+
+
+def assignment_text(assignment: Assignment) -> str:
+    """``key = value, …`` of a grid point or dispersed run, as its errors name it."""
+    values = ", ".join(f"{k} = {v!r}" for k, v in assignment[:_LISTED_VALUES])
+    if len(assignment) > _LISTED_VALUES:  # a [sweep] of thousands of keys: the first few
+        values += f", … {len(assignment):,} values in all"
+    return values
 
 
 def _check_typed(problem: Problem, dispersed: Assignment, run_cfg: CwrendConfig, seed: int) -> None:
@@ -396,6 +405,29 @@ def _check_typed(problem: Problem, dispersed: Assignment, run_cfg: CwrendConfig,
             "parameters as drawn (disperse single numbers of the scenario, estimator, "
             "schedule, guidance, solver or degradation sections)"
         )
+
+
+def check_inputs(cfg: CwrendConfig) -> None:
+    """Refuse the inputs of ``cfg`` that every campaign of it would refuse before running.
+
+    The checks :func:`plan` makes of each point, made of the base configuration
+    (``cwrend config validate``): the ``[dispersions]`` keys, drawn for seed 0 on
+    top of the base (a key that names no number, a dispersed value that is invalid
+    or cannot be applied to the physics parameters), and the noise file
+    (:func:`~cwrend_cli.config.io.load_noise_file`: its columns and rows). Raises
+    :class:`ConfigError` (or :class:`~cwrend_cli.errors.InputDataError`) with the
+    message :func:`plan` gives.
+    """
+    if cfg.noise.file is not None:
+        load_noise_file(cfg.noise.file, cfg.scenario.n_steps)
+    if not cfg.dispersions:
+        return
+    base = resolved_dict(cfg)
+    base.pop("sweep", None)
+    base.pop("dispersions", None)
+    dispersed = draw_dispersions(cfg.dispersions, base, cfg.noise.seed, 0)
+    run_cfg = _validated(base, dispersed, "dispersed run (seed 0)", nis_offset_given(cfg))
+    _check_typed(problem_of(cfg), dispersed, run_cfg, 0)
 
 
 def campaign_hash(

@@ -15,14 +15,21 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any, get_args, get_origin
+from types import UnionType
+from typing import Any, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 from pydantic_core import PydanticCustomError
 
 from cwrend_cli.limits import MAX_LISTED_PROBLEMS
 
-__all__ = ["did_you_mean", "fmt_num", "format_validation_error", "rules_error"]
+__all__ = [
+    "closest_all",
+    "did_you_mean",
+    "fmt_num",
+    "format_validation_error",
+    "rules_error",
+]
 
 # ---------------------------------------------------------------------------
 # Errors raised from validators. Model-level rules report the field they are
@@ -82,15 +89,46 @@ def did_you_mean(word: object, choices: Sequence[str]) -> str:
     return f"; did you mean {near[0]!r}?" if near else ""
 
 
+def closest_all(word: object, choices: Sequence[str]) -> list[str]:
+    """The ``choices`` closest to ``word``, all of them when several are as close (in order).
+
+    :func:`difflib.SequenceMatcher`'s ratio with :func:`difflib.get_close_matches`'s
+    default cutoff (0.6); ``scenario.xo.2`` is as close to ``scenario.x0.2`` as to
+    ``scenario.xf.2``, and both are named.
+    """
+    import difflib
+
+    if not isinstance(word, str):
+        return []
+    best: list[str] = []
+    top = 0.6
+    matcher = difflib.SequenceMatcher(b=word)
+    for choice in choices:
+        matcher.set_seq1(choice)
+        if matcher.real_quick_ratio() < top or matcher.quick_ratio() < top:
+            continue
+        ratio = matcher.ratio()
+        if ratio > top or (ratio == top and not best):
+            best, top = [choice], ratio
+        elif ratio == top:
+            best.append(choice)
+    return best
+
+
 # ---------------------------------------------------------------------------
 # Validation-error formatting
 # ---------------------------------------------------------------------------
 
 
 def _model_at(root_model: type[BaseModel], loc: Sequence[str | int]) -> type[BaseModel] | None:
-    """The config model class found at ``loc`` inside ``root_model``, if any."""
+    """The config model class found at ``loc`` inside ``root_model``, if any.
+
+    An optional table (``KeepOutConfig | None``) is its model, so that a key inside
+    ``constraints.keep_out`` or ``constraints.keep_out.bodies.0`` is looked up too.
+    """
     tp: Any = root_model
     for part in loc:
+        tp = _optional_model(tp)
         if isinstance(part, int):
             args = get_args(tp)
             if get_origin(tp) is tuple and args:
@@ -101,7 +139,17 @@ def _model_at(root_model: type[BaseModel], loc: Sequence[str | int]) -> type[Bas
             tp = tp.model_fields[part].annotation
         else:
             return None
+    tp = _optional_model(tp)
     return tp if isinstance(tp, type) and issubclass(tp, BaseModel) else None
+
+
+def _optional_model(tp: Any) -> Any:
+    """The one model of an optional type ``Model | None``; any other type unchanged."""
+    if get_origin(tp) in (Union, UnionType):
+        members = [a for a in get_args(tp) if a is not type(None)]
+        if len(members) == 1:
+            return members[0]
+    return tp
 
 
 def _describe(err: Mapping[str, Any]) -> str:
@@ -133,6 +181,8 @@ def _describe(err: Mapping[str, Any]) -> str:
         "model_attributes_type": "must be a table",
         "dict_type": "must be a table",
     }
+    if kind in _CONTAINER_TYPES:
+        return f"{simple[kind]} ({_CONTAINER_TYPES[kind]}), got {_given(err.get('input'))}"
     if kind in simple:
         return simple[kind]
     if kind == "literal_error":
@@ -146,6 +196,36 @@ def _describe(err: Mapping[str, Any]) -> str:
         return "must not be empty"
     msg = str(err.get("msg", kind))
     return msg.removeprefix("Value error, ")
+
+
+#: Error types of a value that must be an array or a table: how one is written.
+_CONTAINER_TYPES = {
+    "tuple_type": "written [v1, v2, …]",
+    "list_type": "written [v1, v2, …]",
+    "model_type": "a [section] or { key = value, … }",
+    "model_attributes_type": "a [section] or { key = value, … }",
+    "dict_type": "a [section] or { key = value, … }",
+}
+
+
+def _given(value: Any) -> str:
+    """What a value of the wrong type is, in words: ``a number``, ``a string, …``."""
+    if isinstance(value, bool):
+        return "true/false"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, Mapping):
+        return "a table"
+    if isinstance(value, (list, tuple)):
+        return "an array"
+    if isinstance(value, str):
+        if value.lstrip().startswith(("[", "{")) or "," in value:
+            return (
+                "a string that is not a valid TOML array or table (check its brackets, "
+                "commas and quotes; a --set value that is not valid TOML is read as a string)"
+            )
+        return "a string"
+    return type(value).__name__
 
 
 #: Error types of a union member the input is not of (a number given where the
@@ -177,8 +257,8 @@ def _union_errors_merged(errors: Sequence[Any]) -> list[Any]:
             out.append(merged)
         elif out[seen[bare]]["type"] in _TYPE_MISMATCH:
             if err["type"] in _TYPE_MISMATCH:  # neither a number nor an array
-                out[seen[bare]] = {**merged, "type": "value_error",
-                                   "msg": "must be a number or an array of numbers"}  # fmt: skip
+                msg = f"must be a number or an array of numbers, got {_given(err.get('input'))}"
+                out[seen[bare]] = {**merged, "type": "value_error", "msg": msg}
             else:
                 out[seen[bare]] = merged
         elif err["type"] not in _TYPE_MISMATCH:

@@ -16,12 +16,12 @@ import copy
 import functools
 import math
 import tomllib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from decimal import Context, Decimal, localcontext
 from types import MappingProxyType
 from typing import Any
 
-from cwrend_cli.config.messages import did_you_mean
+from cwrend_cli.config.messages import closest_all, did_you_mean
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_NESTING, MAX_SWEPT_KEYS, MAX_VALUES_PER_KEY
@@ -38,6 +38,7 @@ __all__ = [
     "apply",
     "expand_grid",
     "get_dotted",
+    "missing_key_hint",
     "nesting_depth",
     "parse_arch",
     "parse_archs",
@@ -217,6 +218,45 @@ def get_dotted(tree: Mapping[str, Any], key: str) -> Any:
     return node
 
 
+def missing_key_hint(tree: Mapping[str, Any], key: str) -> str:
+    """Why the dotted ``key`` names no value of ``tree``, as a hint to append, else ``""``.
+
+    A table without the component: ``"; did you mean 'scenario.x0.2'?"``, the closest
+    dotted key of the tree's values (:func:`~cwrend_cli.config.messages.closest`); an
+    index out of range: ``" (scenario.x0 has 6 entries: 0 to 5)"``.
+    """
+    parts = key.split(".")
+    node: Any = tree
+    for i, part in enumerate(parts):
+        if isinstance(node, Mapping) and part in node:
+            node = node[part]
+        elif isinstance(node, list):
+            try:
+                node = node[_array_index(part)]
+            except (ValueError, IndexError):
+                last = f": 0 to {len(node) - 1}" if node else ""
+                return f" ({'.'.join(parts[:i])} has {len(node)} entries{last})"
+        elif isinstance(node, Mapping):
+            near = closest_all(key, list(_dotted_keys(tree)))
+            return f"; did you mean {' or '.join(repr(k) for k in near)}?" if near else ""
+        else:
+            return ""
+    return ""
+
+
+def _dotted_keys(node: Any, prefix: str = "") -> Iterator[str]:
+    """The dotted keys of every value (a leaf: neither a table nor an array) of a tree."""
+    if isinstance(node, Mapping):
+        items: Iterable[tuple[Any, Any]] = node.items()
+    elif isinstance(node, list):
+        items = enumerate(node)
+    else:
+        yield prefix
+        return
+    for k, v in items:
+        yield from _dotted_keys(v, f"{prefix}.{k}" if prefix else str(k))
+
+
 def apply(base: Mapping[str, Any], assignment: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     """A copy of ``base`` with every ``(key, value)`` of ``assignment`` set, in order.
 
@@ -238,18 +278,34 @@ def point_tree(
     of the base config; a resolved tree has lost that). If not, and ``assignment``
     sets the sensor but not the offset, the offset is left out so that validation
     fills it in for the point's sensor (its measurement dimension m, paper Eq. 24),
-    not kept at the base's resolved value (:func:`apply` otherwise). One place for
-    the campaign that runs the point and the report that draws it.
+    not kept at the base's resolved value (:func:`apply` otherwise). Likewise
+    ``scenario.xf`` of a base with a corridor, where it is the port at rest (filled
+    in or given so: validation requires it): an assignment that moves the port
+    (``constraints.corridor.port_km``) but sets no ``scenario.xf`` leaves it out, so
+    that it is the point's port at rest. One place for the campaign that runs the
+    point and the report that draws it.
     """
     tree = apply(base, assignment)
     keys = [k for k, _ in assignment]
     if (
         not offset_given
-        and any(k == "sensor" or k.startswith("sensor.") for k in keys)
+        and _touches(keys, "sensor")
         and not any(k in ("schedule", "schedule.nis_offset") for k in keys)
     ):
         tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
+    corridor = (base.get("constraints") or {}).get("corridor")
+    if (
+        corridor is not None
+        and _touches(keys, "constraints.corridor.port_km")
+        and not _touches(keys, "scenario.xf")
+    ):
+        tree["scenario"] = {k: v for k, v in tree["scenario"].items() if k != "xf"}
     return tree
+
+
+def _touches(keys: Iterable[str], key: str) -> bool:
+    """Whether one of the dotted ``keys`` sets ``key``: itself, a table above it or a part of it."""
+    return any(k == key or k.startswith(key + ".") or key.startswith(k + ".") for k in keys)
 
 
 # ---------------------------------------------------------------------------
@@ -263,7 +319,7 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
     Values are read as TOML scalars (``0.5``, ``"mean"``, ``true``); a bare
     word is a string. A TOML array lists the values as a file's ``[sweep]`` does, so a
     vector-valued key is swept as ``key=[[1, 2, 3], [4, 5, 6]]``. A range gives ``num``
-    evenly spaced floats.
+    evenly spaced floats. Vectors may also be listed with commas, ``key=[1, 2, 3],[4, 5, 6]``.
     """
     if "=" not in text:
         raise ConfigError(
@@ -282,6 +338,10 @@ def parse_param(text: str) -> tuple[str, tuple[Any, ...]]:
         raise ConfigError(  # 0.1:0.5 (no num) or 0:1:5:2: a range meant, not a string
             f"--param {text!r}: a range is start:stop:num, e.g. {key}=0.1:0.5:5"
         )
+    if raw_text.startswith(("[", "{")):  # vectors or tables listed with commas, [1, 2],[3, 4]:
+        listed = _parse_value(f"[{raw_text}]", key)  # the commas inside them are theirs
+        if isinstance(listed, list):
+            return key, tuple(listed)
     parts = [p.strip() for p in raw_text.split(",")]
     if any(not p for p in parts):
         raise ConfigError(f"--param {text!r}: empty value in the list")

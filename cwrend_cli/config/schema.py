@@ -1633,6 +1633,15 @@ class CwrendConfig(_FrozenModel):
                         "elements), or use 'cw'",
                     )
                 )
+        if self.truth.model == "cw" and self.truth.eccentricity != 0.0:
+            problems.append(
+                (
+                    "truth.eccentricity",
+                    self.truth.eccentricity,
+                    "the 'cw' truth (truth.model) flies a circular chief and ignores it: set "
+                    "truth.model = 'two_body' or 'j2' to fly an eccentric chief, or leave it 0",
+                )
+            )
         if problems:
             raise rules_error(problems)
         return self
