@@ -29,21 +29,28 @@ from cwrend_cli.physics import guidance, simulation
 
 
 @pytest.fixture(scope="session", autouse=True)
-def ctrl_c_delivered() -> Iterator[None]:
-    """Ctrl-C (SIGINT) reaches the tests' campaigns, however the suite was started.
+def stop_signals_delivered() -> Iterator[None]:
+    """Ctrl-C (SIGINT) and a hang-up (SIGHUP) reach the tests' campaigns, however the suite
+    was started.
 
     A shell without job control starts a background job (``pytest … &``, a
-    script's ``cmd &``) with SIGINT ignored, and cwrend keeps a signal
-    ignored at its start ignored (:func:`cwrend_cli.teardown.stop_on_signals`),
-    so the interruption tests failed there (seen: every run of
-    ``test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run`` started
-    with ``&``). Python's own handler here; the campaigns the tests start
-    inherit the default action (a handler is reset on ``exec``, an ignored
+    script's ``cmd &``) with SIGINT ignored, ``nohup`` with SIGHUP ignored,
+    and cwrend keeps a signal ignored at its start ignored
+    (:func:`cwrend_cli.teardown.stop_on_signals`), so the interruption tests
+    failed there (seen: every run of
+    ``test_a_ctrl_c_a_library_turns_into_an_error_drops_the_run`` started with
+    ``&``, of ``test_sigterm_and_sighup_stop_a_campaign_as_ctrl_c_does[SIGHUP-129]``
+    with ``nohup``). Python's own handling here; the campaigns the tests start
+    inherit the default actions (a handler is reset on ``exec``, an ignored
     signal is not).
     """
-    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    before = {
+        signal.SIGINT: signal.signal(signal.SIGINT, signal.default_int_handler),
+        signal.SIGHUP: signal.signal(signal.SIGHUP, signal.SIG_DFL),
+    }
     yield
-    signal.signal(signal.SIGINT, before)
+    for signum, handler in before.items():
+        signal.signal(signum, handler)
 
 
 #: Set on the controller of a whole-suite run on xdist workers (:func:`pytest_cmdline_main`).
