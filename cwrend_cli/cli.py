@@ -114,7 +114,7 @@ USER_ERROR_EXIT = 2
 
 
 def _console(*, stderr: bool = False, soft_wrap: bool = False) -> Console:
-    """A Rich console without highlighting, on stdout or the current stderr.
+    """A Rich console without highlighting or emoji codes, on stdout or the current stderr.
 
     Rich is imported here, when a command prints through it, not with this
     module: ``cwrend --help`` and ``cwrend config validate`` print plain text
@@ -122,7 +122,8 @@ def _console(*, stderr: bool = False, soft_wrap: bool = False) -> Console:
     """
     from rich.console import Console
 
-    return Console(stderr=stderr, highlight=False, soft_wrap=soft_wrap)
+    # emoji=False: text the user wrote (--range schedule.beta=1:-1:) is never an emoji code
+    return Console(stderr=stderr, highlight=False, soft_wrap=soft_wrap, emoji=False)
 
 
 def _stderr() -> Console:

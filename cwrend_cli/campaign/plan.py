@@ -33,10 +33,12 @@ from typing import Any
 import numpy as np
 
 from cwrend_cli.campaign.design import (
+    RANGE_SYNTAX,
     Design,
     ParameterRange,
     parse_cli_range,
     parse_range,
+    range_ends,
     unit_samples,
 )
 from cwrend_cli.campaign.design import design_points as sample_design
@@ -265,6 +267,7 @@ def design_points(
                     f"--range {text}: {parsed.key} is not a configuration value (a dotted key "
                     f"such as schedule.beta or scenario.u_max_km_s2){_key_meant(base, parsed.key)}"
                 ) from None
+            _check_range_ends(base, parsed, f"--range {text}")
         by_key[parsed.key] = parsed
     if not by_key:
         raise ConfigError(
@@ -281,6 +284,21 @@ def design_points(
         points.setdefault(pid, assignment)
     spec = DesignSpec(kind, samples, tuple(ranges), tuple(rows), second_order)
     return spec, tuple(points.items())
+
+
+def _check_range_ends(base: Mapping[str, Any], parsed: ParameterRange, where: str) -> None:
+    """Refuse a range whose bounds (or a choice's values) its key does not take, naming
+    ``where`` (the option) and the option's syntax: else the first sampled point was
+    refused as an invalid grid point, the option unnamed."""
+    for end, value in range_ends(parsed):
+        try:
+            _validated(base, ((parsed.key, value),), where)
+        except ConfigError as exc:
+            why = "; ".join(exc.problems) or str(exc)
+            raise ConfigError(
+                f"{where}: {end} = {value!r} is not a value {parsed.key} takes ({why}); "
+                f"expected {RANGE_SYNTAX}"
+            ) from None
 
 
 def _key_meant(base: Mapping[str, Any], key: str) -> str:
