@@ -53,7 +53,13 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
-from cwrend_cli.config.overrides import expand_grid, get_dotted, point_tree
+from cwrend_cli.config.overrides import (
+    check_given_once,
+    check_swept,
+    expand_grid,
+    get_dotted,
+    point_tree,
+)
 from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -257,8 +263,16 @@ def design_points(
                 "{ values = […] }), not a list of grid values"
             )
         by_key[key] = parse_range(key, spec)
+    given: dict[str, str] = {}  # --range key -> its range as typed
     for text in cli_ranges:
         parsed = parse_cli_range(text)
+        raw = text.split("=", 1)[1].strip()
+        check_given_once(
+            "--range", parsed.key, given, raw,
+            f"give one range per key: --range {parsed.key}=LOW:HIGH or "
+            f"--range {parsed.key}=V1,V2,… (a design samples each key once)",
+        )  # fmt: skip
+        given[parsed.key] = raw
         if base is not None:
             try:
                 get_dotted(base, parsed.key)
@@ -269,6 +283,8 @@ def design_points(
                 ) from None
             _check_range_ends(base, parsed, f"--range {text}")
         by_key[parsed.key] = parsed
+    for parsed in by_key.values():  # what no swept key may be, as --param's (expand_grid)
+        check_swept(parsed.key, parsed.values if parsed.kind == "choice" else None)
     if not by_key:
         raise ConfigError(
             f"--design {kind}: no ranges; give --range KEY=LOW:HIGH (e.g. --range "
