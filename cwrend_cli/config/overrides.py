@@ -499,11 +499,22 @@ ARCH_GROUPS: Mapping[str, tuple[Architecture, ...]] = MappingProxyType(
 
 
 def parse_archs(text: str) -> tuple[Architecture, ...]:
-    """A group name (:data:`ARCH_GROUPS`) or comma-separated slugs."""
+    """A group name (:data:`ARCH_GROUPS`) or comma-separated slugs, each named once.
+
+    A slug named twice is refused (``cwrend run --arch a,a`` printed every row
+    twice): the one check of ``run``, ``ablate`` and ``sweep``.
+    """
     group = ARCH_GROUPS.get(text.strip())
     if group is not None:
         return group
     archs = tuple(parse_arch(part) for part in text.split(",") if part.strip())
     if not archs:
         raise ConfigError(f"--arch {text!r}: name at least one of {', '.join(ALL_ARCHITECTURES)}")
+    repeated = _first_repeated([a.slug for a in archs])
+    if repeated is not None:
+        once = ",".join(dict.fromkeys(a.slug for a in archs))
+        raise ConfigError(
+            f"--arch {text!r}: {repeated} is named twice; name each architecture once: "
+            f"--arch {once}"
+        )
     return archs
