@@ -114,7 +114,7 @@ USER_ERROR_EXIT = 2
 
 
 def _console(*, stderr: bool = False, soft_wrap: bool = False) -> Console:
-    """A Rich console without highlighting, on stdout or the current stderr.
+    """A Rich console without highlighting or emoji codes, on stdout or the current stderr.
 
     Rich is imported here, when a command prints through it, not with this
     module: ``cwrend --help`` and ``cwrend config validate`` print plain text
@@ -122,7 +122,8 @@ def _console(*, stderr: bool = False, soft_wrap: bool = False) -> Console:
     """
     from rich.console import Console
 
-    return Console(stderr=stderr, highlight=False, soft_wrap=soft_wrap)
+    # emoji=False: text the user wrote (--range schedule.beta=1:-1:) is never an emoji code
+    return Console(stderr=stderr, highlight=False, soft_wrap=soft_wrap, emoji=False)
 
 
 def _stderr() -> Console:
@@ -708,6 +709,8 @@ def _campaign(
         out = _campaign_dir(cfg, opts.name)
         batch = opts.batch or DEFAULT_BATCH
         max_seeds = opts.max_seeds or DEFAULT_MAX_SEEDS
+        target: sequential.Target | None = None  # --until's
+        named: campaign.CampaignStatistics | None = None  # of the runs named, if computed
         if opts.until is None:
             if opts.strict:
                 raise ConfigError("--strict: applies to --until only; add --until TARGET")
@@ -741,26 +744,31 @@ def _campaign(
                 )
                 if summary.interrupted:  # no statistics computed: stop at once
                     break
-                achieved = sequential.achieved(statistics.frame, target, archs)
+                # the rule reads the intervals of this step's seeds, not of every seed the
+                # directory holds: a rerun of a finished campaign decides as it did
+                named = _named_statistics(command, plan, summary, statistics, out)
+                achieved = sequential.achieved(named.frame, target, archs)
                 if summary.interrupted or (
                     sequential.ready(n, batch) and all(a.met for a in achieved)
                 ):
                     break
                 if not opts.quiet and n < max_seeds:
                     err.print(sequential.next_batch_message(n, batch, achieved), markup=False)
-        _report_campaign(command, plan, summary, statistics, out, opts, err)
+        _report_campaign(command, plan, summary, statistics, out, opts, err, named)
         # widths are checked only from sequential.checked_from(batch) seeds: a --max-seeds
         # below that stops with none checked
         checked = opts.until is None or sequential.ready(n, batch)
         if achieved and not opts.quiet:  # on stderr when stdout is a --format table
             shown = _console() if opts.table_format is None else err
-            shown.print(until_console_table(achieved, opts.until or "", checked))
-        unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
-        if unmet and not summary.interrupted and (opts.strict or not opts.quiet):
-            err.print(sequential.unmet_message(achieved, max_seeds), markup=False)
+            unit = None if target is None else target.unit
+            shown.print(until_console_table(achieved, opts.until or "", checked, unit))
         unchecked = bool(achieved) and not checked  # met or not: not known (--strict: exit 1)
-        if unchecked and not summary.interrupted and (opts.strict or not opts.quiet):
-            err.print(sequential.unchecked_message(n, batch), markup=False)
+        unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
+        said = not summary.interrupted and (opts.strict or not opts.quiet)
+        if unchecked and said:  # the one verdict: not checked, however wide the intervals
+            err.print(sequential.unchecked_message(n, batch, achieved), markup=False)
+        elif unmet and said:
+            err.print(sequential.unmet_message(achieved, max_seeds), markup=False)
         if summary.interrupted:
             asked = {r.run_key for r in plan.runs}
             done = len(asked & campaign.held_run_keys(out))
@@ -865,6 +873,23 @@ def _set_aside_line(set_aside: Mapping[str, int]) -> str:
     )
 
 
+def _named_statistics(
+    command: Literal["ablate", "sweep"],
+    plan: campaign.CampaignPlan,
+    summary: campaign.CampaignSummary,
+    statistics: campaign.CampaignStatistics,
+    out: Path,
+) -> campaign.CampaignStatistics:
+    """The statistics of the runs ``plan`` names: ``statistics`` (those of every run the
+    directory holds) when it holds no other run, else computed on the runs named."""
+    from cwrend_cli import campaign
+
+    asked = {r.run_key for r in plan.runs}
+    if not campaign.held_run_keys(out) - asked:
+        return statistics
+    return campaign.subset_statistics(out, command, plan.root_seed, asked, summary.pairs)
+
+
 def _report_campaign(
     command: Literal["ablate", "sweep"],
     plan: campaign.CampaignPlan,
@@ -873,8 +898,13 @@ def _report_campaign(
     out: Path,
     opts: CampaignOptions,
     err: Console,
+    named: campaign.CampaignStatistics | None = None,
 ) -> None:
-    """The console tables and summary line of a finished (or interrupted) campaign."""
+    """The console tables and summary line of a finished (or interrupted) campaign.
+
+    ``named``: the statistics of the runs ``plan`` names, when computed already
+    (:func:`_named_statistics`; ``ablate --until`` reads its target from them).
+    """
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
     from cwrend_cli.console import (
@@ -899,10 +929,10 @@ def _report_campaign(
     if held - asked and not opts.quiet:
         # a re-run naming fewer seeds, architectures or points than the directory holds:
         # report on exactly the runs asked for; the statistics file covers them all
-        with phase(err, f"{label}: computing statistics of the runs named"):
-            statistics = campaign.subset_statistics(
-                out, command, plan.root_seed, asked, summary.pairs
-            )
+        if named is None:
+            with phase(err, f"{label}: computing statistics of the runs named"):
+                named = _named_statistics(command, plan, summary, statistics, out)
+        statistics = named
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
         err.print(
             f"note: the tables cover the {len(asked & held)} run(s) this command names; "

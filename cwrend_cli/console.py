@@ -749,11 +749,15 @@ def sensitivity_console_table(frame: pd.DataFrame, title: str) -> Table | Group:
     return Group(table, second)
 
 
-def until_console_table(achieved: Sequence[Any], target: str, checked: bool = True) -> Table:
+def until_console_table(
+    achieved: Sequence[Any], target: str, checked: bool = True, unit: str | None = None
+) -> Table:
     """The intervals a ``--until`` target asked for, as achieved.
 
     ``checked`` False: the campaign stopped before widths are checked
-    (``sequential.ready``), so an interval within its target reads "not checked".
+    (``sequential.ready``), so every interval reads "not checked", however wide
+    (``sequential.unchecked_message`` says how wide). ``unit``: that of the value, half-width and
+    target, said under the table (``sequential.Target.unit``; ``None``: a share).
     """
     table = _table(f"--until {target}", show_edge=False, padding=(0, 0, 0, 1))
     table.add_column("interval of")
@@ -762,17 +766,15 @@ def until_console_table(achieved: Sequence[Any], target: str, checked: bool = Tr
     table.add_column("met")
     for a in achieved:
         needed = a.seeds_needed
-        verdict = (
-            ("yes" if checked else "not checked")
-            if a.met
-            else "no"
-            if needed is None
-            else f"no: ~{needed:,} seeds"
-        )
+        verdict = "not checked"
+        if checked:
+            verdict = "yes" if a.met else "no" if needed is None else f"no: ~{needed:,} seeds"
         table.add_row(a.label, str(a.n), f"{a.value:.6g}", f"{a.half_width:.3g}",
                       f"{a.limit:.3g}", verdict)  # fmt: skip
-    if not all(a.met for a in achieved):
-        table.caption = "~N seeds: the estimate of what would meet the target (half-width ∝ 1/√n)"
+    captions = [] if unit is None else [f"value, half-width and target in {unit}"]
+    if checked and not all(a.met for a in achieved):
+        captions.append("~N seeds: the estimate of what would meet the target (half-width ∝ 1/√n)")
+    table.caption = "\n".join(captions) or None
     return table
 
 

@@ -211,7 +211,7 @@ def test_a_command_line_range_is_the_range_of_a_sweep_table(
         ("schedule.beta=0.1", None),  # a single value is one category: accepted
         ("schedule.beta=a:b", "LOW and HIGH must be numbers"),
         ("schedule.beta=1:0.5", "need finite low < high"),
-        ("schedule.beta=0.1:1:cube", "LOW:HIGH:log or LOW:HIGH:int"),
+        ("schedule.beta=0.1:1:cube", "expected KEY=LOW:HIGH"),
         ("schedule.beta=0:1:log", "log = true needs low > 0"),
         ("schedule.beta=0.5:3:int", "int = true needs integer low and high"),
         ("schedule.beta=0.1,,0.2", "empty value in the list"),
@@ -224,3 +224,11 @@ def test_a_bad_command_line_range_names_the_option(text: str, message: str | Non
     with pytest.raises(ConfigError, match=f"^--range {text}: ") as err:
         design.parse_cli_range(text)
     assert message in str(err.value)
+
+
+@pytest.mark.parametrize("text", ["schedule.beta=0.1-1.0", "schedule.beta=1..5", "x.y=a,-1-2"])
+def test_a_range_written_with_a_dash_is_refused_not_read_as_one_category(text: str) -> None:
+    """``0.1-1.0`` was read as one categorical value, the string "0.1-1.0"."""
+    with pytest.raises(ConfigError, match=f"^--range {text}: '.*' is not a range") as err:
+        design.parse_cli_range(text)
+    assert "KEY=LOW:HIGH (uniform)" in str(err.value)  # the option's syntax

@@ -250,6 +250,13 @@ def test_an_lhs_design_from_the_command_line_prints_and_stores_rbd_fast_indices(
          "--range schedule.bta=0.1:1: schedule.bta is not a configuration value"),
         (["--design", "lhs", "--samples", "4", "--range", "schedule.beta=1:0.1"],
          "--range schedule.beta=1:0.1: low = 1.0, high = 0.1"),
+        (["--design", "lhs", "--samples", "4", "--range", "schedule.beta=-1:1"],
+         "--range schedule.beta=-1:1: LOW = -1.0 is not a value schedule.beta takes "
+         "(schedule.beta = -1: must be > 0); expected KEY=LOW:HIGH (uniform)"),
+        (["--design", "lhs", "--samples", "4", "--range", "truth.model=cw,jj2"],
+         "--range truth.model=cw,jj2: V2 = 'jj2' is not a value truth.model takes"),
+        (["--design", "lhs", "--samples", "4", "--range", "schedule.beta=1:-1"],
+         "--range schedule.beta=1:-1: low = 1.0"),  # ":-1:" is no emoji code
         (["--range", "schedule.beta=0.1:1"], "--range defines a sampled design: add --design"),
         (["--design", "lhs", "--samples", "4"], "--design lhs: no ranges; give --range"),
         (["--design", "lhs", "--samples", "16", "--range", "schedule.beta=0.1:1",

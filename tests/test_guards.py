@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -201,3 +203,67 @@ def test_another_threads_compile_stops_this_threads_clock_too() -> None:
     compiled.set()
     runner.join(timeout=60.0)
     assert thread_result == [None]
+
+
+class _RaisesTheAlarmWhenCollected:
+    """Raises SIGALRM in its ``__del__``: the timeout falls due where Python swallows it."""
+
+    def __del__(self) -> None:
+        signal.raise_signal(signal.SIGALRM)
+
+
+def test_a_timeout_due_in_a_del_is_raised_after_it_not_swallowed() -> None:
+    """Python prints ("Exception ignored") and drops what escapes a ``__del__`` or a ctypes
+    callback (llvmlite's, loading a kernel): the run went on unlimited, a traceback on
+    stderr. The timeout waits for the block to leave such code, then is raised."""
+    unraisable: list[object] = []
+    previous = sys.unraisablehook
+    sys.unraisablehook = unraisable.append
+    try:
+        with pytest.raises(guards.RunTimeoutError), guards.time_limit(1000.0):
+            _RaisesTheAlarmWhenCollected()  # collected at once: its __del__ runs here
+            for _ in range(10_000):  # the timeout, tried again a millisecond later, ends this
+                time.sleep(0.001)
+    finally:
+        sys.unraisablehook = previous
+    assert unraisable == []
+
+
+def test_a_timeout_due_in_an_llvmlite_callback_is_raised_after_it_not_swallowed() -> None:
+    """llvmlite calls numba's object cache through ctypes when it loads or emits a
+    kernel (``ExecutionEngine._raw_object_cache_notify``): the timeout a limit of
+    0.2 s had there was printed as "Exception ignored" and lost."""
+    import llvmlite.binding as llvm
+
+    llvm.initialize_native_target()
+    llvm.initialize_native_asmprinter()
+    module = llvm.parse_assembly("define i32 @f() {\n  ret i32 1\n}\n")
+    engine = llvm.create_mcjit_compiler(
+        llvm.parse_assembly(""), llvm.Target.from_default_triple().create_target_machine()
+    )
+    engine.set_object_cache(notify_func=lambda module, data: signal.raise_signal(signal.SIGALRM))
+    unraisable: list[object] = []
+    previous = sys.unraisablehook
+    sys.unraisablehook = unraisable.append
+    try:
+        with pytest.raises(guards.RunTimeoutError), guards.time_limit(1000.0):
+            engine.add_module(module)
+            engine.finalize_object()  # emits the module: the callback runs here
+            for _ in range(10_000):  # the timeout, tried again a millisecond later, ends this
+                time.sleep(0.001)
+    finally:
+        sys.unraisablehook = previous
+    assert unraisable == []
+
+
+def test_the_clock_stops_while_numba_holds_its_compiler_lock() -> None:
+    """numba takes its compiler lock to load a kernel from its cache, with no compile
+    event: loading the references' kernels (about 1.5 s) counted against the limit."""
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with guards.time_limit(1000.0):
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0.0
+        with global_compiler_lock:
+            stopped = signal.getitimer(signal.ITIMER_REAL)
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0.0  # set again afterwards
+    assert stopped == (0.0, 0.0)

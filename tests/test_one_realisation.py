@@ -81,10 +81,12 @@ def test_the_seeds_needed_scale_as_the_inverse_square_of_the_half_width() -> Non
 
 
 def _until(tmp_path: Path, *extra: str) -> object:
+    """An --until campaign that stops at --max-seeds 20 with its target not met (checked:
+    widths are checked from 20 seeds; before, it is "not checked", never "not met")."""
     cfg = tmp_path / "c.toml"
     cfg.write_text(f'[output]\ndir = "{tmp_path}"\n')
     args = ["ablate", str(cfg), "--name", "u", "--arch", "mtf_adaptive", "-w", "1", "--no-rrd",
-            "--until", "miss_km:1e-9", "--batch", "1", "--max-seeds", "2", *extra]  # fmt: skip
+            "--until", "miss_km:1e-9", "--batch", "10", "--max-seeds", "20", *extra]  # fmt: skip
     return runner.invoke(app, args, env={"COLUMNS": "200"})
 
 
@@ -92,7 +94,7 @@ def test_an_unmet_until_says_so_and_estimates_the_seeds(tmp_path: Path) -> None:
     result = _until(tmp_path)
     assert result.exit_code == 0, result.output
     text = " ".join(result.stderr.split())
-    assert "--until not met: --max-seeds 2 reached with 1 of 1 interval(s) too wide" in text
+    assert "--until not met: --max-seeds 20 reached with 1 of 1 interval(s) too wide" in text
     assert "seeds would meet it (a half-width shrinks as 1/√seeds)" in text
 
 

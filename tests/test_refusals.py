@@ -282,3 +282,22 @@ def test_every_number_of_the_configuration_has_an_upper_bound() -> None:
         for path in _unbounded(schema, f"{name}.{field}")
     ]
     assert unbounded == []
+
+
+@pytest.mark.parametrize("command", ["run", "ablate", "sweep"])
+def test_an_architecture_named_twice_is_refused(
+    command: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``cwrend run --arch a,a`` printed each of a's rows twice; one check (the parsing of
+    --arch) refuses it for every command, naming the list to write instead."""
+    monkeypatch.chdir(tmp_path)
+    arch = "mtf_adaptive,plain_fixed,mtf_adaptive"
+    extra = ["--no-rrd"] if command == "run" else ["--set", f"output.dir={str(tmp_path)!r}"]
+    result = runner.invoke(app, [command, str(PAPER), "--arch", arch, *extra])
+    assert result.exit_code == 2, result.output
+    assert (
+        f"--arch '{arch}': mtf_adaptive is named twice; name each architecture once: "
+        "--arch mtf_adaptive,plain_fixed"
+    ) in " ".join(result.stderr.split())
+    assert "Traceback" not in result.output
+    assert os.listdir(tmp_path) == []  # nothing written

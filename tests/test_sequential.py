@@ -133,3 +133,36 @@ def test_a_target_without_an_interval_yet_says_so() -> None:
     assert sequential.next_batch_message(1, 1, [one]) == (
         "1 seeds: not yet (mtf_adaptive: no interval yet); next batch"
     )
+
+
+def _until_paper(tmp_path: Path, target: str, *extra: str) -> list[str]:
+    return ["ablate", str(PAPER), "--arch", "mtf_adaptive", "--until", target,
+            "--workers", "1", "--no-rrd", "--set", f"output.dir={json.dumps(str(tmp_path))}",
+            *extra]  # fmt: skip
+
+
+def test_the_until_table_says_the_unit_of_its_values(tmp_path: Path) -> None:
+    """Its value, half-width and target are in the metric's unit (km for the miss),
+    where the campaign's own table shows the miss in metres: it said no unit."""
+    args = _until_paper(tmp_path, "miss_km:1000", "--batch", "2", "--max-seeds", "2")
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "value, half-width and target in km" in result.stdout
+
+
+def test_a_rerun_of_a_finished_until_campaign_reports_the_seeds_its_rule_stopped_at(
+    tmp_path: Path,
+) -> None:
+    """The paper's mean miss has a half-width of 0.753 m at 20 seeds, 0.668 m at 30: a
+    0.7 m target stops at 30. The rerun read every seed the directory held at each batch,
+    so it stopped at 20 and printed the tables of 20 seeds beside a target row of 30."""
+    args = _until_paper(tmp_path, "miss_km:0.0007", "--batch", "10", "--max-seeds", "40")
+    first = CliRunner().invoke(app, args)
+    assert first.exit_code == 0, first.output
+    assert "cwrend ablate · paper · 30 seed(s)" in first.stdout
+    rerun = CliRunner().invoke(app, args)
+    assert rerun.exit_code == 0, rerun.output
+    assert "cwrend ablate · paper · 30 seed(s)" in rerun.stdout
+    assert "0 run(s) computed, 30 already done" in rerun.stderr
+    rows = [line for line in rerun.stdout.splitlines() if line.startswith(" mtf_adaptive")]
+    assert rows[-1].split()[:2] == ["mtf_adaptive", "30"], rerun.stdout  # the --until row

@@ -126,3 +126,31 @@ def test_vectors_listed_with_commas_are_swept_as_in_one_array() -> None:
     listed = parse_param("constraints.corridor.port_km=[0,0,-0.25],[0,0,-0.3]")
     assert listed == parse_param("constraints.corridor.port_km=[[0,0,-0.25],[0,0,-0.3]]")
     assert listed[1] == ([0, 0, -0.25], [0, 0, -0.3])
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--range", "schedule.beta=0.1:1", "--range", "schedule.beta=0.2:0.5"],
+         "--range schedule.beta: given twice (schedule.beta=0.1:1 and schedule.beta=0.2:0.5)"),
+        (["--range", "truth.model=cw,cw"], "sweep truth.model: the value 'cw' is listed twice"),
+        (["--range", "output.rrd_seeds=1:3:int"], "sweep output.rrd_seeds: an [output] setting"),
+        (["--range", "output.dir=a,b"], "sweep output.dir: an [output] setting"),
+    ],
+)  # fmt: skip
+def test_a_design_refuses_them_as_a_grid_does(tmp_path: Path, args: list[str], said: str) -> None:
+    """``sweep --design`` took the last of two ranges of a key, sampled a repeated category
+    twice over and swept ``output.*`` keys into identical points."""
+    argv = ["sweep", str(_config(tmp_path)), "--design", "lhs", "--samples", "2", *args]
+    result = runner.invoke(app, argv)
+    assert result.exit_code == 2, result.output
+    assert said in result.stderr
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "c").exists()  # nothing written
+
+
+def test_a_design_refuses_a_sweep_table_choice_listing_a_value_twice(tmp_path: Path) -> None:
+    cfg = _config(tmp_path, '[sweep]\n"truth.model" = { values = ["cw", "j2", "cw"] }\n')
+    result = runner.invoke(app, ["sweep", str(cfg), "--design", "lhs", "--samples", "2"])
+    assert result.exit_code == 2, result.output
+    assert "sweep truth.model: the value 'cw' is listed twice" in result.stderr

@@ -18,18 +18,24 @@ from cwrend_cli.cli import app
 WIDE = "miss_km:1000"
 
 
-def _ablate(tmp_path: Path, *extra: str) -> list[str]:
+def _ablate(tmp_path: Path, *extra: str, target: str = WIDE) -> list[str]:
     cfg = tmp_path / "c.toml"
     cfg.write_text(f'[output]\ndir = "{tmp_path}"\nrrd_seeds = 0\n', encoding="utf-8")
     return ["ablate", str(cfg), "--arch", "mtf_adaptive", "--workers", "1", "--no-rrd",
-            "--until", WIDE, "--batch", "2", "--max-seeds", "4", *extra]  # fmt: skip
+            "--until", target, "--batch", "2", "--max-seeds", "4", *extra]  # fmt: skip
+
+
+def _until_row(stdout: str) -> str:
+    """The --until table's row (of its one architecture), printed last but its captions."""
+    rows = [line for line in stdout.splitlines() if line.startswith(" mtf_adaptive")]
+    return rows[-1].rstrip()
 
 
 def test_until_stopped_before_widths_are_checked_does_not_say_met(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, _ablate(tmp_path))
     assert result.exit_code == 0, result.output
-    row = result.stdout.strip().splitlines()[-1]  # the --until table's row, printed last
-    assert row.startswith(" mtf_adaptive") and row.endswith("not checked"), result.stdout
+    row = _until_row(result.stdout)
+    assert row.endswith("not checked"), result.stdout
     assert "--until not checked: widths are checked from 20 seeds" in result.stderr
     assert "raise --max-seeds to 20" in result.stderr
 
@@ -37,3 +43,18 @@ def test_until_stopped_before_widths_are_checked_does_not_say_met(tmp_path: Path
 def test_until_strict_exits_1_when_widths_were_not_checked(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, _ablate(tmp_path, "--strict"))
     assert result.exit_code == 1, result.output
+
+
+def test_until_stopped_before_widths_are_checked_says_not_checked_only(
+    tmp_path: Path,
+) -> None:
+    """With intervals still too wide, it printed "--until not met" and "--until not
+    checked" one after the other: whether the target is met is not known, so only the
+    latter, naming the intervals too wide so far and the seeds they would need."""
+    result = CliRunner().invoke(app, _ablate(tmp_path, target="miss_km:1e-7"))
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())  # the console folds lines
+    assert "not met" not in said
+    assert "--until not checked: widths are checked from 20 seeds" in said
+    assert "so far 1 of 1 interval(s) are wider than the target" in said
+    assert _until_row(result.stdout).endswith("not checked"), result.stdout

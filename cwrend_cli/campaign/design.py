@@ -53,6 +53,7 @@ unchanged.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -69,6 +70,7 @@ from cwrend_cli.output.tables import PARAM_PREFIX, UNIT_PREFIX
 __all__ = [
     "DESIGNS",
     "DESIGN_STREAM",
+    "RANGE_SYNTAX",
     "SIGNIFICANT_DIGITS",
     "Design",
     "ParameterRange",
@@ -77,6 +79,7 @@ __all__ = [
     "n_runs_per_base",
     "parse_cli_range",
     "parse_range",
+    "range_ends",
     "rbd_fast_harmonics",
     "rbd_fast_indices",
     "salib_problem",
@@ -182,6 +185,28 @@ def parse_range(key: str, spec: Mapping[str, Any], where: str | None = None) -> 
     return ParameterRange(key, "int" if integer else "float", float(low), float(high), log)
 
 
+#: What a ``--range`` option is, as its errors say.
+RANGE_SYNTAX = (
+    "KEY=LOW:HIGH (uniform), KEY=LOW:HIGH:log, KEY=LOW:HIGH:int or KEY=V1,V2,… (categories), "
+    "e.g. --range schedule.beta=0.1:1.0"
+)
+#: Two numbers joined by a dash or two dots (``0.1-1.0``, ``1..5``): a range written as
+#: other tools write one, not a categorical value.
+_NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_DASHED_RANGE = re.compile(rf"^{_NUMBER}\s*(?:-|–|\.\.)\s*{_NUMBER}$")
+
+
+def range_ends(parsed: ParameterRange) -> tuple[tuple[str, Any], ...]:
+    """The values of ``parsed`` that bound what a design samples, named as in
+    :data:`RANGE_SYNTAX`: ``LOW`` and ``HIGH`` of a range (as :meth:`ParameterRange.value`
+    rounds them), every value ``V1``, ``V2``, … of a choice."""
+    if parsed.kind == "choice":
+        return tuple((f"V{i}", v) for i, v in enumerate(parsed.values, start=1))
+    if parsed.kind == "int":
+        return (("LOW", int(parsed.low)), ("HIGH", int(parsed.high)))
+    return (("LOW", decimal_float(parsed.low)), ("HIGH", decimal_float(parsed.high)))
+
+
 def parse_cli_range(text: str) -> ParameterRange:
     """A ``--range`` option as a :class:`ParameterRange`; :class:`ConfigError` naming the option.
 
@@ -197,19 +222,16 @@ def parse_cli_range(text: str) -> ParameterRange:
     key, sep, raw = text.partition("=")
     key, raw = key.strip(), raw.strip()
     if not sep or not key or not raw:
-        raise ConfigError(
-            f"{where}: expected KEY=LOW:HIGH[:log|:int] or KEY=V1,V2,…, "
-            "e.g. --range schedule.beta=0.1:1.0"
-        )
+        raise ConfigError(f"{where}: expected {RANGE_SYNTAX}")
     if ":" in raw:
         parts = [p.strip() for p in raw.split(":")]
         flags = {"log": {"log": True}, "int": {"int": True}}
         if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] not in flags):
-            raise ConfigError(f"{where}: a range is LOW:HIGH, LOW:HIGH:log or LOW:HIGH:int")
+            raise ConfigError(f"{where}: expected {RANGE_SYNTAX}")
         try:
             low, high = float(parts[0]), float(parts[1])
         except ValueError:
-            raise ConfigError(f"{where}: LOW and HIGH must be numbers") from None
+            raise ConfigError(f"{where}: LOW and HIGH must be numbers; {RANGE_SYNTAX}") from None
         integer = len(parts) == 3 and parts[2] == "int"
         bounds: tuple[float | int, float | int] = (low, high)
         if integer and low.is_integer() and high.is_integer():
@@ -218,7 +240,13 @@ def parse_cli_range(text: str) -> ParameterRange:
         return parse_range(key, {"low": bounds[0], "high": bounds[1], **extra}, where)
     items = [p.strip() for p in raw.split(",")]
     if any(not item for item in items):
-        raise ConfigError(f"{where}: empty value in the list")
+        raise ConfigError(f"{where}: empty value in the list; {RANGE_SYNTAX}")
+    dashed = next((item for item in items if _DASHED_RANGE.match(item)), None)
+    if dashed is not None:  # else one categorical value, the string "0.1-1.0"
+        raise ConfigError(
+            f"{where}: {dashed!r} is not a range (it would be one categorical value); "
+            f"write it LOW:HIGH; {RANGE_SYNTAX}"
+        )
     values = [parse_override(f"{key}={item}")[1] for item in items]
     return parse_range(key, {"values": values}, where)
 

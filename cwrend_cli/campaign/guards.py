@@ -12,10 +12,12 @@ from __future__ import annotations
 import ctypes
 import math
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
 from types import FrameType
 from typing import Protocol
 
@@ -204,11 +206,20 @@ def time_limit(seconds: float | None) -> Iterator[None]:
     runs Python code: the compiled step loop returns to Python at every
     re-solve. ``seconds = None``: the block runs unlimited.
 
-    Time numba spends compiling a kernel inside the block does not count: the
-    clock stops while it compiles (:class:`_CompilePause`). A kernel first met
-    in the middle of a campaign (a fallback of the re-solve chain, a variant of
-    the loop) costs 10-15 CPU s on a fresh install, the run's own cost is what
-    its limit is for (a run of a sweep timed out that way on a loaded machine).
+    Time numba spends loading or compiling a kernel inside the block does not
+    count: the clock stops while numba holds its compiler lock, which it takes
+    to load a kernel from its cache as well as to compile one
+    (:class:`_CompilePause`). A kernel first met in the middle of a campaign (a
+    fallback of the re-solve chain, a variant of the loop) costs 10-15 CPU s on
+    a fresh install, loading the references' kernels from the cache about 1.5 s;
+    the run's own cost is what its limit is for (a run of a sweep timed out that
+    way on a loaded machine).
+
+    The timeout is never raised where Python would swallow it (llvmlite's ctypes
+    callbacks, a ``__del__``: "Exception ignored", a traceback on stderr and the
+    run going on unlimited): there it waits for the block to leave such code
+    (:func:`_swallowing`), so even a limit of a millisecond gives a clean
+    "timed out".
     """
     if seconds is None:
         yield
@@ -220,7 +231,7 @@ def time_limit(seconds: float | None) -> Iterator[None]:
     ):
         alarm = _ThreadAlarm(seconds)
         try:
-            with numba_event.install_listener("numba:compile", _CompilePause(alarm)):
+            with _paused_by_numba(_CompilePause(alarm)):
                 yield
         except _ExpiredError:
             raise RunTimeoutError(message) from None
@@ -228,17 +239,58 @@ def time_limit(seconds: float | None) -> Iterator[None]:
             alarm.stop()
         return
 
+    pause = _CompilePause(_SignalAlarm())
+
     def expire(signum: int, frame: FrameType | None) -> None:
+        if pause.depth > 0 or _swallowing(frame):  # not now: again once out of there
+            signal.setitimer(signal.ITIMER_REAL, _RETRY_S)
+            return
         raise RunTimeoutError(message)
 
     previous = signal.signal(signal.SIGALRM, expire)
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
-        with numba_event.install_listener("numba:compile", _CompilePause(_SignalAlarm())):
+        with _paused_by_numba(pause):
             yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
+
+
+#: numba's events during which the clock of :func:`time_limit` stops: its compiler lock
+#: (held to load a kernel from the cache, to compile one, and waited for while another
+#: thread does) and its compiles.
+_NUMBA_PAUSE_EVENTS = ("numba:compiler_lock", "numba:compile")
+#: How soon a timeout that could not be raised where the block was is tried again [s].
+_RETRY_S = 1e-3
+#: Where an exception raised is swallowed: the ctypes callbacks of llvmlite (numba's
+#: code generator) call Python from C and print, not raise, what escapes them.
+_SWALLOWING_PACKAGE = "llvmlite"
+
+
+@contextmanager
+def _paused_by_numba(pause: _CompilePause) -> Iterator[None]:
+    """``pause`` listens to numba's :data:`_NUMBA_PAUSE_EVENTS` in the ``with`` block."""
+    with ExitStack() as stack:
+        for kind in _NUMBA_PAUSE_EVENTS:
+            stack.enter_context(numba_event.install_listener(kind, pause))
+        yield
+
+
+def _swallowing(frame: FrameType | None) -> bool:
+    """Whether an exception raised in ``frame`` would be swallowed on its way out.
+
+    Python prints ("Exception ignored ...") rather than raises what escapes a
+    ``__del__`` or a callback called from C through ctypes (llvmlite's, while
+    numba loads or finalises a kernel), and the code around goes on as if
+    nothing happened.
+    """
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "__del__" or _SWALLOWING_PACKAGE in Path(code.co_filename).parts:
+            return True
+        frame = frame.f_back
+    return False
 
 
 class _ExpiredError(RunTimeoutError):
@@ -269,9 +321,10 @@ class _ThreadAlarm:
     that raises :class:`_ExpiredError` in the thread that made it, once, while the block runs.
 
     ``PyThreadState_SetAsyncExc`` (the C API's asynchronous exception) raises it at the
-    next Python instruction that thread runs; :meth:`stop` withdraws one set but not yet
-    raised, so nothing is raised after the block. A lock orders the timer's firing with
-    :meth:`pause`, :meth:`resume` and :meth:`stop`.
+    next Python instruction that thread runs, unless the thread is where it would be
+    swallowed (:func:`_swallowing`): then the timer tries again shortly. :meth:`stop`
+    withdraws one set but not yet raised, so nothing is raised after the block. A lock
+    orders the timer's firing with :meth:`pause`, :meth:`resume` and :meth:`stop`.
     """
 
     def __init__(self, seconds: float) -> None:
@@ -298,6 +351,10 @@ class _ThreadAlarm:
                 and self._timer is not None
                 and started == self._started
             ):
+                if _swallowing(sys._current_frames().get(self._thread)):
+                    self._left_s = _RETRY_S  # not there: again once out of it
+                    self._start()
+                    return
                 self._fired = True
                 _set_async_exc(self._thread, _ExpiredError)
 
@@ -337,9 +394,10 @@ class _Alarm(Protocol):
 
 
 class _CompilePause(numba_event.Listener):
-    """Stops the clock of :func:`time_limit` while numba compiles.
+    """Stops the clock of :func:`time_limit` while numba loads or compiles a kernel.
 
-    numba announces each compile (a cache miss, not a load from its cache) as a
+    numba announces each acquisition of its compiler lock (to load a kernel from its
+    cache, to compile one) as a ``numba:compiler_lock`` event, each compile as a
     ``numba:compile`` event, nested for the kernels a kernel calls; the clock is
     stopped at the outermost start and set again, with the time it had left,
     at the outermost end.
@@ -348,8 +406,8 @@ class _CompilePause(numba_event.Listener):
     tasks in threads, one thread's compile stops every thread's clock. Kept so on
     purpose, as it only lengthens a limit: numba compiles under a process-wide
     lock (``numba.core.compiler_lock``) that another thread meeting any kernel
-    waits for without an event of its own, and the compile holds the GIL; a
-    per-thread pause would count that wait against the waiting run
+    waits for, and the compile holds the GIL; a per-thread pause would count
+    the GIL's share of that wait against the waiting run
     (docs/guide/integrity.md, "Time limits").
     """
 

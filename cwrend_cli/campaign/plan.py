@@ -33,10 +33,12 @@ from typing import Any
 import numpy as np
 
 from cwrend_cli.campaign.design import (
+    RANGE_SYNTAX,
     Design,
     ParameterRange,
     parse_cli_range,
     parse_range,
+    range_ends,
     unit_samples,
 )
 from cwrend_cli.campaign.design import design_points as sample_design
@@ -51,7 +53,14 @@ from cwrend_cli.config import (
 from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
-from cwrend_cli.config.overrides import expand_grid, get_dotted, missing_key_hint, point_tree
+from cwrend_cli.config.overrides import (
+    check_given_once,
+    check_swept,
+    expand_grid,
+    get_dotted,
+    missing_key_hint,
+    point_tree,
+)
 from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
@@ -257,8 +266,16 @@ def design_points(
                 "{ values = […] }), not a list of grid values"
             )
         by_key[key] = parse_range(key, spec)
+    given: dict[str, str] = {}  # --range key -> its range as typed
     for text in cli_ranges:
         parsed = parse_cli_range(text)
+        raw = text.split("=", 1)[1].strip()
+        check_given_once(
+            "--range", parsed.key, given, raw,
+            f"give one range per key: --range {parsed.key}=LOW:HIGH or "
+            f"--range {parsed.key}=V1,V2,… (a design samples each key once)",
+        )  # fmt: skip
+        given[parsed.key] = raw
         if base is not None:
             try:
                 get_dotted(base, parsed.key)
@@ -267,7 +284,10 @@ def design_points(
                     f"--range {text}: {parsed.key} is not a configuration value (a dotted key "
                     f"such as schedule.beta or scenario.u_max_km_s2){_key_meant(base, parsed.key)}"
                 ) from None
+            _check_range_ends(base, parsed, f"--range {text}")
         by_key[parsed.key] = parsed
+    for parsed in by_key.values():  # what no swept key may be, as --param's (expand_grid)
+        check_swept(parsed.key, parsed.values if parsed.kind == "choice" else None)
     if not by_key:
         raise ConfigError(
             f"--design {kind}: no ranges; give --range KEY=LOW:HIGH (e.g. --range "
@@ -283,6 +303,21 @@ def design_points(
         points.setdefault(pid, assignment)
     spec = DesignSpec(kind, samples, tuple(ranges), tuple(rows), second_order)
     return spec, tuple(points.items())
+
+
+def _check_range_ends(base: Mapping[str, Any], parsed: ParameterRange, where: str) -> None:
+    """Refuse a range whose bounds (or a choice's values) its key does not take, naming
+    ``where`` (the option) and the option's syntax: else the first sampled point was
+    refused as an invalid grid point, the option unnamed."""
+    for end, value in range_ends(parsed):
+        try:
+            _validated(base, ((parsed.key, value),), where)
+        except ConfigError as exc:
+            why = "; ".join(exc.problems) or str(exc)
+            raise ConfigError(
+                f"{where}: {end} = {value!r} is not a value {parsed.key} takes ({why}); "
+                f"expected {RANGE_SYNTAX}"
+            ) from None
 
 
 def _key_meant(base: Mapping[str, Any], key: str) -> str:

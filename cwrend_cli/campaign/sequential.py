@@ -45,7 +45,7 @@ import pandas as pd
 from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, STATISTICS
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output.tables import METRIC_NAMES
+from cwrend_cli.output.tables import METRIC_NAMES, suffix_unit
 
 __all__ = [
     "MIN_BATCHES",
@@ -83,6 +83,12 @@ class Target:
     half_width: float
     relative: bool  # half_width is a fraction of |value|
     pair: tuple[str, str] | None = None  # a paired difference A − B, else every architecture
+
+    @property
+    def unit(self) -> str | None:
+        """The unit of the targeted value and its half-width: the metric's (``miss_km`` → km),
+        ``None`` for a share of seeds (``frac_less``)."""
+        return None if self.statistic == "frac_less" else suffix_unit(self.metric)
 
 
 def parse_until(
@@ -171,18 +177,33 @@ def ready(n_seeds: int, batch: int) -> bool:
     return n_seeds >= checked_from(batch)
 
 
-def unchecked_message(n_seeds: int, batch: int) -> str:
+def unchecked_message(n_seeds: int, batch: int, achieved: Sequence[Achieved] = ()) -> str:
     """What ``--until`` says when it stopped at ``n_seeds`` (``--max-seeds``) before widths are
-    checked (:func:`ready`): whether the target was met is not known, and how to know."""
+    checked (:func:`ready`): whether the target was met is not known, and how to know.
+
+    The only verdict then (never beside :func:`unmet_message`): intervals of ``achieved``
+    wider than their target so far are named, with the seeds they would need.
+    """
     first = checked_from(batch)
-    fix = f"raise --max-seeds to {first:,}"
-    if MIN_BATCHES * batch > MIN_SEEDS:
-        fix += f" or lower --batch to {math.ceil(MIN_SEEDS / MIN_BATCHES)}"
-    return (
+    text = (
         f"--until not checked: widths are checked from {first:,} seeds ({MIN_BATCHES} batches "
         f"of --batch {batch}, at least {MIN_SEEDS}) and --max-seeds stopped the campaign at "
-        f"{n_seeds}: {fix}"
+        f"{n_seeds}"
     )
+    unmet = [a for a in achieved if not a.met]
+    needed = [a.seeds_needed for a in unmet if a.seeds_needed is not None]
+    fix = f"raise --max-seeds to {max([first, *needed]):,}"
+    if MIN_BATCHES * batch > MIN_SEEDS:
+        fix += f" or lower --batch to {math.ceil(MIN_SEEDS / MIN_BATCHES)}"
+    if unmet:
+        text += (
+            f"; so far {len(unmet)} of {len(achieved)} interval(s) are wider than the target "
+            f"({_too_wide(unmet)})"
+        )
+        if needed:
+            shrinks = "(a half-width shrinks as 1/√seeds)"
+            fix = f"about {max(needed):,} seeds would meet it {shrinks}: {fix}"
+    return f"{text}: {fix}"
 
 
 def next_batch_message(n_seeds: int, batch: int, achieved: Sequence[Achieved]) -> str:
@@ -241,14 +262,9 @@ def unmet_message(achieved: Sequence[Achieved], max_seeds: int) -> str:
     widest would need (:attr:`Achieved.seeds_needed`).
     """
     unmet = [a for a in achieved if not a.met]
-    parts = [
-        f"{a.label}: no interval" if a.seeds_needed is None
-        else f"{a.label}: half-width {a.half_width:.3g} > {a.limit:.3g}"
-        for a in unmet
-    ]  # fmt: skip
     text = (
         f"--until not met: --max-seeds {max_seeds} reached with "
-        f"{len(unmet)} of {len(achieved)} interval(s) too wide ({'; '.join(parts)})"
+        f"{len(unmet)} of {len(achieved)} interval(s) too wide ({_too_wide(unmet)})"
     )
     needed = [a.seeds_needed for a in unmet if a.seeds_needed is not None]
     if needed:
@@ -257,6 +273,15 @@ def unmet_message(achieved: Sequence[Achieved], max_seeds: int) -> str:
             "(a half-width shrinks as 1/√seeds): raise --max-seeds or widen the target"
         )
     return text
+
+
+def _too_wide(unmet: Sequence[Achieved]) -> str:
+    """The intervals of ``unmet`` against their targets: ``A: half-width 0.0012 > 0.001; …``."""
+    return "; ".join(
+        f"{a.label}: no interval" if a.seeds_needed is None
+        else f"{a.label}: half-width {a.half_width:.3g} > {a.limit:.3g}"
+        for a in unmet
+    )  # fmt: skip
 
 
 def achieved(stats: pd.DataFrame, target: Target, archs: Sequence[str]) -> list[Achieved]:

@@ -36,6 +36,8 @@ from cwrend_cli.physics.params import (
 __all__ = [
     "ARCH_GROUPS",
     "apply",
+    "check_given_once",
+    "check_swept",
     "expand_grid",
     "get_dotted",
     "missing_key_hint",
@@ -444,33 +446,52 @@ def expand_grid(
         if key in given:
             plain = not any(c in given[key] + raw for c in ":[")  # value lists, not ranges
             both = f"{given[key]},{raw}" if plain else "V1,V2,…"
-            raise ConfigError(
-                f"--param {key}: given twice ({key}={given[key]} and {key}={raw}); list every "
-                f"value in one option: --param {key}={both} (the grid is the cartesian product "
-                "of different keys)"
-            )
+            check_given_once(
+                "--param", key, given, raw,
+                f"list every value in one option: --param {key}={both} (the grid is the "
+                "cartesian product of different keys)",
+            )  # fmt: skip
         given[key] = raw
         grid[key] = values
     for key, values in grid.items():
-        if not values:
-            raise ConfigError(f"sweep {key}: needs at least one value")
-        if len(values) > MAX_VALUES_PER_KEY:
-            raise ConfigError(
-                f"sweep {key}: {len(values):,} values; at most {MAX_VALUES_PER_KEY:,} per key"
-            )
-        if key == "output" or key.startswith("output."):
-            raise ConfigError(
-                f"sweep {key}: an [output] setting changes no number of a run, so its grid "
-                f"points would be identical; set it once (--set {key}=VALUE, or in the "
-                "config) instead of sweeping it"
-            )
-        repeated = _first_repeated(values)
-        if repeated is not None:
-            raise ConfigError(
-                f"sweep {key}: the value {repeated!r} is listed twice; a grid point is "
-                "computed once: list each value once"
-            )
+        check_swept(key, values)
     return tuple(grid.items())
+
+
+def check_given_once(option: str, key: str, given: Mapping[str, str], raw: str, fix: str) -> None:
+    """Refuse ``option`` giving ``key`` a second time: ``given`` maps each key given so far
+    to its text, ``raw`` is this one's; ``fix`` says what to write instead (``--param``
+    and ``--range``: one option per key)."""
+    if key in given:
+        raise ConfigError(
+            f"{option} {key}: given twice ({key}={given[key]} and {key}={raw}); {fix}"
+        )
+
+
+def check_swept(key: str, values: Sequence[Any] | None = None) -> None:
+    """Refuse what no swept key may be, in a grid or a design: an ``output.*`` key (it
+    changes no number of a run: its points would be identical) and, of ``values`` (a
+    grid's values, a design's categories; ``None``: a design's numeric range), none,
+    more than :data:`~cwrend_cli.limits.MAX_VALUES_PER_KEY`, or one listed twice (a point
+    is computed once)."""
+    if values is not None and not values:
+        raise ConfigError(f"sweep {key}: needs at least one value")
+    if values is not None and len(values) > MAX_VALUES_PER_KEY:
+        raise ConfigError(
+            f"sweep {key}: {len(values):,} values; at most {MAX_VALUES_PER_KEY:,} per key"
+        )
+    if key == "output" or key.startswith("output."):
+        raise ConfigError(
+            f"sweep {key}: an [output] setting changes no number of a run, so its "
+            f"points would be identical; set it once (--set {key}=VALUE, or in the "
+            "config) instead of sweeping it"
+        )
+    repeated = None if values is None else _first_repeated(values)
+    if repeated is not None:
+        raise ConfigError(
+            f"sweep {key}: the value {repeated!r} is listed twice; a point is "
+            "computed once: list each value once"
+        )
 
 
 def replaced_sweep_keys(sweep: Mapping[str, Any], cli_params: Sequence[str]) -> tuple[str, ...]:
@@ -538,11 +559,22 @@ ARCH_GROUPS: Mapping[str, tuple[Architecture, ...]] = MappingProxyType(
 
 
 def parse_archs(text: str) -> tuple[Architecture, ...]:
-    """A group name (:data:`ARCH_GROUPS`) or comma-separated slugs."""
+    """A group name (:data:`ARCH_GROUPS`) or comma-separated slugs, each named once.
+
+    A slug named twice is refused (``cwrend run --arch a,a`` printed every row
+    twice): the one check of ``run``, ``ablate`` and ``sweep``.
+    """
     group = ARCH_GROUPS.get(text.strip())
     if group is not None:
         return group
     archs = tuple(parse_arch(part) for part in text.split(",") if part.strip())
     if not archs:
         raise ConfigError(f"--arch {text!r}: name at least one of {', '.join(ALL_ARCHITECTURES)}")
+    repeated = _first_repeated([a.slug for a in archs])
+    if repeated is not None:
+        once = ",".join(dict.fromkeys(a.slug for a in archs))
+        raise ConfigError(
+            f"--arch {text!r}: {repeated} is named twice; name each architecture once: "
+            f"--arch {once}"
+        )
     return archs
