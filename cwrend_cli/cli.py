@@ -343,6 +343,7 @@ def run(
     recording.rrd unless --no-rrd.
     """
     from cwrend_cli import campaign
+    from cwrend_cli.campaign.worker import cold_loops_of_case
     from cwrend_cli.config import config_hash, load_config, resolved_dict
     from cwrend_cli.config.adapt import problem_of, windows_of
     from cwrend_cli.console import script_table, summary_console_table, summary_frame
@@ -378,7 +379,8 @@ def run(
             case = campaign.run_case(cfg, archs, seed_)
         else:
             guidance = problem_of(cfg).guidance
-            notice = compiling_notice({a.resolved_method(guidance) for a in archs})
+            loops = cold_loops_of_case(cfg, archs, seed_)
+            notice = compiling_notice({a.resolved_method(guidance) for a in archs}, loops=loops)
             if notice is not None and not console.is_terminal:  # no spinner to show it in
                 console.print(notice, markup=False)
             with console.status(notice or "running…", spinner="dots"):
@@ -624,10 +626,13 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
     """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
 
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
-    for the guidance methods the plan's runs use; ``fan_out``: a local campaign given two
+    for the guidance methods the plan's runs use and the step loops of their configurations
+    (a J2 truth, an ``ss`` design model: :func:`cwrend_cli.campaign.worker.cold_loops`);
+    ``fan_out``: a local campaign given two
     workers or more (a pool, or a helper process beside a campaign of one task), which
     compile part of the kernels at the same time.
     """
+    from cwrend_cli.campaign.worker import cold_loops
     from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
 
@@ -636,7 +641,7 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
         for task in plan.tasks
         for r in task.runs
     }
-    return compiling_notice(methods, fan_out)
+    return compiling_notice(methods, fan_out, loops=cold_loops(plan.tasks))
 
 
 @contextmanager
