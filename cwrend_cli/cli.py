@@ -39,7 +39,6 @@ from cwrend_cli.output.layout import (
     COMPARE_STATS,
     MANIFEST,
     RUN_RECORDING,
-    RUNS_DIR,
     SWEEP_STATS,
     compare_dir,
     run_dir,
@@ -353,6 +352,7 @@ def run(
     recording.rrd unless --no-rrd.
     """
     from cwrend_cli import campaign
+    from cwrend_cli.campaign.worker import cold_loops_of_case
     from cwrend_cli.config import config_hash, load_config, resolved_dict
     from cwrend_cli.config.adapt import problem_of, windows_of
     from cwrend_cli.console import script_table, summary_console_table, summary_frame
@@ -370,15 +370,9 @@ def run(
             recording.check_enabled()
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
-            runs_root = Path(cfg.output.dir) / RUNS_DIR
-            if (runs_root / MANIFEST).exists():
-                raise ConfigError(
-                    f"{runs_root} is a campaign directory (a campaign named {RUNS_DIR!r}); "
-                    "name the run's directory with --out"
-                )
             out = Path(cfg.output.dir) / run_dir(cfg.output.name or "run", slug, seed_)
         check_output_dir(out, "choose another --out or output.dir")  # before computing
-        check_run_dir(out, "choose another --out")  # never beside a campaign's files
+        check_run_dir(out, "choose another --out")  # never in a campaign's tree
         console = _console(stderr=True)
         ignored = [name for name in ("sweep", "dispersions") if getattr(cfg, name)]
         if ignored:  # a run is the base config's case: say so, with -q too
@@ -394,7 +388,8 @@ def run(
             case = campaign.run_case(cfg, archs, seed_)
         else:
             guidance = problem_of(cfg).guidance
-            notice = compiling_notice({a.resolved_method(guidance) for a in archs})
+            loops = cold_loops_of_case(cfg, archs, seed_)
+            notice = compiling_notice({a.resolved_method(guidance) for a in archs}, loops=loops)
             if notice is not None and not console.is_terminal:  # no spinner to show it in
                 console.print(notice, markup=False)
             with console.status(notice or "running…", spinner="dots"):
@@ -640,10 +635,13 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
     """``compiling kernels (first run only, about N s)…`` when the plan's kernels are not cached.
 
     The same check as ``cwrend run`` (:func:`cwrend_cli.physics.compiled.compiling_notice`),
-    for the guidance methods the plan's runs use; ``fan_out``: a local campaign given two
+    for the guidance methods the plan's runs use and the step loops of their configurations
+    (a J2 truth, an ``ss`` design model: :func:`cwrend_cli.campaign.worker.cold_loops`);
+    ``fan_out``: a local campaign given two
     workers or more (a pool, or a helper process beside a campaign of one task), which
     compile part of the kernels at the same time.
     """
+    from cwrend_cli.campaign.worker import cold_loops
     from cwrend_cli.config import ALL_ARCHITECTURES
     from cwrend_cli.physics.compiled import compiling_notice
 
@@ -652,7 +650,7 @@ def _first_run_notice(plan: campaign.CampaignPlan, fan_out: bool) -> str | None:
         for task in plan.tasks
         for r in task.runs
     }
-    return compiling_notice(methods, fan_out)
+    return compiling_notice(methods, fan_out, loops=cold_loops(plan.tasks))
 
 
 @contextmanager

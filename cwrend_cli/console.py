@@ -29,6 +29,7 @@ from rich.text import Text
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.campaign.statistics import APPLIED_METRICS
 from cwrend_cli.output.tables import reference_row, summary_row
+from cwrend_cli.physics.params import arch_order
 from cwrend_cli.physics.references import OpenLoopResult
 from cwrend_cli.physics.simulation import RunResult
 from cwrend_cli.report.labels import (
@@ -462,6 +463,16 @@ def _caption(text: str, rows: pd.DataFrame, alone: str) -> str:
     return "\n".join(lines)
 
 
+def _in_arch_order(stats: pd.DataFrame) -> pd.DataFrame:
+    """``stats`` with ``arch`` an ordered categorical in :func:`arch_order`: grouped with
+    ``sort=True``, its rows come in the order of the report and ``cwrend table`` (the
+    statistics file's rows are sorted by slug)."""
+    order = arch_order(stats["arch"].unique())
+    return stats.assign(
+        arch=pd.Categorical(stats["arch"].astype(str), categories=order, ordered=True)
+    )
+
+
 def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
     """Per architecture: mean Δv, miss and fuel penalty with 95 % CIs, and the solves.
 
@@ -473,7 +484,7 @@ def ablation_console_table(stats: pd.DataFrame, title: str) -> Table:
     table.add_column("architecture", no_wrap=True)
     for name in ("Δv km/s", "miss m", "fuel pen. %", "solves ok %\nms mean/max"):
         table.add_column(name, justify="right", no_wrap=True)
-    for arch, g in marginal.groupby("arch", sort=False):
+    for arch, g in _in_arch_order(marginal).groupby("arch", sort=True, observed=True):
         get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
         table.add_row(
             str(arch),
@@ -508,7 +519,7 @@ def applied_console_table(
     for name in ("Δv applied km/s", "fuel pen. vs exact %"):
         table.add_column(name, justify="right", no_wrap=True)
     keys = [*params, "point", "arch"] if point_cols else ["arch"]
-    for _, g in marginal.groupby(keys, sort=bool(point_cols), observed=True):
+    for _, g in _in_arch_order(marginal).groupby(keys, sort=True, observed=True):
         get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
         first = g.iloc[0]
         table.add_row(
@@ -560,7 +571,9 @@ def sweep_console_table(stats: pd.DataFrame, point_cols: list[str], title: str) 
     for name in ("n", "Δv km/s", "miss m"):
         table.add_column(name, justify="right", no_wrap=True)
     marginal = stats[stats["kind"] == "marginal"]
-    for _, g in marginal.groupby([*params, "point", "arch"], sort=True, observed=True):
+    for _, g in _in_arch_order(marginal).groupby(
+        [*params, "point", "arch"], sort=True, observed=True
+    ):
         get = {(r.metric, r.statistic): r for _, r in g.iterrows()}
         first = g.iloc[0]
         table.add_row(
@@ -606,8 +619,8 @@ def consistency_console_table(
     for name in ("n", "NEES", "in\nband", "NIS", "in\nband"):
         table.add_column(name, justify="right", no_wrap=True)
     keys = [*params, *(["point"] if "point" in point_cols else []), "arch"]
-    # as the table above it: a sweep's by its swept values, an ablation's in its rows' order
-    for _, g in rows.groupby(keys, sort=bool(params), observed=True):
+    # as the table above it: a sweep's by its swept values, then the architectures' order
+    for _, g in _in_arch_order(rows).groupby(keys, sort=True, observed=True):
         get = {r.metric: r for _, r in g.iterrows()}
         first = g.iloc[0]
         cells: list[str] = []

@@ -280,3 +280,28 @@ def test_the_consistency_table_left_aligns_the_architectures() -> None:
     table = consistency_console_table(rows, [], "filter consistency")
     assert table is not None
     assert len(_columns_of(_render(table), SLUGS)) == 1
+
+
+def _row_archs(text: str, archs: list[str]) -> list[str]:
+    """The architectures of ``archs`` in the order a rendered table lists them."""
+    return [cell for line in text.splitlines() for cell in line.split() if cell in archs]
+
+
+def test_the_ablation_console_lists_architectures_in_the_order_of_cwrend_table() -> None:
+    """The console followed the statistics file (sorted by slug: mtf_… before plain_…), while
+    ``cwrend table`` and the report list them in the package's order (plain before mtf)."""
+    from cwrend_cli.physics.params import arch_order
+
+    archs = ["mtf_adaptive", "plain_fixed", "plain_adaptive", "mtf_fixed"]
+    stats = _stats(archs)
+    expected = list(arch_order(archs))
+    assert expected == ["plain_fixed", "mtf_fixed", "plain_adaptive", "mtf_adaptive"]
+    assert _row_archs(_render(ablation_console_table(stats, "ablate")), archs) == expected
+    assert _row_archs(_render(applied_console_table(stats)), archs) == expected
+
+
+def test_the_sweep_console_lists_architectures_in_the_order_of_cwrend_table() -> None:
+    archs = ["mtf_adaptive", "plain_adaptive"]
+    stats = _stats(archs, points=2)
+    text = _render(sweep_console_table(stats, ["point", "param.schedule.beta"], "sweep"))
+    assert _row_archs(text, archs) == ["plain_adaptive", "mtf_adaptive"] * 2

@@ -93,13 +93,46 @@ def test_compiled_kernels_announce_nothing() -> None:
     assert compiled.compiling_notice({"shooting"}) is None
 
 
+def _j2(guidance: str) -> dict[str, Any]:
+    """campaigns/paper_j2.toml's J2 truth, with the re-solves' design model ``guidance``."""
+    truth = {"model": "j2", "inclination_deg": 51.6}
+    return {"truth": truth, "model": {"guidance": guidance}}
+
+
+@pytest.mark.parametrize("guidance", ["cw", "ss"])
+@pytest.mark.parametrize("arch", ["mtf_adaptive", "mtf_adaptive_socp"])
+def test_a_campaign_whose_step_loop_is_not_cached_announces_the_compile(
+    arch: str, guidance: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first ablate of a J2 (or ``ss``) config compiled its own step loop for two minutes
+    without a word: the entry points held the paper's compile, and any compile counted."""
+    from cwrend_cli.campaign.plan import plan
+    from cwrend_cli.cli import _first_run_notice
+
+    # the cache holds a compile of every entry point, none of this configuration's loop
+    monkeypatch.setattr(compiled, "_cached", lambda dispatcher, signature=None: signature is None)
+    campaign_plan = plan(config_from_dict(_j2(guidance)), [arch], [0])
+    notice = _first_run_notice(campaign_plan, fan_out=False)
+    assert notice is not None and notice.startswith(NOTICE)
+
+
+@pytest.mark.parametrize("arch", ["mtf_adaptive", "mtf_adaptive_socp"])
+def test_a_step_loop_once_run_is_cached_for_its_configuration(arch: str) -> None:
+    """The types asked about are those a run compiles: after a run, its loop is not cold."""
+    from cwrend_cli.campaign.worker import cold_loops_of_case
+
+    cfg = config_from_dict(_j2("ss"))
+    campaign.run_case(cfg, (ALL_ARCHITECTURES[arch],), 0)
+    assert cold_loops_of_case(cfg, (ALL_ARCHITECTURES[arch],), 0) == set()
+
+
 @pytest.mark.parametrize("arch", ["mtf_adaptive", "mtf_adaptive_socp"])
 def test_a_campaign_prints_the_notice_before_its_runs(
     arch: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # every architecture, the cone-program ones too (a lookup among the paper's four alone
     # ended `ablate --arch all_socp` with a KeyError)
-    monkeypatch.setattr(compiled, "compile_seconds", lambda methods, fan_out=False: 24.0)
+    monkeypatch.setattr(compiled, "compile_seconds", lambda methods, *_, **__: 24.0)
     out = f"output.dir={json.dumps(str(tmp_path))}"
     args = ["ablate", str(PAPER), "--arch", arch, "-w", "1", "--no-rrd", "--set", out]
     result = runner.invoke(app, args)

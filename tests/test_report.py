@@ -565,6 +565,62 @@ def test_sweep_figure_bands_are_the_stored_intervals(sweep_dir: Path, tmp_path: 
     assert _band_limits(bare.axes[0]) == [] and _band_limits(bare.axes[1]) == []
 
 
+def _with_misses(data: Any, misses_km: Sequence[float]) -> Any:
+    """``data`` whose ok runs have the misses ``misses_km`` (cycled) and no stored statistics."""
+    from dataclasses import replace
+
+    runs = data.runs.copy()
+    ok = runs["status"] == "ok"
+    runs.loc[ok, "miss_km"] = np.resize(np.asarray(misses_km, dtype=float), int(ok.sum()))
+    return replace(data, runs=runs, stats=None)
+
+
+def test_sweep_figure_draws_misses_within_a_decade_on_a_linear_axis(sweep_dir: Path) -> None:
+    """Medians 0.1 mm apart on a log axis sat between two ticks, unreadable."""
+    from cwrend_cli.report import figures
+
+    data = _with_misses(load_results(sweep_dir), [1.440e-4, 1.441e-4])  # 0.1440–0.1441 m
+    ax_m = figures.fig_sweep(data, "param.schedule.beta").axes[0]
+    assert ax_m.get_yscale() == "linear"
+    assert ax_m.yaxis.get_major_formatter().get_offset() == ""  # 0.14405, not 1e-5+1.44e-1
+
+
+def test_sweep_figure_draws_misses_over_more_than_a_decade_on_a_log_axis(
+    sweep_dir: Path,
+) -> None:
+    from cwrend_cli.report import figures
+
+    data = _with_misses(load_results(sweep_dir), [1e-5, 1e-3])  # 1 cm to 1 m
+    assert figures.fig_sweep(data, "param.schedule.beta").axes[0].get_yscale() == "log"
+
+
+def test_a_constrained_sweep_figure_draws_the_median_distance_to_the_unsafe_set(
+    sweep_dir: Path,
+) -> None:
+    from dataclasses import replace
+
+    from cwrend_cli.config import load_config
+    from cwrend_cli.report import figures
+
+    data = load_results(sweep_dir)
+    runs = data.runs.copy()
+    runs["safety_min_distance_km"] = np.where(runs["seed"] == 0, -0.002, 0.004)  # m: -2, 4
+    safe = load_config(Path(__file__).resolve().parents[1] / "campaigns" / "safe_approach.toml")
+    data = replace(data, runs=runs, config=safe, stats=None)
+    fig = figures.fig_sweep(data, "param.schedule.beta")
+    ax_s = fig.axes[2]
+    assert "unsafe set" in ax_s.get_ylabel() and ax_s.get_ylabel().endswith("[m]")
+    medians = {round(float(y), 9) for line in ax_s.get_lines() for y in line.get_ydata()}
+    assert medians == {0.0, 1.0}  # the zero line and each point's median over seeds 0 and 1
+
+
+def test_an_unconstrained_sweep_figure_has_no_safety_panel(sweep_dir: Path) -> None:
+    from cwrend_cli.report import figures
+
+    fig = figures.fig_sweep(load_results(sweep_dir), "param.schedule.beta")
+    assert [ax.get_ylabel() for ax in fig.axes] == ["median terminal miss [m]", "mean Δv [km/s]"]
+
+
 def test_point_picks_the_grid_point_of_figs_1_to_5(
     sweep_dir: Path, tmp_path: Path, unrendered: None
 ) -> None:

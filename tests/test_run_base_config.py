@@ -51,7 +51,7 @@ def test_a_first_run_says_it_compiles_when_stderr_is_not_a_terminal(
     from cwrend_cli.physics import compiled
 
     notice = "compiling kernels (first run only, about 15 s)…"
-    monkeypatch.setattr(compiled, "compiling_notice", lambda methods, fan_out=False: notice)
+    monkeypatch.setattr(compiled, "compiling_notice", lambda methods, *_, **__: notice)
     config = tmp_path / "c.toml"
     config.write_text("", encoding="utf-8")
     args = ["run", str(config), "-a", "mtf_adaptive", "--no-rrd", "-o", str(tmp_path / "r")]

@@ -41,7 +41,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -330,17 +330,63 @@ def _compile_for(task: Task, compile_: Any) -> None:
     """``compile_`` with the problem and draws of ``task``'s first run and its architectures;
     a failure swallowed (:func:`compile_ahead`)."""
     try:
-        spec = task.runs[0]
-        problem = with_values(task.problem, spec.dispersed)
-        compile_(
-            problem,
-            [ALL_ARCHITECTURES[r.arch] for r in task.runs],
-            standard_normal(task.noise, spec.seed, problem.scenario.n_steps),
-            actuator_draws(problem, task.noise.root_seed, spec.seed),
-            fault_draws(problem, task.noise.root_seed, spec.seed),
-        )
+        compile_(*_first_run(task))
     except Exception:  # the runs compile what they need themselves
         return
+
+
+def _first_run(task: Task) -> tuple[Any, ...]:
+    """The problem, architectures and draws of ``task``'s first run (:func:`compile_ahead`)."""
+    spec = task.runs[0]
+    problem = with_values(task.problem, spec.dispersed)
+    return (
+        problem,
+        [ALL_ARCHITECTURES[r.arch] for r in task.runs],
+        standard_normal(task.noise, spec.seed, problem.scenario.n_steps),
+        actuator_draws(problem, task.noise.root_seed, spec.seed),
+        fault_draws(problem, task.noise.root_seed, spec.seed),
+    )
+
+
+def cold_loops(tasks: Iterable[Task]) -> set[str]:
+    """The guidance methods whose step loop some of ``tasks`` compiles on its first run.
+
+    :func:`cwrend_cli.physics.compiled.cold_loops` of the first run of each
+    task, once per kind of loop (:func:`kernel_variant` and the design model):
+    for the first-run notice. Any failure counts as cached (no notice).
+    """
+    from cwrend_cli.physics import compiled
+
+    cold: set[str] = set()
+    seen: set[tuple[object, ...]] = set()
+    for task in tasks:
+        if not task.runs:
+            continue
+        problem = task.problem
+        key = (*(kernel_variant(problem, r.arch) for r in task.runs), problem.model.guidance)
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            cold |= compiled.cold_loops(*_first_run(task))
+        except Exception:  # the notice must not break a command
+            continue
+    return cold
+
+
+def cold_loops_of_case(cfg: CwrendConfig, archs: Sequence[Architecture], seed: int) -> set[str]:
+    """:func:`cold_loops` of the case ``cwrend run`` flies: ``archs`` on the base config."""
+    from cwrend_cli.physics import compiled
+
+    problem = problem_of(cfg)
+    try:
+        return compiled.cold_loops(
+            problem, archs, standard_normal_for(cfg, seed),
+            actuator_draws(problem, cfg.noise.seed, seed),
+            fault_draws(problem, cfg.noise.seed, seed),
+        )  # fmt: skip
+    except Exception:  # the notice must not break a command
+        return set()
 
 
 def compile_newton() -> None:

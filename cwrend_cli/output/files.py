@@ -16,7 +16,7 @@ import errno
 import json
 import os
 import secrets
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
@@ -29,12 +29,14 @@ from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import (
     EVENTS,
     MANIFEST,
+    POINTS,
     RUN_CONFIG,
     RUN_FILES,
     RUN_REFERENCES,
     RUN_SOLVES,
     RUN_STEPS,
     RUN_SUMMARY,
+    RUNS,
 )
 from cwrend_cli.output.tables import (
     reference_row,
@@ -254,32 +256,83 @@ def holds_run(path: Path) -> bool:
     return _there(path, RUN_CONFIG, RUN_SUMMARY) and not holds_campaign(path)
 
 
-def check_run_dir(path: Path, setting: str) -> None:
-    """Refuse (:class:`ConfigError`, exit 2) a ``cwrend run`` directory that holds a campaign.
+def _campaign_above(path: Path) -> bool:
+    """Whether ``path``, a directory above the one checked, holds a campaign.
 
-    A run's files beside a campaign's would be neither's: ``setting`` names the option or
-    key to change.
+    Its journal, or its manifest beside its runs or points: a ``manifest.json``
+    alone (a web project's has that name too) does not make a parent a campaign.
     """
-    if holds_campaign(path):
+    return _there(path, EVENTS) or (_there(path, MANIFEST) and _there(path, RUNS, POINTS))
+
+
+def _run_above(path: Path) -> bool:
+    """Whether ``path``, a directory above the one checked, holds a ``cwrend run``'s output.
+
+    Its summary beside its config or steps (the summary is written first): a
+    ``config.json`` alone (a project's) does not make a parent a run's directory.
+    """
+    return (
+        _there(path, RUN_SUMMARY)
+        and _there(path, RUN_CONFIG, RUN_STEPS)
+        and not _campaign_above(path)
+    )
+
+
+def _enclosing(path: Path, holds: Callable[[Path], bool]) -> Path | None:
+    """The nearest directory strictly above ``path`` (links and ``..`` resolved) that ``holds``."""
+    for parent in Path(path).resolve().parents:
+        if holds(parent):
+            return parent
+    return None
+
+
+def check_run_dir(path: Path, setting: str) -> None:
+    """Refuse (:class:`ConfigError`, exit 2) a ``cwrend run`` directory in a campaign's tree.
+
+    The directory itself or any directory above it holding a campaign: a
+    run's files among a campaign's would be neither's. ``setting`` names the
+    option or key to change.
+    """
+    campaign = path if holds_campaign(path) else _enclosing(path, _campaign_above)
+    if campaign is not None:
+        where = "" if campaign == path else f"{path} is inside {campaign}, which "
         raise ConfigError(
-            f"{path} holds a campaign ({MANIFEST} or {EVENTS}) and cwrend run never writes "
-            f"into a campaign's directory: {setting}, or use the campaign's own commands "
-            "(cwrend ablate / sweep with its config to add runs, cwrend report to report on it)"
+            f"{where or f'{path} '}holds a campaign ({MANIFEST} or {EVENTS}) and cwrend run "
+            f"never writes into a campaign's directory or below it: {setting} outside it, "
+            "or use the campaign's own commands (cwrend ablate / sweep with its config to add "
+            "runs, cwrend report to report on it)"
         )
 
 
 def check_campaign_dir(path: Path) -> None:
-    """Refuse (:class:`ConfigError`, exit 2) a campaign directory that holds a ``cwrend run``.
+    """Refuse (:class:`ConfigError`, exit 2) a campaign directory among a run's or a campaign's.
 
-    A campaign's files beside a run's would be neither's, and ``--force`` removes only
-    what a campaign writes, so it is refused with ``--force`` too.
+    A directory that holds a ``cwrend run``'s output, or any directory inside
+    one; or a directory inside another campaign's directory. A campaign's
+    files beside a run's would be neither's, and ``--force`` removes only what
+    a campaign writes, so it is refused with ``--force`` too.
     """
+    fix = "choose another --name (output.name) or output.dir"
     if holds_run(path):
         raise ConfigError(
             f"{path} holds the output of cwrend run ({RUN_CONFIG} / {RUN_SUMMARY}, no "
             f"{MANIFEST}) and a campaign never writes beside a run's files (--force "
-            "included): choose another --name (output.name) or output.dir, or move the run's "
-            "files elsewhere (a new cwrend run into it replaces them)"
+            f"included): {fix}, or move the run's files elsewhere (a new cwrend run into it "
+            "replaces them)"
+        )
+    run = _enclosing(path, _run_above)
+    if run is not None:
+        raise ConfigError(
+            f"{path} is inside {run}, which holds the output of cwrend run ({RUN_SUMMARY}), "
+            f"and a campaign never writes inside a run's directory (--force included): {fix} "
+            "outside it"
+        )
+    campaign = _enclosing(path, _campaign_above)
+    if campaign is not None:
+        raise ConfigError(
+            f"{path} is inside {campaign}, which holds a campaign ({MANIFEST} / {EVENTS}), "
+            f"and a campaign never writes inside another campaign's directory (--force "
+            f"included): {fix} outside it"
         )
 
 

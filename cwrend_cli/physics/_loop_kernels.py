@@ -260,11 +260,63 @@ def advance(
     (:func:`_optional_hold`).
     """
     out = _advance(
+        *_advance_args(k_start, k_stop, n_steps, model, truth, act, sched, state, scalars, log,
+                       sensor, ekf, pn)
+    )  # fmt: skip
+    return LoopScalars(*out)
+
+
+def _advance_args(
+    k_start: int,
+    k_stop: int,
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    scalars: LoopScalars,
+    log: StepLog,
+    sensor: SensorModel | None,
+    ekf: EkfModel | None,
+    pn: ProcessNoiseModel | None,
+) -> tuple[Any, ...]:
+    """The arguments :func:`advance` hands :func:`_advance` (plain tuples, optional parts)."""
+    return (
         k_start, k_stop, n_steps, tuple(model), *_optional(truth, act), tuple(sched),
         tuple(state), tuple(scalars), tuple(log), _optional_hold(model),
         None if sensor is None else tuple(sensor), _optional_ekf(ekf), _optional_noise(pn),
     )  # fmt: skip
-    return LoopScalars(*out)
+
+
+def loop_signature(
+    socp: bool,
+    n_steps: int,
+    model: LoopModel,
+    truth: TruthModel,
+    act: ActuatorModel,
+    sched: ScheduleParams,
+    state: LoopState,
+    scalars: LoopScalars,
+    log: StepLog,
+    sensor: SensorModel | None = None,
+    ekf: EkfModel | None = None,
+    pn: ProcessNoiseModel | None = None,
+) -> tuple[Any, tuple[types.Type, ...]]:
+    """The step loop's entry point for these parts and the argument types it compiles for.
+
+    :func:`_advance` as :func:`advance` calls it (``socp``: the cone program's
+    loop), else :func:`_steps` as :func:`compile_steps` compiles it. Each
+    choice of truth, actuator, sensor, filter, process noise, hold and design
+    model is its own specialisation, compiled on its first run: what the
+    first-run notice asks numba's cache about
+    (:func:`cwrend_cli.physics.compiled.loop_cached`).
+    """
+    if socp:
+        args = _advance_args(0, -1, n_steps, model, truth, act, sched, state, scalars, log,
+                             sensor, ekf, pn)  # fmt: skip
+        return _advance, tuple(typeof(a) for a in args)  # type: ignore[no-untyped-call]
+    return _steps, _steps_types(model, truth, act, sched, state, log, sensor, ekf, pn)
 
 
 def _optional(

@@ -85,24 +85,67 @@ def _entry_points(part: str) -> tuple[Any, ...]:
     return (_loop_kernels._advance, _grid_kernels.grid_dual_ascent)
 
 
-def _cached(dispatcher: Any) -> bool:
+def _cached(dispatcher: Any, signature: tuple[Any, ...] | None = None) -> bool:
     """Whether numba's cache holds a compile of ``dispatcher``'s current code for this CPU.
 
     Reads the cache index as the dispatcher itself does on its first call
     (numba's ``IndexDataCacheFile``: version, source stamp), then its keys
     (signature, CPU and features, bytecode hash); private numba API, so any
-    surprise counts as cached (no notice rather than a wrong one).
+    surprise counts as cached (no notice rather than a wrong one). With
+    ``signature`` (argument types), a compile for exactly those: the step
+    loop's entry points hold one per specialisation (:func:`cold_loops`).
     """
     try:
         cache = dispatcher._cache
         index = cache._cache_file._load_index()
         codegen = dispatcher.targetctx.codegen()
+        if signature is not None:
+            return cache._index_key(tuple(signature), codegen) in index
         return any(cache._index_key(key[0], codegen) == key for key in index)
     except Exception:  # a change of numba's internals must not break a command
         return True
 
 
-def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
+def cold_loops(
+    problem: Problem,
+    archs: Iterable[Architecture],
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> set[str]:
+    """The guidance methods of ``archs`` whose step loop for ``problem`` is not in numba's cache.
+
+    Each choice of truth model, actuator errors, sensor, filter, process noise,
+    hold and design model (``ss``: the model enters the loop as a kernel tuple)
+    compiles its own specialisation of the step loop on its first run, with
+    the kernels below it (a J2 truth's RK8 step: a minute and more on a small
+    machine), while the entry points hold the paper's: asked about any
+    compile, they said cached. This asks for the argument types of a run of
+    the first of ``archs`` of each method (:func:`~cwrend_cli.physics.simulation.loop_signature`,
+    with the draws of that run, as :func:`compile_ahead`); any failure counts
+    as cached.
+    """
+    from cwrend_cli.physics import simulation
+
+    first: dict[str, Architecture] = {}
+    for arch in archs:
+        first.setdefault(arch.resolved_method(problem.guidance), arch)
+    cold = set()
+    for method, arch in first.items():
+        try:
+            dispatcher, signature = simulation.loop_signature(
+                problem, arch, standard_normal, actuator_draws, fault_draws
+            )
+        except Exception:  # the notice must not break a command
+            continue
+        if not _cached(dispatcher, signature):
+            cold.add(method)
+    return cold
+
+
+def compile_seconds(
+    methods: Iterable[str], fan_out: bool = False, loops: Iterable[str] = ()
+) -> float:
     """About how many seconds the first closed loops with these guidance ``methods`` compile.
 
     ``methods``: ``"shooting"`` and/or ``"socp"``. 0 when every kernel they
@@ -111,21 +154,29 @@ def compile_seconds(methods: Iterable[str], fan_out: bool = False) -> float:
     helper process beside a campaign of one task), whose second process
     compiles :data:`_AHEAD_CPU_S` while the campaign process compiles the
     references' dual ascent (:func:`compile_ascent`), so those seconds overlap.
+    ``loops``: methods whose step loop is cold for the runs' own configuration
+    (:func:`cold_loops`) although their entry points hold another's.
     """
     parts = ["references", *sorted(set(methods))]
-    cold = [part for part in parts if not all(_cached(d) for d in _entry_points(part))]
+    cold = [
+        part
+        for part in parts
+        if part in set(loops) or not all(_cached(d) for d in _entry_points(part))
+    ]
     seconds = sum(_COMPILE_CPU_S[part] for part in cold)
     if fan_out and "references" in cold:
         seconds -= sum(_AHEAD_CPU_S.get(part, 0.0) for part in cold)
     return seconds
 
 
-def compiling_notice(methods: Iterable[str], fan_out: bool = False) -> str | None:
+def compiling_notice(
+    methods: Iterable[str], fan_out: bool = False, loops: Iterable[str] = ()
+) -> str | None:
     """``compiling kernels (first run only, about N s)…``, or ``None`` when all is cached.
 
-    ``fan_out``: as for :func:`compile_seconds`.
+    ``fan_out`` and ``loops``: as for :func:`compile_seconds`.
     """
-    seconds = compile_seconds(methods, fan_out)
+    seconds = compile_seconds(methods, fan_out, loops)
     if not seconds:
         return None
     return f"compiling kernels (first run only, about {5 * round(seconds / 5):.0f} s)…"

@@ -14,7 +14,7 @@ matching squared units.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Literal
@@ -577,3 +577,16 @@ STF_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
 ALL_ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType(
     {**ARCHITECTURES, **SOCP_ARCHITECTURES, **STF_ARCHITECTURES}
 )
+
+
+def arch_order(names: Iterable[object]) -> tuple[str, ...]:
+    """The distinct architectures of ``names`` in the one display order of every table.
+
+    The order of :data:`ALL_ARCHITECTURES` (the paper's four, their cone-program
+    twins, the single-factor baseline), then unknown names sorted: the report,
+    ``cwrend table`` and the console tables of ``ablate`` / ``sweep`` list
+    architectures in it.
+    """
+    present = {str(n) for n in names}
+    known = [a for a in ALL_ARCHITECTURES if a in present]
+    return (*known, *sorted(present - set(known)))

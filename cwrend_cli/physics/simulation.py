@@ -53,6 +53,7 @@ import pickle
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -596,9 +597,7 @@ def compile_loop(
     if top and socp:
         return
     sc = problem.scenario
-    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
-    x0 = np.asarray(sc.x0, dtype=float)
-    loop = _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
+    loop = _first_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
     scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
     if top:
         schedule = resolve_steps(problem)
@@ -611,6 +610,40 @@ def compile_loop(
             loop.model, loop.truth, loop.act, loop.sched, loop.state, loop.log, loop.sensor,
             loop.ekf, loop.pn,
         )  # fmt: skip
+
+
+def loop_signature(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None = None,
+    fault_draws: sensors.FaultDraws | None = None,
+) -> tuple[Any, tuple[Any, ...]]:
+    """The step loop's entry point of a run of ``arch`` on ``problem`` and its argument types.
+
+    The arguments as for :func:`compile_loop`; nothing compiled or run
+    (:func:`~cwrend_cli.physics._loop_kernels.loop_signature`).
+    """
+    loop = _first_loop(problem, arch, standard_normal, actuator_draws, fault_draws)
+    scalars = sk.LoopScalars(eps=0.0, score_filtered=0.0, first=True)
+    return sk.loop_signature(
+        arch.resolved_method(problem.guidance) == "socp", problem.scenario.n_steps, loop.model,
+        loop.truth, loop.act, loop.sched, loop.state, scalars, loop.log, loop.sensor, loop.ekf,
+        loop.pn,
+    )  # fmt: skip
+
+
+def _first_loop(
+    problem: Problem,
+    arch: Architecture,
+    standard_normal: FloatArray,
+    actuator_draws: actuator.ActuatorDraws | None,
+    fault_draws: sensors.FaultDraws | None,
+) -> _Loop:
+    """The loop parts of a run's first step (the types every step has)."""
+    sensor, noise, _, dropout, _ = _measured(problem, standard_normal, fault_draws)
+    x0 = np.asarray(problem.scenario.x0, dtype=float)
+    return _loop_parts(problem, arch, noise, dropout, sensor, x0, np.zeros(6), 0.0, actuator_draws)
 
 
 def _target_attitude(problem: Problem) -> attitude.TargetAttitude | None:

@@ -18,7 +18,8 @@ both the drawing and the figure list of ``report.md``:
 * with more than one seed per architecture: ``miss_distribution.png``,
   ``dv_distribution.png``, ``paired_miss.png`` (MTF vs plain, seed by seed);
 * per swept parameter with more than one value: ``sweep_<key>.png`` (not for
-  a sampled design, whose hundreds of points would not read);
+  a sampled design, whose hundreds of points would not read; with path
+  constraints a third panel, the distance to the unsafe set);
 * for a ``sobol`` design: ``sensitivity.png`` (first-order and total Sobol
   indices per architecture and metric, with their 95 % intervals);
 * when the steps hold it: ``nees.png`` (filter consistency, every seed of
@@ -1067,8 +1068,7 @@ def fig_safety_distance(data: ReportData) -> Figure:
     start = min(start, 0.9 * horizon)
     for ax in (ax_all, ax_near):
         _shade(ax, data.windows)
-        ax.axhline(0.0, color="black", lw=1.1)
-        ax.axhspan(-1e9, 0.0, color=unsafe, alpha=0.08, lw=0)
+        _mark_unsafe_side(ax)
         ax.set_xlabel("time [s]")
         ax.set_ylabel("distance to the unsafe set φ [km]")
     ax_all.set_yscale("symlog", linthresh=0.1 * float(np.min(geo.semi_axes_km)))
@@ -1093,6 +1093,15 @@ def fig_safety_distance(data: ReportData) -> Figure:
     fig.suptitle(f"Distance to the unsafe set, the keep-out zone outside the corridor "
                  f"({_title(data)})")  # fmt: skip
     return _finished(fig)
+
+
+def _mark_unsafe_side(ax: Axes) -> None:
+    """The zero line of a distance to the unsafe set, and the unsafe side below it shaded.
+
+    The shading reaches far below: the caller sets the axis's y limits afterwards.
+    """
+    ax.axhline(0.0, color="black", lw=1.1)
+    ax.axhspan(-1e9, 0.0, color=_rgb(UNSAFE_COLOUR), alpha=0.08, lw=0)
 
 
 def _mark_deepest(ax: Axes, steps: pd.DataFrame) -> None:
@@ -1298,7 +1307,13 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
     other swept parameters, each of their combinations (up to four) gets its
     own line style; with more, the runs are pooled over them (stated in the
     title). Axes are labelled with the parameter's symbol and unit, values as
-    given.
+    given. The miss axis is logarithmic only when the drawn misses span more
+    than a decade (:func:`spans_decades`), else linear: misses within
+    millimetres of each other would read as one unlabelled log tick. With path
+    constraints (a third panel) the median over the seeds of each run's
+    minimum signed distance to the unsafe set (the safety rows of the
+    statistics file, as the report's safety table; negative: inside), linear,
+    the unsafe side of zero shaded.
     """
     runs = data.runs[data.runs["status"] == "ok"].copy()
     key = param.removeprefix(PARAM_PREFIX)
@@ -1318,10 +1333,14 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         stats = None
     else:
         stats = stats[stats["kind"] == "marginal"]
-    fig = _figure(13, 6.6)
-    ax_m, ax_v = fig.subplots(1, 2)
-    floor = _MISS_FLOOR_M
-    banded = False
+    safety = _has_constraints(data) and SAFETY_METRIC in runs.columns
+    fig = _figure(19 if safety else 13, 6.6)
+    axes = fig.subplots(1, 3 if safety else 2)
+    ax_m, ax_v = axes[0], axes[1]
+    panels = [(ax_m, "miss_km", "median", M_PER_KM), (ax_v, "delta_v_km_s", "mean", 1.0)]
+    if safety:
+        panels.append((axes[2], SAFETY_METRIC, "median", M_PER_KM))
+    drawn: list[tuple[Axes, str, str, str, np.ndarray, pd.DataFrame]] = []
     for a in data.archs:
         c = arch_colour(a, data.archs.index(a))
         arch_stats = stats[stats["arch"] == a] if stats is not None else None
@@ -1329,28 +1348,32 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
             g = runs[(runs["arch"] == a) & (runs["_other"] == combo)]
             if g.empty:
                 continue
-            for ax, metric, statistic, scale, low in (
-                (ax_m, "miss_km", "median", M_PER_KM, floor),
-                (ax_v, "delta_v_km_s", "mean", 1.0, -np.inf),
-            ):
+            for ax, metric, statistic, scale in panels:
                 line = _sweep_line(g, arch_stats, metric, statistic, scale)
                 if not numeric:
                     line["x"] = [pos[v] for v in line["x"]]
                 line = line.sort_values("x")
-                xs = line["x"].to_numpy(dtype=float)
-                ax.plot(xs, np.maximum(line["value"], low), ls=ls, marker=marker, color=c)
-                if line["low"].notna().all():
-                    banded = True
-                    ax.fill_between(xs, np.maximum(line["low"], low),
-                                    np.maximum(line["high"], low), color=c, alpha=0.12,
-                                    lw=0)  # fmt: skip
+                drawn.append((ax, c, ls, marker, line["x"].to_numpy(dtype=float), line))
+    misses = [line[["value", "low", "high"]].to_numpy() for ax, *_, line in drawn if ax is ax_m]
+    log_miss = spans_decades(np.concatenate([m.ravel() for m in misses]) if misses else [])
+    banded = False
+    for ax, c, ls, marker, xs, line in drawn:
+        low = _MISS_FLOOR_M if ax is ax_m and log_miss else -np.inf
+        ax.plot(xs, np.maximum(line["value"], low), ls=ls, marker=marker, color=c)
+        if line["low"].notna().all():
+            banded = True
+            ax.fill_between(xs, np.maximum(line["low"], low), np.maximum(line["high"], low),
+                            color=c, alpha=0.12, lw=0)  # fmt: skip
     for _, row in data.ref_summary.iterrows():
         name = str(row["arch"]).removeprefix("open_loop_")
         st_ = _ref_style(name)
         ax_v.axhline(float(row["delta_v_km_s"]), color=st_["color"], ls=st_["ls"], lw=1.4)
-    ax_m.set_yscale("log")
+    if log_miss:
+        ax_m.set_yscale("log")
+    else:  # misses close together read as themselves (0.14402), not as an offset (1e-5+1.44e-1)
+        ax_m.ticklabel_format(axis="y", style="plain", useOffset=False)
     symbol = param_label(key)
-    for ax in (ax_m, ax_v):
+    for ax in axes:
         ax.set_xlabel(symbol)
         if numeric:
             ax.set_xticks(levels, [format_value(v) for v in levels])
@@ -1362,6 +1385,21 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
     ax_v.set_ylabel("mean Δv [km/s]")
     ax_v.set_title(f"mean Δv over seeds{band}")
     handles: list[Any] = _arch_handles_plain([a for a in data.archs if (runs["arch"] == a).any()])
+    if safety:
+        ax_s = axes[2]
+        _mark_unsafe_side(ax_s)
+        values = np.concatenate(
+            [line[["value", "low", "high"]].to_numpy().ravel() for ax, *_, line in drawn
+             if ax is ax_s] + [np.zeros(1)]
+        )  # fmt: skip
+        values = values[np.isfinite(values)]
+        lo, hi = float(values.min()), float(values.max())
+        pad = 0.08 * (hi - lo or 1.0)
+        ax_s.set_ylim(lo - pad, hi + pad)
+        ax_s.set_ylabel("median min distance to the unsafe set [m]")
+        ax_s.set_title(f"closest approach to the unsafe set{band}")
+        handles.append(Patch(color=_rgb(UNSAFE_COLOUR), alpha=0.2,
+                             label="< 0: inside the unsafe set"))  # fmt: skip
     if len(combos) > 1:
         handles += [
             Line2D([], [], color="black", ls=ls, marker=marker, label=combo)
@@ -1377,6 +1415,28 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
     what = f" (pooled over {', '.join(param_symbol(o)[0] for o in others)})" if pooled else ""
     fig.suptitle(f"Sweep of {param_symbol(key)[0]} ({key}){what}")
     return _finished(fig)
+
+
+#: A log axis is drawn only for values spanning more than this ratio (a decade):
+#: within one, a log axis shows at most one labelled tick.
+LOG_AXIS_MIN_RATIO = 10.0
+#: The per-run safety column the sweep figure draws (the minimum signed distance [km]).
+SAFETY_METRIC = "safety_min_distance_km"
+
+
+def spans_decades(values: Any, floor: float = _MISS_FLOOR_M) -> bool:
+    """Whether ``values`` (misses, each raised to ``floor``) span more than a decade.
+
+    The rule of the sweep figure's miss axis: logarithmic when its largest
+    drawn value exceeds :data:`LOG_AXIS_MIN_RATIO` times its smallest, linear
+    otherwise. NaN (no interval) is ignored; nothing to draw is linear.
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return False
+    v = np.maximum(v, floor)
+    return bool(v.max() > LOG_AXIS_MIN_RATIO * v.min())
 
 
 #: Bins of a design figure's trend (equal counts of design points).
@@ -1627,7 +1687,9 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     ),
     SweepFigureEntry(
         "sweep_{key}.png",
-        f"Median miss and mean Δv against `{{key}}`. {DV_CAPTION}",
+        "Median miss and mean Δv against `{key}` (the miss on a log axis only when it spans "
+        "more than a decade); with path constraints also the median minimum signed distance "
+        f"to the unsafe set (negative: inside). {DV_CAPTION}",
         fig_sweep,
     ),
     SweepFigureEntry(

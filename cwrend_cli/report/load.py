@@ -35,7 +35,7 @@ Units: km, s, km/s, km/s² (as in the Parquet files).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
@@ -84,7 +84,7 @@ from cwrend_cli.output.tables import (
 )
 from cwrend_cli.physics.constraints import Geometry, geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
-from cwrend_cli.physics.params import Sensor, Window
+from cwrend_cli.physics.params import Sensor, Window, arch_order
 from cwrend_cli.report.labels import format_value
 
 Layout = Literal["run", "campaign"]
@@ -469,12 +469,6 @@ def _stored_config(raw: Any, source: Path, notes: list[str]) -> CwrendConfig | N
     return None
 
 
-def _order_archs(names: Iterable[object]) -> tuple[str, ...]:
-    present = {str(n) for n in names}
-    known = [a for a in ALL_ARCHITECTURES if a in present]
-    return (*known, *sorted(present - set(known)))
-
-
 def _reference_summary(
     references: pd.DataFrame | None, config: CwrendConfig | None
 ) -> pd.DataFrame:
@@ -649,7 +643,7 @@ def _load_run_dir(root: Path, seed: int | None, point: str | None = None) -> Rep
         config_hash=str(meta.get("config_hash", "")),
         seed=chosen,
         point=None,
-        archs=_order_archs(runs["arch"].unique()),
+        archs=arch_order(runs["arch"].unique()),
         notes=tuple(notes),
         nees=_nees_of(all_steps),
     )
@@ -756,7 +750,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         config_hash=str(meta.get("config_hash", meta.get("campaign_hash", ""))),
         seed=chosen,
         point=point,
-        archs=_order_archs(runs["arch"].unique()),
+        archs=arch_order(runs["arch"].unique()),
         params=tuple(params),
         notes=tuple(notes),
         stats=_campaign_stats(root),

@@ -70,7 +70,7 @@ from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWEEP_STATS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
 from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES, PARAM_PREFIX
-from cwrend_cli.physics.params import ALL_ARCHITECTURES
+from cwrend_cli.physics.params import ALL_ARCHITECTURES, arch_order
 from cwrend_cli.report.labels import (
     M_PER_KM,
     MIN_BOOTSTRAP_N,
@@ -995,7 +995,8 @@ def _order(
     """The distinct ``values`` of a field in display order.
 
     A ``--where`` list's order first (one naming no campaign); then campaigns
-    as given, architectures in the package's order, values asked for as
+    as given, architectures in the one order of every table (:func:`arch_order`),
+    values asked for as
     asked, a configuration key's values in the order of the first grid that
     sweeps it, the rest sorted.
     """
@@ -1007,7 +1008,7 @@ def _order(
     if field_.name in ("campaign", "other_campaign"):
         ranked += [s.label for s in sources]
     elif field_.name in ("arch", "other"):
-        ranked += list(ALL_ARCHITECTURES)
+        ranked += list(arch_order(present))
     elif field_.name == "metric":
         ranked += list(range(len(specs)))
     elif field_.is_key:
