@@ -39,6 +39,7 @@ from cwrend_cli.output.layout import (
     COMPARE_STATS,
     MANIFEST,
     RUN_RECORDING,
+    RUNS_DIR,
     SWEEP_STATS,
     compare_dir,
     run_dir,
@@ -370,6 +371,12 @@ def run(
             recording.check_enabled()
         if out is None:
             slug = archs[0].slug if len(archs) == 1 else "multi"
+            runs_root = Path(cfg.output.dir) / RUNS_DIR
+            if (runs_root / MANIFEST).exists():  # cwrend's own directory: a manifest will do
+                raise ConfigError(
+                    f"{runs_root} is a campaign directory (a campaign named {RUNS_DIR!r}); "
+                    "name the run's directory with --out"
+                )
             out = Path(cfg.output.dir) / run_dir(cfg.output.name or "run", slug, seed_)
         check_output_dir(out, "choose another --out or output.dir")  # before computing
         check_run_dir(out, "choose another --out")  # never in a campaign's tree

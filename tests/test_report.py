@@ -1274,13 +1274,14 @@ def test_design_figure_shows_every_point_and_a_binned_mean_per_architecture(
 
 
 def test_the_cone_program_architectures_are_named_and_ordered_like_the_paper_four() -> None:
-    from cwrend_cli.report.load import _order_archs, arch_label
+    from cwrend_cli.physics.params import arch_order
+    from cwrend_cli.report.load import arch_label
 
     assert arch_label("mtf_adaptive_socp") == "MTF KF, adaptive ε, SOCP"
     assert arch_label("plain_fixed") == "plain KF, fixed ε"
     assert arch_label("not_an_arch") == "not_an_arch"
     present = ["mtf_adaptive_socp", "plain_fixed_socp", "mtf_adaptive", "plain_fixed"]
-    assert _order_archs(present) == (
+    assert arch_order(present) == (
         "plain_fixed",
         "mtf_adaptive",
         "plain_fixed_socp",
