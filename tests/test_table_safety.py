@@ -235,3 +235,20 @@ def test_a_campaign_without_safety_columns_is_refused_naming_the_metric(
     assert f"--metric {metric!r}" in result.output
     assert "[constraints]" in result.output
     assert "Traceback" not in result.output
+
+
+def test_docking_values_of_a_fixed_target_are_refused_naming_the_tumbling_target(
+    tmp_path: Path,
+) -> None:
+    """A fixed target with a corridor (campaigns/safe_approach.toml) writes the safety
+    columns but no docking errors: only a tumbling target does, so the refusal says so
+    rather than asking for the corridor the campaign already has."""
+    path = _campaign(tmp_path)
+    runs = pd.read_parquet(path / "runs.parquet")
+    dock = ["safety_dock_position_error_km", "safety_dock_velocity_error_km_s"]
+    runs.drop(columns=dock).to_parquet(path / "runs.parquet")
+    result = runner.invoke(app, ["table", str(path), "--metric", "median.dock_position"])
+    assert result.exit_code == 2, result.output
+    assert "--metric 'median.dock_position'" in result.output
+    assert 'target.attitude = "tumbling"' in " ".join(result.output.split())
+    assert "Traceback" not in result.output

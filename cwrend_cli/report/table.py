@@ -805,7 +805,8 @@ def _check_held(sources: Sequence[Source], values: Sequence[Value]) -> None:
             if column.startswith(("safety_", "abort_")) or column in ("scp_iterations", "slack_km"):
                 why = (
                     "a campaign with [constraints] writes it (abort_*: with "
-                    "constraints.abort_safe_s; dock_*: with a corridor)"
+                    "constraints.abort_safe_s; dock_*: a tumbling target, "
+                    'target.attitude = "tumbling", with a corridor)'
                 )
             else:
                 why = "written by a newer cwrend; re-run the campaign"
