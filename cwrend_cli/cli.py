@@ -1194,7 +1194,8 @@ def report(
             "--point",
             help="Grid point of figures 1–5 and the per-point tables: its id, or its "
             "swept values (beta=0.5, or 0.5; comma-separated for several keys). "
-            "Default: the point at the config's values. A bad one lists the points.",
+            "Default: the point at the config's values, else the first id in sorted order. "
+            "A bad one lists the points.",
             metavar="KEY",
         ),
     ] = None,
