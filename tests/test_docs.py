@@ -176,3 +176,122 @@ def test_shipped_files_cite_the_paper_not_the_teams_spec() -> None:
     shipped = [*REPO.glob("campaigns/*.toml"), *REPO.glob("docs/**/*.md"), REPO / "README.md"]
     citing = [p.relative_to(REPO) for p in shipped if "SPEC §" in p.read_text(encoding="utf-8")]
     assert citing == []
+
+
+# ---------------------------------------------------------------------------
+# The guides against the tool: the options they give, the pages they link
+# ---------------------------------------------------------------------------
+
+#: The pages a new user follows: the front page, the tour, the manual's home and the guides.
+USER_PAGES = [
+    REPO / "README.md",
+    REPO / "docs/getting-started.md",
+    REPO / "docs/index.md",
+    *sorted((REPO / "docs/guide").glob("*.md")),
+]
+#: An option as written on a command line: ``--seeds``, ``-n`` (not ``-1`` or ``a-b``).
+OPTION = re.compile(r"(?<![\w-])(--?[A-Za-z][\w-]*)")
+
+
+def _command_options() -> dict[str, set[str]]:
+    """Every command's options by its name as typed (``ablate``, ``config show``)."""
+    from typer.main import get_command
+
+    from cwrend_cli.cli import app
+
+    def options(command: object) -> set[str]:
+        names = {"--help"}
+        for param in getattr(command, "params", []):
+            names |= set(param.opts) | set(getattr(param, "secondary_opts", []))
+        return names
+
+    found: dict[str, set[str]] = {}
+    for name, command in get_command(app).commands.items():  # type: ignore[attr-defined]
+        found[name] = options(command)
+        for sub, subcommand in getattr(command, "commands", {}).items():
+            found[f"{name} {sub}"] = options(subcommand)
+    return found
+
+
+def _command_lines(text: str) -> list[str]:
+    """Each ``cwrend …`` invocation of a page: lines of its bash blocks (continuations
+    joined) and inline code spans, split at ``&&`` and ``;`` (not at ``|``, which a
+    synopsis uses between alternatives: ``[--seeds N | --seed-list 0,5,9]``)."""
+    blocks = re.findall(r"```bash\n(.*?)```", text, re.DOTALL)
+    lines = [line for block in blocks for line in block.replace("\\\n", " ").splitlines()]
+    prose = re.sub(r"```.*?```", "", text, flags=re.DOTALL).replace("\n", " ")
+    lines += re.findall(r"`(cwrend [^`]*)`", prose)
+    parts = (part.split(" #")[0].strip() for line in lines for part in re.split(r"&&|;", line))
+    return [part for part in parts if part.startswith("cwrend ")]
+
+
+def _options_not_of_their_command() -> list[str]:
+    """``page: what is wrong: line`` for each command line naming an option (or a command)
+    that cwrend does not have; ``cwrend run|ablate … --format`` is checked for each."""
+    commands = _command_options()
+    wrong = []
+    for page in USER_PAGES:
+        for line in _command_lines(page.read_text(encoding="utf-8")):
+            words = [*line.split()[1:], "", ""]
+            name = " ".join(words[:2]) if " ".join(words[:2]) in commands else words[0]
+            if not name.islower():  # a placeholder (COMMAND) is not a command
+                continue
+            unknown = [n for n in name.split("|") if n not in commands]
+            if unknown:
+                wrong.append(f"{page.name}: no command 'cwrend {unknown[0]}': {line}")
+                continue
+            options = OPTION.findall(line.split(name, 1)[1])
+            wrong += [
+                f"{page.name}: cwrend {n} has no option {option}: {line}"
+                for n in name.split("|")
+                for option in options
+                if option not in commands[n]
+            ]
+    return wrong
+
+
+def test_every_option_the_guides_give_a_command_is_one_of_its_options() -> None:
+    """A command line in the README, the tour or a guide (a bash block or an inline
+    ``cwrend …``) names only options that command has (``cwrend COMMAND --help``)."""
+    assert _options_not_of_their_command() == []
+
+
+def _heading_anchors(page: Path) -> set[str]:
+    """The anchors MkDocs gives the headings of a page (Python-Markdown's toc slugs,
+    a repeated heading suffixed ``_1``, ``_2``, …)."""
+    from markdown.extensions.toc import slugify
+
+    text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.DOTALL)
+    anchors: set[str] = set()
+    for heading in re.findall(r"^#{1,6}\s+(.*?)\s*#*\s*$", text, re.MULTILINE):
+        plain = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", heading).replace("`", "")
+        slug, n = slugify(plain, "-"), 0
+        while (slug if n == 0 else f"{slug}_{n}") in anchors:
+            n += 1
+        anchors.add(slug if n == 0 else f"{slug}_{n}")
+    return anchors
+
+
+def _broken_links() -> list[str]:
+    pages = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+    broken = []
+    for page in pages:
+        text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.DOTALL)
+        text = re.sub(r"`[^`\n]*`", "", text)
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            path, _, anchor = target.partition("#")
+            linked = (page.parent / path).resolve() if path else page
+            where = f"{page.relative_to(REPO)}: {target}"
+            if not linked.exists():
+                broken.append(f"{where} (no such file)")
+            elif anchor and linked.suffix == ".md" and anchor not in _heading_anchors(linked):
+                broken.append(f"{where} (no such heading)")
+    return broken
+
+
+def test_every_link_of_the_manual_reaches_a_page_and_its_heading() -> None:
+    """A link between pages of the manual (or from the README) names a file that exists
+    and, after ``#``, a heading of it: a renamed heading breaks no link silently."""
+    assert _broken_links() == []
