@@ -28,7 +28,7 @@ from rich.text import Text
 
 from cwrend_cli.campaign import CaseResult
 from cwrend_cli.campaign.statistics import APPLIED_METRICS
-from cwrend_cli.output.tables import reference_row, summary_row
+from cwrend_cli.output.tables import reference_row, summary_row, summary_table
 from cwrend_cli.physics.params import arch_order
 from cwrend_cli.physics.references import OpenLoopResult
 from cwrend_cli.physics.simulation import RunResult
@@ -89,8 +89,10 @@ def _summary_rows(case: CaseResult) -> list[dict[str, Any]]:
 
 
 def summary_frame(case: CaseResult) -> pd.DataFrame:
-    """The rows of :func:`summary_console_table` as stored (``cwrend run --format``)."""
-    return pd.DataFrame(_summary_rows(case))
+    """The rows of :func:`summary_console_table` as stored (``cwrend run --format``), in
+    ``summary.parquet``'s column order."""
+    rows = _summary_rows(case)
+    return pd.DataFrame(rows)[summary_table(rows).column_names]
 
 
 def script_table(frame: pd.DataFrame, fmt: str) -> str:

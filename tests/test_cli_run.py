@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -187,3 +188,16 @@ def test_malformed_noise_file_exits_2_and_writes_nothing(
     # a file bad from the start did not change: not "unusable since the campaign was
     # planned … run the same command to resume, or start over with --force" (run has none)
     assert "since the campaign was planned" not in result.output
+
+
+def test_format_csv_prints_summary_parquet_columns_in_their_order(tmp_path: Path) -> None:
+    """``run --format`` prints the rows of summary.parquet (run guide): its columns, in
+    its order, so a script can read either with the same code."""
+    out = tmp_path / "csv"
+    args = ["--arch", "mtf_adaptive", "--out", str(out), "--no-rrd", "--format", "csv"]
+    result = _run(str(PAPER), *args)
+    assert result.exit_code == 0, result.output
+    printed = pd.read_csv(io.StringIO(result.stdout))
+    stored = pd.read_parquet(out / "summary.parquet")
+    assert list(printed.columns) == list(stored.columns)
+    assert list(printed["arch"]) == list(stored["arch"])
