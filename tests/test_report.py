@@ -142,6 +142,15 @@ def test_report_md_holds_the_table(run_dir: Path, run_report) -> None:
         assert f"]({name})" in md
 
 
+def test_report_md_of_a_run_gives_the_references_applied_dv_as_the_run_stored_it(
+    run_dir: Path, run_report
+) -> None:
+    """``cwrend run`` stores the references' applied Δv (∫‖u‖dt of the plan) and prints it;
+    the report of that run shows it too (the exact fuel optimum, 0.1131 km/s, 0 %)."""
+    md = (run_dir / "report" / "report.md").read_text(encoding="utf-8")
+    assert "| open-loop fuel | 0.1128 | 0.00 | 0.00 | 0.1131 | 0.00 |" in md
+
+
 def test_report_is_rewritten_in_place(run_dir: Path, run_report, unrendered: None) -> None:
     result = _report(run_dir, "--seed", "0")
     assert result.exit_code == 0, result.output

@@ -7,8 +7,9 @@ captions. One unit and precision per quantity, as on the console: Δv in km/s
 (4 decimals), misses in m (2 decimals), fuel penalty in % (2 decimals); beside
 the paper's Δv (the 1 s trapezoid of ‖u‖) and fuel penalty the applied Δv
 Σ‖u_k‖Δt and its penalty against the exact continuous fuel optimum (issue 33;
-"–" for the open-loop references, whose exact Δv the stored samples do not
-hold, and for campaigns written before). Campaign tables carry the 95 %
+for the open-loop references a ``cwrend run``'s ``summary.parquet`` holds them,
+"–" for a campaign's, whose exact Δv the stored samples do not hold, and for
+campaigns written before). Campaign tables carry the 95 %
 intervals and paired comparisons that the campaign stored in
 ``ablation.parquet`` / ``sweep.parquet`` (never recomputed here); an interval
 from fewer than :data:`MIN_BOOTSTRAP_N` seeds is marked with
@@ -110,7 +111,9 @@ def seed_table(data: ReportData) -> str:
     for _, r in data.ref_summary.iterrows():
         rows.append([f"open-loop {str(r['arch']).removeprefix('open_loop_')}",
                      _fmt(r["delta_v_km_s"], DV), _fmt(r["miss_km"] * M_PER_KM, MISS),
-                     _fmt(r.get("fuel_penalty_pct"), FUEL), "–", "–", "", "", "", "",
+                     _fmt(r.get("fuel_penalty_pct"), FUEL),
+                     _fmt(r.get("delta_v_applied_km_s"), DV),
+                     _fmt(r.get("fuel_penalty_applied_pct"), FUEL), "", "", "", "",
                      ""])  # fmt: skip
     for a in data.archs:
         g = runs[runs["arch"] == a]
