@@ -963,20 +963,22 @@ def _report_campaign(
         sensitivity = campaign.write_sensitivity(out, plan)
     asked = {r.run_key for r in plan.runs}
     held = campaign.held_run_keys(out)
-    if held - asked and not opts.quiet:
+    if held - asked and (not opts.quiet or opts.table_format is not None):
         # a re-run naming fewer seeds, architectures or points than the directory holds:
-        # report on exactly the runs asked for; the statistics file covers them all
+        # report on exactly the runs asked for, in the console and the script table alike;
+        # the statistics file covers them all
         if named is None:
-            with phase(err, f"{label}: computing statistics of the runs named"):
+            with phase(err, f"{label}: computing statistics of the runs named", opts.quiet):
                 named = _named_statistics(command, plan, summary, statistics, out)
         statistics = named
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
-        err.print(
-            f"note: the tables cover the {len(asked & held)} run(s) this command names; "
-            f"the directory holds {len(held)} and {stats_file} covers them all",
-            markup=False,
-        )
-    if opts.table_format is not None:  # the statistics as stored, for scripts
+        if not opts.quiet:
+            err.print(
+                f"note: the tables cover the {len(asked & held)} run(s) this command names; "
+                f"the directory holds {len(held)} and {stats_file} covers them all",
+                markup=False,
+            )
+    if opts.table_format is not None:  # the statistics of the runs named, for scripts
         sys.stdout.write(script_table(statistics.frame, opts.table_format))
     if opts.quiet or opts.table_format is not None:
         return
