@@ -203,3 +203,21 @@ def test_the_report_reads_a_point_that_introduces_a_corridor_as_the_campaign_ran
     })  # fmt: skip
     point = with_swept_values(cfg, runs, True, xf_given({"xf_given": False}))
     assert point is not None and tuple(point.scenario.xf) == (0.0, 0.0, -0.3, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("key", ["constraints.corridor.port_km.2", "constraints.corridor.port_km"])
+def test_a_dispersed_corridor_port_is_refused_naming_it_and_the_sweep_to_use(
+    tmp_path: Path, key: str
+) -> None:
+    """It was refused as 'cannot be applied to the physics parameters', naming no reason."""
+    config = tmp_path / "port.toml"
+    base = SAFE_APPROACH.read_text(encoding="utf-8")
+    config.write_text(
+        f'{base}\n[dispersions]\n"{key}" = {{ dist = "uniform", low = -0.01, high = 0.01 }}\n',
+        encoding="utf-8",
+    )
+    result = runner.invoke(app, ["config", "validate", str(config)])
+    assert result.exit_code == 2, result.output
+    assert f"dispersions.{key}: the corridor's port cannot be dispersed" in result.stderr
+    assert "sweep the port instead" in result.stderr and "--param" in result.stderr
+    assert "Traceback" not in result.output

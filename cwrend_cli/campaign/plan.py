@@ -54,11 +54,13 @@ from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import (
+    CORRIDOR_PORT,
     check_given_once,
     check_swept,
     expand_grid,
     get_dotted,
     missing_key_hint,
+    moves_port,
     point_tree,
 )
 from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given, xf_given
@@ -371,6 +373,14 @@ def draw_dispersions(
     out = []
     for key in sorted(dispersions):
         d = dispersions[key]
+        if key.startswith(CORRIDOR_PORT) and moves_port([key]):  # the port or an entry
+            raise ConfigError(
+                f"dispersions.{key}: the corridor's port cannot be dispersed: it is also the "
+                "terminal state of every run of a grid point (scenario.xf, the port at rest), "
+                "which a dispersed value does not move; sweep the port instead, each point "
+                f"ending at its own, e.g. --param '{CORRIDOR_PORT}=[[0, 0, -0.25], "
+                "[0, 0, -0.3]]', and drop it from [dispersions]"
+            )
         if d.dist == "normal":
             assert d.std is not None  # the model requires std for dist = "normal"
             draw = d.mean + d.std * rng.standard_normal()

@@ -303,11 +303,22 @@ def point_tree(
     corridor = (base.get("constraints") or {}).get("corridor")
     if (
         (corridor is not None or not xf_given)
-        and _touches(keys, "constraints.corridor.port_km")
+        and moves_port(keys)
         and not _touches(keys, "scenario.xf")
     ):
         tree["scenario"] = {k: v for k, v in tree["scenario"].items() if k != "xf"}
     return tree
+
+
+#: The corridor's docking port: with a corridor, also the terminal state (``scenario.xf``,
+#: the port at rest), so a point that moves it ends there (:func:`point_tree`).
+CORRIDOR_PORT = "constraints.corridor.port_km"
+
+
+def moves_port(keys: Iterable[str]) -> bool:
+    """Whether one of the dotted ``keys`` sets the corridor's port (:data:`CORRIDOR_PORT`,
+    an entry of it, or a table above it)."""
+    return _touches(keys, CORRIDOR_PORT)
 
 
 def _touches(keys: Iterable[str], key: str) -> bool:
