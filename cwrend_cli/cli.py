@@ -703,7 +703,7 @@ def _campaign(
         from cwrend_cli import campaign
         from cwrend_cli.campaign import design, sequential
         from cwrend_cli.campaign.statistics import campaign_pairs
-        from cwrend_cli.console import until_console_table
+        from cwrend_cli.console import phase, until_console_table
         from cwrend_cli.output import recording
 
         if cfg.output.rrd_seeds != 0:
@@ -743,22 +743,32 @@ def _campaign(
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
             achieved = []
             n = 0
+            label = f"{command} {out.name}: computing statistics"
+            quiet = opts.quiet or opts.table_format is not None
+            whole = True  # whether the last batch's statistics are those of every run held
             for n in sequential.seed_counts(batch, max_seeds):
                 plan, summary, statistics = _campaign_step(
-                    command, cfg, archs, list(range(n)), params, opts, out, err, pairs, hold
-                )
+                    command, cfg, archs, list(range(n)), params, opts, out, err, pairs, hold,
+                    write=False,
+                )  # fmt: skip
                 if summary.interrupted:  # no statistics computed: stop at once
                     break
                 # the rule reads the intervals of this step's seeds, not of every seed the
-                # directory holds: a rerun of a finished campaign decides as it did
-                named = _named_statistics(command, plan, summary, statistics, out)
+                # directory holds: a rerun of a finished campaign decides as it did, and
+                # computes only those at each batch (the file is written once, below)
+                with phase(err, label, quiet=quiet):
+                    named, whole = _batch_statistics(command, plan, summary, out)
+                statistics = named
                 achieved = sequential.achieved(named.frame, target, archs)
-                if summary.interrupted or (
-                    sequential.ready(n, batch) and all(a.met for a in achieved)
-                ):
+                if sequential.ready(n, batch) and all(a.met for a in achieved):
                     break
                 if not opts.quiet and n < max_seeds:
                     err.print(sequential.next_batch_message(n, batch, achieved), markup=False)
+            if not summary.interrupted and not whole:  # the file covers every run held
+                with phase(err, label, quiet=quiet):
+                    statistics = campaign.write_statistics(
+                        out, command, plan.root_seed, summary.pairs
+                    )
         _report_campaign(command, plan, summary, statistics, out, opts, err, named)
         # widths are checked only from sequential.checked_from(batch) seeds: a --max-seeds
         # below that stops with none checked
@@ -805,12 +815,14 @@ def _campaign_step(
     err: Console,
     pairs: Sequence[tuple[str, str]],
     hold: ExitStack,
+    write: bool = True,
 ) -> tuple[campaign.CampaignPlan, campaign.CampaignSummary, campaign.CampaignStatistics]:
     """Plan, run (resuming) and compute the statistics (with ``pairs``) of one invocation.
 
     The campaign's lock is entered into ``hold`` (the command's): kept until the
     command has written everything, never released between the runs and the
-    statistics (issue 36 item 2).
+    statistics (issue 36 item 2). ``write`` false: no statistics computed (a batch
+    of ``ablate --until``, which computes those it needs: :func:`_batch_statistics`).
     """
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
@@ -863,6 +875,8 @@ def _campaign_step(
     if summary.interrupted:  # out at once (the bootstrap of 12,000 runs takes 1.5-4 s on two
         # cores): the statistics are written, with everything, when the campaign completes
         return plan, summary, campaign.no_statistics(command)
+    if not write:
+        return plan, summary, campaign.no_statistics(command)
     with progress.phase("computing statistics"):
         # the pairs asked for and those earlier commands added (the manifest records them)
         statistics = campaign.write_statistics(out, command, plan.root_seed, summary.pairs)
@@ -893,6 +907,24 @@ def _named_statistics(
     if not campaign.held_run_keys(out) - asked:
         return statistics
     return campaign.subset_statistics(out, command, plan.root_seed, asked, summary.pairs)
+
+
+def _batch_statistics(
+    command: Literal["ablate", "sweep"],
+    plan: campaign.CampaignPlan,
+    summary: campaign.CampaignSummary,
+    out: Path,
+) -> tuple[campaign.CampaignStatistics, bool]:
+    """The statistics of the runs ``plan`` names (a batch of ``ablate --until``) and whether
+    they are those of every run the directory holds: then written to the statistics file
+    (:func:`campaign.write_statistics`), else computed on the runs named only, nothing
+    written (:func:`campaign.subset_statistics`, as :func:`_named_statistics`)."""
+    from cwrend_cli import campaign
+
+    asked = {r.run_key for r in plan.runs}
+    if campaign.held_run_keys(out) - asked:
+        return campaign.subset_statistics(out, command, plan.root_seed, asked, summary.pairs), False
+    return campaign.write_statistics(out, command, plan.root_seed, summary.pairs), True
 
 
 def _report_campaign(
@@ -931,20 +963,22 @@ def _report_campaign(
         sensitivity = campaign.write_sensitivity(out, plan)
     asked = {r.run_key for r in plan.runs}
     held = campaign.held_run_keys(out)
-    if held - asked and not opts.quiet:
+    if held - asked and (not opts.quiet or opts.table_format is not None):
         # a re-run naming fewer seeds, architectures or points than the directory holds:
-        # report on exactly the runs asked for; the statistics file covers them all
+        # report on exactly the runs asked for, in the console and the script table alike;
+        # the statistics file covers them all
         if named is None:
-            with phase(err, f"{label}: computing statistics of the runs named"):
+            with phase(err, f"{label}: computing statistics of the runs named", opts.quiet):
                 named = _named_statistics(command, plan, summary, statistics, out)
         statistics = named
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
-        err.print(
-            f"note: the tables cover the {len(asked & held)} run(s) this command names; "
-            f"the directory holds {len(held)} and {stats_file} covers them all",
-            markup=False,
-        )
-    if opts.table_format is not None:  # the statistics as stored, for scripts
+        if not opts.quiet:
+            err.print(
+                f"note: the tables cover the {len(asked & held)} run(s) this command names; "
+                f"the directory holds {len(held)} and {stats_file} covers them all",
+                markup=False,
+            )
+    if opts.table_format is not None:  # the statistics of the runs named, for scripts
         sys.stdout.write(script_table(statistics.frame, opts.table_format))
     if opts.quiet or opts.table_format is not None:
         return

@@ -129,6 +129,19 @@ def test_rerun_with_fewer_seeds_reports_exactly_those(tmp_path: Path) -> None:
     assert set(stats.loc[stats["kind"] == "marginal", "n"]) == {3}
 
 
+@pytest.mark.parametrize("quiet", [(), ("-q",)], ids=["plain", "quiet"])
+def test_the_script_table_of_a_rerun_with_fewer_seeds_is_of_those_seeds(
+    tmp_path: Path, quiet: tuple[str, ...]
+) -> None:
+    """As the console table: ``-q --format csv`` printed the statistics of every seed held."""
+    cfg = _config(tmp_path)
+    assert _ablate(cfg, "--seeds", "3", "-q").exit_code == 0
+    result = _ablate(cfg, "--seeds", "2", "--format", "csv", *quiet)
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(io.StringIO(result.stdout))
+    assert set(table.loc[table["kind"] == "marginal", "n"]) == {2}
+
+
 def test_rerun_with_fewer_architectures_reports_exactly_those(tmp_path: Path) -> None:
     cfg = _config(tmp_path)
     assert _ablate(cfg, "--seeds", "2", "-q").exit_code == 0

@@ -429,6 +429,20 @@ def test_a_processs_first_run_of_an_architecture_gets_the_allowance_for_its_kern
     assert firsts == [True, True, False, False]  # seed 0's two architectures, then seed 1's
 
 
+def test_a_design_model_that_compiles_its_own_loop_is_its_own_variant() -> None:
+    # the ss design model enters the step loop as a kernel tuple: its loop is typed (and
+    # compiled) apart from CW's in the same world, so its first run in a process is a first
+    # run; two configs whose loops have the same argument types share the variant
+    from cwrend_cli.config.adapt import problem_of
+
+    def variant(model: dict[str, str]) -> tuple[object, ...]:
+        cfg = config_from_dict({"truth": {"model": "two_body"}, "model": model})
+        return worker_module.kernel_variant(problem_of(cfg), "mtf_adaptive")
+
+    assert variant({"guidance": "ss"}) != variant({})
+    assert variant({"guidance": "ya"}) == variant({})  # the same loop: tables, not types
+
+
 def test_each_compiled_variant_of_the_loop_gets_the_first_run_allowance() -> None:
     # a nonlinear truth or an actuator with errors compiles its own loop: its first run in a
     # process is a first run, even after runs of the same architecture in the CW world

@@ -1282,6 +1282,27 @@ def test_design_figure_shows_every_point_and_a_binned_mean_per_architecture(
         assert len(ax.lines) == len(set(ok["arch"]))  # one binned mean per architecture
 
 
+def test_design_figure_draws_misses_within_a_decade_on_a_linear_axis(design_dir: Path) -> None:
+    """The sweep figure's rule (figures.spans_decades): a log axis only over a decade."""
+    from cwrend_cli.report import figures
+
+    data = _with_misses(load_results(design_dir), [1.440e-4, 1.441e-4])  # 0.1440–0.1441 m
+    fig = figures.fig_design(data, "param.schedule.beta")
+    ax_m = next(ax for ax in fig.axes if ax.get_title())
+    assert ax_m.get_yscale() == "linear"
+    assert ax_m.yaxis.get_major_formatter().get_offset() == ""
+
+
+def test_design_figure_draws_misses_over_more_than_a_decade_on_a_log_axis(
+    design_dir: Path,
+) -> None:
+    from cwrend_cli.report import figures
+
+    data = _with_misses(load_results(design_dir), [1e-5, 1e-3])  # 1 cm to 1 m
+    fig = figures.fig_design(data, "param.schedule.beta")
+    assert next(ax for ax in fig.axes if ax.get_title()).get_yscale() == "log"
+
+
 def test_the_cone_program_architectures_are_named_and_ordered_like_the_paper_four() -> None:
     from cwrend_cli.physics.params import arch_order
     from cwrend_cli.report.load import arch_label

@@ -166,3 +166,29 @@ def test_a_rerun_of_a_finished_until_campaign_reports_the_seeds_its_rule_stopped
     assert "0 run(s) computed, 30 already done" in rerun.stderr
     rows = [line for line in rerun.stdout.splitlines() if line.startswith(" mtf_adaptive")]
     assert rows[-1].split()[:2] == ["mtf_adaptive", "30"], rerun.stdout  # the --until row
+
+
+def test_an_until_batch_computes_the_statistics_of_its_own_seeds_only(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Over a directory holding more seeds, each batch's rule needs its seeds' intervals
+    only: the statistics of every run held (the file) are computed once, not per batch."""
+    from cwrend_cli import campaign
+
+    args = _until_paper(tmp_path, "miss_km:0.0007", "--batch", "10", "--max-seeds", "40")
+    fixed = CliRunner().invoke(app, [*args[:4], "--seeds", "40", *args[6:-4]])
+    assert fixed.exit_code == 0, fixed.output
+    whole: list[int] = []
+    real = campaign.write_statistics
+
+    def counted(*a: object, **k: object) -> campaign.CampaignStatistics:
+        whole.append(1)
+        return real(*a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(campaign, "write_statistics", counted)
+    rerun = CliRunner().invoke(app, args)
+    assert rerun.exit_code == 0, rerun.output
+    assert "cwrend ablate · paper · 30 seed(s)" in rerun.stdout  # where the rule stops
+    assert len(whole) == 1
+    stored = pd.read_parquet(tmp_path / "paper" / "ablation.parquet")
+    assert set(stored[stored["kind"] == "marginal"]["n"]) == {40}  # the file: every run

@@ -120,6 +120,38 @@ def test_a_swept_corridor_port_moves_the_terminal_state_with_it() -> None:
     assert ends == [(0.0, 0.0, -0.3, 0.0, 0.0, 0.0), (0.0, 0.0, -0.25, 0.0, 0.0, 0.0)]
 
 
+_CORRIDOR_PARAMS = [
+    "constraints.corridor.port_km=[[0, 0, -0.25], [0, 0, -0.3]]",
+    "constraints.corridor.axis=[[0, 0, -1]]",
+    "constraints.corridor.half_angle_deg=30",
+]
+
+
+def test_a_corridor_swept_into_a_base_without_one_ends_at_its_port() -> None:
+    """The resolved base holds the built-in scenario.xf, which the user did not set: each
+    point was refused with "leave scenario.xf unset"."""
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_from_dict
+
+    cfg = config_from_dict({"constraints": {"keep_out": {"semi_axes_km": [0.2, 0.2, 0.2]}}})
+    plan = campaign.plan(cfg, ["plain_adaptive_socp"], [0], _CORRIDOR_PARAMS)
+    ends = sorted(tuple(t.problem.scenario.xf) for t in plan.tasks)
+    assert ends == [(0.0, 0.0, -0.3, 0.0, 0.0, 0.0), (0.0, 0.0, -0.25, 0.0, 0.0, 0.0)]
+
+
+def test_a_corridor_swept_into_a_base_that_sets_scenario_xf_is_refused_naming_it() -> None:
+    from cwrend_cli import campaign
+    from cwrend_cli.config import config_from_dict
+
+    cfg = config_from_dict({
+        "constraints": {"keep_out": {"semi_axes_km": [0.2, 0.2, 0.2]}},
+        "scenario": {"xf": [0.0, 0.0, -0.3, 0.0, 0.0, 0.0]},
+    })  # fmt: skip
+    with pytest.raises(ConfigError, match=r"scenario\.xf = ") as info:
+        campaign.plan(cfg, ["plain_adaptive_socp"], [0], _CORRIDOR_PARAMS)
+    assert "constraints.corridor.port_km = [0, 0, -0.25]" in str(info.value)
+
+
 def test_vectors_listed_with_commas_are_swept_as_in_one_array() -> None:
     from cwrend_cli.config.overrides import parse_param
 
@@ -154,3 +186,38 @@ def test_a_design_refuses_a_sweep_table_choice_listing_a_value_twice(tmp_path: P
     result = runner.invoke(app, ["sweep", str(cfg), "--design", "lhs", "--samples", "2"])
     assert result.exit_code == 2, result.output
     assert "sweep truth.model: the value 'cw' is listed twice" in result.stderr
+
+
+def test_the_report_reads_a_point_that_introduces_a_corridor_as_the_campaign_ran_it() -> None:
+    import pandas as pd
+
+    from cwrend_cli.config import config_from_dict
+    from cwrend_cli.output.manifest import xf_given
+    from cwrend_cli.report.load import with_swept_values
+
+    cfg = config_from_dict({"constraints": {"keep_out": {"semi_axes_km": [0.2, 0.2, 0.2]}}})
+    runs = pd.DataFrame({
+        "param.constraints.corridor.port_km": ["[0.0, 0.0, -0.3]"],  # as runs.parquet holds it
+        "param.constraints.corridor.axis": ["[0.0, 0.0, -1.0]"],
+        "param.constraints.corridor.half_angle_deg": [30.0],
+    })  # fmt: skip
+    point = with_swept_values(cfg, runs, True, xf_given({"xf_given": False}))
+    assert point is not None and tuple(point.scenario.xf) == (0.0, 0.0, -0.3, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("key", ["constraints.corridor.port_km.2", "constraints.corridor.port_km"])
+def test_a_dispersed_corridor_port_is_refused_naming_it_and_the_sweep_to_use(
+    tmp_path: Path, key: str
+) -> None:
+    """It was refused as 'cannot be applied to the physics parameters', naming no reason."""
+    config = tmp_path / "port.toml"
+    base = SAFE_APPROACH.read_text(encoding="utf-8")
+    config.write_text(
+        f'{base}\n[dispersions]\n"{key}" = {{ dist = "uniform", low = -0.01, high = 0.01 }}\n',
+        encoding="utf-8",
+    )
+    result = runner.invoke(app, ["config", "validate", str(config)])
+    assert result.exit_code == 2, result.output
+    assert f"dispersions.{key}: the corridor's port cannot be dispersed" in result.stderr
+    assert "sweep the port instead" in result.stderr and "--param" in result.stderr
+    assert "Traceback" not in result.output

@@ -674,7 +674,9 @@ def new_manifest(
     ``nis_offset_given``: the base config's ``schedule.nis_offset`` was given by
     the user (:attr:`CampaignPlan.nis_offset_given`); ``config`` is a resolved
     tree, which has lost that, and a point that sets the sensor fills the offset
-    in for its sensor only when it was not. Outside ``config``: no hash changes.
+    in for its sensor only when it was not; likewise ``xf_given`` (a point that
+    introduces a corridor ends at its port at rest when it is false). Outside
+    ``config``: no hash changes.
     """
     sessions = _earlier_sessions(previous or {})
     earlier_hash = (previous or {}).get("config_hash")
@@ -714,6 +716,7 @@ def new_manifest(
         "root_seed": plan_.root_seed,
         "archs": _union((previous or {}).get("archs"), plan_.archs, str),
         "nis_offset_given": plan_.nis_offset_given,
+        "xf_given": plan_.xf_given,
         "executor": dict(executor),
         "started_at": sessions[0].get("started_at", iso(started)) if sessions else iso(started),
         "status": "running",

@@ -54,14 +54,16 @@ from cwrend_cli.config.adapt import problem_of, with_values
 from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import (
+    CORRIDOR_PORT,
     check_given_once,
     check_swept,
     expand_grid,
     get_dotted,
     missing_key_hint,
+    moves_port,
     point_tree,
 )
-from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given
+from cwrend_cli.config.schema import end_in_keep_out, nis_offset_given, xf_given
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_POINTS, MAX_RUNS, MAX_SEED
 from cwrend_cli.physics.params import Architecture, DesignModel, Problem
@@ -203,6 +205,9 @@ class CampaignPlan:
     #: the base's schedule.nis_offset was given (else each point's sensor fills it in; the
     #: resolved ``base`` has lost that: the manifest records it, outside the hashed config)
     nis_offset_given: bool = True
+    #: the base's scenario.xf was given (else a point that introduces a corridor has its
+    #: port at rest; recorded in the manifest as the offset's flag is)
+    xf_given: bool = True
 
     @property
     def runs(self) -> tuple[RunSpec, ...]:
@@ -368,6 +373,14 @@ def draw_dispersions(
     out = []
     for key in sorted(dispersions):
         d = dispersions[key]
+        if key.startswith(CORRIDOR_PORT) and moves_port([key]):  # the port or an entry
+            raise ConfigError(
+                f"dispersions.{key}: the corridor's port cannot be dispersed: it is also the "
+                "terminal state of every run of a grid point (scenario.xf, the port at rest), "
+                "which a dispersed value does not move; sweep the port instead, each point "
+                f"ending at its own, e.g. --param '{CORRIDOR_PORT}=[[0, 0, -0.25], "
+                "[0, 0, -0.3]]', and drop it from [dispersions]"
+            )
         if d.dist == "normal":
             assert d.std is not None  # the model requires std for dist = "normal"
             draw = d.mean + d.std * rng.standard_normal()
@@ -398,14 +411,18 @@ _LISTED_VALUES = 5
 
 
 def _validated(
-    base: Mapping[str, Any], assignment: Assignment, what: str, offset_given: bool = True
+    base: Mapping[str, Any],
+    assignment: Assignment,
+    what: str,
+    offset_given: bool = True,
+    xf_given_: bool = True,
 ) -> CwrendConfig:
     """The config ``base`` + ``assignment``, validated; errors name ``what`` and the values.
 
-    ``offset_given``: the base's ``schedule.nis_offset`` was given by the user
-    (:func:`~cwrend_cli.config.overrides.point_tree`).
+    ``offset_given``, ``xf_given_``: the base's ``schedule.nis_offset``, ``scenario.xf``
+    was given by the user (:func:`~cwrend_cli.config.overrides.point_tree`).
     """
-    tree = point_tree(base, assignment, offset_given)
+    tree = point_tree(base, assignment, offset_given, xf_given_)
     try:
         return config_from_dict(tree, source=what)
     except ConfigError as exc:
@@ -461,7 +478,9 @@ def check_inputs(cfg: CwrendConfig) -> None:
     base.pop("sweep", None)
     base.pop("dispersions", None)
     dispersed = draw_dispersions(cfg.dispersions, base, cfg.noise.seed, 0)
-    run_cfg = _validated(base, dispersed, "dispersed run (seed 0)", nis_offset_given(cfg))
+    run_cfg = _validated(
+        base, dispersed, "dispersed run (seed 0)", nis_offset_given(cfg), xf_given(cfg)
+    )
     _check_typed(problem_of(cfg), dispersed, run_cfg, 0)
 
 
@@ -611,6 +630,7 @@ def plan(
     base.pop("dispersions", None)
     root = cfg.noise.seed
     offset_given = nis_offset_given(cfg)  # else each point's sensor fills it in (issue 35)
+    xf_set = xf_given(cfg)  # else a point that introduces a corridor ends at its port
     spec: DesignSpec | None = None
     if design_kind is None:
         if ranges or second_order:
@@ -634,7 +654,7 @@ def plan(
     digests: list[str] = []
     noises: dict[tuple[int, str | None, int], NoiseSource] = {}
     for pid, params in points:
-        point_cfg = _validated(base, params, f"grid point {pid}", offset_given)
+        point_cfg = _validated(base, params, f"grid point {pid}", offset_given, xf_set)
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
         check_design_models(problem, [ALL_ARCHITECTURES[a] for a in archs])
@@ -653,7 +673,11 @@ def plan(
                 dispersed = draw_dispersions(cfg.dispersions, point_tree, root, seed)
                 if dispersed:
                     run_cfg = _validated(
-                        base, params + dispersed, f"dispersed run (seed {seed})", offset_given
+                        base,
+                        params + dispersed,
+                        f"dispersed run (seed {seed})",
+                        offset_given,
+                        xf_set,
                     )
                     _check_typed(problem, dispersed, run_cfg, seed)
                 runs.extend(
@@ -680,6 +704,7 @@ def plan(
         design=spec,
         steps_points=_steps_points(spec, cfg.output.design_steps_points),
         nis_offset_given=offset_given,
+        xf_given=xf_set,
     )
 
 

@@ -66,7 +66,7 @@ from cwrend_cli.output import recording
 from cwrend_cli.output.files import write_parquet
 from cwrend_cli.output.layout import SOLVES, STEPS, recording_path
 from cwrend_cli.output.tables import campaign_solves_table, campaign_steps_table, summary_row
-from cwrend_cli.physics import actuator, process_noise, sensors, simulation
+from cwrend_cli.physics import actuator, sensors, simulation
 from cwrend_cli.physics.params import (
     ALL_ARCHITECTURES,
     Architecture,
@@ -280,25 +280,34 @@ _VARIANTS_RUN: set[tuple[object, ...]] = set()
 _INITIAL_PLANS: simulation.InitialPlans = {}
 
 
-def kernel_variant(problem: Problem, arch: str) -> tuple[object, ...]:
+def kernel_variant(
+    problem: Problem, arch: str, draws: tuple[Any, ...] | None = None
+) -> tuple[object, ...]:
     """What chooses the compiled code a run of ``arch`` on ``problem`` loads or compiles.
 
-    The architecture, and whether the closed loop carries a nonlinear truth, an
-    actuator with errors, a process noise other than ``q_process``, an extended
-    Kalman filter or a nonlinear sensor: each compiles its own specialisation of the
-    loop (:func:`cwrend_cli.physics._loop_kernels._optional`), 10-15 CPU s on a fresh
-    install, so the first run of each gets the first-run allowance of its time limit,
-    not only the first run of each architecture.
+    The architecture and the step loop's entry point with the exact argument
+    types of the run (:func:`cwrend_cli.physics.simulation.loop_signature`, what
+    the first-run notice asks numba's cache about): each choice of truth,
+    actuator, sensor, filter, process noise, hold and design model that types
+    the loop differently is its own specialisation, 10-15 CPU s on a fresh
+    install, so the first run of each gets the first-run allowance of its time
+    limit, not only the first run of each architecture. ``draws``: the run's
+    standard normals, actuator and fault draws; by default those of seed 0 (the
+    types depend on the problem, not on the seed). Any failure to type the loop
+    counts as one variant per architecture.
     """
-    noise = process_noise.varies(problem.estimator, problem.actuator.ideal)
-    return (
-        arch,
-        problem.truth.model,
-        problem.actuator.ideal,
-        noise,
-        problem.model.filter,
-        problem.sensor.model,
-    )
+    if draws is None:
+        n_steps = problem.scenario.n_steps
+        draws = (
+            sensors.standard_normal_stream(noise_seed_sequence(0, 0), n_steps),
+            actuator_draws(problem, 0, 0),
+            fault_draws(problem, 0, 0),
+        )
+    try:
+        dispatcher, signature = simulation.loop_signature(problem, ALL_ARCHITECTURES[arch], *draws)
+    except Exception:  # the run itself reports what is wrong with its problem
+        return (arch,)
+    return (arch, dispatcher, signature)
 
 
 def compile_ahead(task: Task) -> None:
@@ -352,7 +361,7 @@ def cold_loops(tasks: Iterable[Task]) -> set[str]:
     """The guidance methods whose step loop some of ``tasks`` compiles on its first run.
 
     :func:`cwrend_cli.physics.compiled.cold_loops` of the first run of each
-    task, once per kind of loop (:func:`kernel_variant` and the design model):
+    task, once per kind of loop (:func:`kernel_variant`):
     for the first-run notice. Any failure counts as cached (no notice).
     """
     from cwrend_cli.physics import compiled
@@ -363,7 +372,7 @@ def cold_loops(tasks: Iterable[Task]) -> set[str]:
         if not task.runs:
             continue
         problem = task.problem
-        key = (*(kernel_variant(problem, r.arch) for r in task.runs), problem.model.guidance)
+        key = tuple(kernel_variant(problem, r.arch) for r in task.runs)
         if key in seen:
             continue
         seen.add(key)
@@ -567,6 +576,7 @@ def execute_task(
     if refs is not None:
         references[references_key(task.problem)] = refs
     noises: dict[tuple[Assignment, int], FloatArray] = {}  # shared by the archs of a seed
+    variants: dict[tuple[Assignment, str], tuple[object, ...]] = {}  # kernel_variant's
     stopped = False
     restore = _ctrl_c_noted()
     _RUNNING["runs"] = True
@@ -586,7 +596,15 @@ def execute_task(
                     noise = noises[spec.dispersed, spec.seed] = standard_normal(
                         task.noise, spec.seed, n_steps
                     )
-                variant = kernel_variant(problem, spec.arch)
+                draws = (
+                    noise,
+                    actuator_draws(problem, task.noise.root_seed, spec.seed),
+                    fault_draws(problem, task.noise.root_seed, spec.seed),
+                )
+                variant = variants.get((spec.dispersed, spec.arch))
+                if variant is None:  # the types depend on the problem, not on the seed
+                    variant = kernel_variant(problem, spec.arch, draws)
+                    variants[spec.dispersed, spec.arch] = variant
                 first = variant not in _VARIANTS_RUN
                 _VARIANTS_RUN.add(variant)
                 limit = guards.run_timeout_s(run_timeout_s, problem, first=first)
@@ -598,8 +616,8 @@ def execute_task(
                         noise,
                         run_refs,
                         spec.seed,
-                        actuator_draws=actuator_draws(problem, task.noise.root_seed, spec.seed),
-                        fault_draws=fault_draws(problem, task.noise.root_seed, spec.seed),
+                        actuator_draws=draws[1],
+                        fault_draws=draws[2],
                         attitude_draws=attitude_draws(problem, task.noise.root_seed, spec.seed),
                         initial_plans=_INITIAL_PLANS,
                     )

@@ -271,7 +271,10 @@ def apply(base: Mapping[str, Any], assignment: Iterable[tuple[str, Any]]) -> dic
 
 
 def point_tree(
-    base: Mapping[str, Any], assignment: Sequence[tuple[str, Any]], offset_given: bool = True
+    base: Mapping[str, Any],
+    assignment: Sequence[tuple[str, Any]],
+    offset_given: bool = True,
+    xf_given: bool = True,
 ) -> dict[str, Any]:
     """The config tree of a campaign's point or run: ``base`` with ``assignment`` set.
 
@@ -282,10 +285,12 @@ def point_tree(
     fills it in for the point's sensor (its measurement dimension m, paper Eq. 24),
     not kept at the base's resolved value (:func:`apply` otherwise). Likewise
     ``scenario.xf`` of a base with a corridor, where it is the port at rest (filled
-    in or given so: validation requires it): an assignment that moves the port
-    (``constraints.corridor.port_km``) but sets no ``scenario.xf`` leaves it out, so
-    that it is the point's port at rest. One place for the campaign that runs the
-    point and the report that draws it.
+    in or given so: validation requires it), or of a base without one whose
+    ``scenario.xf`` the user did not give (``xf_given``: :func:`~cwrend_cli.config.schema.xf_given`;
+    the resolved tree holds the default): an assignment that moves or introduces
+    the port (``constraints.corridor.port_km``, or the whole ``constraints.corridor``)
+    but sets no ``scenario.xf`` leaves it out, so that it is the point's port at
+    rest. One place for the campaign that runs the point and the report that draws it.
     """
     tree = apply(base, assignment)
     keys = [k for k, _ in assignment]
@@ -297,12 +302,23 @@ def point_tree(
         tree["schedule"] = {k: v for k, v in tree["schedule"].items() if k != "nis_offset"}
     corridor = (base.get("constraints") or {}).get("corridor")
     if (
-        corridor is not None
-        and _touches(keys, "constraints.corridor.port_km")
+        (corridor is not None or not xf_given)
+        and moves_port(keys)
         and not _touches(keys, "scenario.xf")
     ):
         tree["scenario"] = {k: v for k, v in tree["scenario"].items() if k != "xf"}
     return tree
+
+
+#: The corridor's docking port: with a corridor, also the terminal state (``scenario.xf``,
+#: the port at rest), so a point that moves it ends there (:func:`point_tree`).
+CORRIDOR_PORT = "constraints.corridor.port_km"
+
+
+def moves_port(keys: Iterable[str]) -> bool:
+    """Whether one of the dotted ``keys`` sets the corridor's port (:data:`CORRIDOR_PORT`,
+    an entry of it, or a table above it)."""
+    return _touches(keys, CORRIDOR_PORT)
 
 
 def _touches(keys: Iterable[str], key: str) -> bool:

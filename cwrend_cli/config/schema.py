@@ -1869,6 +1869,16 @@ def nis_offset_given(cfg: CwrendConfig) -> bool:
     return "nis_offset" in cfg.schedule.model_fields_set
 
 
+def xf_given(cfg: CwrendConfig) -> bool:
+    """Whether ``scenario.xf`` was given (in the file, ``--set`` or a swept value).
+
+    Not given: the built-in terminal state. Asked of a base without a corridor
+    (:func:`~cwrend_cli.config.overrides.point_tree`): with one, validation fills
+    the port at rest in, which then counts as given.
+    """
+    return "xf" in cfg.scenario.model_fields_set
+
+
 def sensor_problems(cfg: CwrendConfig) -> list[tuple[str, Any, str]]:
     """The fields of ``cfg`` that make no sense with its sensor model (issue 35), with the fix."""
     model = cfg.sensor.model

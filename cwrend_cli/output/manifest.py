@@ -29,6 +29,7 @@ __all__ = [
     "pair_texts",
     "read_manifest",
     "recorded_pairs",
+    "xf_given",
 ]
 
 #: Size of a manifest [bytes]: it holds a configuration, a grid of at most
@@ -56,6 +57,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "status": (str,),
     "pairs": (list,),  # the pairs added by --pair A:B, as "A:B" (pair_texts)
     "nis_offset_given": (bool,),  # the base's schedule.nis_offset was given (absent: true)
+    "xf_given": (bool,),  # the base's scenario.xf was given (absent: true)
 }
 
 
@@ -167,6 +169,12 @@ def nis_offset_given(manifest: Mapping[str, Any]) -> bool:
     at every point, as reports read it before.
     """
     return bool(manifest.get("nis_offset_given", True))
+
+
+def xf_given(manifest: Mapping[str, Any]) -> bool:
+    """Whether the campaign's base config gave ``scenario.xf`` (``xf_given``; true when the
+    manifest does not say, as :func:`nis_offset_given`)."""
+    return bool(manifest.get("xf_given", True))
 
 
 def pairs_recorded_at(path: Path) -> tuple[tuple[str, str], ...]:

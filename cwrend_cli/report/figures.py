@@ -1368,10 +1368,7 @@ def fig_sweep(data: ReportData, param: str) -> Figure:
         name = str(row["arch"]).removeprefix("open_loop_")
         st_ = _ref_style(name)
         ax_v.axhline(float(row["delta_v_km_s"]), color=st_["color"], ls=st_["ls"], lw=1.4)
-    if log_miss:
-        ax_m.set_yscale("log")
-    else:  # misses close together read as themselves (0.14402), not as an offset (1e-5+1.44e-1)
-        ax_m.ticklabel_format(axis="y", style="plain", useOffset=False)
+    _miss_scale(ax_m, log_miss)
     symbol = param_label(key)
     for ax in axes:
         ax.set_xlabel(symbol)
@@ -1425,7 +1422,7 @@ SAFETY_METRIC = "safety_min_distance_km"
 
 
 def spans_decades(values: Any, floor: float = _MISS_FLOOR_M) -> bool:
-    """Whether ``values`` (misses, each raised to ``floor``) span more than a decade.
+    """Whether ``values`` (misses by default, each raised to ``floor``) span more than a decade.
 
     The rule of the sweep figure's miss axis: logarithmic when its largest
     drawn value exceeds :data:`LOG_AXIS_MIN_RATIO` times its smallest, linear
@@ -1437,6 +1434,16 @@ def spans_decades(values: Any, floor: float = _MISS_FLOOR_M) -> bool:
         return False
     v = np.maximum(v, floor)
     return bool(v.max() > LOG_AXIS_MIN_RATIO * v.min())
+
+
+def _miss_scale(ax: Axes, log: bool) -> None:
+    """The miss axis ``ax`` logarithmic (``log``: :func:`spans_decades`), else linear with
+    plain labels: misses close together read as themselves (0.14402), not as an offset
+    (1e-5+1.44e-1)."""
+    if log:
+        ax.set_yscale("log")
+    else:
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
 
 
 #: Bins of a design figure's trend (equal counts of design points).
@@ -1451,9 +1458,11 @@ def fig_design(data: ReportData, param: str) -> Figure:
     :func:`fig_sweep`: each point is a dot (its mean over the seeds), and a
     trend per architecture is drawn through :data:`_DESIGN_BINS` bins of equal
     point counts, the mean of the bin's points with its 95 % interval (normal
-    approximation; for the miss, on a log axis, the geometric mean and the
-    interval of the log) as a band. A parameter spanning more than a decade
-    gets a log axis; a categorical one is placed at its categories.
+    approximation; for the miss on a log axis, the geometric mean and the
+    interval of the log) as a band. The miss axis follows the sweep figure's
+    rule (:func:`spans_decades`: logarithmic only when the drawn misses span
+    more than a decade, else linear with plain labels), as does the parameter's
+    axis; a categorical parameter is placed at its categories.
     """
     runs = data.runs[data.runs["status"] == "ok"]
     key = param.removeprefix(PARAM_PREFIX)
@@ -1465,6 +1474,7 @@ def fig_design(data: ReportData, param: str) -> Figure:
     levels = sorted(set(x_all)) if not numeric else []
     xs = np.asarray([levels.index(v) for v in x_all], dtype=float) if not numeric else x_all
     per_point["_x"] = xs
+    log_miss = spans_decades(per_point["miss"].to_numpy(dtype=float) * M_PER_KM)
     fig = _figure(13, 6.6)
     ax_m, ax_v = fig.subplots(1, 2)
     for a in data.archs:
@@ -1472,7 +1482,10 @@ def fig_design(data: ReportData, param: str) -> Figure:
         if g.empty:
             continue
         c = arch_colour(a, data.archs.index(a))
-        for ax, column, scale, log in ((ax_m, "miss", M_PER_KM, True), (ax_v, "dv", 1.0, False)):
+        for ax, column, scale, log in (
+            (ax_m, "miss", M_PER_KM, log_miss),
+            (ax_v, "dv", 1.0, False),
+        ):
             y = g[column].to_numpy(dtype=float) * scale
             if log:
                 y = np.maximum(y, _MISS_FLOOR_M)
@@ -1495,13 +1508,14 @@ def fig_design(data: ReportData, param: str) -> Figure:
     positive = numeric and np.nanmin(xs) > 0
     for ax in (ax_m, ax_v):
         ax.set_xlabel(param_label(key))
-        if positive and np.nanmax(xs) / np.nanmin(xs) > 10:
+        if positive and spans_decades(xs, floor=0.0):
             ax.set_xscale("log")
         if not numeric:
             ax.set_xticks(range(len(levels)), [str(v) for v in levels])
-    ax_m.set_yscale("log")
+    _miss_scale(ax_m, log_miss)
     ax_m.set_ylabel("mean terminal miss over seeds [m]")
-    ax_m.set_title("miss per design point (dots); binned geometric mean, 95 % band")
+    trend = "binned geometric mean" if log_miss else "binned mean"
+    ax_m.set_title(f"miss per design point (dots); {trend}, 95 % band")
     ax_v.set_ylabel("mean Δv over seeds [km/s]")
     ax_v.set_title("Δv per design point (dots); binned mean, 95 % band")
     _legend_below(fig, _arch_handles_plain([a for a in data.archs if (runs["arch"] == a).any()]),
@@ -1695,7 +1709,8 @@ FIGURES: tuple[FigureEntry | SweepFigureEntry, ...] = (
     SweepFigureEntry(
         "design_{key}.png",
         "Mean miss and mean Δv of every design point against `{key}` (dots), with a binned "
-        f"mean (geometric for the miss) and its 95 % band per architecture. {DV_CAPTION}",
+        "mean (geometric for the miss on a log axis, drawn only when the misses span more "
+        f"than a decade) and its 95 % band per architecture. {DV_CAPTION}",
         fig_design,
         design=True,
     ),

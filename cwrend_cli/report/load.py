@@ -75,7 +75,7 @@ from cwrend_cli.output.layout import (
     SWEEP_STATS,
     references_path,
 )
-from cwrend_cli.output.manifest import REPAIR_HINT, nis_offset_given, read_manifest
+from cwrend_cli.output.manifest import REPAIR_HINT, nis_offset_given, read_manifest, xf_given
 from cwrend_cli.output.tables import (
     PARAM_PREFIX,
     REFERENCE_SCHEMA,
@@ -140,6 +140,9 @@ class ReportData:
     #: the campaign's base config gave ``schedule.nis_offset`` (its manifest's
     #: ``nis_offset_given``; else a point that sets the sensor has its sensor's offset)
     nis_offset_given: bool = True
+    #: the base config gave ``scenario.xf`` (its manifest's ``xf_given``; else a point
+    #: that introduces a corridor ends at its port at rest)
+    xf_given: bool = True
 
     @property
     def world(self) -> str:
@@ -160,7 +163,7 @@ class ReportData:
         What the per-seed figures were simulated with (:func:`with_swept_values`);
         :attr:`config` itself for a run or an ablation.
         """
-        return with_swept_values(self.config, self.ok_runs(), self.nis_offset_given)
+        return with_swept_values(self.config, self.ok_runs(), self.nis_offset_given, self.xf_given)
 
     @property
     def worlds(self) -> str:
@@ -170,7 +173,7 @@ class ReportData:
         ``truth.model``, say), ``one per point:`` and each distinct world once,
         sorted, separated by ``;`` (:func:`worlds_of`).
         """
-        return worlds_of(self.config, self.runs, self.nis_offset_given)
+        return worlds_of(self.config, self.runs, self.nis_offset_given, self.xf_given)
 
     def point_stats(self) -> pd.DataFrame | None:
         """The stored statistics of the reported grid point (all of them for an ablation)."""
@@ -253,7 +256,12 @@ def world_of(config: CwrendConfig | None) -> str:
     return " · ".join(parts)
 
 
-def worlds_of(config: CwrendConfig | None, runs: pd.DataFrame, offset_given: bool = True) -> str:
+def worlds_of(
+    config: CwrendConfig | None,
+    runs: pd.DataFrame,
+    offset_given: bool = True,
+    xf_given_: bool = True,
+) -> str:
     """The simulated worlds of every point of ``runs`` (rows of ``runs.parquet``).
 
     The world of each point's successful runs, ``config`` with their swept values
@@ -263,16 +271,19 @@ def worlds_of(config: CwrendConfig | None, runs: pd.DataFrame, offset_given: boo
     """
     ok = runs[runs["status"] == "ok"] if "status" in runs.columns else runs
     if "point" not in ok.columns or ok["point"].nunique() <= 1:
-        return world_of(with_swept_values(config, ok, offset_given))
+        return world_of(with_swept_values(config, ok, offset_given, xf_given_))
     found = {
-        world_of(with_swept_values(config, point, offset_given))
+        world_of(with_swept_values(config, point, offset_given, xf_given_))
         for _, point in ok.groupby(ok["point"].astype(str), sort=False)
     }
     return found.pop() if len(found) == 1 else "one per point: " + "; ".join(sorted(found))
 
 
 def with_swept_values(
-    config: CwrendConfig | None, runs: pd.DataFrame, offset_given: bool = True
+    config: CwrendConfig | None,
+    runs: pd.DataFrame,
+    offset_given: bool = True,
+    xf_given_: bool = True,
 ) -> CwrendConfig | None:
     """The configuration ``runs`` were simulated with: ``config`` with their swept values set.
 
@@ -280,7 +291,9 @@ def with_swept_values(
     column with a single value over them is set at ``key``, as the campaign set
     it on the base configuration (:func:`~cwrend_cli.config.overrides.point_tree`,
     ``offset_given`` as the manifest records it: a point that sets the sensor has
-    its sensor's NIS offset unless the base gave one). ``config`` itself when
+    its sensor's NIS offset unless the base gave one; ``xf_given_`` likewise: a point
+    that introduces a corridor ends at its port unless the base gave ``scenario.xf``).
+    ``config`` itself when
     nothing was swept; ``None`` without a configuration or when the result does
     not validate.
     """
@@ -294,7 +307,8 @@ def with_swept_values(
     if not assignment:
         return config
     try:
-        return config_from_dict(point_tree(resolved_dict(config), assignment, offset_given))
+        tree = point_tree(resolved_dict(config), assignment, offset_given, xf_given_)
+        return config_from_dict(tree)
     except ConfigError:
         return None
 
@@ -318,7 +332,7 @@ def results_world(results_dir: Path) -> str:
             except ReportError:
                 break
             config = _stored_config(stored.get("config"), path, [])
-            return worlds_of(config, runs, nis_offset_given(stored))
+            return worlds_of(config, runs, nis_offset_given(stored), xf_given(stored))
     return world_of(None)
 
 
@@ -758,6 +772,7 @@ def _load_campaign_dir(root: Path, seed: int | None, wanted: str | None = None) 
         design=design,
         sensitivity=sensitivity,
         nis_offset_given=nis_offset_given(meta),
+        xf_given=xf_given(meta),
     )
     # the references' miss against the reported point's terminal position
     return replace(data, ref_summary=_reference_summary(references, data.point_config))
