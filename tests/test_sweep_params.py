@@ -221,3 +221,17 @@ def test_a_dispersed_corridor_port_is_refused_naming_it_and_the_sweep_to_use(
     assert f"dispersions.{key}: the corridor's port cannot be dispersed" in result.stderr
     assert "sweep the port instead" in result.stderr and "--param" in result.stderr
     assert "Traceback" not in result.output
+
+
+def test_one_vector_typed_for_a_vector_key_is_refused_saying_how_vectors_are_swept(
+    tmp_path: Path,
+) -> None:
+    """``port_km=[0,0,-0.25]`` lists three numbers, two of them equal: the refusal says how
+    a vector is swept, not only that 0 is listed twice."""
+    argv = ["sweep", str(SAFE_APPROACH), "--name", "v", "--set", f"output.dir='{tmp_path}'",
+            "--param", "constraints.corridor.port_km=[0,0,-0.25]", "-n", "1"]  # fmt: skip
+    result = runner.invoke(app, argv)
+    assert result.exit_code == 2, result.output
+    assert "the value 0 is listed twice" in result.stderr
+    assert "constraints.corridor.port_km=[[x, y, z], [x, y, z]]" in result.stderr
+    assert not (tmp_path / "v").exists()

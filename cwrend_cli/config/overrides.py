@@ -504,9 +504,15 @@ def check_swept(key: str, values: Sequence[Any] | None = None) -> None:
         )
     repeated = None if values is None else _first_repeated(values)
     if repeated is not None:
+        numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values or ())
+        vector = (  # one vector typed where a list of vectors was meant: [0, 0, -0.25]
+            f" (if {key} is a vector, sweep whole vectors: {key}=[[x, y, z], [x, y, z]])"
+            if numbers
+            else ""
+        )
         raise ConfigError(
             f"sweep {key}: the value {repeated!r} is listed twice; a point is "
-            "computed once: list each value once"
+            f"computed once: list each value once{vector}"
         )
 
 
