@@ -92,7 +92,8 @@ def summary_frame(case: CaseResult) -> pd.DataFrame:
     """The rows of :func:`summary_console_table` as stored (``cwrend run --format``), in
     ``summary.parquet``'s column order."""
     rows = _summary_rows(case)
-    return pd.DataFrame(rows)[summary_table(rows).column_names]
+    columns: list[str] = list(summary_table(rows).column_names)
+    return pd.DataFrame(rows)[columns]
 
 
 def script_table(frame: pd.DataFrame, fmt: str) -> str:
