@@ -861,7 +861,9 @@ def _campaign_step(
     # run it compiles the references' kernels (and, fanned out, a helper the step loop's)
     with phase(err, (notice or "").removesuffix("…"), quiet=quiet or notice is None):
         references = campaign.check_references(plan, beside=fan_out)
-    left = None if fan_out else notice  # one process: the step loop compiles with the runs
+    # one process: the step loop compiles with the runs; said again only where the line
+    # above was a spinner (a terminal), not printed twice into a log
+    left = None if fan_out or not err.is_terminal else notice
     progress = RichProgress(err, f"{command} {out.name}", quiet=quiet, notice=left)
     summary = campaign.run_campaign(
         plan, out, command=command, executor_kind=executor_kind, workers=opts.workers,
