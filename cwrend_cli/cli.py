@@ -860,7 +860,8 @@ def _campaign_step(
     # target (a port in metres) exits 2 instead of a campaign of failed runs. On a first
     # run it compiles the references' kernels (and, fanned out, a helper the step loop's)
     with phase(err, (notice or "").removesuffix("…"), quiet=quiet or notice is None):
-        references = campaign.check_references(plan, beside=fan_out)
+        checked_before = None if opts.force else out  # --force starts over: every point
+        references = campaign.check_references(plan, beside=fan_out, out_dir=checked_before)
     # one process: the step loop compiles with the runs; said again only where the line
     # above was a spinner (a terminal), not printed twice into a log
     left = None if fan_out or not err.is_terminal else notice

@@ -237,10 +237,7 @@ class _PointReferences:
         # those computed before the campaign wrote anything (check_references)
         self._by_key: dict[ReferencesKey, simulation.References | None] = dict(known or {})
         self._written: set[str] = set()  # reference files written by this invocation
-        index = out_dir / REFERENCES_INDEX
-        self._indexed = {  # points the index names already (a resumed campaign)
-            str(e["point"]) for e in (read_events(index) if index.exists() else ()) if "point" in e
-        }
+        self._indexed = indexed_points(out_dir)  # named by the index already (a resume)
 
     def of(self, task: Task) -> simulation.References | None:
         """The references of ``task``'s point (``None`` if they cannot be computed)."""
@@ -299,8 +296,16 @@ class _CheckedReferences:
         return self.known[key]
 
 
+def indexed_points(out_dir: Path) -> set[str]:
+    """The points whose references a campaign directory's ``references/index.jsonl`` names:
+    an earlier invocation computed them (empty for a new directory)."""
+    index = out_dir / REFERENCES_INDEX
+    events = read_events(index) if index.exists() else ()
+    return {str(e["point"]) for e in events if "point" in e}
+
+
 def check_references(
-    plan_: CampaignPlan, beside: bool = False
+    plan_: CampaignPlan, beside: bool = False, out_dir: Path | None = None
 ) -> Mapping[ReferencesKey, simulation.References | None]:
     """The open-loop references of every scenario of ``plan_``: the check of ``cwrend run``.
 
@@ -316,11 +321,18 @@ def check_references(
     ``beside``: a local campaign on a machine of several cores; on a first run (the
     references' kernels not cached) a helper process compiles the step loop meanwhile
     (:func:`_compile_first_run`).
+
+    ``out_dir``: the campaign's directory, whose points with references already
+    (:func:`indexed_points`: an earlier invocation computed them, so they were
+    reachable) are not checked again: a rerun of a finished campaign computes none
+    (``None``: every point, e.g. with ``--force``, which starts over).
     """
+    indexed = set() if out_dir is None else indexed_points(out_dir)
+    tasks = [task for task in plan_.tasks if task.point not in indexed]
     references = _CheckedReferences(plan_.run_timeout_s)
     if beside:
-        _compile_first_run(None, plan_.tasks, references)
-    for task in plan_.tasks:
+        _compile_first_run(None, tasks, references)
+    for task in tasks:
         references.of(task)
     return MappingProxyType(references.known)
 
