@@ -353,6 +353,7 @@ def run(
     recording.rrd unless --no-rrd.
     """
     from cwrend_cli import campaign
+    from cwrend_cli.campaign.plan import check_design_models
     from cwrend_cli.campaign.worker import cold_loops_of_case
     from cwrend_cli.config import config_hash, load_config, resolved_dict
     from cwrend_cli.config.adapt import problem_of, windows_of
@@ -391,10 +392,12 @@ def run(
                 markup=False,
                 soft_wrap=True,
             )
+        problem = problem_of(cfg)
+        check_design_models(problem, archs)  # a refusal comes before any compile notice
         if quiet:
             case = campaign.run_case(cfg, archs, seed_)
         else:
-            guidance = problem_of(cfg).guidance
+            guidance = problem.guidance
             loops = cold_loops_of_case(cfg, archs, seed_)
             notice = compiling_notice({a.resolved_method(guidance) for a in archs}, loops=loops)
             if notice is not None and not console.is_terminal:  # no spinner to show it in

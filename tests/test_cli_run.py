@@ -201,3 +201,24 @@ def test_format_csv_prints_summary_parquet_columns_in_their_order(tmp_path: Path
     stored = pd.read_parquet(out / "summary.parquet")
     assert list(printed.columns) == list(stored.columns)
     assert list(printed["arch"]) == list(stored["arch"])
+
+
+def test_a_design_model_the_architecture_refuses_is_refused_before_any_compile_notice(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``model.guidance = 'ya'`` with a shooting architecture: exit 2 with the reason, and
+    no "compiling kernels" line first (on a cold cache it announced a compile that never
+    came)."""
+    from cwrend_cli.physics import compiled
+
+    monkeypatch.setattr(
+        compiled, "compiling_notice", lambda *a, **k: "compiling kernels (first run only)…"
+    )
+    j2 = PAPER.parent / "paper_j2.toml"
+    out = f"output.dir={json.dumps(str(tmp_path))}"
+    args = ["run", str(j2), "--arch", "mtf_adaptive", "--no-rrd", "--set", out,
+            "--set", "model.guidance='ya'"]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "model.guidance = 'ya' with architecture mtf_adaptive" in result.stderr
+    assert "compiling kernels" not in result.output
