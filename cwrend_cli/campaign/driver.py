@@ -327,7 +327,10 @@ def check_references(
     reachable) are not checked again: a rerun of a finished campaign computes none
     (``None``: every point, e.g. with ``--force``, which starts over).
     """
-    indexed = set() if out_dir is None else indexed_points(out_dir)
+    try:
+        indexed = set() if out_dir is None else indexed_points(out_dir)
+    except OSError:  # a directory the campaign refuses next, naming it (a name too long)
+        indexed = set()
     tasks = [task for task in plan_.tasks if task.point not in indexed]
     references = _CheckedReferences(plan_.run_timeout_s)
     if beside:
