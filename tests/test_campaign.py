@@ -1146,49 +1146,43 @@ def test_a_sweep_with_an_unreachable_point_is_refused_naming_the_point(tmp_path:
     assert not (tmp_path / "results").exists()
 
 
+@pytest.fixture
+def computed_references(monkeypatch: pytest.MonkeyPatch) -> list[object]:
+    """The scenarios whose open-loop references are computed in this process, in order."""
+    computed: list[object] = []
+    references = simulation.open_loop_references
+
+    def counted(problem: Any) -> Any:
+        computed.append(problem.scenario)
+        return references(problem)
+
+    monkeypatch.setattr(simulation, "open_loop_references", counted)
+    return computed
+
+
 def test_a_rerun_of_a_finished_campaign_computes_no_references(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, computed_references: list[object]
 ) -> None:
     """The check before a campaign skips the points whose references the directory holds
     already: a rerun that computes nothing waits for no reference (one per distinct
     scenario: a design over scenario values has thousands)."""
-    from cwrend_cli.physics import simulation
-
-    computed: list[object] = []
-    references = simulation.open_loop_references
-
-    def counted(problem: Any) -> Any:
-        computed.append(problem.scenario)
-        return references(problem)
-
-    monkeypatch.setattr(simulation, "open_loop_references", counted)
     cfg = _write_config(tmp_path / "c.toml", "rerun")
     args = ["sweep", str(cfg), "--param", "scenario.u_max_km_s2=8e-4,1e-3", "--arch",
             "mtf_adaptive", "--seeds", "1", "--workers", "1", "-q", "--no-rrd"]  # fmt: skip
     assert _cli(*args).exit_code == 0
-    assert len(computed) == 2  # two scenarios, each once
+    assert len(computed_references) == 2  # two scenarios, each once
     result = _cli(*args)
     assert result.exit_code == 0, result.output
-    assert len(computed) == 2  # none again
+    assert len(computed_references) == 2  # none again
     assert _cli(*args, "--force").exit_code == 0
-    assert len(computed) == 4  # --force starts over: both again
+    assert len(computed_references) == 4  # --force starts over: both again
 
 
 def test_the_references_checked_before_the_campaign_are_not_computed_again(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, computed_references: list[object]
 ) -> None:
-    from cwrend_cli.physics import simulation
-
-    computed: list[object] = []
-    references = simulation.open_loop_references
-
-    def counted(problem: Any) -> Any:
-        computed.append(problem.scenario)
-        return references(problem)
-
-    monkeypatch.setattr(simulation, "open_loop_references", counted)
     cfg = _write_config(tmp_path / "c.toml", "once")
     result = _cli("sweep", str(cfg), "--param", "schedule.beta=0.25,0.5", "--arch",
                   "mtf_adaptive", "--seeds", "1", "--workers", "1", "-q", "--no-rrd")  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert len(computed) == 1  # one scenario (beta is no part of it), computed once
+    assert len(computed_references) == 1  # one scenario (beta is no part of it), computed once
