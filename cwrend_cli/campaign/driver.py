@@ -243,10 +243,8 @@ class _PointReferences:
         """The references of ``task``'s point (``None`` if they cannot be computed)."""
         key = references_key(task.problem)
         if key not in self._by_key:
-            limit = guards.run_timeout_s(self._run_timeout_s, task.problem, first=True)
             try:
-                with guards.time_limit(limit):
-                    self._by_key[key] = simulation.open_loop_references(task.problem)
+                self._by_key[key] = _references_within_limit(task, self._run_timeout_s)
             except Exception:  # the runs report it (a time limit too), one by one
                 self._by_key[key] = None
         refs = self._by_key[key]
@@ -268,6 +266,14 @@ class _PointReferences:
         return refs
 
 
+def _references_within_limit(task: Task, run_timeout_s: float | None) -> simulation.References:
+    """The open-loop references of ``task``'s point, within the limit of a process's first
+    run (:func:`~cwrend_cli.campaign.guards.run_timeout_s`): what a point's runs wait for."""
+    limit = guards.run_timeout_s(run_timeout_s, task.problem, first=True)
+    with guards.time_limit(limit):
+        return simulation.open_loop_references(task.problem)
+
+
 class _CheckedReferences:
     """The references of a plan's scenarios, computed before its campaign writes anything."""
 
@@ -281,10 +287,8 @@ class _CheckedReferences:
         has none (``None``: another failure, which its runs report one by one)."""
         key = references_key(task.problem)
         if key not in self.known:
-            limit = guards.run_timeout_s(self._run_timeout_s, task.problem, first=True)
             try:
-                with guards.time_limit(limit):
-                    self.known[key] = simulation.open_loop_references(task.problem)
+                self.known[key] = _references_within_limit(task, self._run_timeout_s)
             except ScenarioError as exc:
                 params = task.runs[0].params if task.runs else ()
                 if not params:  # the base configuration: cwrend run's message
