@@ -361,7 +361,9 @@ def cold_loops(tasks: Iterable[Task]) -> set[str]:
     """The guidance methods whose step loop some of ``tasks`` compiles on its first run.
 
     :func:`cwrend_cli.physics.compiled.cold_loops` of the first run of each
-    task, once per kind of loop (:func:`kernel_variant`):
+    task, once per kind of loop (:func:`kernel_variant` of one architecture per
+    guidance method, as that function asks: a task's runs repeat their
+    architectures once per seed, and typing a loop takes about a millisecond):
     for the first-run notice. Any failure counts as cached (no notice).
     """
     from cwrend_cli.physics import compiled
@@ -372,7 +374,11 @@ def cold_loops(tasks: Iterable[Task]) -> set[str]:
         if not task.runs:
             continue
         problem = task.problem
-        key = tuple(kernel_variant(problem, r.arch) for r in task.runs)
+        one_per_method: dict[str, str] = {}
+        for run in task.runs:
+            method = ALL_ARCHITECTURES[run.arch].resolved_method(problem.guidance)
+            one_per_method.setdefault(method, run.arch)
+        key = tuple(kernel_variant(problem, arch) for arch in one_per_method.values())
         if key in seen:
             continue
         seen.add(key)
