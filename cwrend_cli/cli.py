@@ -898,23 +898,6 @@ def _set_aside_line(set_aside: Mapping[str, int]) -> str:
     )
 
 
-def _named_statistics(
-    command: Literal["ablate", "sweep"],
-    plan: campaign.CampaignPlan,
-    summary: campaign.CampaignSummary,
-    statistics: campaign.CampaignStatistics,
-    out: Path,
-) -> campaign.CampaignStatistics:
-    """The statistics of the runs ``plan`` names: ``statistics`` (those of every run the
-    directory holds) when it holds no other run, else computed on the runs named."""
-    from cwrend_cli import campaign
-
-    asked = {r.run_key for r in plan.runs}
-    if not campaign.held_run_keys(out) - asked:
-        return statistics
-    return campaign.subset_statistics(out, command, plan.root_seed, asked, summary.pairs)
-
-
 def _batch_statistics(
     command: Literal["ablate", "sweep"],
     plan: campaign.CampaignPlan,
@@ -924,7 +907,7 @@ def _batch_statistics(
     """The statistics of the runs ``plan`` names (a batch of ``ablate --until``) and whether
     they are those of every run the directory holds: then written to the statistics file
     (:func:`campaign.write_statistics`), else computed on the runs named only, nothing
-    written (:func:`campaign.subset_statistics`, as :func:`_named_statistics`)."""
+    written (:func:`campaign.subset_statistics`, as :func:`_report_campaign` does)."""
     from cwrend_cli import campaign
 
     asked = {r.run_key for r in plan.runs}
@@ -946,7 +929,7 @@ def _report_campaign(
     """The console tables and summary line of a finished (or interrupted) campaign.
 
     ``named``: the statistics of the runs ``plan`` names, when computed already
-    (:func:`_named_statistics`; ``ablate --until`` reads its target from them).
+    (:func:`_batch_statistics`: ``ablate --until`` reads its target from them).
     """
     from cwrend_cli import campaign
     from cwrend_cli.campaign import design
@@ -975,7 +958,9 @@ def _report_campaign(
         # the statistics file covers them all
         if named is None:
             with phase(err, f"{label}: computing statistics of the runs named", opts.quiet):
-                named = _named_statistics(command, plan, summary, statistics, out)
+                named = campaign.subset_statistics(
+                    out, command, plan.root_seed, asked, summary.pairs
+                )
         statistics = named
         stats_file = ABLATION_STATS if command == "ablate" else SWEEP_STATS
         if not opts.quiet:
