@@ -23,7 +23,7 @@ import json
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -361,6 +361,7 @@ def run(
     from cwrend_cli.output import recording
     from cwrend_cli.output.files import check_output_dir, check_run_dir, write_run
     from cwrend_cli.physics.compiled import compiling_notice
+    from cwrend_cli.physics.params import arch_order
 
     with user_errors():
         cfg = load_config(file, set_ or ())
@@ -404,6 +405,9 @@ def run(
                 console.print(notice, markup=False)
             with console.status(notice or "running…", spinner="dots"):
                 case = campaign.run_case(cfg, archs, seed_)
+        # computed in --arch order; shown and written in the one order of every table
+        order = arch_order(r.arch for r in case.runs)
+        case = replace(case, runs=tuple(sorted(case.runs, key=lambda r: order.index(r.arch))))
         written = write_run(out, resolved_dict(cfg), config_hash(cfg), case.runs, case.references)
         if rrd:
             rrd_path = recording.record_case(

@@ -203,6 +203,24 @@ def test_format_csv_prints_summary_parquet_columns_in_their_order(tmp_path: Path
     assert list(printed["arch"]) == list(stored["arch"])
 
 
+def test_run_lists_architectures_in_the_order_of_every_table(tmp_path: Path) -> None:
+    """``--arch mtf_adaptive,plain_fixed``: the console tables, ``--format`` and
+    summary.parquet list plain_fixed first, as ``ablate``, ``table`` and ``report`` do
+    (:func:`cwrend_cli.physics.params.arch_order`), not in ``--arch`` order."""
+    from cwrend_cli.physics.params import arch_order
+
+    archs = ["mtf_adaptive", "plain_fixed"]
+    assert list(arch_order(archs)) == archs[::-1]
+    out = tmp_path / "out"
+    args = ["--arch", ",".join(archs), "--out", str(out), "--no-rrd"]
+    result = runner.invoke(app, ["run", str(PAPER), *args], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    lines = [line.split()[0] for line in result.stdout.splitlines() if line.strip()]
+    shown = [name for name in lines if name in archs]
+    assert shown == archs[::-1] * 3  # the run table, the applied Δv and the filter's
+    assert list(pd.read_parquet(out / "summary.parquet")["arch"])[2:] == archs[::-1]
+
+
 def test_a_design_model_the_architecture_refuses_is_refused_before_any_compile_notice(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
