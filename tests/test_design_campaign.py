@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from cwrend_cli.campaign import sequential
 from cwrend_cli.cli import app
+from cwrend_cli.errors import ConfigError
 from cwrend_cli.report import load_results
 from cwrend_cli.report.figures import fig_sensitivity
 from cwrend_cli.report.markdown import report_md
@@ -270,6 +271,51 @@ def test_a_bad_command_line_design_exits_2_naming_the_option(
     assert result.exit_code == 2, result.output
     assert message in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ('"schedule.bta" = { low = 0.1, high = 1.0 }',
+         "[sweep] schedule.bta: schedule.bta is not a configuration value (a dotted key such as "
+         "schedule.beta or scenario.u_max_km_s2); did you mean 'schedule.beta'?"),
+        ('"schedule.beta" = { low = -1, high = 1 }',
+         "[sweep] schedule.beta: low = -1.0 is not a value schedule.beta takes "
+         "(schedule.beta = -1: must be > 0); expected { low = LOW, high = HIGH } (uniform"),
+        ('"solver.max_iter" = { low = 0, high = 5, int = true }',
+         "[sweep] solver.max_iter: low = 0 is not a value solver.max_iter takes"),
+        ('"truth.model" = { values = ["cw", "jj2"] }',
+         "[sweep] truth.model: values[1] = 'jj2' is not a value truth.model takes"),
+        ('"degradation.windows.0" = { start_s = 250.0, end_s = 325.0, r_scale = 30.0 }',
+         "[sweep] degradation.windows.0: a table of end_s, r_scale, start_s is not a range, and "
+         "a design samples no whole table: a range is { low = LOW, high = HIGH }"),
+    ],
+)  # fmt: skip
+def test_a_bad_sweep_table_range_exits_2_naming_the_key_as_range_does(
+    tmp_path: Path, body: str, message: str
+) -> None:
+    """A ``[sweep]`` range gets the checks of ``--range`` (the same function), named by its
+    key in ``[sweep]``: it was refused only once sampled, as "grid point p… is invalid"."""
+    cfg = _config(tmp_path, "bad", f"[sweep]\n{body}\n")
+    result = runner.invoke(app, _sweep(cfg, "--design", "lhs", "--samples", "4"))
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr and "Traceback" not in result.output
+    assert "grid point" not in result.stderr
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_range_replaces_a_sweep_range_before_it_is_checked() -> None:
+    """``--range`` replaces a ``[sweep]`` key's range (designs guide), so the replaced one is
+    not refused, as a ``[sweep]`` grid key that ``--param`` replaces is not."""
+    from cwrend_cli.campaign.plan import design_points
+    from cwrend_cli.config import CwrendConfig, resolved_dict
+
+    base = resolved_dict(CwrendConfig())
+    sweep = {"schedule.beta": {"low": -1.0, "high": 1.0}}
+    spec, _ = design_points(sweep, [], "lhs", 2, 0, ["schedule.beta=0.1:1"], base=base)
+    assert [(r.key, r.low, r.high) for r in spec.ranges] == [("schedule.beta", 0.1, 1.0)]
+    with pytest.raises(ConfigError, match=r"\[sweep\] schedule\.beta: low = -1\.0"):
+        design_points(sweep, [], "lhs", 2, 0, [], base=base)
 
 
 def test_a_design_writes_per_step_data_of_its_first_point_and_its_references_once(

@@ -84,6 +84,36 @@ def test_the_sweep_command_refuses_them_before_anything_runs(
     assert not (tmp_path / "c").exists()  # nothing written
 
 
+WINDOW = "{ start_s = 250.0, end_s = 325.0, r_scale = 30.0 }"
+
+
+@pytest.mark.parametrize(
+    ("sweep", "args", "said"),
+    [
+        (f'"degradation.windows.0" = {WINDOW}', [], "[sweep] degradation.windows.0: "),
+        (f'"degradation.windows.0" = [{WINDOW}, {WINDOW}]', [], "sweep.degradation.windows.0 = ["),
+        ("", ["--param", f"degradation.windows.0={WINDOW}"], "--param degradation.windows.0: "),
+        ("", ["--param", f"degradation.windows.0=[{WINDOW}]"], "--param degradation.windows.0: "),
+    ],
+)
+def test_a_whole_table_as_a_grid_value_is_refused_saying_what_a_grid_takes(
+    tmp_path: Path, sweep: str, args: list[str], said: str
+) -> None:
+    """A table is no grid value (sweep guide): ``[sweep]`` said "a range table is sampled by a
+    design" of a window, or listed the refusals of every type of its value's union; a
+    ``--param`` table ran every run, then failed with a traceback (unhashable dict)."""
+    cfg = _config(tmp_path, f"[sweep]\n{sweep}\n" if sweep else "")
+    argv = ["sweep", str(cfg), "--seeds", "1", "--arch", "mtf_adaptive", "-w", "1", "--no-rrd"]
+    result = runner.invoke(app, [*argv, *args])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.stderr.split())
+    assert said in text and "a table is not a grid value: a grid sweeps numbers, strings" in text
+    assert "degradation.windows.0.start_s" in text  # the table's entries, by their own keys
+    assert "must be a string" not in text and "range table" not in text
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "c").exists()  # nothing written
+
+
 def test_the_override_of_a_sweep_key_is_said(tmp_path: Path) -> None:
     cfg = _config(tmp_path, '[sweep]\n"schedule.beta" = [0.1, 0.25]\n')
     args = ["sweep", str(cfg), "--param", "schedule.beta=0.5", "--seeds", "1", "--arch",

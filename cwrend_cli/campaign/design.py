@@ -63,7 +63,7 @@ import numpy as np
 if TYPE_CHECKING:  # pandas is imported by sensitivity() only: a worker plans no design
     import pandas as pd
 
-from cwrend_cli.config.overrides import SIGNIFICANT_DIGITS, decimal_float
+from cwrend_cli.config.overrides import RANGE_FIELDS, SIGNIFICANT_DIGITS, decimal_float
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.tables import PARAM_PREFIX, UNIT_PREFIX
 
@@ -72,6 +72,7 @@ __all__ = [
     "DESIGN_STREAM",
     "RANGE_SYNTAX",
     "SIGNIFICANT_DIGITS",
+    "TABLE_RANGE_SYNTAX",
     "Design",
     "ParameterRange",
     "SobolIndices",
@@ -148,6 +149,14 @@ class ParameterRange:
         return [0.0, 1.0], "unif"
 
 
+#: What a ``[sweep]`` range of a design is, as its errors say.
+TABLE_RANGE_SYNTAX = (
+    "{ low = LOW, high = HIGH } (uniform; with log = true log-uniform, with int = true "
+    "integers) or { values = [V1, V2, …] } (categories), e.g. "
+    '"schedule.beta" = { low = 0.1, high = 1.0 }'
+)
+
+
 def parse_range(key: str, spec: Mapping[str, Any], where: str | None = None) -> ParameterRange:
     """A ``[sweep]`` table entry as a :class:`ParameterRange`; :class:`ConfigError` naming the key.
 
@@ -156,8 +165,14 @@ def parse_range(key: str, spec: Mapping[str, Any], where: str | None = None) -> 
     ``where``: how messages name the entry (default ``[sweep] <key>``).
     """
     at = where or f"[sweep] {key}"
-    allowed = {"low", "high", "log", "int", "values"}
-    unknown = sorted(set(spec) - allowed)
+    unknown = sorted(set(spec) - RANGE_FIELDS)
+    if unknown and not RANGE_FIELDS & set(spec):  # a whole table as the value, not a range
+        field = next(iter(spec))
+        raise ConfigError(
+            f"{at}: a table of {', '.join(unknown)} is not a range, and a design samples "
+            f"no whole table: a range is {TABLE_RANGE_SYNTAX}; sample the table's entries by "
+            f'their own keys ("{key}.{field}" = {{ low = …, high = … }})'
+        )
     if unknown:
         raise ConfigError(
             f"{at}: unknown field(s) {', '.join(unknown)} (a range has low, high and "
@@ -196,15 +211,19 @@ _NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _DASHED_RANGE = re.compile(rf"^{_NUMBER}\s*(?:-|–|\.\.)\s*{_NUMBER}$")
 
 
-def range_ends(parsed: ParameterRange) -> tuple[tuple[str, Any], ...]:
+def range_ends(parsed: ParameterRange, table: bool = False) -> tuple[tuple[str, Any], ...]:
     """The values of ``parsed`` that bound what a design samples, named as in
     :data:`RANGE_SYNTAX`: ``LOW`` and ``HIGH`` of a range (as :meth:`ParameterRange.value`
-    rounds them), every value ``V1``, ``V2``, … of a choice."""
+    rounds them), every value ``V1``, ``V2``, … of a choice; ``table``: as in
+    :data:`TABLE_RANGE_SYNTAX` (a ``[sweep]`` range), ``low``, ``high``, ``values[0]``, …"""
+    low, high = ("low", "high") if table else ("LOW", "HIGH")
     if parsed.kind == "choice":
+        if table:
+            return tuple((f"values[{i}]", v) for i, v in enumerate(parsed.values))
         return tuple((f"V{i}", v) for i, v in enumerate(parsed.values, start=1))
     if parsed.kind == "int":
-        return (("LOW", int(parsed.low)), ("HIGH", int(parsed.high)))
-    return (("LOW", decimal_float(parsed.low)), ("HIGH", decimal_float(parsed.high)))
+        return ((low, int(parsed.low)), (high, int(parsed.high)))
+    return ((low, decimal_float(parsed.low)), (high, decimal_float(parsed.high)))
 
 
 def parse_cli_range(text: str) -> ParameterRange:

@@ -34,6 +34,7 @@ import numpy as np
 
 from cwrend_cli.campaign.design import (
     RANGE_SYNTAX,
+    TABLE_RANGE_SYNTAX,
     Design,
     ParameterRange,
     parse_cli_range,
@@ -282,15 +283,12 @@ def design_points(
         )  # fmt: skip
         given[parsed.key] = raw
         if base is not None:
-            try:
-                get_dotted(base, parsed.key)
-            except (KeyError, IndexError, ValueError, TypeError):
-                raise ConfigError(
-                    f"--range {text}: {parsed.key} is not a configuration value (a dotted key "
-                    f"such as schedule.beta or scenario.u_max_km_s2){_key_meant(base, parsed.key)}"
-                ) from None
-            _check_range_ends(base, parsed, f"--range {text}")
+            _check_range(base, parsed, f"--range {text}")
         by_key[parsed.key] = parsed
+    if base is not None:  # the config's ranges a --range does not replace, as --range's
+        for key in sweep:
+            if key not in given:
+                _check_range(base, by_key[key], f"[sweep] {key}", table=True)
     for parsed in by_key.values():  # what no swept key may be, as --param's (expand_grid)
         check_swept(parsed.key, parsed.values if parsed.kind == "choice" else None)
     if not by_key:
@@ -310,18 +308,29 @@ def design_points(
     return spec, tuple(points.items())
 
 
-def _check_range_ends(base: Mapping[str, Any], parsed: ParameterRange, where: str) -> None:
-    """Refuse a range whose bounds (or a choice's values) its key does not take, naming
-    ``where`` (the option) and the option's syntax: else the first sampled point was
-    refused as an invalid grid point, the option unnamed."""
-    for end, value in range_ends(parsed):
+def _check_range(
+    base: Mapping[str, Any], parsed: ParameterRange, where: str, table: bool = False
+) -> None:
+    """Refuse a design's range whose key is not a value of ``base`` (the resolved
+    configuration) or whose bounds (or a choice's values) its key does not take, naming
+    ``where`` (a ``--range`` option, or ``[sweep] KEY``: ``table``) and its syntax: else
+    the first sampled point was refused as an invalid grid point, the range unnamed."""
+    syntax = TABLE_RANGE_SYNTAX if table else RANGE_SYNTAX
+    try:
+        get_dotted(base, parsed.key)
+    except (KeyError, IndexError, ValueError, TypeError):
+        raise ConfigError(
+            f"{where}: {parsed.key} is not a configuration value (a dotted key "
+            f"such as schedule.beta or scenario.u_max_km_s2){_key_meant(base, parsed.key)}"
+        ) from None
+    for end, value in range_ends(parsed, table):
         try:
             _validated(base, ((parsed.key, value),), where)
         except ConfigError as exc:
             why = "; ".join(exc.problems) or str(exc)
             raise ConfigError(
                 f"{where}: {end} = {value!r} is not a value {parsed.key} takes ({why}); "
-                f"expected {RANGE_SYNTAX}"
+                f"expected {syntax}"
             ) from None
 
 

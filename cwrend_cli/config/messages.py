@@ -29,6 +29,7 @@ __all__ = [
     "fmt_num",
     "format_validation_error",
     "rules_error",
+    "table_value_problem",
 ]
 
 # ---------------------------------------------------------------------------
@@ -50,6 +51,20 @@ def rules_error(problems: Sequence[tuple[str, Any, str]]) -> PydanticCustomError
         _RULES_ERROR,
         "{summary}",
         {"summary": summary, "problems": tuple((f, _fmt_value(v), m) for f, v, m in problems)},
+    )
+
+
+def table_value_problem(key: str, table: Mapping[str, Any], param: bool = False) -> str:
+    """Why a table (``table``) is not a value a grid sweeps ``key`` over (``[sweep]``, or
+    ``--param``: ``param``), and what is: the values a grid takes, the table's entries by
+    their own keys, or the whole table set once."""
+    field = next((str(k) for k in table), "FIELD")
+    entry = f"--param {key}.{field}=a,b" if param else f'"{key}.{field}" = [a, b]'
+    return (
+        "a table is not a grid value: a grid sweeps numbers, strings, true/false or arrays "
+        "of numbers, listed [v1, v2, …] or as 'start:stop:num'; sweep the table's entries "
+        f"by their own keys ({entry}, crossed with the other swept keys), or set the whole "
+        f"table once (--set '{key}={{ … }}')"
     )
 
 

@@ -21,7 +21,7 @@ from decimal import Context, Decimal, localcontext
 from types import MappingProxyType
 from typing import Any
 
-from cwrend_cli.config.messages import closest_all, did_you_mean
+from cwrend_cli.config.messages import closest_all, did_you_mean, table_value_problem
 from cwrend_cli.config.schema import CwrendConfig
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.limits import MAX_NESTING, MAX_SWEPT_KEYS, MAX_VALUES_PER_KEY
@@ -427,6 +427,10 @@ def _range_values(key: str, spec: str) -> tuple[float, ...]:
     return floats
 
 
+#: The fields of a design's range in ``[sweep]`` (:func:`cwrend_cli.campaign.design.parse_range`).
+RANGE_FIELDS = frozenset({"low", "high", "log", "int", "values"})
+
+
 def expand_grid(
     sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
 ) -> tuple[tuple[str, tuple[Any, ...]], ...]:
@@ -449,15 +453,20 @@ def expand_grid(
         )
     grid: dict[str, tuple[Any, ...]] = {}
     for key, values in sweep.items():
-        if isinstance(values, Mapping):
+        if isinstance(values, Mapping) and RANGE_FIELDS & set(values):
             raise ConfigError(
                 f"[sweep] {key}: a range table is sampled by a design: add --design "
                 "lhs|sobol|random --samples N (a grid lists values: [v1, v2] or 'start:stop:num')"
             )
+        if isinstance(values, Mapping):  # a whole table as the value, not a range
+            raise ConfigError(f"[sweep] {key}: {table_value_problem(key, values)}")
         grid[key] = _range_values(key, values) if isinstance(values, str) else tuple(values)
     given: dict[str, str] = {}  # --param key -> its values as typed
     for text in cli_params:
         key, values = parse_param(text)
+        table = next((v for v in values if isinstance(v, Mapping)), None)
+        if table is not None:  # as [sweep]'s (the schema): else it ran, then failed
+            raise ConfigError(f"--param {key}: {table_value_problem(key, table, param=True)}")
         raw = text.split("=", 1)[1].strip()
         if key in given:
             plain = not any(c in given[key] + raw for c in ":[")  # value lists, not ranges

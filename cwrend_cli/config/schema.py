@@ -40,7 +40,7 @@ from pydantic import (
     model_validator,
 )
 
-from cwrend_cli.config.messages import fmt_num, rules_error
+from cwrend_cli.config.messages import fmt_num, rules_error, table_value_problem
 from cwrend_cli.limits import (
     MAX_RUN_TIMEOUT_S,
     MAX_RUNS,
@@ -1554,6 +1554,21 @@ class CwrendConfig(_FrozenModel):
         max_length=MAX_SWEPT_KEYS,
         description="per-run random draws: dotted.key = {dist = …}; at most 1,000 keys",
     )
+
+    @field_validator("sweep", mode="before")
+    @classmethod
+    def _no_table_values(cls, value: Any) -> Any:
+        # a list of tables: one clear refusal, not one per branch of the value's union
+        if isinstance(value, dict):
+            for key, values in value.items():
+                tables = (
+                    [v for v in values if isinstance(v, dict)] if isinstance(values, list) else []
+                )
+                if tables:
+                    raise rules_error(
+                        [(str(key), values, table_value_problem(str(key), tables[0]))]
+                    )
+        return value
 
     @model_validator(mode="before")
     @classmethod
