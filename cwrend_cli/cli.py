@@ -267,8 +267,16 @@ def config_show(
 def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
     """Check a configuration; print 'OK <hash>' or the problems (exit code 2).
 
-    Besides the values, the checks every campaign makes before it runs: the
-    [dispersions] keys and the noise file (its columns and rows).
+    Checked: the values and the rules between them; the [dispersions] keys (each
+    names a number) and their draws for seed 0 on the base configuration (the
+    draws of a one-seed campaign); the noise file (its columns and rows); the form
+    of [sweep].
+
+    Not checked: the draws of other seeds (a normal draw is unbounded; a uniform one
+    spans low … high) or of grid points, and the keys and values of [sweep]. ablate
+    and sweep check every run's draws and every grid point before anything runs: a
+    value a key does not take exits 2 naming the seed or point ('dispersed run (seed
+    3) (schedule.beta = -0.13) is invalid'), nothing written.
     """
     from cwrend_cli.config import config_hash, load_config
 

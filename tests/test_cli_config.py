@@ -148,3 +148,32 @@ def test_validate_accepts_the_shipped_dispersed_campaign() -> None:
     result = runner.invoke(app, ["config", "validate", str(cfg)])
     assert result.exit_code == 0, result.output
     assert result.stdout.strip() == f"OK {config_hash(load_config(cfg))}"
+
+
+def test_validate_help_says_what_it_checks_of_the_dispersions_and_what_not() -> None:
+    """It draws the dispersions of seed 0 only: its help said "the checks every campaign
+    makes before it runs", which a campaign of more seeds makes for every seed."""
+    result = runner.invoke(app, ["config", "validate", "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stdout.split())
+    assert "their draws for seed 0 on the base configuration" in text
+    assert "Not checked: the draws of other seeds" in text
+    assert "ablate and sweep check every run's draws and every grid point" in text
+
+
+def test_validate_draws_seed_0_and_a_campaign_every_seed_as_the_guide_says(
+    tmp_path: Path,
+) -> None:
+    """The config guide's example: β = 0.25 + U(−0.5, 0.5) is valid for seed 0 (validate
+    says OK), and ``ablate --seeds 4`` is refused at seed 3 before anything runs."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(
+        '[dispersions]\n"schedule.beta" = { dist = "uniform", low = -0.5, high = 0.5 }\n'
+        f"[output]\ndir = {json.dumps(str(tmp_path / 'out'))}\n"
+    )
+    checked = runner.invoke(app, ["config", "validate", str(cfg)])
+    assert checked.exit_code == 0 and checked.stdout.startswith("OK "), checked.output
+    ran = runner.invoke(app, ["ablate", str(cfg), "-n", "4", "-a", "mtf_adaptive", "-q"])
+    assert ran.exit_code == 2, ran.output
+    assert "error: dispersed run (seed 3) (schedule.beta = -0.13" in ran.stderr
+    assert "must be > 0" in ran.stderr and not (tmp_path / "out").exists()
