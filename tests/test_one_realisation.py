@@ -104,6 +104,23 @@ def test_strict_makes_an_unmet_until_exit_1(tmp_path: Path) -> None:
     assert "--until not met" in result.stderr  # said even when quiet: it is the error
 
 
+def test_quiet_prints_a_not_checked_until_only_as_the_error_of_strict(tmp_path: Path) -> None:
+    """``-q`` prints nothing but errors: with ``--strict`` a target not checked is the error
+    of exit 1 and its verdict alone is printed; without ``--strict`` nothing is."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\n')
+    args = ["ablate", str(cfg), "--name", "u", "--arch", "mtf_adaptive", "-w", "1", "--no-rrd",
+            "--until", "miss_km:1e-9", "--batch", "10", "--max-seeds", "10", "-q"]  # fmt: skip
+    strict = runner.invoke(app, [*args, "--strict"], env={"COLUMNS": "200"})
+    assert strict.exit_code == 1, strict.output
+    assert strict.stdout == "" and strict.stderr.startswith("--until not checked: widths are")
+    said = " ".join(strict.stderr.split())  # the verdict, nothing else (no table, progress)
+    assert said.count("--until") == 1 and "computing" not in said and "ablate u" not in said
+    quiet = runner.invoke(app, args, env={"COLUMNS": "200"})  # the same runs, resumed
+    assert quiet.exit_code == 0, quiet.output
+    assert quiet.stdout == "" and quiet.stderr == ""
+
+
 @pytest.mark.parametrize("args", [["--seeds", "1"], []])
 def test_strict_without_until_is_refused(tmp_path: Path, args: list[str]) -> None:
     cfg = tmp_path / "c.toml"
