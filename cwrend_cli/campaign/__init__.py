@@ -41,23 +41,12 @@ from cwrend_cli.campaign.plan import (
     point_id,
     run_key,
 )
-from cwrend_cli.campaign.worker import (
-    CaseResult,
-    RunOutcome,
-    TaskOutcome,
-    execute_task,
-    noise_seed_sequence,
-    run_case,
-    seeds_to_record,
-    standard_normal,
-    standard_normal_for,
-)
 from cwrend_cli.lazy import lazy_attributes
 
 #: Names of the driver and the executors, imported on first use (PEP 562): a worker
 #: process imports ``cwrend_cli.campaign.worker``, hence this package, and needs neither
 #: the driver nor pandas and the statistics it brings (about 0.4 s of every worker's
-#: start-up). ``plan`` and ``worker`` stay eager: the package attribute ``plan`` is the
+#: start-up). ``plan`` stays eager: the package attribute ``plan`` is the
 #: function, which a later first import of the submodule would otherwise shadow.
 _LAZY = {
     "CampaignStatistics": "driver",
@@ -71,6 +60,15 @@ _LAZY = {
     "write_sensitivity": "driver",
     "write_statistics": "driver",
     "ExecutorKind": "executors",
+    "CaseResult": "worker",
+    "RunOutcome": "worker",
+    "TaskOutcome": "worker",
+    "execute_task": "worker",
+    "noise_seed_sequence": "worker",
+    "run_case": "worker",
+    "seeds_to_record": "worker",
+    "standard_normal": "worker",
+    "standard_normal_for": "worker",
 }
 
 if TYPE_CHECKING:
@@ -87,6 +85,17 @@ if TYPE_CHECKING:
         write_statistics,
     )
     from cwrend_cli.campaign.executors import ExecutorKind
+    from cwrend_cli.campaign.worker import (
+        CaseResult,
+        RunOutcome,
+        TaskOutcome,
+        execute_task,
+        noise_seed_sequence,
+        run_case,
+        seeds_to_record,
+        standard_normal,
+        standard_normal_for,
+    )
 else:
     __getattr__ = lazy_attributes(__name__, _LAZY, globals())
 

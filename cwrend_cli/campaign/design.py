@@ -65,7 +65,7 @@ if TYPE_CHECKING:  # pandas is imported by sensitivity() only: a worker plans no
 
 from cwrend_cli.config.overrides import RANGE_FIELDS, SIGNIFICANT_DIGITS, decimal_float
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output.tables import PARAM_PREFIX, UNIT_PREFIX
+from cwrend_cli.output.layout import PARAM_PREFIX, UNIT_PREFIX
 
 __all__ = [
     "DESIGNS",

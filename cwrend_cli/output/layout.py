@@ -13,6 +13,12 @@ into :func:`compare_dir` (beside A) unless told where.
 
 from __future__ import annotations
 
+# Column names
+#: Prefix of the ``runs.parquet`` columns holding a run's swept values.
+PARAM_PREFIX = "param."
+#: Prefix of a design row's unit-cube coordinate of a key in ``design.parquet``.
+UNIT_PREFIX = "unit."
+
 # A single run (``cwrend run``)
 RUN_CONFIG = "config.json"
 RUN_SUMMARY = "summary.parquet"

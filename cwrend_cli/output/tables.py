@@ -37,14 +37,13 @@ if TYPE_CHECKING:  # frames are only passed in: a campaign worker never loads pa
     import pandas as pd
 
 from cwrend_cli import __version__
+from cwrend_cli.output.layout import PARAM_PREFIX, UNIT_PREFIX
 from cwrend_cli.physics.metrics import reference_metrics, run_metrics
 from cwrend_cli.physics.references import OpenLoopResult
 from cwrend_cli.physics.simulation import References, RunResult
 
 _AXES = ("x", "y", "z")
 _VEL = ("vx", "vy", "vz")
-#: Prefix of the ``runs.parquet`` columns holding a run's swept values.
-PARAM_PREFIX = "param."
 
 
 def _metadata(extra: Mapping[str, Any]) -> dict[bytes, bytes]:
@@ -369,8 +368,6 @@ _DIMENSIONLESS_KEYS = (
 _KEY_UNITS = {"actuator.delay_steps": "steps", "estimator.r_nominal_km2": "km^2"}
 #: Prefixes of the ``runs.parquet`` columns of swept values and dispersion draws.
 _VALUE_PREFIXES = ("param.", "disp.")
-#: Prefix of a design row's unit-cube coordinate of a key in ``design.parquet``.
-UNIT_PREFIX = "unit."
 
 
 def _key_unit(key: str) -> str:
