@@ -57,15 +57,9 @@ from cwrend_cli.campaign.statistics import (
 from cwrend_cli.config.io import file_digest
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError, InputDataError
-from cwrend_cli.output.layout import MANIFEST, RUNS
+from cwrend_cli.output.layout import MANIFEST, PARAM_PREFIX, RUNS
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
-from cwrend_cli.output.tables import (
-    METRIC_NAMES,
-    PARAM_PREFIX,
-    metric_name,
-    param_columns,
-    statistics_table,
-)
+from cwrend_cli.output.tables import METRIC_NAMES, metric_name, param_columns, statistics_table
 
 __all__ = [
     "COMPARED",

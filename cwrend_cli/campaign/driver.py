@@ -95,6 +95,7 @@ from cwrend_cli.output.layout import (
     DESIGN,
     EVENTS,
     MANIFEST,
+    PARAM_PREFIX,
     POINTS,
     PROBLEM,
     REFERENCES_INDEX,
@@ -106,7 +107,6 @@ from cwrend_cli.output.layout import (
 )
 from cwrend_cli.output.manifest import read_manifest, recorded_pairs
 from cwrend_cli.output.tables import (
-    PARAM_PREFIX,
     param_columns,
     points_table,
     references_table,

@@ -64,6 +64,7 @@ from matplotlib.typing import RcKeyType
 from scipy.spatial import ConvexHull
 
 from cwrend_cli.config import ARCHITECTURES
+from cwrend_cli.output.layout import PARAM_PREFIX
 from cwrend_cli.output.recording import (
     CORRIDOR_COLOUR,
     DEGRADATION_COLOUR,
@@ -73,7 +74,6 @@ from cwrend_cli.output.recording import (
     inflation_ratio_names,
     port_path,
 )
-from cwrend_cli.output.tables import PARAM_PREFIX
 from cwrend_cli.physics.constraints import (
     Geometry,
     ellipsoids,

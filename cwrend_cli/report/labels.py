@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cwrend_cli.output.tables import PARAM_PREFIX
+from cwrend_cli.output.layout import PARAM_PREFIX
 
 #: Below this many seeds a percentile-bootstrap interval is too narrow to trust (with 1 seed
 #: it is a single point): the console, report.md and ``cwrend table`` mark such intervals.

@@ -62,6 +62,7 @@ from cwrend_cli.output.layout import (
     DESIGN,
     EVENTS,
     MANIFEST,
+    PARAM_PREFIX,
     REFERENCES,
     REFERENCES_INDEX,
     REPORT_DIR,
@@ -76,12 +77,7 @@ from cwrend_cli.output.layout import (
     references_path,
 )
 from cwrend_cli.output.manifest import REPAIR_HINT, nis_offset_given, read_manifest, xf_given
-from cwrend_cli.output.tables import (
-    PARAM_PREFIX,
-    REFERENCE_SCHEMA,
-    normalize_steps,
-    param_columns,
-)
+from cwrend_cli.output.tables import REFERENCE_SCHEMA, normalize_steps, param_columns
 from cwrend_cli.physics.constraints import Geometry, geometry
 from cwrend_cli.physics.metrics import cumulative_delta_v
 from cwrend_cli.physics.params import Sensor, Window, arch_order

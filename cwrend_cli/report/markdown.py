@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from cwrend_cli.output.tables import PARAM_PREFIX, param_columns
+from cwrend_cli.output.layout import PARAM_PREFIX
+from cwrend_cli.output.tables import param_columns
 from cwrend_cli.physics.metrics import NEES_DOF, NIS_DOF, mean_in_band
 from cwrend_cli.report.consistency import judged, share_inside, step_ensembles
 from cwrend_cli.report.figures import SENSITIVITY_METRICS, sensitivity_archs

@@ -67,9 +67,16 @@ import pandas as pd
 from cwrend_cli.config import get_dotted
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
-from cwrend_cli.output.layout import ABLATION_STATS, MANIFEST, RUNS, SOLVES, SWEEP_STATS
+from cwrend_cli.output.layout import (
+    ABLATION_STATS,
+    MANIFEST,
+    PARAM_PREFIX,
+    RUNS,
+    SOLVES,
+    SWEEP_STATS,
+)
 from cwrend_cli.output.manifest import REPAIR_HINT, read_manifest
-from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES, PARAM_PREFIX
+from cwrend_cli.output.tables import FALLBACK_STEPS, METRIC_NAMES
 from cwrend_cli.physics.params import ALL_ARCHITECTURES, arch_order
 from cwrend_cli.report.labels import (
     M_PER_KM,
