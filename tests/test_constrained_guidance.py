@@ -348,3 +348,79 @@ def test_a_one_step_re_solve_re_plans_instead_of_keeping_its_warm_start() -> Non
     assert np.array_equal(warm.controls, cold.controls)
     # the one control that lands on x_f, to the cone solver's tolerance (1e-8 relative)
     assert np.allclose(warm.controls[0], u_star, rtol=0.0, atol=1e-8 * U_MAX)
+
+
+#: campaigns/safe_approach.toml's zone and corridor: a 200 m sphere, the port 250 m out
+#: along −z, the corridor along −z (it clears the sphere by 50 m).
+SAFE_APPROACH = (np.full(3, 0.2), np.array([0.0, 0.0, -0.25]), np.array([0.0, 0.0, -1.0]), 30.0)
+
+
+def test_a_corridor_clear_of_the_zone_is_not_tightened() -> None:
+    """The cone's tightening (module docstring, *Margins*): none where the corridor clears
+    the zone by more than every node's chord margin; the margins where it clears by less
+    (a port on the surface), and for a turning body whatever the clearance."""
+    margins = np.full(11, 1.5e-4)
+    clear = _geometry(*SAFE_APPROACH)
+    assert np.array_equal(cp._cone_margins(clear, margins, None), np.zeros(11))
+    on_surface = _geometry(np.full(3, 0.2), np.array([0.0, 0.0, -0.2]), SAFE_APPROACH[2], 30.0)
+    assert cp._cone_margins(on_surface, margins, None) is margins
+    barely = _geometry(np.full(3, 0.2), np.array([0.0, 0.0, -0.20015]), SAFE_APPROACH[2], 30.0)
+    assert cp._cone_margins(barely, margins, None) is margins  # 0.15 m = the margin: kept
+    turning = cg.BodyMotion(np.tile(np.eye(3), (11, 1, 1)), np.zeros((11, 3)), 0.0, 0.0)
+    assert cp._cone_margins(clear, margins, turning) is margins
+
+
+def test_the_last_step_into_a_clear_corridor_need_not_brake_at_full_thrust() -> None:
+    """Docking along campaigns/safe_approach.toml's corridor from 1 km out on its axis
+    (ε = 0.5): the node before the port lies in the untightened cone, so the last step
+    brakes at what the cost asks. Tightened by the chord margin (0.15 m here: apex moved
+    0.3 m back) that node had to be 0.3–0.4 m from the port, the last step at ≥ 75 % of
+    u_max (½u_maxΔt² = 0.4 m): the sliver of docs/solvers.md."""
+    axes, port, axis, deg = SAFE_APPROACH
+    x0 = np.r_[port + 1.0 * axis, 0.0, 0.0, 0.0]
+    res = cp.plan(
+        N_MOTION, DT, U_MAX, x0, np.r_[port, 0, 0, 0], 120.0, 0.5, _geometry(axes, port, axis, deg)
+    )
+    assert res.status is SolveStatus.CONVERGED and res.slack_km == 0.0
+    assert res.modes[-2] in (1, 3)  # the node before the port is a corridor node
+    assert float(np.linalg.norm(res.controls[-1])) < 0.75 * U_MAX
+    assert not _unsafe(_dense(x0, res.controls), axes, port, axis, deg).any()
+
+
+def test_plans_through_a_clear_untightened_corridor_never_enter_the_unsafe_set() -> None:
+    """The independent dense check of the test above on 200 random problems whose corridor
+    clears the zone (a sphere of 25–75 m, the port 1–20 m outside it, the corridor's axis
+    within 30° of the outward radial, half-angle 10–45°), started 100 m out in the corridor
+    or anywhere: every planned arc outside the unsafe set, and every corridor node of a
+    plan in the untightened cone (to Clarabel's tolerance, 1e-7 km). The corridor is used:
+    most plans end with corridor nodes."""
+    rng = np.random.default_rng(3233)
+    checked = with_corridor = 0
+    for _ in range(220):
+        if checked == 200:
+            break
+        radius = float(rng.uniform(0.025, 0.075))
+        outward = rng.normal(size=3)
+        outward /= np.linalg.norm(outward)
+        port = outward * (radius + rng.uniform(0.001, 0.02))
+        axis = outward + rng.normal(size=3) * 0.25
+        axis /= np.linalg.norm(axis)
+        deg = float(rng.uniform(10, 45))
+        geo = _geometry(np.full(3, radius), port, axis, deg)
+        if cg.corridor_clearance_km(geo) <= 2e-4:  # not clear of the zone: tightened as before
+            continue
+        start = axis if rng.uniform() < 0.5 else rng.normal(size=3)
+        x0 = np.r_[port + 0.1 * start / np.linalg.norm(start), rng.normal(size=3) * 2.5e-5]
+        eps = float(rng.choice([0.0, 0.5, 1.0]))
+        res = cp.plan(N_MOTION, DT, U_MAX, x0, np.r_[port, 0, 0, 0], 40.0, eps, geo)
+        if res.status is not SolveStatus.CONVERGED or res.slack_km > 0.0:
+            continue  # softened: no safe plan was claimed
+        dense = _dense(x0, res.controls)
+        assert not _unsafe(dense, np.full(3, radius), port, axis, deg).any()
+        nodes = np.flatnonzero(np.isin(res.modes, (1, 3)))
+        w = res.positions[nodes] - port
+        across = np.linalg.norm(w - np.outer(w @ axis, axis), axis=1)
+        assert np.all(across - math.tan(math.radians(deg)) * (w @ axis) <= 1e-7)
+        with_corridor += nodes.size > 0
+        checked += 1
+    assert checked == 200 and with_corridor > 100

@@ -236,3 +236,76 @@ def test_the_covariance_margin_is_k_sigma_along_the_normal() -> None:
     expected = 3 * math.sqrt(0.36 * 4e-6 + 0.64 * 9e-6)
     assert cg.covariance_margin_km(normal, p, 3.0) == pytest.approx(expected, rel=1e-14)
     assert cg.covariance_margin_km(normal, np.zeros((3, 3)), 3.0) == 0.0
+
+
+def _corridor_geometry(
+    port: np.ndarray, axis: np.ndarray, deg: float, axes: np.ndarray = AXES
+) -> cg.Geometry:
+    return cg.geometry(
+        Constraints(keep_out=KeepOut(tuple(axes)), corridor=Corridor(tuple(port), tuple(axis), deg))
+    )
+
+
+def test_a_corridor_opening_away_from_a_sphere_clears_it_by_the_ports_height() -> None:
+    """campaigns/safe_approach.toml: a 200 m sphere, the port 250 m out along −z, the axis
+    −z: every point of the cone is at least 250 m from the centre (its apex the nearest),
+    so 50 m from the sphere, whatever the half-angle below 90°."""
+    for deg in (10.0, 30.0, 80.0):
+        geo = _corridor_geometry(
+            np.array([0.0, 0.0, -0.25]), np.array([0.0, 0.0, -1.0]), deg, np.full(3, 0.2)
+        )
+        assert cg.corridor_clearance_km(geo) == pytest.approx(0.05, abs=1e-15)
+
+
+def test_a_corridor_holding_the_zones_centre_has_no_clearance() -> None:
+    """A wide cone opening towards a small sphere 200 m away holds its centre, however deep
+    the centre lies in the cone (here 246 m from its surface, deeper than the radius)."""
+    for deg, radius in ((30.0, 0.2), (80.0, 0.05)):
+        geo = _corridor_geometry(
+            np.array([0.0, 0.0, -0.25]), np.array([0.0, 0.0, 1.0]), deg, np.full(3, radius)
+        )
+        assert cg.corridor_clearance_km(geo) <= 0.0
+
+
+def test_the_corridor_clearance_never_exceeds_the_distance_to_the_zone() -> None:
+    """A lower bound, checked by brute force written here on 200 random corridors (a port up
+    to 100 m outside a sphere of 50–300 m, any axis, half-angle 5–80°): each cone sampled
+    on 61 lengths to 1 km × 90 generator lines, each point's distance to the sphere
+    ``‖p‖ − R`` exactly; the sampled minimum can only exceed the cone's, so a clearance above
+    it would be an overstatement. Where the apex is the nearest point the bound is exact."""
+    turn = np.linspace(0.0, 2 * math.pi, 90, endpoint=False)
+    lengths = np.r_[0.0, np.geomspace(1e-4, 1.0, 60)]
+    positive = exact = 0
+    for _ in range(200):
+        radius = float(RNG.uniform(0.05, 0.3))
+        direction = RNG.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        port = direction * (radius + RNG.uniform(0.0, 0.1))
+        axis = direction + RNG.normal(size=3) * RNG.uniform(0.0, 1.5)
+        axis /= np.linalg.norm(axis)
+        deg = float(RNG.uniform(5.0, 80.0))
+        geo = _corridor_geometry(port, axis, deg, np.full(3, radius))
+        clearance = cg.corridor_clearance_km(geo)
+        helper = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+        helper /= np.linalg.norm(helper)
+        other = np.cross(axis, helper)
+        tan = math.tan(math.radians(deg))
+        lines = axis + tan * (np.outer(np.cos(turn), helper) + np.outer(np.sin(turn), other))
+        lines /= np.linalg.norm(lines, axis=1)[:, None]
+        points = port + np.einsum("l,gi->lgi", lengths, lines).reshape(-1, 3)
+        sampled = float(np.min(np.linalg.norm(points, axis=1))) - radius
+        assert clearance <= sampled + 1e-12
+        positive += clearance > 0.0
+        # the apex nearest: −port (the centre seen from the port) at least 90° + θ off the axis
+        if float(-port @ axis) <= -math.sin(math.radians(deg)) * float(np.linalg.norm(port)):
+            exact += 1
+            assert clearance == pytest.approx(float(np.linalg.norm(port)) - radius, abs=1e-15)
+    assert positive > 30 and exact > 10
+
+
+def test_an_ellipsoid_is_cleared_by_its_circumscribed_sphere() -> None:
+    """An ellipsoid counts as its circumscribed sphere: the clearance of AXES's zone is that
+    of a sphere of its largest semi-axis."""
+    port, axis = np.array([0.0, 0.0, -0.3]), np.array([0.0, 0.0, -1.0])
+    clearance = cg.corridor_clearance_km(_corridor_geometry(port, axis, 30.0))
+    assert clearance == pytest.approx(0.3 - float(np.max(AXES)), abs=1e-15)

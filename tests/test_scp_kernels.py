@@ -274,6 +274,6 @@ def test_the_kept_corridor_rows_are_the_geometrys_own() -> None:
         for i in range(2)
     ]
     for geo in (geos[0], geos[1], geos[1], geos[0]):
-        _, rows = cp._untightened_corridor(geo)
+        _, rows, _ = cp._untightened_corridor(geo)
         fresh = cg.corridor_cone(geo, 0.0).rows()
         assert all(np.array_equal(g, w) for g, w in zip(rows, fresh, strict=True))

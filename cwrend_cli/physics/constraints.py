@@ -104,6 +104,7 @@ __all__ = [
     "chord_margin_km",
     "cone_signed_distance",
     "corridor_angle_deg",
+    "corridor_clearance_km",
     "corridor_cone",
     "covariance_margin_km",
     "covariance_margins_km",
@@ -483,6 +484,26 @@ def corridor_cone(geo: Geometry, margin_km: float) -> SecondOrderCone:
         raise ValueError("no corridor")
     theta = geo.half_angle_rad
     return SecondOrderCone(geo.port_km, geo.axis, math.tan(theta), margin_km / math.cos(theta))
+
+
+def corridor_clearance_km(geo: Geometry) -> float:
+    """A lower bound [km] on the distance between the corridor cone and the keep-out zone
+    (≤ 0: the corridor may enter the zone; +∞ without a zone).
+
+    Each ellipsoid lies in its circumscribed sphere (centre c, radius its largest
+    semi-axis), so the cone is at least ``dist(c, cone) − max semi-axis`` from it
+    (the distance by :func:`cone_signed_distance`, taken as 0 for a centre inside the
+    cone); the smallest over the zone's ellipsoids. A corridor
+    that opens away from a zone it starts outside of (campaigns/safe_approach.toml: a port
+    50 m outside a 200 m sphere, the axis along the outward radial) clears it everywhere."""
+    if geo.port_km is None or geo.axis is None or geo.half_angle_rad is None:
+        raise ValueError("no corridor")
+    clearance = math.inf
+    for centre, axes in ellipsoids(geo):
+        c = np.zeros(3) if centre is None else centre
+        outside = float(cone_signed_distance(c, geo.port_km, geo.axis, geo.half_angle_rad))
+        clearance = min(clearance, max(outside, 0.0) - float(np.max(axes)))
+    return clearance
 
 
 def approach_start(inside: npt.NDArray[np.bool_], lowest: int) -> int:

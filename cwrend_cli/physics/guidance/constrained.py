@@ -35,7 +35,18 @@ and the filter's updates shrink it). The corridor is not tightened by the
 covariance: its apex is the port, where any margin would forbid docking. The
 terminal node (the port, fixed by the terminal equality) carries no path
 constraint; the last step's arc is within AΔt²/8 of its chord, which is inside
-the cone.
+the cone. **A corridor clear of the zone is not tightened** (a fixed target): when
+the cone keeps farther from every keep-out ellipsoid than the largest chord margin
+(:func:`~cwrend_cli.physics.constraints.corridor_clearance_km`, a lower bound), a
+point of an arc lies within that margin of its chord, the chord in the cone, so the
+point is outside the zone: safe whether in the corridor or not (the unsafe set is the
+zone less the corridor). Its nodes are still held in the cone. Tightened, the cone's
+apex would move back from the port by the margin over sin θ (0.3 m in
+campaigns/safe_approach.toml) while the node before the port lies within ½u_maxΔt²
+(0.4 m) of it: a sliver that the last step reaches only at full thrust, where the dual
+solver stalls (docs/solvers.md, *where the mean goes*). A corridor that may enter the
+zone (a port on its surface, the circumscribed spheres of a long ellipsoid) keeps the
+margin, and so does a turning body's.
 
 **Iterations.** Trust region ``‖r_k − r̄_k‖_∞ ≤`` :data:`TRUST_RADIUS_FACTOR`
 × the largest semi-axis; stop when no node moves by more than
@@ -281,7 +292,7 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    cone, rows = _untightened_corridor(geo)
+    cone, rows, _ = _untightened_corridor(geo)
     inside = cone.residual_km(cg.to_body(motion, r_bar), rows) >= -SCP_TOL_KM
     first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
     modes[first:steps] = _CORRIDOR
@@ -290,24 +301,41 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     return modes
 
 
-#: The last geometry's untightened corridor cone and its rows (:func:`_untightened_corridor`).
-_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...]]] = []
+#: The last geometry's untightened corridor cone, its rows and its clearance of the zone
+#: (:func:`_untightened_corridor`).
+_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...], float]] = []
 
 
 def _untightened_corridor(
     geo: cg.Geometry,
-) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
-    """``corridor_cone(geo, 0)`` and its rows, kept for the geometry last asked (a closed
-    loop's re-solves share one, and :func:`_modes` reads it twice a re-solve): the same
-    arrays as made afresh (the geometry is held, so the identity test cannot be fooled)."""
+) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float], float]:
+    """``corridor_cone(geo, 0)``, its rows and :func:`.constraints.corridor_clearance_km`,
+    kept for the geometry last asked (a closed loop's re-solves share one, and
+    :func:`_modes` reads it twice a re-solve): the same arrays as made afresh (the
+    geometry is held, so the identity test cannot be fooled)."""
     if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] is not geo:
         cone = cg.corridor_cone(geo, 0.0)
         rows = cone.rows()
         for array in rows[:3]:
             array.flags.writeable = False
-        _CORRIDOR_KEPT[:] = [(geo, cone, rows)]
-    _, cone, rows = _CORRIDOR_KEPT[0]
-    return cone, (rows[0], rows[1], rows[2], rows[3])
+        _CORRIDOR_KEPT[:] = [(geo, cone, rows, cg.corridor_clearance_km(geo))]
+    _, cone, rows, clearance_km = _CORRIDOR_KEPT[0]
+    return cone, (rows[0], rows[1], rows[2], rows[3]), clearance_km
+
+
+def _cone_margins(
+    geo: cg.Geometry, margins_km: np.ndarray, motion: cg.BodyMotion | None
+) -> np.ndarray:
+    """The corridor cone's tightening at each node (N+1,) [km] (module docstring,
+    *Margins*): the nodes' chord margins ``margins_km``, or none at all when the corridor
+    clears the keep-out zone by more than the largest of them (a fixed target only)."""
+    clear = (
+        motion is None
+        and geo.port_km is not None
+        and geo.semi_axes_km is not None
+        and _untightened_corridor(geo)[2] > float(np.max(margins_km))
+    )
+    return np.zeros_like(margins_km) if clear else margins_km
 
 
 class HalfSpaces(Mapping[int, cg.HalfSpace]):
@@ -654,9 +682,10 @@ class _Subproblem:
 
     The problem (mean motion n [rad/s], step Δt [s], u_max [km/s²], x0, x_f, ε),
     the geometry, and the previous iterate's modes, positions r̄ (N+1, 3) [km] and
-    controls ū (N, 3) [km/s²], the nodes' chord margins [km], their linearised
-    half-spaces, the trust radius [km], the turning body frame of a tumbling
-    target (``None``: fixed) and the abort-safety rows (``None``: off).
+    controls ū (N, 3) [km/s²], the corridor cone's tightening at each node [km]
+    (:func:`_cone_margins`), the nodes' linearised half-spaces, the trust radius [km],
+    the turning body frame of a tumbling target (``None``: fixed) and the abort-safety
+    rows (``None``: off).
     """
 
     n: float
@@ -669,7 +698,7 @@ class _Subproblem:
     modes: np.ndarray
     r_bar: np.ndarray
     u_bar: np.ndarray
-    margins_km: np.ndarray
+    cone_margins_km: np.ndarray
     half_spaces: list[HalfSpaces]
     trust_km: float
     motion: cg.BodyMotion | None = None
@@ -933,7 +962,7 @@ def _cone_cuts(
     rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
     out_nodes, coeffs, offsets = [], [], []
     for i, k in enumerate(nodes.tolist()):
-        a, b, c, d = cg.corridor_cone(sub.geo, float(sub.margins_km[k])).rows()
+        a, b, c, d = cg.corridor_cone(sub.geo, float(sub.cone_margins_km[k])).rows()
         w = a @ rho[i] + b
         size = float(np.linalg.norm(w))
         if float(c @ rho[i]) + d - size >= -DUAL_TOL_KM:
@@ -1136,7 +1165,7 @@ def _program(
     its body-frame position R_kᵀ r_k (issue 34).
     """
     n, dt_s, u_max, x0, xf, eps = sub.n, sub.dt_s, sub.u_max, sub.x0, sub.xf, sub.eps
-    geo, modes, r_bar, margins_km = sub.geo, sub.modes, sub.r_bar, sub.margins_km
+    geo, modes, r_bar, margins_km = sub.geo, sub.modes, sub.r_bar, sub.cone_margins_km
     half_spaces, trust_km, motion, abort_rows = (
         sub.half_spaces, sub.trust_km, sub.motion, sub.abort_rows,
     )  # fmt: skip
@@ -1626,6 +1655,7 @@ def plan(
             _step_margins(n, dt_s, u_max_km_s2, x_bar, trust, ACCEL_FACTOR, motion)
         )
         half_spaces = _half_spaces(geo, modes, r_bar, margins, p_pos_km2, sigma_margin, motion)
+        cone_margins = _cone_margins(geo, margins, motion)
         chords, axes = None, geo.semi_axes_km
         if drift is not None and axes is not None:
             nodes = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, r_bar, motion))
@@ -1635,7 +1665,7 @@ def plan(
             if chords is not None and drift is not None and axes is not None:
                 rows = ab.rows_for(geo, drift, chords)
             sub = _Subproblem(
-                n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, margins,
+                n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, cone_margins,
                 half_spaces, trust, motion, rows, solver == "auto", warm_duals,
             )  # fmt: skip
             sol, iterations, answer, fell_back = _reduced_solve(sub, reduce)
