@@ -273,7 +273,7 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
     of [sweep].
 
     Not checked: the draws of other seeds (a normal draw is unbounded; a uniform one
-    spans low … high) or of grid points, and the keys and values of [sweep]. ablate
+    spans low to high) or of grid points, and the keys and values of [sweep]. ablate
     and sweep check every run's draws and every grid point before anything runs: a
     value a key does not take exits 2 naming the seed or point ('dispersed run (seed
     3) (schedule.beta = -0.13) is invalid'), nothing written.
