@@ -290,22 +290,32 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     return modes
 
 
-#: The last geometry's untightened corridor cone and its rows (:func:`_untightened_corridor`).
-_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...]]] = []
+#: The last corridor's untightened cone and its rows (:func:`_untightened_corridor`), by
+#: the corridor's port, axis and half-angle.
+_CORRIDOR_KEPT: list[tuple[tuple[Any, ...], cg.SecondOrderCone, tuple[Any, ...]]] = []
+
+
+def _array_key(array: np.ndarray | None) -> tuple[str, tuple[int, ...], bytes] | None:
+    """What an array is, bit for bit, as a dictionary key: dtype, shape and bytes."""
+    if array is None:
+        return None
+    return array.dtype.str, array.shape, array.tobytes()
 
 
 def _untightened_corridor(
     geo: cg.Geometry,
 ) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
-    """``corridor_cone(geo, 0)`` and its rows, kept for the geometry last asked (a closed
-    loop's re-solves share one, and :func:`_modes` reads it twice a re-solve): the same
-    arrays as made afresh (the geometry is held, so the identity test cannot be fooled)."""
-    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] is not geo:
+    """``corridor_cone(geo, 0)`` and its rows, kept for the corridor last asked (a closed
+    loop's re-solves share one, each with its own :class:`.constraints.Geometry`, and
+    :func:`_modes` reads it twice a re-solve): the same arrays as made afresh (the key is
+    every bit the cone is made of: the port's and the axis' arrays, the half-angle)."""
+    key = (_array_key(geo.port_km), _array_key(geo.axis), geo.half_angle_rad)
+    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] != key:
         cone = cg.corridor_cone(geo, 0.0)
         rows = cone.rows()
         for array in rows[:3]:
             array.flags.writeable = False
-        _CORRIDOR_KEPT[:] = [(geo, cone, rows)]
+        _CORRIDOR_KEPT[:] = [(key, cone, rows)]
     _, cone, rows = _CORRIDOR_KEPT[0]
     return cone, (rows[0], rows[1], rows[2], rows[3])
 
@@ -393,6 +403,19 @@ def _node_planes(
     return normals, offsets
 
 
+#: :func:`_node_planes`' shift when no node is inside the zone (it reads none then).
+_NO_SHIFT = np.zeros(3)
+
+
+@njit(cache=True)
+def _any_inside(level: np.ndarray, nodes: np.ndarray) -> bool:
+    """Whether one of ``nodes`` has its ``level`` below 1 (inside the ellipsoid)."""
+    for k in nodes:  # noqa: SIM110 (a loop: numba compiles no generator for any())
+        if level[k] < 1.0:
+            return True
+    return False
+
+
 def _half_spaces(
     geo: cg.Geometry,
     modes: np.ndarray,
@@ -417,10 +440,13 @@ def _half_spaces(
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
         level = cg.ellipsoid_level(local, axes)
-        side = _detour_side(axes, local, level)
+        # the detour side moves only the nodes inside the zone: none in most re-solves
+        shift = _NO_SHIFT
+        if _any_inside(level, nodes):
+            shift = float(np.max(axes)) * _detour_side(axes, local, level)
         normals, offsets = _node_planes(
-            np.asarray(axes, dtype=np.float64), local, level, nodes,
-            float(np.max(axes)) * side, np.asarray(margins_km, dtype=np.float64),
+            np.asarray(axes, dtype=np.float64), local, level, nodes, shift,
+            np.asarray(margins_km, dtype=np.float64),
         )  # fmt: skip
         if sigma_margin > 0.0 and p_pos_km2 is not None:
             if motion is None:
@@ -472,13 +498,13 @@ def _pairs_planes(
     """:func:`_pairs` and the kept rows' planes (normals (P, 3), offsets (P,) [km]): those
     :func:`_planes` gives for them, taken from the trust test's (the same bits)."""
     if motion is None:  # the three steps below in one pass (the same rows, the same bits)
+        if len(half_spaces) == 1:  # one ellipsoid: its arrays as a stack of one, no copy
+            normals, offsets = half_spaces[0].normals[None], half_spaces[0].offsets[None]
+        else:
+            normals = np.stack([hs.normals for hs in half_spaces])
+            offsets = np.stack([hs.offsets for hs in half_spaces])
         kept, left_out, kept_normals, kept_offsets = _fixed_pairs(
-            half_spaces[0].index,
-            np.stack([hs.normals for hs in half_spaces]),
-            np.stack([hs.offsets for hs in half_spaces]),
-            modes,
-            r_bar,
-            trust_km,
+            half_spaces[0].index, normals, offsets, modes, r_bar, trust_km
         )
         return kept, left_out, (kept_normals, kept_offsets)
     # every ellipsoid has the same nodes
@@ -716,67 +742,111 @@ def _dual_rows(
     (0 terminal, 1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows
     scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`).
     ``planes``: :func:`_planes` of ``pairs`` when the caller has them (:func:`_pairs_planes`).
-    Written into arrays of the final size, block by block (terminal, half-space, trust,
-    abort rows), then sorted stably by node."""
-    steps = sub.modes.size - 1
-    s_p = float(row_scale[0])
-    n_hs, n_tr = pairs.shape[0], box[0].size
-    abort = sub.abort_rows if sub.abort_rows is not None and sub.abort_rows.nodes.size else None
-    total = 6 + n_hs + n_tr + (0 if abort is None else abort.nodes.size)
-    node = np.empty(total, np.int64)
-    coeffs = np.zeros((total, 6))
-    offsets, tol = np.empty(total), np.empty(total)
-    kinds, keys = np.empty(total, np.int64), np.empty(total, np.int64)
-    # terminal state: x_N = x_f
-    node[:6], kinds[:6], keys[:6] = steps, 0, np.arange(6)
-    coeffs[np.arange(6), np.arange(6)] = row_scale
-    offsets[:6] = row_scale * sub.xf
-    tol[:6] = row_scale * _TERMINAL_TOL
-    i = 6
-    if n_hs:  # nᵀ r_k ≥ offset
-        normals, offs = _planes(sub.half_spaces, pairs, sub.motion) if planes is None else planes
-        rows = slice(i, i + n_hs)
-        node[rows], kinds[rows] = pairs[:, 0], 1
-        coeffs[rows, :3] = normals * s_p
-        offsets[rows], tol[rows] = offs * s_p, DUAL_TOL_KM * s_p
-        keys[rows] = pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2]
-        i += n_hs
-    if n_tr:  # the trust rows given (:func:`_trust_rows`)
-        t_node, t_coeffs, t_offsets, _ = _trust_rows(sub, box[0], box[1], s_p)
-        rows = slice(i, i + n_tr)
-        node[rows], coeffs[rows], offsets[rows] = t_node, t_coeffs, t_offsets
-        tol[rows], kinds[rows], keys[rows] = DUAL_TOL_KM * s_p, 2, box[1]
-        i += n_tr
-    if abort is not None:  # cᵀ x_k ≥ o
-        rows = slice(i, total)
-        node[rows], coeffs[rows] = abort.nodes, abort.coeffs * s_p
-        offsets[rows], tol[rows] = abort.offsets_km * s_p, DUAL_TOL_KM * s_p
-        kinds[rows], keys[rows] = 3, 999
-    order = np.argsort(node, kind="stable")
-    kind = kinds[order]
-    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
-    dual_rows = path_dual.DualRows(
-        node[order], coeffs[order], offsets[order], kind == 0, tol[order]
-    )
-    return dual_rows, kind, code
+    Written by :func:`_row_arrays`."""
+    if planes is None:
+        planes = _planes(sub.half_spaces, pairs, sub.motion)
+    abort = sub.abort_rows if sub.abort_rows is not None else _NO_ABORT_ROWS
+    node, coeffs, offsets, tol, kind, code = _row_arrays(
+        row_scale, sub.xf, _TERMINAL_TOL, pairs, planes[0], planes[1], box[0], box[1],
+        sub.r_bar, sub.trust_km, abort.nodes, abort.coeffs, abort.offsets_km,
+    )  # fmt: skip
+    return path_dual.DualRows(node, coeffs, offsets, kind == 0, tol), kind, code
 
 
 #: The terminal rows' tolerances before scaling: position [km], velocity [km/s].
 _TERMINAL_TOL = np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)]
+#: No abort row (abort safety off), for :func:`_row_arrays`.
+_NO_ABORT_ROWS = ab.AbortRows(np.zeros(0, np.int64), np.zeros((0, 6)), np.zeros(0))
+
+
+@njit(cache=True)
+def _row_arrays(
+    row_scale: np.ndarray,
+    xf: np.ndarray,
+    terminal_tol: np.ndarray,
+    pairs: np.ndarray,
+    normals: np.ndarray,
+    plane_offsets: np.ndarray,
+    box_nodes: np.ndarray,
+    box_comps: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+    abort_nodes: np.ndarray,
+    abort_coeffs: np.ndarray,
+    abort_offsets: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of :func:`_dual_rows`: (nodes, coeffs (M, 6), offsets, tolerances, kinds,
+    codes), sorted stably by node. Written block by block — the terminal state
+    ``x_N = x_f`` (the last node of ``r_bar``), the half-space rows ``nᵀ r_k ≥ offset``
+    of ``pairs`` with their planes (``normals``, ``plane_offsets`` [km]), the trust rows
+    of ``box_nodes``, ``box_comps`` (:func:`_trust_arrays`) and the abort rows
+    ``cᵀ x_k ≥ o`` — each scaled by ``row_scale`` (:func:`.feasibility.grid_problem`;
+    the path rows by its position entry), then sorted (numpy's stable sort's order)."""
+    steps = r_bar.shape[0] - 1
+    s_p = row_scale[0]
+    n_hs, n_tr, n_ab = pairs.shape[0], box_nodes.size, abort_nodes.size
+    total = 6 + n_hs + n_tr + n_ab
+    node = np.empty(total, np.int64)
+    coeffs = np.zeros((total, 6))
+    offsets, tol = np.empty(total), np.empty(total)
+    kinds, keys = np.empty(total, np.int64), np.empty(total, np.int64)
+    for i in range(6):
+        node[i], kinds[i], keys[i] = steps, 0, i
+        coeffs[i, i] = row_scale[i]
+        offsets[i] = row_scale[i] * xf[i]
+        tol[i] = row_scale[i] * terminal_tol[i]
+    row = 6
+    for p in range(n_hs):
+        node[row], kinds[row] = pairs[p, 0], 1
+        for c in range(3):
+            coeffs[row, c] = normals[p, c] * s_p
+        offsets[row], tol[row] = plane_offsets[p] * s_p, DUAL_TOL_KM * s_p
+        keys[row] = pairs[p, 0] - pairs[p, 1] + 2 * pairs[p, 2]
+        row += 1
+    t_coeffs, t_offsets = _trust_arrays(box_nodes, box_comps, r_bar, trust_km, s_p)
+    for p in range(n_tr):
+        node[row], kinds[row], keys[row] = box_nodes[p], 2, box_comps[p]
+        coeffs[row] = t_coeffs[p]
+        offsets[row], tol[row] = t_offsets[p], DUAL_TOL_KM * s_p
+        row += 1
+    for p in range(n_ab):
+        node[row], kinds[row], keys[row] = abort_nodes[p], 3, 999
+        for c in range(6):
+            coeffs[row, c] = abort_coeffs[p, c] * s_p
+        offsets[row], tol[row] = abort_offsets[p] * s_p, DUAL_TOL_KM * s_p
+        row += 1
+    order = np.argsort(node, kind="mergesort")
+    kind = kinds[order]
+    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
+    return node[order], coeffs[order], offsets[order], tol[order], kind, code
 
 
 def _trust_rows(
     sub: _Subproblem, nodes: np.ndarray, comps: np.ndarray, scale: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Trust rows of ``sub`` at ``nodes`` (M,), component ``comps`` (M,) 0 … 5: (nodes,
-    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``. Component
-    i < 3: ``r_k,i ≥ r̄_k,i − T``; i ≥ 3: ``−r_k,i−3 ≥ −r̄_k,i−3 − T`` (T the trust radius)."""
-    sign = np.where(comps < 3, 1.0, -1.0)
-    axis = comps % 3
-    coeffs = np.zeros((nodes.size, 6))
-    coeffs[np.arange(nodes.size), axis] = sign * scale
-    offsets = (sign * sub.r_bar[nodes, axis] - sub.trust_km) * scale
+    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``
+    (:func:`_trust_arrays`)."""
+    coeffs, offsets = _trust_arrays(nodes, comps, sub.r_bar, sub.trust_km, scale)
     return nodes, coeffs, offsets, nodes * _CODE_NODE + 2 * _CODE_KIND + comps
+
+
+@njit(cache=True)
+def _trust_arrays(
+    nodes: np.ndarray, comps: np.ndarray, r_bar: np.ndarray, trust_km: float, scale: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(coeffs (M, 6), offsets (M,)) of the trust rows at ``nodes``, component ``comps``,
+    scaled by ``scale``: component i < 3 ``r_k,i ≥ r̄_k,i − T``, i ≥ 3 ``−r_k,i−3 ≥
+    −r̄_k,i−3 − T`` (T = ``trust_km``), i.e. sign s = ±1 on axis i mod 3, offset
+    ``(s r̄_k,i mod 3 − T) × scale``."""
+    coeffs = np.zeros((nodes.size, 6))
+    offsets = np.empty(nodes.size)
+    for p in range(nodes.size):
+        sign = 1.0 if comps[p] < 3 else -1.0
+        axis = comps[p] % 3
+        coeffs[p, axis] = sign * scale
+        offsets[p] = (sign * r_bar[nodes[p], axis] - trust_km) * scale
+    return coeffs, offsets
 
 
 def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -898,14 +968,26 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
     hs = np.flatnonzero(kind == 1)
     if hs.size == 0:
         return y
-    residual = (
-        np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
-    ) / cg.row_norms(rows.coeffs[hs, :3])
-    close = hs[residual <= GUESS_KM]
-    if close.size == 0:
-        return y
-    y[close] = 1e-300
+    normals = rows.coeffs[hs, :3]
+    _mark_touching(
+        np.einsum("ij,ij->i", normals, r_bar[rows.nodes[hs]]), normals, rows.offsets, hs, y
+    )
     return y
+
+
+@njit(cache=True)
+def _mark_touching(
+    dots: np.ndarray, normals: np.ndarray, offsets: np.ndarray, hs: np.ndarray, y: np.ndarray
+) -> None:
+    """Writes the speck of :func:`_guess_active` into ``y`` at the half-space rows ``hs``
+    whose distance ``(nᵀ r̄ − offset)/‖n‖`` (``dots`` their nᵀ r̄, ``normals`` their n, in
+    the rows' scale) is within :data:`GUESS_KM` (numpy's arithmetic, :func:`.constraints.row_norms`'
+    norm: the same bits)."""
+    for i in range(hs.size):
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if (dots[i] - offsets[hs[i]]) / size <= GUESS_KM:
+            y[hs[i]] = 1e-300
 
 
 #: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
