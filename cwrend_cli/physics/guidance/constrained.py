@@ -1047,18 +1047,67 @@ def _with_rows(
     cut_kind: int = 4,
 ) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
     """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts` or
-    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again."""
+    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again
+    (:func:`_merged_rows`)."""
     node, coeffs, offsets, cut_code = cuts
-    nodes = np.r_[rows.nodes, node]
-    order = np.argsort(nodes, kind="stable")
-    merged = path_dual.DualRows(
-        nodes[order],
-        np.ascontiguousarray(np.vstack([rows.coeffs, coeffs])[order]),
-        np.r_[rows.offsets, offsets][order],
-        np.r_[rows.equality, np.zeros(node.size, dtype=bool)][order],
-        np.r_[rows.tol, np.full(node.size, tol)][order],
-    )
-    return merged, np.r_[kind, np.full(node.size, cut_kind)][order], np.r_[code, cut_code][order]
+    nodes, coeffs, offsets, equality, tols, kinds, codes = _merged_rows(
+        rows.nodes, rows.coeffs, rows.offsets, rows.equality, rows.tol, kind, code,
+        node, coeffs, offsets, cut_code, tol, cut_kind,
+    )  # fmt: skip
+    return path_dual.DualRows(nodes, coeffs, offsets, equality, tols), kinds, codes
+
+
+@njit(cache=True)
+def _merged_rows(
+    nodes: np.ndarray,
+    coeffs: np.ndarray,
+    offsets: np.ndarray,
+    equality: np.ndarray,
+    tol: np.ndarray,
+    kind: np.ndarray,
+    code: np.ndarray,
+    new_nodes: np.ndarray,
+    new_coeffs: np.ndarray,
+    new_offsets: np.ndarray,
+    new_code: np.ndarray,
+    new_tol: float,
+    new_kind: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_with_rows`' arrays: the rows (``nodes`` … ``code``) followed by the new
+    inequality rows (``new_nodes`` … ``new_code``, each of tolerance ``new_tol`` and kind
+    ``new_kind``), sorted stably by node (numpy's stable sort's order; copies only)."""
+    old, total = nodes.size, nodes.size + new_nodes.size
+    every = np.empty(total, np.int64)
+    every[:old] = nodes
+    every[old:] = new_nodes
+    order = np.argsort(every, kind="mergesort")
+    out_coeffs = np.empty((total, 6))
+    out_offsets, out_tol = np.empty(total), np.empty(total)
+    out_equality = np.empty(total, np.bool_)
+    out_kind, out_code = np.empty(total, np.int64), np.empty(total, np.int64)
+    for r in range(total):
+        i = order[r]
+        if i < old:
+            out_coeffs[r] = coeffs[i]
+            out_offsets[r], out_tol[r], out_equality[r] = offsets[i], tol[i], equality[i]
+            out_kind[r], out_code[r] = kind[i], code[i]
+        else:
+            j = i - old
+            out_coeffs[r] = new_coeffs[j]
+            out_offsets[r], out_tol[r], out_equality[r] = new_offsets[j], new_tol, False
+            out_kind[r], out_code[r] = new_kind, new_code[j]
+    return every[order], out_coeffs, out_offsets, out_equality, out_tol, out_kind, out_code
+
+
+@njit(cache=True)
+def _absent(values: np.ndarray, pool: np.ndarray) -> np.ndarray:
+    """``~np.isin(values, pool)`` of integer arrays: where a value is not in ``pool``."""
+    ordered = np.sort(pool)
+    at = np.searchsorted(ordered, values)
+    out = np.empty(values.size, np.bool_)
+    for i in range(values.size):
+        out[i] = at[i] >= ordered.size or ordered[at[i]] != values[i]
+    return out
 
 
 def _dual_solve(
@@ -1077,11 +1126,13 @@ def _dual_solve(
     rounds every trust row is written. An answer that holds every trust row it left out
     (with multiplier 0) meets the whole program's KKT conditions: the same answer."""
     steps = sub.modes.size - 1
-    g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
-    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub), planes)
+    # the grid's blocks and row scale: those of feasibility.grid_problem, without its rhs
+    blocks = feasibility.grid_blocks(sub.n, sub.dt_s, steps)
+    row_scale = feasibility.row_scale(steps * sub.dt_s, sub.u_max)
+    rows, kind, code = _dual_rows(sub, pairs, row_scale, _warm_trust(sub), planes)
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
-    s_p = float(g.row_scale[0])
+    s_p = float(row_scale[0])
     used = 0
     cone_rounds = trust_rounds = 0
     retried = sub.warm_duals is None
@@ -1093,14 +1144,14 @@ def _dual_solve(
     scaled, products = path_dual.grid_arrays(sub.n, sub.dt_s, sub.u_max, steps)
     while True:
         ans = path_dual.solve(
-            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
+            sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows, warm,
             keep=keep, products=products, scaled=scaled,
         )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
-                sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
+                sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows,
                 _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
                 scaled=scaled,
             )  # fmt: skip
@@ -1110,7 +1161,8 @@ def _dual_solve(
         path = (kind == 1) | (kind == 4)
         if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
             return None, used, None
-        if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+        abort = sub.abort_rows is not None and sub.abort_rows.nodes.size > 0
+        if abort and float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
@@ -1137,7 +1189,7 @@ def _dual_solve(
                 boxed = np.flatnonzero(sub.modes > 0)
                 box = (np.repeat(boxed, 6), np.tile(np.arange(6), boxed.size))
             trust = _trust_rows(sub, box[0], box[1], s_p)
-            new = ~np.isin(trust[3], code)
+            new = _absent(trust[3], code)
             if not np.any(new) and cuts[0].size == 0:  # broken though written: not certified
                 return None, used, None
             trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
@@ -1580,6 +1632,31 @@ def _node_margins(step_margins: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def _largest_move(x: np.ndarray, r_bar: np.ndarray) -> float:
+    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6) from
+    ``r_bar`` (N + 1, 3): how far an iterate moved; NaN if a difference is (``np.max``'s)."""
+    out = -math.inf
+    for k in range(r_bar.shape[0]):
+        for i in range(3):
+            d = abs(x[k, i] - r_bar[k, i])
+            if d != d:
+                return math.nan
+            out = max(out, d)
+    return out
+
+
+@njit(cache=True)
+def _within_margins(step_margins: np.ndarray, node_margins: np.ndarray) -> bool:
+    """Whether every step's margin (N,) is at most both its nodes' (N + 1,) [km]: ``all(s_k ≤
+    min(m_k, m_k+1))``, false where one is NaN (``np.minimum``'s)."""
+    for k in range(step_margins.size):
+        s = step_margins[k]
+        if not (s <= node_margins[k] and s <= node_margins[k + 1]):
+            return False
+    return True
+
+
 def _unconstrained_plan(
     n: float,
     dt_s: float,
@@ -1676,7 +1753,7 @@ def plan(
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
-    if not np.any(modes):  # nothing is unsafe: the unconstrained plan
+    if not modes.any():  # nothing is unsafe: the unconstrained plan
         if warm and not restarted:  # a one-step horizon: no node to constrain, still re-plan
             exists, warm_controls, used = _unconstrained_plan(
                 n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
@@ -1763,14 +1840,11 @@ def plan(
             )
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
-        moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
+        moved = _largest_move(x_new, r_bar)
         new_modes = _modes(geo, x_new[:, :3], motion)
         # each step's own bound within what both its nodes' constraints were tightened by
-        bound_ok = bool(
-            np.all(
-                _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion)
-                <= np.minimum(margins[:-1], margins[1:])
-            )
+        bound_ok = _within_margins(
+            _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion), margins
         )
         bound_ok = bound_ok and chords is None  # every abort chord covered (or abort off)
         abort_slack = float(sol.x[-1]) if drift is not None else 0.0
