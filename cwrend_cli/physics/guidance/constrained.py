@@ -435,7 +435,9 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = np.concatenate((np.zeros(1, np.int64), np.flatnonzero(modes >= _KEEP_OUT)))
+    keep_out = modes >= _KEEP_OUT
+    keep_out[0] = True  # node 0 (never a keep-out node: _modes) has its half-spaces too
+    nodes = np.flatnonzero(keep_out)
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
@@ -540,10 +542,10 @@ def _fixed_pairs(
         n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
         offset = offsets[b, row]
         if _box_low(n0, n1, n2, r_bar, k, trust_km) >= offset + SCP_TOL_KM:
-            out[o] = pairs[p]
+            out[o, 0], out[o, 1], out[o, 2] = k, pairs[p, 1], b
             o += 1
         else:
-            kept[i] = pairs[p]
+            kept[i, 0], kept[i, 1], kept[i, 2] = k, pairs[p, 1], b
             kept_normals[i, 0], kept_normals[i, 1], kept_normals[i, 2] = n0, n1, n2
             kept_offsets[i] = offset
             i += 1
@@ -965,14 +967,27 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
     closest: a state constraint touched over a stretch is held by a few of its rows);
     zero elsewhere."""
     y = np.zeros(rows.nodes.size)
-    hs = np.flatnonzero(kind == 1)
-    if hs.size == 0:
-        return y
-    normals = rows.coeffs[hs, :3]
-    _mark_touching(
-        np.einsum("ij,ij->i", normals, r_bar[rows.nodes[hs]]), normals, rows.offsets, hs, y
-    )
+    hs, normals, points = _half_space_rows(kind, rows.coeffs, rows.nodes, r_bar)
+    if hs.size:
+        _mark_touching(np.einsum("ij,ij->i", normals, points), normals, rows.offsets, hs, y)
     return y
+
+
+@njit(cache=True)
+def _half_space_rows(
+    kind: np.ndarray, coeffs: np.ndarray, nodes: np.ndarray, r_bar: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The half-space rows (kind 1) of :func:`_guess_active`: their indices (K,), normals
+    (K, 3) (``coeffs[hs, :3]``) and the iterate's positions at their nodes (K, 3)
+    (``r_bar[nodes[hs]]``), gathered (copies: the same arrays as numpy's indexing)."""
+    hs = np.flatnonzero(kind == 1)
+    normals = np.empty((hs.size, 3))
+    points = np.empty((hs.size, 3))
+    for i in range(hs.size):
+        for c in range(3):
+            normals[i, c] = coeffs[hs[i], c]
+            points[i, c] = r_bar[nodes[hs[i]], c]
+    return hs, normals, points
 
 
 @njit(cache=True)
@@ -1732,7 +1747,7 @@ def plan(
     x0 = np.asarray(x0, dtype=np.float64)
     xf = np.asarray(xf, dtype=np.float64)
     used = 0
-    sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
+    sizes = [float(axes.max()) for _, axes in cg.ellipsoids(geo)]
     trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
     warm = warm_controls is not None and warm_controls.shape == (steps, 3)
     exists = True  # whether the first iterate, when unconstrained, has a plan
