@@ -290,9 +290,24 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     return modes
 
 
-#: The last corridor's untightened cone and its rows (:func:`_untightened_corridor`), by
-#: the corridor's port, axis and half-angle.
-_CORRIDOR_KEPT: list[tuple[tuple[Any, ...], cg.SecondOrderCone, tuple[Any, ...]]] = []
+@njit(cache=True)
+def _corridor_nodes(modes: np.ndarray) -> np.ndarray:
+    """The nodes in the corridor cone (modes corridor and both), in order."""
+    return np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+
+
+@njit(cache=True)
+def _half_space_nodes(modes: np.ndarray) -> np.ndarray:
+    """The nodes with keep-out half-spaces, in order: node 0 (the start, never a keep-out
+    node: :func:`_modes`) and the keep-out nodes (modes keep-out and both)."""
+    keep_out = modes >= _KEEP_OUT
+    keep_out[0] = True
+    return np.flatnonzero(keep_out)
+
+
+#: The last corridor's untightened cone and its rows (:func:`_untightened_corridor`), with
+#: the geometry last asked and the corridor's key (its port, axis and half-angle).
+_CORRIDOR_KEPT: list[tuple[cg.Geometry, tuple[Any, ...], cg.SecondOrderCone, tuple[Any, ...]]] = []
 
 
 def _array_key(array: np.ndarray | None) -> tuple[str, tuple[int, ...], bytes] | None:
@@ -309,14 +324,19 @@ def _untightened_corridor(
     loop's re-solves share one, each with its own :class:`.constraints.Geometry`, and
     :func:`_modes` reads it twice a re-solve): the same arrays as made afresh (the key is
     every bit the cone is made of: the port's and the axis' arrays, the half-angle)."""
-    key = (_array_key(geo.port_km), _array_key(geo.axis), geo.half_angle_rad)
-    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] != key:
-        cone = cg.corridor_cone(geo, 0.0)
-        rows = cone.rows()
-        for array in rows[:3]:
-            array.flags.writeable = False
-        _CORRIDOR_KEPT[:] = [(key, cone, rows)]
-    _, cone, rows = _CORRIDOR_KEPT[0]
+    kept = _CORRIDOR_KEPT[0] if _CORRIDOR_KEPT else None
+    if kept is None or kept[0] is not geo:  # the geometry last asked: no key to compare
+        key = (_array_key(geo.port_km), _array_key(geo.axis), geo.half_angle_rad)
+        if kept is None or kept[1] != key:
+            cone = cg.corridor_cone(geo, 0.0)
+            rows = cone.rows()
+            for array in rows[:3]:
+                array.flags.writeable = False
+            kept = (geo, key, cone, rows)
+        else:  # the same corridor: kept for this geometry from now on
+            kept = (geo, *kept[1:])
+        _CORRIDOR_KEPT[:] = [kept]
+    _, _, cone, rows = kept
     return cone, (rows[0], rows[1], rows[2], rows[3])
 
 
@@ -435,9 +455,7 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    keep_out = modes >= _KEEP_OUT
-    keep_out[0] = True  # node 0 (never a keep-out node: _modes) has its half-spaces too
-    nodes = np.flatnonzero(keep_out)
+    nodes = _half_space_nodes(modes)
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
@@ -628,7 +646,7 @@ def _planes(
 
 def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
     """The first node that carries a half-space or a corridor row (N when none does)."""
-    corridor = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    corridor = _corridor_nodes(modes)
     return int(np.min(np.r_[pairs[:, 0], corridor, modes.size - 1]))
 
 
@@ -1024,7 +1042,7 @@ def _cone_cuts(
     unit ŵ), so a program with cuts is a relaxation of the one with cones (Kelley's
     cutting planes); ρ = R_kᵀ r with ``motion``.
     """
-    nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
+    nodes = _corridor_nodes(sub.modes)
     if nodes.size == 0:  # no corridor node (most programs): no cut
         return nodes, np.zeros((0, 6)), np.zeros(0), nodes * _CODE_NODE
     rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
@@ -1380,7 +1398,7 @@ def _program(
     rhs.append(np.concatenate(b_nonneg))
     cones.append(clarabel.NonnegativeConeT(row0))
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
-    corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    corridor_nodes = _corridor_nodes(modes)
     if corridor_nodes.size:
         rows_c = 4 * np.arange(corridor_nodes.size)
         if motion is None:  # one margin, one cone for every node
