@@ -277,3 +277,236 @@ def test_the_kept_corridor_rows_are_the_geometrys_own() -> None:
         _, rows, _ = cp._untightened_corridor(geo)
         fresh = cg.corridor_cone(geo, 0.0).rows()
         assert all(np.array_equal(g, w) for g, w in zip(rows, fresh, strict=True))
+
+
+def test_a_corridor_made_again_with_the_same_bits_is_the_one_kept() -> None:
+    """A closed loop makes a new ``Geometry`` every re-solve: the corridor kept for the same
+    port, axis and half-angle is reused (its arrays, not made again); one bit apart, not."""
+    corridor = Corridor((0.0, 0.0, -0.25), (0.0, 0.0, -1.0), 30.0)
+    first = cg.geometry(Constraints(keep_out=KeepOut((0.2, 0.2, 0.2)), corridor=corridor))
+    again = cg.geometry(Constraints(keep_out=KeepOut((0.2, 0.2, 0.2)), corridor=corridor))
+    assert first is not again
+    kept = cp._untightened_corridor(first)[1][0]
+    assert cp._untightened_corridor(again)[1][0] is kept
+    port = np.nextafter(first.port_km, 1.0)
+    moved = cg.Geometry(first.semi_axes_km, port, first.axis, first.half_angle_rad)
+    rows = cp._untightened_corridor(moved)[1]
+    assert rows[0] is not kept
+    fresh = cg.corridor_cone(moved, 0.0).rows()
+    assert all(np.array_equal(g, w) for g, w in zip(rows, fresh, strict=True))
+
+
+def test_the_kept_corridors_clearance_is_that_of_the_zone_asked() -> None:
+    """The same corridor around another zone is another key: its clearance is the new
+    zone's (a 200 m sphere: 50 m; a 100 m one: 150 m), never the one kept."""
+    corridor = Corridor((0.0, 0.0, -0.25), (0.0, 0.0, -1.0), 30.0)
+    for radius in (0.2, 0.1, 0.2):
+        geo = cg.geometry(Constraints(keep_out=KeepOut((radius,) * 3), corridor=corridor))
+        assert cp._untightened_corridor(geo)[2] == cg.corridor_clearance_km(geo)
+        assert cp._untightened_corridor(geo)[2] == pytest.approx(0.25 - radius, abs=1e-15)
+
+
+def test_the_cone_residuals_are_those_of_before() -> None:
+    """``SecondOrderCone.residual_km``: ``r c + d − ‖r Aᵀ + b‖`` by numpy, bit for bit."""
+    rng = np.random.default_rng(11)
+    for rows in range(1, 400, 7):
+        axis = rng.normal(size=3)
+        cone = cg.SecondOrderCone(
+            rng.normal(size=3), axis / np.linalg.norm(axis), rng.uniform(0.1, 2.0), 1e-4
+        )
+        a, b, c, d = cone.rows()
+        r = _vectors(rng, rows)
+        want = r @ c + d - np.linalg.norm(r @ a.T + b, axis=-1)
+        assert np.array_equal(cone.residual_km(r), want)
+    assert np.array_equal(cone.residual_km(r[0]), r[0] @ c + d - np.linalg.norm(r[0] @ a.T + b))
+
+
+def _dual_rows_before(
+    sub: cp._Subproblem,
+    pairs: np.ndarray,
+    row_scale: np.ndarray,
+    box: tuple[np.ndarray, ...],
+    ab: cp.ab.AbortRows,
+) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]:
+    """``constrained._dual_rows`` as it was (numpy, block by block, a stable argsort), with
+    the abort rows ``ab`` (none: empty)."""
+    steps, s_p = sub.modes.size - 1, float(row_scale[0])
+    normals, offs = cp._planes(sub.half_spaces, pairs, sub.motion)
+    sign = np.where(box[1] < 3, 1.0, -1.0)
+    axis = box[1] % 3
+    t_coeffs = np.zeros((box[0].size, 6))
+    t_coeffs[np.arange(box[0].size), axis] = sign * s_p
+    t_offsets = (sign * sub.r_bar[box[0], axis] - sub.trust_km) * s_p
+    hs_coeffs = np.zeros((pairs.shape[0], 6))
+    hs_coeffs[:, :3] = normals * s_p
+    node = np.r_[np.full(6, steps), pairs[:, 0], box[0], ab.nodes]
+    coeffs = np.vstack([np.diag(row_scale), hs_coeffs, t_coeffs, ab.coeffs * s_p])
+    offsets = np.r_[row_scale * sub.xf, offs * s_p, t_offsets, ab.offsets_km * s_p]
+    path_tol = np.full(pairs.shape[0] + box[0].size + ab.nodes.size, cp.DUAL_TOL_KM * s_p)
+    tol = np.r_[row_scale * cp._TERMINAL_TOL, path_tol]
+    kinds = np.r_[np.zeros(6), np.ones(pairs.shape[0]), np.full(box[0].size, 2)]
+    kinds = np.r_[kinds, np.full(ab.nodes.size, 3)].astype(np.int64)
+    keys = np.r_[np.arange(6), pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2], box[1]]
+    keys = np.r_[keys, np.full(ab.nodes.size, 999)].astype(np.int64)
+    order = np.argsort(node, kind="stable")
+    kind = kinds[order]
+    code = node[order] * cp._CODE_NODE + kind * cp._CODE_KIND + keys[order]
+    rows = (node[order], coeffs[order], offsets[order], kind == 0, tol[order])
+    return rows, kind, code
+
+
+def test_the_dual_rows_are_those_of_before() -> None:
+    """``_dual_rows`` (its kernel ``_row_arrays``): terminal, half-space, trust and abort
+    rows as numpy wrote and sorted them before, bit for bit; and the rows of a cut or trust
+    round merged in (``_with_rows``) as numpy's concatenation and stable sort did."""
+    rng = np.random.default_rng(12)
+    geo = cg.geometry(Constraints(keep_out=KeepOut((0.2, 0.2, 0.2))))
+    for trial in range(150):
+        steps = int(rng.integers(3, 150))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, 1 + trial % 2)
+        pairs = cp._pairs(modes, r_bar, half_spaces, trust)[0]
+        boxed = np.flatnonzero(modes > 0)
+        count = int(rng.integers(0, 3 * boxed.size + 1))
+        box = (np.sort(rng.choice(boxed, count)), rng.integers(0, 6, count)) if boxed.size else (
+            np.zeros(0, np.int64), np.zeros(0, np.int64)
+        )  # fmt: skip
+        n_ab = int(rng.integers(0, 5))
+        abort = cp.ab.AbortRows(
+            rng.integers(1, steps + 1, n_ab), rng.normal(size=(n_ab, 6)), rng.normal(size=n_ab)
+        )
+        xf = rng.normal(size=6)
+        states = np.hstack([r_bar, rng.normal(size=r_bar.shape)])  # r̄: a strided view
+        sub = cp._Subproblem(
+            N_MOTION, 1.0, U_MAX, np.zeros(6), xf, 0.5, geo, modes, states[:, :3],
+            np.zeros((steps, 3)), np.zeros(steps + 1), half_spaces, trust,
+            abort_rows=abort if n_ab else None,
+        )  # fmt: skip
+        row_scale = feasibility.row_scale(float(steps), U_MAX)
+        rows, kind, code = cp._dual_rows(sub, pairs, row_scale, box)
+        want_rows, want_kind, want_code = _dual_rows_before(sub, pairs, row_scale, box, abort)
+        for g, w in zip(rows, want_rows, strict=True):
+            assert g.dtype == w.dtype and np.array_equal(g, w)
+        assert np.array_equal(kind, want_kind) and np.array_equal(code, want_code)
+        # a round of cuts merged in: numpy's concatenation and stable sort of before
+        m = int(rng.integers(1, 6))
+        cuts = (
+            rng.integers(1, steps + 1, m), rng.normal(size=(m, 6)), rng.normal(size=m),
+            rng.integers(0, 1 << 30, m),
+        )  # fmt: skip
+        merged, merged_kind, merged_code = cp._with_rows(rows, kind, code, cuts, 1e-9, 4)
+        nodes = np.r_[rows.nodes, cuts[0]]
+        order = np.argsort(nodes, kind="stable")
+        want = (
+            nodes[order],
+            np.vstack([rows.coeffs, cuts[1]])[order],
+            np.r_[rows.offsets, cuts[2]][order],
+            np.r_[rows.equality, np.zeros(m, dtype=bool)][order],
+            np.r_[rows.tol, np.full(m, 1e-9)][order],
+        )
+        for g, w in zip(merged, want, strict=True):
+            assert g.dtype == w.dtype and np.array_equal(g, w)
+        assert np.array_equal(merged_kind, np.r_[kind, np.full(m, 4)][order])
+        assert np.array_equal(merged_code, np.r_[code, cuts[3]][order])
+        assert np.array_equal(cp._absent(cuts[3], merged_code), np.zeros(m, dtype=bool))
+        probe = rng.integers(0, 1 << 30, 20)
+        assert np.array_equal(cp._absent(probe, code), ~np.isin(probe, code))
+
+
+def test_the_touched_half_spaces_are_those_of_before() -> None:
+    """``_guess_active``: a speck on the half-space rows (kind 1) whose plane passes within
+    ``GUESS_KM`` of r̄ at their node, ``(nᵀ r̄ − offset)/‖n‖ ≤ GUESS_KM``, numpy's of before."""
+    rng = np.random.default_rng(13)
+    for _ in range(200):
+        count = int(rng.integers(1, 120))
+        nodes = np.sort(rng.integers(1, 100, count))
+        kind = rng.integers(0, 4, count)
+        coeffs = rng.normal(size=(count, 6)) * 1e3
+        r_bar = np.hstack([0.3 * rng.normal(size=(101, 3)), np.zeros((101, 3))])[:, :3]
+        offsets = np.einsum("ij,ij->i", coeffs[:, :3], r_bar[nodes])
+        offsets += rng.choice([-1.0, 1.0], count) * rng.uniform(0.0, 3.0, count)
+        rows = path_dual.DualRows(nodes, coeffs, offsets, kind == 0, np.ones(count))
+        hs = np.flatnonzero(kind == 1)
+        residual = (
+            np.einsum("ij,ij->i", coeffs[hs, :3], r_bar[nodes[hs]]) - offsets[hs]
+        ) / np.linalg.norm(coeffs[hs, :3], axis=-1)
+        want = np.zeros(count)
+        want[hs[residual <= cp.GUESS_KM]] = 1e-300
+        assert np.array_equal(cp._guess_active(rows, kind, r_bar), want)
+
+
+def test_the_iterates_move_and_the_margins_check_are_those_of_before() -> None:
+    """``_largest_move`` is ``max |r − r̄|`` and ``_within_margins`` ``all(s ≤ min(m_k,
+    m_k+1))`` by numpy, NaN included (a NaN move, a check that fails)."""
+    rng = np.random.default_rng(14)
+    for trial in range(300):
+        steps = int(rng.integers(1, 100))
+        x = rng.normal(size=(steps + 1, 6))
+        r_bar = x[:, :3] + 1e-3 * rng.normal(size=(steps + 1, 3)) * (rng.random() < 0.9)
+        step, node = rng.uniform(0, 1, steps), rng.uniform(0, 1, steps + 1)
+        if trial % 5 == 0:  # a NaN somewhere
+            x[rng.integers(0, steps + 1), rng.integers(0, 3)] = np.nan
+            node[rng.integers(0, steps + 1)] = np.nan
+        if trial % 7 == 0:
+            step[:] = 0.0
+        moved = cp._largest_move(x, r_bar)
+        want = float(np.max(np.abs(x[:, :3] - r_bar)))
+        assert moved == want or (np.isnan(moved) and np.isnan(want))
+        assert cp._within_margins(step, node) == bool(
+            np.all(step <= np.minimum(node[:-1], node[1:]))
+        )
+
+
+def test_the_rows_vectors_and_the_cost_are_those_of_before() -> None:
+    """``path_dual``: each row's ``h = (Φ^{k−N})ᵀ g`` from the kept table of backward
+    transitions equal to that of its own ``stm(n, (k − N)Δt)`` (made before for every
+    distinct node), however the table was made; the cost ``Σ c₁‖ũ‖ + c₂‖ũ‖²`` numpy's."""
+    rng = np.random.default_rng(15)
+    path_dual._BACKWARD.clear()
+    for steps in (40, 300, 120, 301, 1):
+        nodes = np.sort(rng.integers(1, steps + 1, 50))
+        coeffs = rng.normal(size=(50, 6))
+        got = np.empty_like(coeffs)
+        table = path_dual.backward_transitions(N_MOTION, 1.0, steps)
+        assert table.shape == (steps + 1, 6, 6) and not table.flags.writeable
+        path_dual._row_vectors(table, steps, nodes, coeffs, got)
+        want = np.empty_like(coeffs)
+        for i, k in enumerate(nodes):
+            back = dynamics.stm(N_MOTION, float(k - steps))
+            for c in range(6):
+                acc = 0.0
+                for r in range(6):
+                    acc += back[r, c] * coeffs[i, r]
+                want[i, c] = acc
+        assert np.array_equal(got, want)
+    for size in (1, 7, 130, 800):
+        u = rng.normal(size=(size, 3)) * (rng.random((size, 1)) < 0.5)
+        norms = np.linalg.norm(u, axis=-1)
+        want_cost = float(np.sum(0.7 * norms + 2e-3 * norms**2))
+        assert float(np.sum(path_dual._step_costs(u, 0.7, 2e-3))) == want_cost
+
+
+def test_the_half_spaces_need_no_detour_side_when_no_node_is_inside() -> None:
+    """``_half_spaces`` works out the detour side only when a node lies inside the zone; its
+    planes are then those with the side's shift (which moves only the nodes inside),
+    bit for bit, and a node inside still gets the shifted point."""
+    rng = np.random.default_rng(16)
+    geo = cg.geometry(Constraints(keep_out=KeepOut((0.2, 0.15, 0.1))))
+    axes = np.asarray(geo.semi_axes_km)
+    for trial in range(60):
+        steps = int(rng.integers(3, 120))
+        directions = rng.normal(size=(steps + 1, 3))
+        directions /= np.linalg.norm(directions, axis=1)[:, None]
+        scale = (
+            rng.uniform(1.01, 3.0, (steps + 1, 1))
+            if trial % 2
+            else rng.uniform(0.3, 3.0, (steps + 1, 1))
+        )
+        r_bar = directions * 0.2 * scale
+        modes = np.full(steps + 1, 2, dtype=np.int8)
+        modes[0] = modes[-1] = 0
+        margins = rng.uniform(0.0, 1e-4, steps + 1)
+        (got,) = cp._half_spaces(geo, modes, r_bar, margins, None, 0.0)
+        level = cg.ellipsoid_level(r_bar, axes)
+        shift = float(np.max(axes)) * cp._detour_side(axes, r_bar, level)
+        want = cp._node_planes(axes, r_bar, level, got.nodes, shift, margins)
+        assert np.array_equal(got.normals, want[0]) and np.array_equal(got.offsets, want[1])

@@ -475,7 +475,21 @@ class SecondOrderCone:
         :meth:`rows` when the caller keeps them."""
         a, b, c, d = self.rows() if rows is None else rows
         r = np.asarray(r_km, dtype=np.float64)
-        return np.asarray(r @ c + d - row_norms(r @ a.T + b), dtype=np.float64)
+        along = r @ c
+        across = r @ a.T
+        return _cone_residuals(along.reshape(-1), across.reshape(-1, 3), b, d).reshape(along.shape)
+
+
+@njit(cache=True)
+def _cone_residuals(along: FloatArray, across: FloatArray, b: FloatArray, d: float) -> FloatArray:
+    """:meth:`SecondOrderCone.residual_km` of rows r given ``along`` = r c (K,) and ``across``
+    = r Aᵀ (K, 3) (numpy's products): ``along + d − ‖across + b‖``, numpy's elementwise
+    arithmetic in its order and :func:`row_norms`' norm (the same bits)."""
+    out = np.empty(along.size)
+    for k in range(along.size):
+        w0, w1, w2 = across[k, 0] + b[0], across[k, 1] + b[1], across[k, 2] + b[2]
+        out[k] = (along[k] + d) - math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    return out
 
 
 def corridor_cone(geo: Geometry, margin_km: float) -> SecondOrderCone:

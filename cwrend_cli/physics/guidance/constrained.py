@@ -301,25 +301,61 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     return modes
 
 
-#: The last geometry's untightened corridor cone, its rows and its clearance of the zone
-#: (:func:`_untightened_corridor`).
-_CORRIDOR_KEPT: list[tuple[cg.Geometry, cg.SecondOrderCone, tuple[Any, ...], float]] = []
+@njit(cache=True)
+def _corridor_nodes(modes: np.ndarray) -> np.ndarray:
+    """The nodes in the corridor cone (modes corridor and both), in order."""
+    return np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+
+
+@njit(cache=True)
+def _half_space_nodes(modes: np.ndarray) -> np.ndarray:
+    """The nodes with keep-out half-spaces, in order: node 0 (the start, never a keep-out
+    node: :func:`_modes`) and the keep-out nodes (modes keep-out and both)."""
+    keep_out = modes >= _KEEP_OUT
+    keep_out[0] = True
+    return np.flatnonzero(keep_out)
+
+
+#: The last corridor's untightened cone, its rows and its clearance of the zone
+#: (:func:`_untightened_corridor`), with the geometry last asked and its key (the
+#: corridor's port, axis and half-angle and the zone's ellipsoids).
+_CORRIDOR_KEPT: list[
+    tuple[cg.Geometry, tuple[Any, ...], cg.SecondOrderCone, tuple[Any, ...], float]
+] = []
+
+
+def _array_key(array: np.ndarray | None) -> tuple[str, tuple[int, ...], bytes] | None:
+    """What an array is, bit for bit, as a dictionary key: dtype, shape and bytes."""
+    if array is None:
+        return None
+    return array.dtype.str, array.shape, array.tobytes()
 
 
 def _untightened_corridor(
     geo: cg.Geometry,
 ) -> tuple[cg.SecondOrderCone, tuple[np.ndarray, np.ndarray, np.ndarray, float], float]:
     """``corridor_cone(geo, 0)``, its rows and :func:`.constraints.corridor_clearance_km`,
-    kept for the geometry last asked (a closed loop's re-solves share one, and
-    :func:`_modes` reads it twice a re-solve): the same arrays as made afresh (the
-    geometry is held, so the identity test cannot be fooled)."""
-    if not _CORRIDOR_KEPT or _CORRIDOR_KEPT[0][0] is not geo:
-        cone = cg.corridor_cone(geo, 0.0)
-        rows = cone.rows()
-        for array in rows[:3]:
-            array.flags.writeable = False
-        _CORRIDOR_KEPT[:] = [(geo, cone, rows, cg.corridor_clearance_km(geo))]
-    _, cone, rows, clearance_km = _CORRIDOR_KEPT[0]
+    kept for the corridor last asked (a closed loop's re-solves share one, each with its
+    own :class:`.constraints.Geometry`, and :func:`_modes` reads it twice a re-solve): the
+    same values as made afresh (the key is every bit they are made of: the port's and the
+    axis' arrays, the half-angle and the zone's semi-axes and centres)."""
+    kept = _CORRIDOR_KEPT[0] if _CORRIDOR_KEPT else None
+    if kept is None or kept[0] is not geo:  # the geometry last asked: no key to compare
+        key = (
+            _array_key(geo.port_km), _array_key(geo.axis), geo.half_angle_rad,
+            _array_key(geo.semi_axes_km), _array_key(geo.bodies_centre_km),
+            _array_key(geo.bodies_semi_axes_km),
+        )  # fmt: skip
+        if kept is None or kept[1] != key:
+            cone = cg.corridor_cone(geo, 0.0)
+            rows = cone.rows()
+            for array in rows[:3]:
+                array.flags.writeable = False
+            kept = (geo, key, cone, rows, cg.corridor_clearance_km(geo))
+        else:  # the same corridor: kept for this geometry from now on
+            kept = (geo, *kept[1:])
+        _CORRIDOR_KEPT[:] = [kept]
+    _, _, cone, rows, clearance_km = kept
     return cone, (rows[0], rows[1], rows[2], rows[3]), clearance_km
 
 
@@ -421,6 +457,19 @@ def _node_planes(
     return normals, offsets
 
 
+#: :func:`_node_planes`' shift when no node is inside the zone (it reads none then).
+_NO_SHIFT = np.zeros(3)
+
+
+@njit(cache=True)
+def _any_inside(level: np.ndarray, nodes: np.ndarray) -> bool:
+    """Whether one of ``nodes`` has its ``level`` below 1 (inside the ellipsoid)."""
+    for k in nodes:  # noqa: SIM110 (a loop: numba compiles no generator for any())
+        if level[k] < 1.0:
+            return True
+    return False
+
+
 def _half_spaces(
     geo: cg.Geometry,
     modes: np.ndarray,
@@ -440,15 +489,18 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = np.concatenate((np.zeros(1, np.int64), np.flatnonzero(modes >= _KEEP_OUT)))
+    nodes = _half_space_nodes(modes)
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
         level = cg.ellipsoid_level(local, axes)
-        side = _detour_side(axes, local, level)
+        # the detour side moves only the nodes inside the zone: none in most re-solves
+        shift = _NO_SHIFT
+        if _any_inside(level, nodes):
+            shift = float(np.max(axes)) * _detour_side(axes, local, level)
         normals, offsets = _node_planes(
-            np.asarray(axes, dtype=np.float64), local, level, nodes,
-            float(np.max(axes)) * side, np.asarray(margins_km, dtype=np.float64),
+            np.asarray(axes, dtype=np.float64), local, level, nodes, shift,
+            np.asarray(margins_km, dtype=np.float64),
         )  # fmt: skip
         if sigma_margin > 0.0 and p_pos_km2 is not None:
             if motion is None:
@@ -500,13 +552,13 @@ def _pairs_planes(
     """:func:`_pairs` and the kept rows' planes (normals (P, 3), offsets (P,) [km]): those
     :func:`_planes` gives for them, taken from the trust test's (the same bits)."""
     if motion is None:  # the three steps below in one pass (the same rows, the same bits)
+        if len(half_spaces) == 1:  # one ellipsoid: its arrays as a stack of one, no copy
+            normals, offsets = half_spaces[0].normals[None], half_spaces[0].offsets[None]
+        else:
+            normals = np.stack([hs.normals for hs in half_spaces])
+            offsets = np.stack([hs.offsets for hs in half_spaces])
         kept, left_out, kept_normals, kept_offsets = _fixed_pairs(
-            half_spaces[0].index,
-            np.stack([hs.normals for hs in half_spaces]),
-            np.stack([hs.offsets for hs in half_spaces]),
-            modes,
-            r_bar,
-            trust_km,
+            half_spaces[0].index, normals, offsets, modes, r_bar, trust_km
         )
         return kept, left_out, (kept_normals, kept_offsets)
     # every ellipsoid has the same nodes
@@ -542,10 +594,10 @@ def _fixed_pairs(
         n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
         offset = offsets[b, row]
         if _box_low(n0, n1, n2, r_bar, k, trust_km) >= offset + SCP_TOL_KM:
-            out[o] = pairs[p]
+            out[o, 0], out[o, 1], out[o, 2] = k, pairs[p, 1], b
             o += 1
         else:
-            kept[i] = pairs[p]
+            kept[i, 0], kept[i, 1], kept[i, 2] = k, pairs[p, 1], b
             kept_normals[i, 0], kept_normals[i, 1], kept_normals[i, 2] = n0, n1, n2
             kept_offsets[i] = offset
             i += 1
@@ -628,7 +680,7 @@ def _planes(
 
 def _first_node(modes: np.ndarray, pairs: np.ndarray) -> int:
     """The first node that carries a half-space or a corridor row (N when none does)."""
-    corridor = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    corridor = _corridor_nodes(modes)
     return int(np.min(np.r_[pairs[:, 0], corridor, modes.size - 1]))
 
 
@@ -745,67 +797,111 @@ def _dual_rows(
     (0 terminal, 1 half-space, 2 trust, 3 abort) and code (:data:`_CODE_NODE`). Rows
     scaled as the terminal position rows (``row_scale``: :func:`.feasibility.grid_problem`).
     ``planes``: :func:`_planes` of ``pairs`` when the caller has them (:func:`_pairs_planes`).
-    Written into arrays of the final size, block by block (terminal, half-space, trust,
-    abort rows), then sorted stably by node."""
-    steps = sub.modes.size - 1
-    s_p = float(row_scale[0])
-    n_hs, n_tr = pairs.shape[0], box[0].size
-    abort = sub.abort_rows if sub.abort_rows is not None and sub.abort_rows.nodes.size else None
-    total = 6 + n_hs + n_tr + (0 if abort is None else abort.nodes.size)
-    node = np.empty(total, np.int64)
-    coeffs = np.zeros((total, 6))
-    offsets, tol = np.empty(total), np.empty(total)
-    kinds, keys = np.empty(total, np.int64), np.empty(total, np.int64)
-    # terminal state: x_N = x_f
-    node[:6], kinds[:6], keys[:6] = steps, 0, np.arange(6)
-    coeffs[np.arange(6), np.arange(6)] = row_scale
-    offsets[:6] = row_scale * sub.xf
-    tol[:6] = row_scale * _TERMINAL_TOL
-    i = 6
-    if n_hs:  # nᵀ r_k ≥ offset
-        normals, offs = _planes(sub.half_spaces, pairs, sub.motion) if planes is None else planes
-        rows = slice(i, i + n_hs)
-        node[rows], kinds[rows] = pairs[:, 0], 1
-        coeffs[rows, :3] = normals * s_p
-        offsets[rows], tol[rows] = offs * s_p, DUAL_TOL_KM * s_p
-        keys[rows] = pairs[:, 0] - pairs[:, 1] + 2 * pairs[:, 2]
-        i += n_hs
-    if n_tr:  # the trust rows given (:func:`_trust_rows`)
-        t_node, t_coeffs, t_offsets, _ = _trust_rows(sub, box[0], box[1], s_p)
-        rows = slice(i, i + n_tr)
-        node[rows], coeffs[rows], offsets[rows] = t_node, t_coeffs, t_offsets
-        tol[rows], kinds[rows], keys[rows] = DUAL_TOL_KM * s_p, 2, box[1]
-        i += n_tr
-    if abort is not None:  # cᵀ x_k ≥ o
-        rows = slice(i, total)
-        node[rows], coeffs[rows] = abort.nodes, abort.coeffs * s_p
-        offsets[rows], tol[rows] = abort.offsets_km * s_p, DUAL_TOL_KM * s_p
-        kinds[rows], keys[rows] = 3, 999
-    order = np.argsort(node, kind="stable")
-    kind = kinds[order]
-    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
-    dual_rows = path_dual.DualRows(
-        node[order], coeffs[order], offsets[order], kind == 0, tol[order]
-    )
-    return dual_rows, kind, code
+    Written by :func:`_row_arrays`."""
+    if planes is None:
+        planes = _planes(sub.half_spaces, pairs, sub.motion)
+    abort = sub.abort_rows if sub.abort_rows is not None else _NO_ABORT_ROWS
+    node, coeffs, offsets, tol, kind, code = _row_arrays(
+        row_scale, sub.xf, _TERMINAL_TOL, pairs, planes[0], planes[1], box[0], box[1],
+        sub.r_bar, sub.trust_km, abort.nodes, abort.coeffs, abort.offsets_km,
+    )  # fmt: skip
+    return path_dual.DualRows(node, coeffs, offsets, kind == 0, tol), kind, code
 
 
 #: The terminal rows' tolerances before scaling: position [km], velocity [km/s].
 _TERMINAL_TOL = np.r_[np.full(3, DUAL_TOL_KM), np.full(3, DUAL_TOL_KM_S)]
+#: No abort row (abort safety off), for :func:`_row_arrays`.
+_NO_ABORT_ROWS = ab.AbortRows(np.zeros(0, np.int64), np.zeros((0, 6)), np.zeros(0))
+
+
+@njit(cache=True)
+def _row_arrays(
+    row_scale: np.ndarray,
+    xf: np.ndarray,
+    terminal_tol: np.ndarray,
+    pairs: np.ndarray,
+    normals: np.ndarray,
+    plane_offsets: np.ndarray,
+    box_nodes: np.ndarray,
+    box_comps: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+    abort_nodes: np.ndarray,
+    abort_coeffs: np.ndarray,
+    abort_offsets: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of :func:`_dual_rows`: (nodes, coeffs (M, 6), offsets, tolerances, kinds,
+    codes), sorted stably by node. Written block by block — the terminal state
+    ``x_N = x_f`` (the last node of ``r_bar``), the half-space rows ``nᵀ r_k ≥ offset``
+    of ``pairs`` with their planes (``normals``, ``plane_offsets`` [km]), the trust rows
+    of ``box_nodes``, ``box_comps`` (:func:`_trust_arrays`) and the abort rows
+    ``cᵀ x_k ≥ o`` — each scaled by ``row_scale`` (:func:`.feasibility.grid_problem`;
+    the path rows by its position entry), then sorted (numpy's stable sort's order)."""
+    steps = r_bar.shape[0] - 1
+    s_p = row_scale[0]
+    n_hs, n_tr, n_ab = pairs.shape[0], box_nodes.size, abort_nodes.size
+    total = 6 + n_hs + n_tr + n_ab
+    node = np.empty(total, np.int64)
+    coeffs = np.zeros((total, 6))
+    offsets, tol = np.empty(total), np.empty(total)
+    kinds, keys = np.empty(total, np.int64), np.empty(total, np.int64)
+    for i in range(6):
+        node[i], kinds[i], keys[i] = steps, 0, i
+        coeffs[i, i] = row_scale[i]
+        offsets[i] = row_scale[i] * xf[i]
+        tol[i] = row_scale[i] * terminal_tol[i]
+    row = 6
+    for p in range(n_hs):
+        node[row], kinds[row] = pairs[p, 0], 1
+        for c in range(3):
+            coeffs[row, c] = normals[p, c] * s_p
+        offsets[row], tol[row] = plane_offsets[p] * s_p, DUAL_TOL_KM * s_p
+        keys[row] = pairs[p, 0] - pairs[p, 1] + 2 * pairs[p, 2]
+        row += 1
+    t_coeffs, t_offsets = _trust_arrays(box_nodes, box_comps, r_bar, trust_km, s_p)
+    for p in range(n_tr):
+        node[row], kinds[row], keys[row] = box_nodes[p], 2, box_comps[p]
+        coeffs[row] = t_coeffs[p]
+        offsets[row], tol[row] = t_offsets[p], DUAL_TOL_KM * s_p
+        row += 1
+    for p in range(n_ab):
+        node[row], kinds[row], keys[row] = abort_nodes[p], 3, 999
+        for c in range(6):
+            coeffs[row, c] = abort_coeffs[p, c] * s_p
+        offsets[row], tol[row] = abort_offsets[p] * s_p, DUAL_TOL_KM * s_p
+        row += 1
+    order = np.argsort(node, kind="mergesort")
+    kind = kinds[order]
+    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
+    return node[order], coeffs[order], offsets[order], tol[order], kind, code
 
 
 def _trust_rows(
     sub: _Subproblem, nodes: np.ndarray, comps: np.ndarray, scale: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Trust rows of ``sub`` at ``nodes`` (M,), component ``comps`` (M,) 0 … 5: (nodes,
-    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``. Component
-    i < 3: ``r_k,i ≥ r̄_k,i − T``; i ≥ 3: ``−r_k,i−3 ≥ −r̄_k,i−3 − T`` (T the trust radius)."""
-    sign = np.where(comps < 3, 1.0, -1.0)
-    axis = comps % 3
-    coeffs = np.zeros((nodes.size, 6))
-    coeffs[np.arange(nodes.size), axis] = sign * scale
-    offsets = (sign * sub.r_bar[nodes, axis] - sub.trust_km) * scale
+    coeffs (M, 6), offsets, codes) of rows ``gᵀx_k ≥ f`` scaled by ``scale``
+    (:func:`_trust_arrays`)."""
+    coeffs, offsets = _trust_arrays(nodes, comps, sub.r_bar, sub.trust_km, scale)
     return nodes, coeffs, offsets, nodes * _CODE_NODE + 2 * _CODE_KIND + comps
+
+
+@njit(cache=True)
+def _trust_arrays(
+    nodes: np.ndarray, comps: np.ndarray, r_bar: np.ndarray, trust_km: float, scale: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(coeffs (M, 6), offsets (M,)) of the trust rows at ``nodes``, component ``comps``,
+    scaled by ``scale``: component i < 3 ``r_k,i ≥ r̄_k,i − T``, i ≥ 3 ``−r_k,i−3 ≥
+    −r̄_k,i−3 − T`` (T = ``trust_km``), i.e. sign s = ±1 on axis i mod 3, offset
+    ``(s r̄_k,i mod 3 − T) × scale``."""
+    coeffs = np.zeros((nodes.size, 6))
+    offsets = np.empty(nodes.size)
+    for p in range(nodes.size):
+        sign = 1.0 if comps[p] < 3 else -1.0
+        axis = comps[p] % 3
+        coeffs[p, axis] = sign * scale
+        offsets[p] = (sign * r_bar[nodes[p], axis] - trust_km) * scale
+    return coeffs, offsets
 
 
 def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -924,17 +1020,42 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
     closest: a state constraint touched over a stretch is held by a few of its rows);
     zero elsewhere."""
     y = np.zeros(rows.nodes.size)
-    hs = np.flatnonzero(kind == 1)
-    if hs.size == 0:
-        return y
-    residual = (
-        np.einsum("ij,ij->i", rows.coeffs[hs, :3], r_bar[rows.nodes[hs]]) - rows.offsets[hs]
-    ) / cg.row_norms(rows.coeffs[hs, :3])
-    close = hs[residual <= GUESS_KM]
-    if close.size == 0:
-        return y
-    y[close] = 1e-300
+    hs, normals, points = _half_space_rows(kind, rows.coeffs, rows.nodes, r_bar)
+    if hs.size:
+        _mark_touching(np.einsum("ij,ij->i", normals, points), normals, rows.offsets, hs, y)
     return y
+
+
+@njit(cache=True)
+def _half_space_rows(
+    kind: np.ndarray, coeffs: np.ndarray, nodes: np.ndarray, r_bar: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The half-space rows (kind 1) of :func:`_guess_active`: their indices (K,), normals
+    (K, 3) (``coeffs[hs, :3]``) and the iterate's positions at their nodes (K, 3)
+    (``r_bar[nodes[hs]]``), gathered (copies: the same arrays as numpy's indexing)."""
+    hs = np.flatnonzero(kind == 1)
+    normals = np.empty((hs.size, 3))
+    points = np.empty((hs.size, 3))
+    for i in range(hs.size):
+        for c in range(3):
+            normals[i, c] = coeffs[hs[i], c]
+            points[i, c] = r_bar[nodes[hs[i]], c]
+    return hs, normals, points
+
+
+@njit(cache=True)
+def _mark_touching(
+    dots: np.ndarray, normals: np.ndarray, offsets: np.ndarray, hs: np.ndarray, y: np.ndarray
+) -> None:
+    """Writes the speck of :func:`_guess_active` into ``y`` at the half-space rows ``hs``
+    whose distance ``(nᵀ r̄ − offset)/‖n‖`` (``dots`` their nᵀ r̄, ``normals`` their n, in
+    the rows' scale) is within :data:`GUESS_KM` (numpy's arithmetic, :func:`.constraints.row_norms`'
+    norm: the same bits)."""
+    for i in range(hs.size):
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if (dots[i] - offsets[hs[i]]) / size <= GUESS_KM:
+            y[hs[i]] = 1e-300
 
 
 #: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
@@ -956,7 +1077,7 @@ def _cone_cuts(
     unit ŵ), so a program with cuts is a relaxation of the one with cones (Kelley's
     cutting planes); ρ = R_kᵀ r with ``motion``.
     """
-    nodes = np.flatnonzero((sub.modes == _CORRIDOR) | (sub.modes == _BOTH))
+    nodes = _corridor_nodes(sub.modes)
     if nodes.size == 0:  # no corridor node (most programs): no cut
         return nodes, np.zeros((0, 6)), np.zeros(0), nodes * _CODE_NODE
     rho = cg.to_body(None if sub.motion is None else _motion_at(sub.motion, nodes), r[nodes])
@@ -994,18 +1115,67 @@ def _with_rows(
     cut_kind: int = 4,
 ) -> tuple[path_dual.DualRows, np.ndarray, np.ndarray]:
     """``rows`` with the inequality rows ``cuts`` (:func:`_cone_cuts` or
-    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again."""
+    :func:`_trust_rows`, kind ``cut_kind``, tolerance ``tol``), sorted by node again
+    (:func:`_merged_rows`)."""
     node, coeffs, offsets, cut_code = cuts
-    nodes = np.r_[rows.nodes, node]
-    order = np.argsort(nodes, kind="stable")
-    merged = path_dual.DualRows(
-        nodes[order],
-        np.ascontiguousarray(np.vstack([rows.coeffs, coeffs])[order]),
-        np.r_[rows.offsets, offsets][order],
-        np.r_[rows.equality, np.zeros(node.size, dtype=bool)][order],
-        np.r_[rows.tol, np.full(node.size, tol)][order],
-    )
-    return merged, np.r_[kind, np.full(node.size, cut_kind)][order], np.r_[code, cut_code][order]
+    nodes, coeffs, offsets, equality, tols, kinds, codes = _merged_rows(
+        rows.nodes, rows.coeffs, rows.offsets, rows.equality, rows.tol, kind, code,
+        node, coeffs, offsets, cut_code, tol, cut_kind,
+    )  # fmt: skip
+    return path_dual.DualRows(nodes, coeffs, offsets, equality, tols), kinds, codes
+
+
+@njit(cache=True)
+def _merged_rows(
+    nodes: np.ndarray,
+    coeffs: np.ndarray,
+    offsets: np.ndarray,
+    equality: np.ndarray,
+    tol: np.ndarray,
+    kind: np.ndarray,
+    code: np.ndarray,
+    new_nodes: np.ndarray,
+    new_coeffs: np.ndarray,
+    new_offsets: np.ndarray,
+    new_code: np.ndarray,
+    new_tol: float,
+    new_kind: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_with_rows`' arrays: the rows (``nodes`` … ``code``) followed by the new
+    inequality rows (``new_nodes`` … ``new_code``, each of tolerance ``new_tol`` and kind
+    ``new_kind``), sorted stably by node (numpy's stable sort's order; copies only)."""
+    old, total = nodes.size, nodes.size + new_nodes.size
+    every = np.empty(total, np.int64)
+    every[:old] = nodes
+    every[old:] = new_nodes
+    order = np.argsort(every, kind="mergesort")
+    out_coeffs = np.empty((total, 6))
+    out_offsets, out_tol = np.empty(total), np.empty(total)
+    out_equality = np.empty(total, np.bool_)
+    out_kind, out_code = np.empty(total, np.int64), np.empty(total, np.int64)
+    for r in range(total):
+        i = order[r]
+        if i < old:
+            out_coeffs[r] = coeffs[i]
+            out_offsets[r], out_tol[r], out_equality[r] = offsets[i], tol[i], equality[i]
+            out_kind[r], out_code[r] = kind[i], code[i]
+        else:
+            j = i - old
+            out_coeffs[r] = new_coeffs[j]
+            out_offsets[r], out_tol[r], out_equality[r] = new_offsets[j], new_tol, False
+            out_kind[r], out_code[r] = new_kind, new_code[j]
+    return every[order], out_coeffs, out_offsets, out_equality, out_tol, out_kind, out_code
+
+
+@njit(cache=True)
+def _absent(values: np.ndarray, pool: np.ndarray) -> np.ndarray:
+    """``~np.isin(values, pool)`` of integer arrays: where a value is not in ``pool``."""
+    ordered = np.sort(pool)
+    at = np.searchsorted(ordered, values)
+    out = np.empty(values.size, np.bool_)
+    for i in range(values.size):
+        out[i] = at[i] >= ordered.size or ordered[at[i]] != values[i]
+    return out
 
 
 def _dual_solve(
@@ -1024,11 +1194,13 @@ def _dual_solve(
     rounds every trust row is written. An answer that holds every trust row it left out
     (with multiplier 0) meets the whole program's KKT conditions: the same answer."""
     steps = sub.modes.size - 1
-    g = feasibility.grid_problem(sub.n, sub.x0, sub.xf, steps * sub.dt_s, sub.dt_s, sub.u_max)
-    rows, kind, code = _dual_rows(sub, pairs, g.row_scale, _warm_trust(sub), planes)
+    # the grid's blocks and row scale: those of feasibility.grid_problem, without its rhs
+    blocks = feasibility.grid_blocks(sub.n, sub.dt_s, steps)
+    row_scale = feasibility.row_scale(steps * sub.dt_s, sub.u_max)
+    rows, kind, code = _dual_rows(sub, pairs, row_scale, _warm_trust(sub), planes)
     weight = max(float(sub.eps), convex.REGULARISATION)
     warm = _warm_multipliers(sub.warm_duals, code, _guess_active(rows, kind, sub.r_bar))
-    s_p = float(g.row_scale[0])
+    s_p = float(row_scale[0])
     used = 0
     cone_rounds = trust_rounds = 0
     retried = sub.warm_duals is None
@@ -1040,14 +1212,14 @@ def _dual_solve(
     scaled, products = path_dual.grid_arrays(sub.n, sub.dt_s, sub.u_max, steps)
     while True:
         ans = path_dual.solve(
-            sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows, warm,
+            sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows, warm,
             keep=keep, products=products, scaled=scaled,
         )  # fmt: skip
         used += ans.iterations
         if not ans.converged and not retried:  # the warm start failed: once from the guess
             retried = True
             ans = path_dual.solve(
-                sub.n, sub.dt_s, sub.u_max, sub.x0, g.blocks, sub.eps, weight, rows,
+                sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows,
                 _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
                 scaled=scaled,
             )  # fmt: skip
@@ -1057,7 +1229,8 @@ def _dual_solve(
         path = (kind == 1) | (kind == 4)
         if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
             return None, used, None
-        if float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+        abort = sub.abort_rows is not None and sub.abort_rows.nodes.size > 0
+        if abort and float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
@@ -1084,7 +1257,7 @@ def _dual_solve(
                 boxed = np.flatnonzero(sub.modes > 0)
                 box = (np.repeat(boxed, 6), np.tile(np.arange(6), boxed.size))
             trust = _trust_rows(sub, box[0], box[1], s_p)
-            new = ~np.isin(trust[3], code)
+            new = _absent(trust[3], code)
             if not np.any(new) and cuts[0].size == 0:  # broken though written: not certified
                 return None, used, None
             trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
@@ -1260,7 +1433,7 @@ def _program(
     rhs.append(np.concatenate(b_nonneg))
     cones.append(clarabel.NonnegativeConeT(row0))
     # corridor: ‖P(r_k − p)‖ ≤ tan θ âᵀ(r_k − p) − m + s, as (head, body) = b − A x ∈ SOC(4)
-    corridor_nodes = np.flatnonzero((modes == _CORRIDOR) | (modes == _BOTH))
+    corridor_nodes = _corridor_nodes(modes)
     if corridor_nodes.size:
         rows_c = 4 * np.arange(corridor_nodes.size)
         if motion is None:  # one margin, one cone for every node
@@ -1527,6 +1700,31 @@ def _node_margins(step_margins: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def _largest_move(x: np.ndarray, r_bar: np.ndarray) -> float:
+    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6) from
+    ``r_bar`` (N + 1, 3): how far an iterate moved; NaN if a difference is (``np.max``'s)."""
+    out = -math.inf
+    for k in range(r_bar.shape[0]):
+        for i in range(3):
+            d = abs(x[k, i] - r_bar[k, i])
+            if d != d:
+                return math.nan
+            out = max(out, d)
+    return out
+
+
+@njit(cache=True)
+def _within_margins(step_margins: np.ndarray, node_margins: np.ndarray) -> bool:
+    """Whether every step's margin (N,) is at most both its nodes' (N + 1,) [km]: ``all(s_k ≤
+    min(m_k, m_k+1))``, false where one is NaN (``np.minimum``'s)."""
+    for k in range(step_margins.size):
+        s = step_margins[k]
+        if not (s <= node_margins[k] and s <= node_margins[k + 1]):
+            return False
+    return True
+
+
 def _unconstrained_plan(
     n: float,
     dt_s: float,
@@ -1602,7 +1800,7 @@ def plan(
     x0 = np.asarray(x0, dtype=np.float64)
     xf = np.asarray(xf, dtype=np.float64)
     used = 0
-    sizes = [float(np.max(axes)) for _, axes in cg.ellipsoids(geo)]
+    sizes = [float(axes.max()) for _, axes in cg.ellipsoids(geo)]
     trust = TRUST_RADIUS_FACTOR * (max(sizes) if sizes else 1.0)
     warm = warm_controls is not None and warm_controls.shape == (steps, 3)
     exists = True  # whether the first iterate, when unconstrained, has a plan
@@ -1623,7 +1821,7 @@ def plan(
         warm_duals = None
     u_bar = warm_controls
     modes = _modes(geo, r_bar, motion)
-    if not np.any(modes):  # nothing is unsafe: the unconstrained plan
+    if not modes.any():  # nothing is unsafe: the unconstrained plan
         if warm and not restarted:  # a one-step horizon: no node to constrain, still re-plan
             exists, warm_controls, used = _unconstrained_plan(
                 n, dt_s, u_max_km_s2, x0, xf, horizon_s, eps
@@ -1711,14 +1909,11 @@ def plan(
             )
         u, x_new, slack = answer
         slack = slack if slack > SLACK_TOL_KM else 0.0  # below: the solver's own tolerance
-        moved = float(np.max(np.abs(x_new[:, :3] - r_bar)))
+        moved = _largest_move(x_new, r_bar)
         new_modes = _modes(geo, x_new[:, :3], motion)
         # each step's own bound within what both its nodes' constraints were tightened by
-        bound_ok = bool(
-            np.all(
-                _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion)
-                <= np.minimum(margins[:-1], margins[1:])
-            )
+        bound_ok = _within_margins(
+            _step_margins(n, dt_s, u_max_km_s2, x_new, 0.0, 1.0, motion), margins
         )
         bound_ok = bound_ok and chords is None  # every abort chord covered (or abort off)
         abort_slack = float(sol.x[-1]) if drift is not None else 0.0

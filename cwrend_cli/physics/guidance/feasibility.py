@@ -95,9 +95,9 @@ def grid_problem_from_condensed(
     """
     k0 = c.blocks.shape[0] - steps
     transition = c.to_end[k0]
-    row_scale = _row_scale(steps * dt_s, u_max_km_s2)
+    scale = row_scale(steps * dt_s, u_max_km_s2)
     return GridProblem(
-        c.blocks[k0:], xf - transition @ x0, row_scale, dt_s, u_max_km_s2, transition=transition
+        c.blocks[k0:], xf - transition @ x0, scale, dt_s, u_max_km_s2, transition=transition
     )
 
 
@@ -117,7 +117,7 @@ def grid_problem_from_steps(
     return grid_problem_from_condensed(condense(phi, gam), phi.shape[0], x0, xf, dt_s, u_max_km_s2)
 
 
-def _row_scale(t: float, u_max_km_s2: float) -> np.ndarray:
+def row_scale(t: float, u_max_km_s2: float) -> np.ndarray:
     """The terminal rows' scale of a grid of length ``t`` [s]: position 1/(u_max t²), velocity
     1/(u_max t)."""
     return np.array([1.0, 1.0, 1.0, t, t, t]) / (u_max_km_s2 * t * t)
@@ -135,9 +135,16 @@ def grid_problem(
 ) -> GridProblem:
     """Transcribe a re-solve on the ``dt_s`` zero-order-hold grid."""
     steps = max(1, round(horizon_s / dt_s))
-    blocks = _power_blocks(n, dt_s, steps)[-steps:]
     rhs = xf - stm(n, steps * dt_s) @ x0
-    return GridProblem(blocks, rhs, _row_scale(steps * dt_s, u_max_km_s2), dt_s, u_max_km_s2)
+    return GridProblem(
+        grid_blocks(n, dt_s, steps), rhs, row_scale(steps * dt_s, u_max_km_s2), dt_s, u_max_km_s2
+    )
+
+
+def grid_blocks(n: float, dt_s: float, steps: int) -> np.ndarray:
+    """The terminal blocks ``Φ^{N−1−j} Γ`` (N, 6, 3) [s, s²] of a ``steps``-step grid
+    (:func:`grid_problem`'s, read-only), without the rest of its problem."""
+    return _power_blocks(n, dt_s, steps)[-steps:]
 
 
 _BLOCKS: dict[tuple[float, float], np.ndarray] = {}

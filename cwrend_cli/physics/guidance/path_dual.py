@@ -69,12 +69,12 @@ tolerances in the same scaled units).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import math
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
-from cwrend_cli.physics.constraints import row_norms
 from cwrend_cli.physics.dynamics import discretize, stm, zoh_rollout
 from cwrend_cli.physics.guidance import feasibility
 from cwrend_cli.physics.guidance._grid_kernels import step_law
@@ -583,31 +583,74 @@ def grid_arrays(n: float, dt_s: float, u_max: float, steps: int) -> tuple[np.nda
         blocks = feasibility.grid_problem(n, zero, zero, steps * dt_s, dt_s, u_max).blocks
         scaled = np.ascontiguousarray(blocks * u_max)
         cached = (scaled, block_products(scaled))
-        for array in cached:
-            array.flags.writeable = False
-        _PRODUCTS.pop(key, None)
-        while len(_PRODUCTS) >= PRODUCTS_KEPT:
-            _PRODUCTS.pop(next(iter(_PRODUCTS)))
-        _PRODUCTS[key] = cached
+        _keep(_PRODUCTS, key, cached)
     size = cached[0].shape[0]
     return cached[0][size - steps :], cached[1][size - steps :]
 
 
+#: :func:`backward_transitions` kept, by (n, Δt): the longest table made so far.
+_BACKWARD: dict[tuple[float, float], np.ndarray] = {}
+
+
+def backward_transitions(n: float, dt_s: float, steps: int) -> np.ndarray:
+    """``Φ(−mΔt)`` (steps + 1, 6, 6) for m = 0 … ``steps``, each the closed-form
+    :func:`~cwrend_cli.physics.dynamics.stm` of its own time (not a product), read-only:
+    what :func:`_row_vectors` carries a row at node k back by (m = N − k).
+
+    A longer table's first entries are this one's, so the longest table made for
+    ``(n, Δt)`` is kept and sliced: the same bits as made afresh, once per closed loop
+    instead of once a distinct row node per program."""
+    key = (float(n), float(dt_s))
+    cached = _BACKWARD.get(key)
+    if cached is None or cached.shape[0] <= steps:
+        cached = _transitions_back(n, dt_s, steps + 1)
+        cached.flags.writeable = False
+        _keep(_BACKWARD, key, cached)
+    return cached[: steps + 1]
+
+
+def _keep(cache: dict[Any, Any], key: Any, value: Any) -> None:
+    """Keep ``value`` as ``cache[key]``, the newest entry, the oldest dropped beyond
+    :data:`PRODUCTS_KEPT` entries."""
+    cache.pop(key, None)
+    while len(cache) >= PRODUCTS_KEPT:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
+
+
+@njit(cache=True)
+def _step_costs(u: np.ndarray, c1: float, c2: float) -> np.ndarray:
+    """Each step's scaled cost ``c₁‖ũ_j‖ + c₂‖ũ_j‖²`` (N,) of the scaled controls ``u``
+    (N, 3): numpy's elementwise arithmetic in its order (``norms**2`` is ``norms *
+    norms``), :func:`~cwrend_cli.physics.constraints.row_norms`' norms: the same bits."""
+    out = np.empty(u.shape[0])
+    for j in range(u.shape[0]):
+        size = math.sqrt(u[j, 0] * u[j, 0] + u[j, 1] * u[j, 1] + u[j, 2] * u[j, 2])
+        out[j] = c1 * size + c2 * (size * size)
+    return out
+
+
+@njit(cache=True)
+def _transitions_back(n: float, dt_s: float, count: int) -> np.ndarray:
+    """:func:`backward_transitions`' table of ``count`` entries: ``stm(n, (−m) Δt)``."""
+    out = np.empty((count, 6, 6))
+    for m in range(count):
+        out[m] = stm(n, (-m) * dt_s)
+    return out
+
+
 @njit(cache=True)
 def _row_vectors(
-    n: float, dt_s: float, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
+    back: np.ndarray, steps: int, nodes: np.ndarray, coeffs: np.ndarray, out: np.ndarray
 ) -> None:
-    """``h_i = (Φ^{k_i−N})ᵀ g_i`` (module docstring), one closed-form Φ a distinct node."""
-    last = -1
-    back = np.eye(6)
+    """``h_i = (Φ^{k_i−N})ᵀ g_i`` (module docstring), ``Φ^{k−N}`` = ``back[N − k]``
+    (:func:`backward_transitions`)."""
     for i in range(nodes.size):
-        if nodes[i] != last:
-            last = nodes[i]
-            back = stm(n, (last - steps) * dt_s)
+        m = steps - nodes[i]
         for c in range(6):
             acc = 0.0
             for r in range(6):
-                acc += back[r, c] * coeffs[i, r]
+                acc += back[m, r, c] * coeffs[i, r]
             out[i, c] = acc
 
 
@@ -707,7 +750,7 @@ def solve(
             f"not {a_all.shape} and {aat_all.shape}"
         )
     h = np.empty_like(rows.coeffs)
-    _row_vectors(n, dt_s, steps, rows.nodes, rows.coeffs, h)
+    _row_vectors(backward_transitions(n, dt_s, steps), steps, rows.nodes, rows.coeffs, h)
     f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
     y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
     c1 = 1.0 - min(float(eps), 1.0)
@@ -750,8 +793,7 @@ def solve(
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
         if start is not None:  # the next round's homotopy starts where this one's did
             y[:] = start
-    norms = row_norms(u)
-    cost = float(np.sum(c1 * norms + weight * norms**2))
+    cost = float(np.sum(_step_costs(u, c1, weight)))  # numpy's (pairwise) sum
     controls = u * u_max
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
     return DualAnswer(converged, controls, states, y, cost, int(total), start)
