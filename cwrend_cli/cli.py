@@ -269,22 +269,24 @@ def config_validate(file: ConfigFile, set_: SetOption = None) -> None:
 
     Checked: the values and the rules between them; the [dispersions] keys (each
     names a number) and their draws for seed 0 on the base configuration (the
-    draws of a one-seed campaign); the noise file (its columns and rows); the form
-    of [sweep].
+    draws of a one-seed campaign); the noise file (its columns and rows); [sweep]
+    as sweep checks it: its keys, and every grid point (or each range's ends).
 
     Not checked: the draws of other seeds (a normal draw is unbounded; a uniform one
-    spans low to high) or of grid points, and the keys and values of [sweep]. ablate
-    and sweep check every run's draws and every grid point before anything runs: a
-    value a key does not take exits 2 naming the seed or point ('dispersed run (seed
-    3) (schedule.beta = -0.13) is invalid'), nothing written.
+    spans low to high) or on grid points, and what the command line adds (--param,
+    --range, --arch, the size limits). ablate and sweep check every run's draws
+    before anything runs: a value a key does not take exits 2 naming the seed or
+    point ('dispersed run (seed 3) (schedule.beta = -0.13) is invalid'), nothing
+    written.
     """
     from cwrend_cli.config import config_hash, load_config
 
     with user_errors():
         cfg = load_config(file, set_ or ())
-        if cfg.dispersions or cfg.noise.file is not None:  # else no numpy to import
-            from cwrend_cli.campaign.plan import check_inputs
+        if cfg.dispersions or cfg.noise.file is not None or cfg.sweep:  # else no numpy
+            from cwrend_cli.campaign.plan import check_inputs, check_sweep
 
+            check_sweep(cfg)  # the grid's checks first, as a campaign's plan makes them
             check_inputs(cfg)
         typer.echo(f"OK {config_hash(cfg)}")
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from cwrend_cli import __version__
@@ -158,7 +159,8 @@ def test_validate_help_says_what_it_checks_of_the_dispersions_and_what_not() -> 
     text = " ".join(result.stdout.split())
     assert "their draws for seed 0 on the base configuration" in text
     assert "Not checked: the draws of other seeds" in text
-    assert "ablate and sweep check every run's draws and every grid point" in text
+    assert "ablate and sweep check every run's draws before anything runs" in text
+    assert "[sweep] as sweep checks it: its keys, and every grid point" in text
 
 
 def test_validate_draws_seed_0_and_a_campaign_every_seed_as_the_guide_says(
@@ -177,3 +179,49 @@ def test_validate_draws_seed_0_and_a_campaign_every_seed_as_the_guide_says(
     assert ran.exit_code == 2, ran.output
     assert "error: dispersed run (seed 3) (schedule.beta = -0.13" in ran.stderr
     assert "must be > 0" in ran.stderr and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "sweep",
+    ['"schedule.betta" = [0.1]', '"schedule.beta" = [0.1, -0.1]', '"schedule.beta" = "0:1:3"'],
+    ids=["unknown key", "value the key does not take", "range string reaching 0"],
+)
+def test_validate_refuses_the_sweep_that_sweep_refuses(tmp_path: Path, sweep: str) -> None:
+    """``config validate`` runs the campaign's grid checks on ``[sweep]``: the message and
+    exit code 2 of ``cwrend sweep``'s plan, before anything runs (it said OK)."""
+    from cwrend_cli.campaign.plan import plan
+    from cwrend_cli.errors import ConfigError
+
+    cfg_file = tmp_path / "sweep.toml"
+    cfg_file.write_text(PAPER_TOML.read_text() + f"\n[sweep]\n{sweep}\n")
+    with pytest.raises(ConfigError) as refused:
+        plan(load_config(cfg_file), ["mtf_adaptive"], [0])
+    result = runner.invoke(app, ["config", "validate", str(cfg_file)])
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output
+    assert str(refused.value).splitlines()[0] in result.output
+    for problem in refused.value.problems:
+        assert problem in result.output
+
+
+def test_validate_accepts_a_valid_grid_and_a_design_s_ranges(tmp_path: Path) -> None:
+    grid = tmp_path / "grid.toml"
+    grid.write_text(
+        PAPER_TOML.read_text()
+        + '\n[sweep]\n"schedule.beta" = [0.1, 0.5]\n"schedule.kappa_mtf" = [6.0, 12.0]\n'
+    )
+    design = PAPER_TOML.with_name("sobol_schedule.toml")
+    for path in (grid, design):
+        result = runner.invoke(app, ["config", "validate", str(path)])
+        assert result.exit_code == 0, result.output
+        assert result.output.startswith("OK ")
+
+
+def test_validate_refuses_a_design_range_its_key_does_not_take(tmp_path: Path) -> None:
+    cfg_file = tmp_path / "design.toml"
+    cfg_file.write_text(
+        PAPER_TOML.read_text() + '\n[sweep]\n"schedule.beta" = { low = -0.5, high = 1.0 }\n'
+    )
+    result = runner.invoke(app, ["config", "validate", str(cfg_file)])
+    assert result.exit_code == 2
+    assert "[sweep] schedule.beta: low = -0.5 is not a value schedule.beta takes" in result.output

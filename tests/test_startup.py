@@ -247,3 +247,17 @@ def test_validating_dispersions_loads_numpy_but_no_heavy_library() -> None:
     dispersed = PAPER.with_name("sweep_beta_dispersed.toml")
     code, loaded = _run(("config", "validate", str(dispersed)))
     assert code == 0 and "numpy" in loaded and not loaded & set(HEAVY)
+
+
+@pytest.mark.parametrize("sweep", ["grid", "design ranges"])
+def test_validating_a_sweep_loads_numpy_but_no_heavy_library(tmp_path: Path, sweep: str) -> None:
+    """``config validate`` checks ``[sweep]`` through the campaign's plan (numpy): each grid
+    point, or a design's ranges (one point drawn by ``random``, not SciPy's Latin
+    hypercube nor SALib); a config without ``[sweep]`` loads no numpy (above)."""
+    if sweep == "grid":
+        cfg = tmp_path / "grid.toml"
+        cfg.write_text(PAPER.read_text() + '\n[sweep]\n"schedule.beta" = [0.1, 0.5]\n')
+    else:
+        cfg = PAPER.with_name("sobol_schedule.toml")
+    code, loaded = _run(("config", "validate", str(cfg)))
+    assert code == 0 and "numpy" in loaded and not loaded & {*HEAVY, "SALib"}

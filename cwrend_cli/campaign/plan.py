@@ -56,6 +56,7 @@ from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import (
     CORRIDOR_PORT,
+    RANGE_FIELDS,
     check_given_once,
     check_swept,
     expand_grid,
@@ -483,14 +484,56 @@ def check_inputs(cfg: CwrendConfig) -> None:
         load_noise_file(cfg.noise.file, cfg.scenario.n_steps)
     if not cfg.dispersions:
         return
-    base = resolved_dict(cfg)
-    base.pop("sweep", None)
-    base.pop("dispersions", None)
+    base = _base_tree(cfg)
     dispersed = draw_dispersions(cfg.dispersions, base, cfg.noise.seed, 0)
     run_cfg = _validated(
         base, dispersed, "dispersed run (seed 0)", nis_offset_given(cfg), xf_given(cfg)
     )
     _check_typed(problem_of(cfg), dispersed, run_cfg, 0)
+
+
+def check_sweep(cfg: CwrendConfig) -> None:
+    """Refuse the ``[sweep]`` of ``cfg`` as every campaign of it would before running.
+
+    The checks :func:`plan` makes of ``[sweep]`` (``cwrend config validate``), with its
+    messages: a grid (lists, ``start:stop:num``) is expanded by
+    :func:`~cwrend_cli.config.overrides.expand_grid` (its keys and values) and every grid
+    point validated by :func:`grid_point_config`; a table of ranges is checked as
+    ``sweep --design`` checks it (:func:`design_points`: each key a configuration value,
+    each end one its key takes). Not checked: what depends on the command line (the
+    size limits, ``--param``, ``--arch``). Raises :class:`ConfigError`.
+    """
+    if not cfg.sweep:
+        return
+    base = _base_tree(cfg)
+    if any(isinstance(v, Mapping) and RANGE_FIELDS & set(v) for v in cfg.sweep.values()):
+        # a design's ranges: checked as sweep --design checks them, one point sampled
+        design_points(cfg.sweep, (), "random", 1, cfg.noise.seed, base=base)
+        return
+    offset_given, xf_set = nis_offset_given(cfg), xf_given(cfg)
+    for pid, params in grid_points(expand_grid(cfg.sweep)):
+        grid_point_config(base, pid, params, offset_given, xf_set)
+
+
+def grid_point_config(
+    base: Mapping[str, Any],
+    pid: str,
+    params: Assignment,
+    offset_given: bool = True,
+    xf_given_: bool = True,
+) -> CwrendConfig:
+    """The validated config of grid point ``pid`` (``base`` + ``params``): errors name the
+    point and its values (:func:`_validated`)."""
+    return _validated(base, params, f"grid point {pid}", offset_given, xf_given_)
+
+
+def _base_tree(cfg: CwrendConfig) -> dict[str, Any]:
+    """The resolved config of ``cfg`` without ``[sweep]`` and ``[dispersions]``: what every
+    grid point and dispersed run starts from."""
+    base = resolved_dict(cfg)
+    base.pop("sweep", None)
+    base.pop("dispersions", None)
+    return base
 
 
 def campaign_hash(
@@ -634,9 +677,7 @@ def plan(
         )
     if len(set(seeds)) != len(seeds) or any(not 0 <= s <= MAX_SEED for s in seeds):
         raise ConfigError(f"seeds must be distinct integers in [0, {MAX_SEED}] (2**63 − 1)")
-    base = resolved_dict(cfg)
-    base.pop("sweep", None)
-    base.pop("dispersions", None)
+    base = _base_tree(cfg)
     root = cfg.noise.seed
     offset_given = nis_offset_given(cfg)  # else each point's sensor fills it in (issue 35)
     xf_set = xf_given(cfg)  # else a point that introduces a corridor ends at its port
@@ -663,7 +704,7 @@ def plan(
     digests: list[str] = []
     noises: dict[tuple[int, str | None, int], NoiseSource] = {}
     for pid, params in points:
-        point_cfg = _validated(base, params, f"grid point {pid}", offset_given, xf_set)
+        point_cfg = grid_point_config(base, pid, params, offset_given, xf_set)
         point_tree = resolved_dict(point_cfg)
         problem = problem_of(point_cfg)
         check_design_models(problem, [ALL_ARCHITECTURES[a] for a in archs])
