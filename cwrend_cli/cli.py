@@ -797,10 +797,13 @@ def _campaign(
         unchecked = bool(achieved) and not checked  # met or not: not known (--strict: exit 1)
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         said = not summary.interrupted and (opts.strict or not opts.quiet)
+        # the most seeds a campaign of these points and architectures accepts: never advised
+        # beyond (the plan refuses more than limits.MAX_RUNS runs)
+        limit = sequential.seeds_limit(len(plan.runs) // max(1, len(plan.seeds)))
         if unchecked and said:  # the one verdict: not checked, however wide the intervals
-            err.print(sequential.unchecked_message(n, batch, achieved), markup=False)
+            err.print(sequential.unchecked_message(n, batch, achieved, limit), markup=False)
         elif unmet and said:
-            err.print(sequential.unmet_message(achieved, max_seeds), markup=False)
+            err.print(sequential.unmet_message(achieved, max_seeds, limit), markup=False)
         if summary.interrupted:
             asked = {r.run_key for r in plan.runs}
             done = len(asked & campaign.held_run_keys(out))

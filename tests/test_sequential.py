@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from cwrend_cli.campaign import sequential, statistics
 from cwrend_cli.cli import app
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.limits import MAX_RUNS
 
 PAPER = Path(__file__).resolve().parents[1] / "campaigns" / "paper.toml"
 
@@ -192,3 +193,28 @@ def test_an_until_batch_computes_the_statistics_of_its_own_seeds_only(
     assert len(whole) == 1
     stored = pd.read_parquet(tmp_path / "paper" / "ablation.parquet")
     assert set(stored[stored["kind"] == "marginal"]["n"]) == {40}  # the file: every run
+
+
+def test_the_seeds_advised_never_exceed_what_max_seeds_accepts() -> None:
+    """Advice to raise --max-seeds to N only for an N a campaign accepts (``MAX_RUNS`` runs):
+    beyond, the target is said to be out of reach, with what to change instead."""
+    limit = sequential.seeds_limit(4)  # four architectures, one point
+    assert limit == MAX_RUNS // 4
+    within = sequential.Achieved("mtf_adaptive", 1e-3, half_width=4e-4, limit=2e-4, n=20)
+    beyond = sequential.Achieved("mtf_adaptive", 1e-3, half_width=1.0, limit=1e-4, n=20)
+    assert beyond.seeds_needed is not None and beyond.seeds_needed > limit
+    for unmet in (
+        sequential.unmet_message([within], max_seeds=20, limit=limit),
+        sequential.unchecked_message(10, 10, [within], limit=limit),
+    ):
+        assert "about 80 seeds would meet it" in unmet and "cannot be reached" not in unmet
+    assert "raise --max-seeds to 80" in sequential.unchecked_message(10, 10, [within], limit)
+    for text in (
+        sequential.unmet_message([beyond], max_seeds=20, limit=limit),
+        sequential.unchecked_message(10, 10, [beyond], limit=limit),
+    ):
+        assert f"about {beyond.seeds_needed:,} seeds would meet it" in text
+        assert f"more than the {limit:,} seeds" in text
+        assert "the target cannot be reached within that limit" in text
+        assert "widen the target or target another metric" in text
+        assert "raise --max-seeds" not in text

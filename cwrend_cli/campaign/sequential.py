@@ -45,6 +45,7 @@ import pandas as pd
 from cwrend_cli.campaign.statistics import DEFAULT_PAIRS, METRICS, STATISTICS
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.errors import ConfigError
+from cwrend_cli.limits import MAX_RUNS
 from cwrend_cli.output.tables import METRIC_NAMES, suffix_unit
 
 __all__ = [
@@ -177,12 +178,34 @@ def ready(n_seeds: int, batch: int) -> bool:
     return n_seeds >= checked_from(batch)
 
 
-def unchecked_message(n_seeds: int, batch: int, achieved: Sequence[Achieved] = ()) -> str:
+def seeds_limit(runs_per_seed: int = 1) -> int:
+    """The most seeds a campaign of ``runs_per_seed`` runs a seed (points × architectures)
+    accepts: :data:`~cwrend_cli.limits.MAX_RUNS` runs, the bound of ``--max-seeds`` too."""
+    return MAX_RUNS // max(1, runs_per_seed)
+
+
+def _beyond_limit(needed: int, limit: int, them: str = "it") -> str:
+    """The advice when ``needed`` seeds exceed ``limit`` (:func:`seeds_limit`): none to raise
+    --max-seeds to, but what else to change."""
+    return (
+        f"about {needed:,} seeds would meet {them} (a half-width shrinks as 1/√seeds), more "
+        f"than the {limit:,} seeds a campaign can run here (at most {MAX_RUNS:,} runs: seeds "
+        "× points × architectures): "
+        "the target cannot be reached within that limit; widen the target or target "
+        "another metric or statistic"
+    )
+
+
+def unchecked_message(
+    n_seeds: int, batch: int, achieved: Sequence[Achieved] = (), limit: int = MAX_RUNS
+) -> str:
     """What ``--until`` says when it stopped at ``n_seeds`` (``--max-seeds``) before widths are
     checked (:func:`ready`): whether the target was met is not known, and how to know.
 
     The only verdict then (never beside :func:`unmet_message`): intervals of ``achieved``
-    wider than their target so far are named, with the seeds they would need.
+    wider than their target so far are named, with the seeds they would need. Seeds
+    beyond ``limit`` (:func:`seeds_limit`) are never advised: a target that would need
+    more is said to be out of reach.
     """
     first = checked_from(batch)
     text = (
@@ -192,14 +215,20 @@ def unchecked_message(n_seeds: int, batch: int, achieved: Sequence[Achieved] = (
     )
     unmet = [a for a in achieved if not a.met]
     needed = [a.seeds_needed for a in unmet if a.seeds_needed is not None]
-    fix = f"raise --max-seeds to {max([first, *needed]):,}"
-    if MIN_BATCHES * batch > MIN_SEEDS:
-        fix += f" or lower --batch to {math.ceil(MIN_SEEDS / MIN_BATCHES)}"
+    lower = math.ceil(MIN_SEEDS / MIN_BATCHES)
+    if first > limit:  # only a smaller batch is checked within the limit
+        fix = f"lower --batch to {lower} (the limit is {limit:,} seeds)"
+    else:
+        fix = f"raise --max-seeds to {max([first, *needed]):,}"
+        if MIN_BATCHES * batch > MIN_SEEDS:
+            fix += f" or lower --batch to {lower}"
     if unmet:
         text += (
             f"; so far {len(unmet)} of {len(achieved)} interval(s) are wider than the target "
             f"({_too_wide(unmet)})"
         )
+        if needed and max(needed) > limit:
+            return f"{text}: {_beyond_limit(max(needed), limit)}"
         if needed:
             shrinks = "(a half-width shrinks as 1/√seeds)"
             fix = f"about {max(needed):,} seeds would meet it {shrinks}: {fix}"
@@ -255,11 +284,12 @@ class Achieved:
         return max(self.n, math.ceil(self.n * (self.half_width / self.limit) ** 2))
 
 
-def unmet_message(achieved: Sequence[Achieved], max_seeds: int) -> str:
+def unmet_message(achieved: Sequence[Achieved], max_seeds: int, limit: int = MAX_RUNS) -> str:
     """What ``--until`` says when ``--max-seeds`` was reached with a target not met.
 
     Each interval not met with its half-width and target, and the seeds the
-    widest would need (:attr:`Achieved.seeds_needed`).
+    widest would need (:attr:`Achieved.seeds_needed`); more than ``limit``
+    (:func:`seeds_limit`): that the target is out of reach, not to raise --max-seeds.
     """
     unmet = [a for a in achieved if not a.met]
     text = (
@@ -267,9 +297,12 @@ def unmet_message(achieved: Sequence[Achieved], max_seeds: int) -> str:
         f"{len(unmet)} of {len(achieved)} interval(s) too wide ({_too_wide(unmet)})"
     )
     needed = [a.seeds_needed for a in unmet if a.seeds_needed is not None]
-    if needed:
+    them = "it" if len(unmet) == 1 else "them"
+    if needed and max(needed) > limit:
+        text += f"; {_beyond_limit(max(needed), limit, them)}"
+    elif needed:
         text += (
-            f"; about {max(needed):,} seeds would meet {'it' if len(unmet) == 1 else 'them'} "
+            f"; about {max(needed):,} seeds would meet {them} "
             "(a half-width shrinks as 1/√seeds): raise --max-seeds or widen the target"
         )
     return text
