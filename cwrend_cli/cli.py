@@ -758,6 +758,16 @@ def _campaign(
             target = sequential.parse_until(opts.until, [*pairs, *remembered], archs, recorded)
             if max_seeds > limits.MAX_RUNS:
                 raise ConfigError(f"--max-seeds: at most {limits.MAX_RUNS:,}")
+            # the runs a seed (points × architectures) bound the seeds: refused before any
+            # run, not at the batch that would cross limits.MAX_RUNS
+            first = _plan(cfg, archs, [0], params, opts)
+            most = sequential.seeds_limit(len(first.runs))
+            if max_seeds > most:
+                raise ConfigError(
+                    f"--max-seeds {max_seeds:,}: at most {most:,} here ({len(first.runs):,} runs "
+                    f"a seed: points × architectures; a campaign runs at most "
+                    f"{limits.MAX_RUNS:,}); lower --max-seeds"
+                )
             achieved = []
             n = 0
             label = f"{command} {out.name}: computing statistics"
@@ -824,6 +834,34 @@ def _campaign(
             raise typer.Exit(code=1)
 
 
+def _workers(opts: CampaignOptions) -> int | None:
+    """The campaign's worker count: ``--workers``, else the machine's for the local executor;
+    None for a Dask cluster of unknown size (it sizes the tasks when
+    ``output.seeds_per_task`` is unset: 16 seeds a task)."""
+    from cwrend_cli.campaign.executors import default_workers
+
+    return opts.workers or (default_workers() if opts.executor != "dask" else None)
+
+
+def _plan(
+    cfg: CwrendConfig,
+    archs: list[str],
+    seeds: list[int],
+    params: list[str],
+    opts: CampaignOptions,
+) -> campaign.CampaignPlan:
+    """The campaign's plan of ``seeds`` (:func:`.campaign.plan`, with the command's options)."""
+    from cwrend_cli import campaign
+    from cwrend_cli.campaign import design
+
+    design_kind: design.Design | None = opts.design  # type: ignore[assignment]
+    return campaign.plan(
+        cfg, archs, seeds, params, allow_large=opts.yes_large, design_kind=design_kind,
+        samples=opts.samples, workers=_workers(opts), ranges=opts.ranges,
+        second_order=opts.second_order,
+    )  # fmt: skip
+
+
 def _campaign_step(
     command: Literal["ablate", "sweep"],
     cfg: CwrendConfig,
@@ -845,20 +883,11 @@ def _campaign_step(
     of ``ablate --until``, which computes those it needs: :func:`_batch_statistics`).
     """
     from cwrend_cli import campaign
-    from cwrend_cli.campaign import design
-    from cwrend_cli.campaign.executors import default_workers
     from cwrend_cli.console import RichProgress, phase
 
-    design_kind: design.Design | None = opts.design  # type: ignore[assignment]
     executor_kind: ExecutorKind = "dask" if opts.executor == "dask" else "local"
-    # the worker count sizes the tasks when output.seeds_per_task is unset (None: a Dask
-    # cluster of unknown size, 16 seeds a task)
-    workers = opts.workers or (default_workers() if executor_kind == "local" else None)
-    plan = campaign.plan(
-        cfg, archs, seeds, params, allow_large=opts.yes_large, design_kind=design_kind,
-        samples=opts.samples, workers=workers, ranges=opts.ranges,
-        second_order=opts.second_order,
-    )  # fmt: skip
+    workers = _workers(opts)
+    plan = _plan(cfg, archs, seeds, params, opts)
     if not opts.quiet:
         from cwrend_cli.config import replaced_sweep_keys
 

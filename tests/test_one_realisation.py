@@ -18,6 +18,7 @@ import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
+from cwrend_cli import cli
 from cwrend_cli.campaign import sequential, statistics
 from cwrend_cli.cli import app
 from cwrend_cli.console import (
@@ -146,3 +147,26 @@ def test_a_comparison_of_one_seed_says_one_realisation() -> None:
     (table,) = compare_console_tables(pd.DataFrame(rows), [], "t")
     text = _caption(table)
     assert ONE_REALISATION in text and "bootstrap" not in text
+
+
+def test_max_seeds_beyond_what_the_runs_a_seed_allow_is_refused_before_any_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Four architectures a seed: 1,250,001 seeds would be 5,000,004 runs, over the limit
+    of 5,000,000. Refused (exit 2) before any run, naming --max-seeds and the most seeds
+    allowed; before, the campaign ran until the batch that crossed the limit (a batch
+    started here fails the test at once)."""
+
+    def no_batch(*_args: object, **_kwargs: object) -> None:
+        raise AssertionError("a batch ran before --max-seeds was checked")
+
+    monkeypatch.setattr(cli, "_campaign_step", no_batch)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[output]\ndir = "{tmp_path}"\n')
+    args = ["ablate", str(cfg), "--name", "m", "--arch", "all", "-w", "1", "--no-rrd",
+            "--until", "miss_km:1e-9", "--batch", "10", "--max-seeds", "1250001"]  # fmt: skip
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 2, result.output
+    said = " ".join(result.stderr.split())
+    assert "--max-seeds 1,250,001: at most 1,250,000 here (4 runs a seed" in said
+    assert not (tmp_path / "m").exists()  # nothing written
