@@ -568,20 +568,18 @@ PRODUCTS_KEPT = 8
 
 def grid_arrays(n: float, dt_s: float, u_max: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
     """The scaled terminal blocks ``A_j = Φ^{N−1−j} Γ u_max`` (N, 6, 3) of a ``steps``-step
-    grid (:func:`~.feasibility.grid_problem`'s blocks times u_max) and their
+    grid (:func:`~.feasibility.grid_blocks` times u_max) and their
     :func:`block_products` (N, 6, 6), read-only.
 
     Each step's block and product are its own, and the last ``steps`` blocks of a longer
-    grid are this grid's (:func:`~.feasibility.grid_problem` slices one stack), so the
+    grid are this grid's (:func:`~.feasibility.grid_blocks` slices one stack), so the
     longest stacks made for ``(n, Δt, u_max)`` are kept and sliced: the same bits as made
     afresh, once per closed loop instead of once per program (a re-solve's horizon only
     shrinks)."""
     key = (float(n), float(dt_s), float(u_max))
     cached = _PRODUCTS.get(key)
     if cached is None or cached[0].shape[0] < steps:
-        zero = np.zeros(6)
-        blocks = feasibility.grid_problem(n, zero, zero, steps * dt_s, dt_s, u_max).blocks
-        scaled = np.ascontiguousarray(blocks * u_max)
+        scaled = np.ascontiguousarray(feasibility.grid_blocks(n, dt_s, steps) * u_max)
         cached = (scaled, block_products(scaled))
         _keep(_PRODUCTS, key, cached)
     size = cached[0].shape[0]
