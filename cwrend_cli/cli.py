@@ -733,6 +733,9 @@ def _campaign(
         max_seeds = opts.max_seeds or DEFAULT_MAX_SEEDS
         target: sequential.Target | None = None  # --until's
         named: campaign.CampaignStatistics | None = None  # of the runs named, if computed
+        # the most seeds a campaign of these points and architectures accepts (--until:
+        # never run nor advised beyond; the plan refuses more than limits.MAX_RUNS runs)
+        limit = sequential.seeds_limit()
         if opts.until is None:
             if opts.strict:
                 raise ConfigError("--strict: applies to --until only; add --until TARGET")
@@ -761,10 +764,10 @@ def _campaign(
             # the runs a seed (points × architectures) bound the seeds: refused before any
             # run, not at the batch that would cross limits.MAX_RUNS
             first = _plan(cfg, archs, [0], params, opts)
-            most = sequential.seeds_limit(len(first.runs))
-            if max_seeds > most:
+            limit = sequential.seeds_limit(len(first.runs))
+            if max_seeds > limit:
                 raise ConfigError(
-                    f"--max-seeds {max_seeds:,}: at most {most:,} here ({len(first.runs):,} runs "
+                    f"--max-seeds {max_seeds:,}: at most {limit:,} here ({len(first.runs):,} runs "
                     f"a seed: points × architectures; a campaign runs at most "
                     f"{limits.MAX_RUNS:,}); lower --max-seeds"
                 )
@@ -807,9 +810,6 @@ def _campaign(
         unchecked = bool(achieved) and not checked  # met or not: not known (--strict: exit 1)
         unmet = opts.until is not None and achieved and not all(a.met for a in achieved)
         said = not summary.interrupted and (opts.strict or not opts.quiet)
-        # the most seeds a campaign of these points and architectures accepts: never advised
-        # beyond (the plan refuses more than limits.MAX_RUNS runs)
-        limit = sequential.seeds_limit(len(plan.runs) // max(1, len(plan.seeds)))
         if unchecked and said:  # the one verdict: not checked, however wide the intervals
             err.print(sequential.unchecked_message(n, batch, achieved, limit), markup=False)
         elif unmet and said:
