@@ -63,7 +63,12 @@ import numpy as np
 if TYPE_CHECKING:  # pandas is imported by sensitivity() only: a worker plans no design
     import pandas as pd
 
-from cwrend_cli.config.overrides import RANGE_FIELDS, SIGNIFICANT_DIGITS, decimal_float
+from cwrend_cli.config.overrides import (
+    RANGE_FIELDS,
+    SIGNIFICANT_DIGITS,
+    decimal_float,
+    is_range,
+)
 from cwrend_cli.errors import ConfigError
 from cwrend_cli.output.layout import PARAM_PREFIX, UNIT_PREFIX
 
@@ -166,7 +171,7 @@ def parse_range(key: str, spec: Mapping[str, Any], where: str | None = None) -> 
     """
     at = where or f"[sweep] {key}"
     unknown = sorted(set(spec) - RANGE_FIELDS)
-    if unknown and not RANGE_FIELDS & set(spec):  # a whole table as the value, not a range
+    if unknown and not is_range(spec):  # a whole table as the value, not a range
         field = next(iter(spec))
         raise ConfigError(
             f"{at}: a table of {', '.join(unknown)} is not a range, and a design samples "

@@ -56,11 +56,11 @@ from cwrend_cli.config.io import file_digest, load_noise_file
 from cwrend_cli.config.messages import did_you_mean
 from cwrend_cli.config.overrides import (
     CORRIDOR_PORT,
-    RANGE_FIELDS,
     check_given_once,
     check_swept,
     expand_grid,
     get_dotted,
+    is_range,
     missing_key_hint,
     moves_port,
     point_tree,
@@ -506,7 +506,7 @@ def check_sweep(cfg: CwrendConfig) -> None:
     if not cfg.sweep:
         return
     base = _base_tree(cfg)
-    if any(isinstance(v, Mapping) and RANGE_FIELDS & set(v) for v in cfg.sweep.values()):
+    if any(is_range(v) for v in cfg.sweep.values()):
         # a design's ranges: checked as sweep --design checks them, one point sampled
         design_points(cfg.sweep, (), "random", 1, cfg.noise.seed, base=base)
         return

@@ -431,6 +431,12 @@ def _range_values(key: str, spec: str) -> tuple[float, ...]:
 RANGE_FIELDS = frozenset({"low", "high", "log", "int", "values"})
 
 
+def is_range(value: Any) -> bool:
+    """Whether a ``[sweep]`` value is a design's range: a table with one of
+    :data:`RANGE_FIELDS` (a table without any is a whole table, not a range)."""
+    return isinstance(value, Mapping) and bool(RANGE_FIELDS & set(value))
+
+
 def expand_grid(
     sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
 ) -> tuple[tuple[str, tuple[Any, ...]], ...]:
@@ -453,7 +459,7 @@ def expand_grid(
         )
     grid: dict[str, tuple[Any, ...]] = {}
     for key, values in sweep.items():
-        if isinstance(values, Mapping) and RANGE_FIELDS & set(values):
+        if is_range(values):
             raise ConfigError(
                 f"[sweep] {key}: a range table is sampled by a design: add --design "
                 "lhs|sobol|random --samples N (a grid lists values: [v1, v2] or 'start:stop:num')"
