@@ -1224,6 +1224,12 @@ def _dual_solve(
                 scaled=scaled,
             )  # fmt: skip
             used += ans.iterations
+        if not ans.converged and keep is None:  # both failed: once from the smooth program
+            ans = path_dual.solve_from_smooth(
+                sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows, warm,
+                products=products, scaled=scaled,
+            )  # fmt: skip
+            used += ans.iterations
         if not ans.converged:
             return None, used, None
         path = (kind == 1) | (kind == 4)

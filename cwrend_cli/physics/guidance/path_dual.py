@@ -85,12 +85,14 @@ __all__ = [
     "HOMOTOPY_FACTOR",
     "HOMOTOPY_FROM",
     "MAX_ITER",
+    "SMOOTH_EPS",
     "WAKE_MARGIN",
     "WAKE_ROUNDS",
     "DualAnswer",
     "DualRows",
     "held_norms",
     "solve",
+    "solve_from_smooth",
 ]
 
 #: Newton iterations at most [-] (median 39 over the re-solves of seeds 0–1 of
@@ -117,6 +119,10 @@ HOMOTOPY_FACTOR = 0.1
 WAKE_MARGIN = 0.03
 #: Rounds of woken steps before every step is a variable [-].
 WAKE_ROUNDS = 3
+#: The cost weight ε of :func:`solve_from_smooth`'s first program [-]: 1, the quadratic
+#: cost alone (``c₁ = 1 − ε = 0``), whose dual is smooth (module docstring, *A kinked last
+#: step*).
+SMOOTH_EPS = 1.0
 _ARMIJO = 1e-4
 _HALVINGS = 4
 _DAMPING_TRIES = 40
@@ -795,3 +801,36 @@ def solve(
     controls = u * u_max
     states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
     return DualAnswer(converged, controls, states, y, cost, int(total), start)
+
+
+def solve_from_smooth(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    blocks: np.ndarray,
+    eps: float,
+    weight: float,
+    rows: DualRows,
+    warm: np.ndarray | None = None,
+    max_iter: int = MAX_ITER,
+    products: np.ndarray | None = None,
+    scaled: np.ndarray | None = None,
+) -> DualAnswer:
+    """:func:`solve` started from the multipliers of the same rows' smooth program (module
+    docstring, *A kinked last step*): first the program at ε = :data:`SMOOTH_EPS` (the
+    quadratic cost ``‖ũ_j‖²`` alone, ``c₁ = 0``: no step has a dead zone) from ``warm``,
+    then the program at ``eps`` and ``weight`` from its multipliers, whose answer alone is
+    certified (its ``converged``). Weights of at least :data:`HOMOTOPY_FROM` only (every
+    step a variable). ``iterations`` counts both solves'."""
+    if weight < HOMOTOPY_FROM:
+        raise ValueError(f"a weight of at least {HOMOTOPY_FROM}, not {weight}")
+    grid = (n, dt_s, u_max, x0, blocks)
+    smooth = solve(
+        *grid, SMOOTH_EPS, max(SMOOTH_EPS, weight), rows, warm, max_iter,
+        products=products, scaled=scaled,
+    )  # fmt: skip
+    ans = solve(
+        *grid, eps, weight, rows, smooth.multipliers, max_iter, products=products, scaled=scaled
+    )
+    return ans._replace(iterations=smooth.iterations + ans.iterations)
