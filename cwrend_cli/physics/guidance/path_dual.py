@@ -63,6 +63,19 @@ whole program's exactly when every held step passes that test; the steps that
 fail wake (with those within :data:`WAKE_MARGIN` of it) and the program is solved
 again, the same screen as :mod:`.convex`'s at ε = 0 with Clarabel.
 
+**A kinked last step** (:func:`solve_from_smooth`). A step whose ``‖y_j‖ < c₁`` coasts
+and adds no curvature: a row whose effect differs from a combination of later rows only
+through such steps leaves ``D`` linear along that difference, and Newton has no model
+there (the cut of the corridor cone at the node before the port, with the terminal state
+fixed: it binds the last control alone). Where the optimum asks that step for a sliver of
+thrust (the port's drift over one step, a few 1e-4 u_max) the iterate crawls along the
+dead zone with damped steps and fails (docs/solvers.md, *The last cut*). At ε = 1
+(``c₁ = 0``, the quadratic cost alone) no step has a dead zone and the same rows'
+program is solved in a few iterations; its multipliers are another start for the
+program at ε, whose answer is certified as above (Newton only starts elsewhere: a
+start changes no certificate). :mod:`.constrained` tries it when the warm start and the
+guess have both failed.
+
 Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
 tolerances in the same scaled units).
 """
