@@ -129,8 +129,8 @@ The two agree to the solvers' tolerances (``tests/test_path_dual.py``). The
 dual solver starts from the row multipliers of the previous SCP iteration, or
 of the plan the re-solve replaces (``warm_duals``, :func:`shift_duals`), else
 from the half-space rows the previous iterate touches (:func:`_guess_active`); when
-both fail (at adaptive ε), from the multipliers of the program at ε = 1
-(:func:`.path_dual.solve_from_smooth`).
+these fail on a program with cuts of the corridor cone (at adaptive ε), from the
+multipliers of the program at ε = 1 (:func:`.path_dual.solve_from_smooth`).
 
 **Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
 free drift from every keep-out node (the corridor nodes of the final approach,
@@ -1226,7 +1226,7 @@ def _dual_solve(
                 scaled=scaled,
             )  # fmt: skip
             used += ans.iterations
-        if not ans.converged and keep is None:  # the starts failed: from the smooth program's
+        if not ans.converged and keep is None and cone_rounds:  # with cuts: the smooth start
             ans = path_dual.solve_from_smooth(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows, warm,
                 products=products, scaled=scaled,
