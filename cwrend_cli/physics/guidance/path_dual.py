@@ -73,8 +73,8 @@ dead zone with damped steps and fails (docs/solvers.md, *The last cut*). At ε =
 (``c₁ = 0``, the quadratic cost alone) no step has a dead zone and the same rows'
 program is solved in a few iterations; its multipliers are another start for the
 program at ε, whose answer is certified as above (Newton only starts elsewhere: a
-start changes no certificate). :mod:`.constrained` tries it when the warm start and the
-guess have both failed.
+start changes no certificate). :mod:`.constrained` tries it on a program with cuts of the
+corridor cone when its other starts (the warm one, the guess) have failed.
 
 Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
 tolerances in the same scaled units).
