@@ -292,13 +292,29 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    cone, rows, _ = _untightened_corridor(geo)
-    inside = cone.residual_km(cg.to_body(motion, r_bar), rows) >= -SCP_TOL_KM
-    first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
-    modes[first:steps] = _CORRIDOR
+    _, rows, _ = _untightened_corridor(geo)
+    along, across = cg.cone_products(cg.to_body(motion, r_bar), rows)
+    _approach_modes(along, across, rows[1], rows[3], modes)
+    return modes
+
+
+@njit(cache=True)
+def _approach_modes(
+    along: np.ndarray, across: np.ndarray, b: np.ndarray, d: float, modes: np.ndarray
+) -> None:
+    """Writes the final approach into ``modes`` (N + 1,) (:func:`_modes`): the nodes inside the
+    untightened corridor cone (its residual ≥ −:data:`SCP_TOL_KM`, from ``along`` = r c
+    (N + 1,) and ``across`` = r Aᵀ (N + 1, 3) of the iterate, :func:`.constraints.cone_products`,
+    and the cone's b, d: :meth:`.constraints.SecondOrderCone.residual_km`'s kernel, the same
+    bits) from :func:`.constraints.approach_start` (not below node 1: node 0 is x0; the
+    terminal node is the apex) to N − 1 are corridor nodes, the first of them both."""
+    steps = modes.size - 1
+    inside = cg._cone_residuals(along, across, b, d) >= -SCP_TOL_KM
+    first = cg.approach_start(inside, 1)
+    for k in range(first, steps):
+        modes[k] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
-    return modes
 
 
 @njit(cache=True)
@@ -379,10 +395,16 @@ class HalfSpaces(Mapping[int, cg.HalfSpace]):
     as arrays (``normals`` (K, 3), ``offsets`` (K,) [km] of ``nodes`` (K,); ``index``
     (N + 1,): a node's row, −1 for none) so that the program reads them at once."""
 
-    def __init__(self, nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray, size: int):
+    def __init__(
+        self,
+        nodes: np.ndarray,
+        normals: np.ndarray,
+        offsets: np.ndarray,
+        size: int,
+        index: np.ndarray | None = None,
+    ):
         self.nodes, self.normals, self.offsets = nodes, normals, offsets
-        self.index = np.full(size, -1, dtype=np.int64)
-        self.index[nodes] = np.arange(nodes.size)
+        self.index = _node_index(nodes, size) if index is None else index
 
     def __getitem__(self, j: int) -> cg.HalfSpace:
         i = int(self.index[j]) if 0 <= j < self.index.size else -1
@@ -395,6 +417,15 @@ class HalfSpaces(Mapping[int, cg.HalfSpace]):
 
     def __len__(self) -> int:
         return int(self.nodes.size)
+
+
+@njit(cache=True)
+def _node_index(nodes: np.ndarray, size: int) -> np.ndarray:
+    """Each node's position in ``nodes`` (sorted, distinct), −1 for a node not in it (size,)."""
+    index = np.full(size, -1, dtype=np.int64)
+    for i in range(nodes.size):
+        index[nodes[i]] = i
+    return index
 
 
 def _detour_side(
@@ -489,19 +520,15 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = _half_space_nodes(modes)
+    margins_km = np.asarray(margins_km, dtype=np.float64)
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
-        level = cg.ellipsoid_level(local, axes)
-        # the detour side moves only the nodes inside the zone: none in most re-solves
-        shift = _NO_SHIFT
-        if _any_inside(level, nodes):
+        a = np.asarray(axes, dtype=np.float64)
+        nodes, index, level, normals, offsets = _outside_planes(a, local, modes, margins_km)
+        if normals is None:  # the detour side moves only the nodes inside: none in most
             shift = float(np.max(axes)) * _detour_side(axes, local, level)
-        normals, offsets = _node_planes(
-            np.asarray(axes, dtype=np.float64), local, level, nodes, shift,
-            np.asarray(margins_km, dtype=np.float64),
-        )  # fmt: skip
+            normals, offsets = _node_planes(a, local, level, nodes, shift, margins_km)
         if sigma_margin > 0.0 and p_pos_km2 is not None:
             if motion is None:
                 offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
@@ -516,8 +543,25 @@ def _half_spaces(
                 )
         if centre is not None:  # nᵀ(ρ − c) ≥ offset ⇔ nᵀρ ≥ offset + nᵀc
             offsets = offsets + normals @ centre
-        out.append(HalfSpaces(nodes, normals, offsets, modes.size))
+        out.append(HalfSpaces(nodes, normals, offsets, modes.size, index))
     return out
+
+
+@njit(cache=True)
+def _outside_planes(
+    a: np.ndarray, r: np.ndarray, modes: np.ndarray, margins_km: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """:func:`_half_spaces`' arrays of ellipsoid ``a`` (3,) at the positions ``r`` (N + 1, 3)
+    (its frame, contiguous): the nodes with a half-space (:func:`_half_space_nodes`), their
+    index (:func:`_node_index`), the positions' :func:`.constraints.ellipsoid_level` (its
+    kernel) and, when no node is inside the zone, their :func:`_node_planes` (normals,
+    offsets: no detour side to shift by); (None, None) when one is (the caller shifts)."""
+    nodes = _half_space_nodes(modes)
+    level = cg._levels(r, a)
+    if _any_inside(level, nodes):
+        return nodes, _node_index(nodes, modes.size), level, None, None
+    normals, offsets = _node_planes(a, r, level, nodes, _NO_SHIFT, margins_km)
+    return nodes, _node_index(nodes, modes.size), level, normals, offsets
 
 
 def _pairs(
@@ -1691,12 +1735,16 @@ def _turning_margins(
     return out
 
 
+@njit(cache=True)
 def _node_margins(step_margins: np.ndarray) -> np.ndarray:
     """Each node's margin (N+1,) [km]: the larger of its two steps' (a node's constraints
-    bind the chords on both sides of it; the end nodes have one step)."""
-    out = np.empty(step_margins.size + 1)
-    out[0], out[-1] = step_margins[0], step_margins[-1]
-    out[1:-1] = np.maximum(step_margins[:-1], step_margins[1:])
+    bind the chords on both sides of it; the end nodes have one step); NaN where either
+    is (``np.maximum``'s)."""
+    size = step_margins.size
+    out = np.empty(size + 1)
+    out[0], out[size] = step_margins[0], step_margins[size - 1]
+    for k in range(1, size):
+        out[k] = _larger(step_margins[k - 1], step_margins[k])
     return out
 
 
