@@ -1270,11 +1270,14 @@ def _dual_solve(
             used += ans.iterations
         if not ans.converged:
             return None, used, None
-        path = (kind == 1) | (kind == 4)
-        if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
+        # numpy's (pairwise) sums of the multipliers in the rows' order
+        if float(np.sum(_of_kinds(ans.multipliers, kind, 1, 4))) * s_p > SLACK_PENALTY:
             return None, used, None
         abort = sub.abort_rows is not None and sub.abort_rows.nodes.size > 0
-        if abort and float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+        if (
+            abort
+            and float(np.sum(_of_kinds(ans.multipliers, kind, 3, 3))) * s_p > ABORT_SLACK_PENALTY
+        ):
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
@@ -1307,6 +1310,19 @@ def _dual_solve(
             trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
             rows, kind, code = _with_rows(rows, kind, code, trust, DUAL_TOL_KM * s_p, 2)
         warm = _warm_multipliers(known, code, np.zeros(code.size))
+
+
+@njit(cache=True)
+def _of_kinds(values: np.ndarray, kind: np.ndarray, first: int, second: int) -> np.ndarray:
+    """``values[(kind == first) | (kind == second)]``: the values of the rows of either kind,
+    in their order (a copy: the same array as numpy's boolean indexing)."""
+    out = np.empty(values.size)
+    count = 0
+    for i in range(values.size):
+        if kind[i] == first or kind[i] == second:
+            out[count] = values[i]
+            count += 1
+    return out[:count]
 
 
 def _reduced_solve(
@@ -1750,8 +1766,9 @@ def _node_margins(step_margins: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _largest_move(x: np.ndarray, r_bar: np.ndarray) -> float:
-    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6) from
-    ``r_bar`` (N + 1, 3): how far an iterate moved; NaN if a difference is (``np.max``'s)."""
+    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6 or 3) from
+    ``r_bar`` (N + 1, 3): how far an iterate moved (or a warm plan's end is from the target,
+    :func:`out_of_reach`); NaN if a difference is (``np.max``'s)."""
     out = -math.inf
     for k in range(r_bar.shape[0]):
         for i in range(3):
@@ -1798,8 +1815,8 @@ def out_of_reach(end_state: np.ndarray, xf: np.ndarray, trust_km: float) -> bool
     [km, km/s]) cannot be moved onto the terminal target ``xf`` within the trust box of the
     first SCP program: its end position is farther than ``trust_km`` from the target's in
     some axis (module docstring, *A moved target*)."""
-    gap = np.asarray(end_state, dtype=np.float64)[:3] - np.asarray(xf, dtype=np.float64)[:3]
-    return bool(np.max(np.abs(gap)) > trust_km)
+    end = np.asarray(end_state, dtype=np.float64)[None]
+    return bool(_largest_move(end, np.asarray(xf, dtype=np.float64)[None, :3]) > trust_km)
 
 
 def plan(
