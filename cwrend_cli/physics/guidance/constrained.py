@@ -526,7 +526,8 @@ def _half_spaces(
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
         a = np.asarray(axes, dtype=np.float64)
         nodes, index, level, normals, offsets = _outside_planes(a, local, modes, margins_km)
-        if normals is None:  # the detour side moves only the nodes inside: none in most
+        if normals is None or offsets is None:  # a node inside (not in most re-solves): the
+            # detour side, which moves only the nodes inside
             shift = float(np.max(axes)) * _detour_side(axes, local, level)
             normals, offsets = _node_planes(a, local, level, nodes, shift, margins_km)
         if sigma_margin > 0.0 and p_pos_km2 is not None:
