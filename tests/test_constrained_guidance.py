@@ -424,3 +424,81 @@ def test_plans_through_a_clear_untightened_corridor_never_enter_the_unsafe_set()
         with_corridor += nodes.size > 0
         checked += 1
     assert checked == 200 and with_corridor > 100
+
+
+def _line_half_spaces(
+    distances_km: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, list[cp.HalfSpaces], cg.Geometry]:
+    """(modes, r̄, half-spaces, geometry) of nodes on a line through safe_approach's sphere
+    at ``distances_km`` from its centre, no corridor (every node a keep-out node)."""
+    axes = np.full(3, 0.2)
+    geo = cg.Geometry(axes, None, None, None)
+    r_bar = np.outer(distances_km, np.array([0.6, 0.8, 0.0]))
+    modes = cp._modes(geo, r_bar, None)
+    margins = np.zeros(distances_km.size)
+    return modes, r_bar, cp._half_spaces(geo, modes, r_bar, margins, None, 0.0), geo
+
+
+def test_a_node_far_from_its_half_spaces_gets_half_the_box_they_hold() -> None:
+    """``trust_radii`` (module docstring, *Iterations*): node k's radius is the larger of the
+    base radius and half the largest ∞-box about r̄_k its half-spaces hold, min over its
+    rows of (nᵀr̄_k − offset)/‖n‖₁ (its own plane and its predecessor's), written here
+    from the planes."""
+    distances = np.array([8.0, 6.0, 4.0, 2.0, 1.0, 0.5, 0.3, 0.25])
+    modes, r_bar, half_spaces, _ = _line_half_spaces(distances)
+    radii = cp.trust_radii(modes, r_bar, half_spaces, 0.2)
+    hs = half_spaces[0]
+    for k in range(1, distances.size - 1):
+        held = min(
+            float(hs.normals[hs.index[j]] @ r_bar[k] - hs.offsets[hs.index[j]])
+            / float(np.abs(hs.normals[hs.index[j]]).sum())
+            for j in (k, k - 1)
+        )
+        assert radii[k] == pytest.approx(max(0.2, 0.5 * held), rel=1e-12)
+    assert radii[1] > 0.5  # 6 km out (its predecessor's plane 2 km off): 3.5× the base radius
+    assert radii[-2] == 0.2  # 0.3 km out: the base radius
+    assert radii[0] == radii[-1] == 0.2  # the start and the end carry no row
+
+
+def test_an_enlarged_trust_box_lies_inside_its_nodes_half_spaces() -> None:
+    """Every row of a node whose radius was enlarged is left out by the trust test of
+    ``_pairs`` (its box cannot reach the plane): the box alone keeps the node safe, as the
+    base box does where it keeps a row out."""
+    distances = np.linspace(12.0, 0.25, 60)
+    modes, r_bar, half_spaces, _ = _line_half_spaces(distances)
+    radii = cp.trust_radii(modes, r_bar, half_spaces, 0.2)
+    kept, left_out = cp._pairs(modes, r_bar, half_spaces, radii)
+    enlarged = np.flatnonzero(radii > 0.2)
+    assert enlarged.size > 30
+    assert not np.isin(kept[:, 0], enlarged).any()
+    assert np.isin(enlarged, left_out[:, 0]).all()
+
+
+def test_a_re_solve_moves_nodes_far_from_the_zone_beyond_the_base_trust_radius() -> None:
+    """A warm re-solve after ε falls (0.9 → 0.1, an adaptive schedule) from 7.3 km out:
+    the fuel-optimal path lies up to 0.85 km from the smoother one. Held in one 0.2 km box at
+    every node (fraction 0: every radius the base one, as before) its far nodes stop at the
+    box and it costs 12 % more than the cold plan; with the far radii it moves them by more
+    than 0.4 km and costs less, and every arc stays outside the unsafe set."""
+    axes, port, axis, deg = SAFE_APPROACH
+    geo = _geometry(axes, port, axis, deg)
+    x0, xf = np.r_[5.0, -5.0, 2.0, 0.0, 0.0, 0.0], np.r_[port, 0.0, 0.0, 0.0]
+    smooth = cp.plan(N_MOTION, DT, U_MAX, x0, xf, 800.0, 0.9, geo)
+
+    def re_solve() -> cp.ConstrainedPlan:
+        return cp.plan(N_MOTION, DT, U_MAX, x0, xf, 800.0, 0.1, geo, warm_controls=smooth.controls)
+
+    def cost(p: cp.ConstrainedPlan) -> float:
+        size = np.linalg.norm(p.controls / U_MAX, axis=1)
+        return float(np.sum(0.9 * size + 0.1 * size**2))
+
+    far = re_solve()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(cp, "TRUST_FAR_FRACTION", 0.0)
+        held = re_solve()
+    for p in (far, held):
+        assert p.status is SolveStatus.CONVERGED and p.slack_km == 0.0 and not p.restarted
+    assert np.max(np.abs(held.positions - smooth.positions)) <= 0.2 + 1e-9
+    assert np.max(np.abs(far.positions - smooth.positions)) > 0.4
+    assert cost(far) < cost(held)
+    assert not _unsafe(_dense(x0, far.controls), axes, port, axis, deg).any()

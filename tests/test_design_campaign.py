@@ -304,6 +304,35 @@ def test_a_bad_sweep_table_range_exits_2_naming_the_key_as_range_does(
     assert not (tmp_path / "results").exists()
 
 
+MIXED = '[sweep]\n"schedule.beta" = [0.1, 0.2]\n"schedule.kappa_mtf" = { low = 2.0, high = 30.0 }\n'
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["sweep"],
+        ["sweep", "--design", "lhs", "--samples", "4"],
+        ["config", "validate"],
+    ],
+    ids=["sweep", "sweep --design", "config validate"],
+)
+def test_a_sweep_mixing_grid_values_and_ranges_gets_one_message_from_every_command(
+    tmp_path: Path, command: list[str]
+) -> None:
+    cfg = _config(tmp_path, "mixed", MIXED)
+    args = [*command[:1], cfg, *command[1:]] if command[0] == "sweep" else [*command, cfg]
+    if command[0] == "sweep":
+        args += ["--arch", "mtf_adaptive", "--workers", "1", "-q"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    assert (
+        "[sweep] mixes grid values (schedule.beta) with ranges (schedule.kappa_mtf)"
+        in result.stderr
+    )
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "results").exists()
+
+
 def test_a_range_replaces_a_sweep_range_before_it_is_checked() -> None:
     """``--range`` replaces a ``[sweep]`` key's range (designs guide), so the replaced one is
     not refused, as a ``[sweep]`` grid key that ``--param`` replaces is not."""

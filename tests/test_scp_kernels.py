@@ -336,7 +336,7 @@ def _dual_rows_before(
     axis = box[1] % 3
     t_coeffs = np.zeros((box[0].size, 6))
     t_coeffs[np.arange(box[0].size), axis] = sign * s_p
-    t_offsets = (sign * sub.r_bar[box[0], axis] - sub.trust_km) * s_p
+    t_offsets = (sign * sub.r_bar[box[0], axis] - sub.trust_km[box[0]]) * s_p
     hs_coeffs = np.zeros((pairs.shape[0], 6))
     hs_coeffs[:, :3] = normals * s_p
     node = np.r_[np.full(6, steps), pairs[:, 0], box[0], ab.nodes]

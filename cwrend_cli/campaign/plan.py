@@ -62,6 +62,7 @@ from cwrend_cli.config.overrides import (
     get_dotted,
     is_range,
     missing_key_hint,
+    mixed_sweep_problem,
     moves_port,
     point_tree,
 )
@@ -265,6 +266,9 @@ def design_points(
         raise ConfigError(f"--second-order: second-order indices need --design sobol, not {kind}")
     if samples is None:
         raise ConfigError(f"--design {kind} needs --samples N")
+    mixed = mixed_sweep_problem(sweep)
+    if mixed is not None:
+        raise ConfigError(mixed)
     by_key: dict[str, ParameterRange] = {}
     for key, spec in sweep.items():
         if not isinstance(spec, Mapping):

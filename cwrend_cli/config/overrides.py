@@ -437,6 +437,23 @@ def is_range(value: Any) -> bool:
     return isinstance(value, Mapping) and bool(RANGE_FIELDS & set(value))
 
 
+def mixed_sweep_problem(sweep: Mapping[str, Any]) -> str | None:
+    """What is wrong with a ``[sweep]`` that mixes grid values and a design's ranges (None
+    when it does not): a sweep is a grid (every key lists values) or a design (every key a
+    range table), and the message names the keys of each kind, whichever command reads it
+    (``sweep``, ``sweep --design``, ``config validate``)."""
+    ranges = [key for key, value in sweep.items() if is_range(value)]
+    grid = [key for key, value in sweep.items() if not is_range(value)]
+    if not ranges or not grid:
+        return None
+    return (
+        f"[sweep] mixes grid values ({', '.join(grid)}) with ranges ({', '.join(ranges)}): "
+        "a sweep is a grid (every key lists values: [v1, v2] or 'start:stop:num') or a "
+        "design (every key a range table, run with --design lhs|sobol|random --samples N); "
+        "give the grid's keys ranges, or the ranges' keys lists of values"
+    )
+
+
 def expand_grid(
     sweep: Mapping[str, Any], cli_params: Sequence[str] = ()
 ) -> tuple[tuple[str, tuple[Any, ...]], ...]:
@@ -457,6 +474,9 @@ def expand_grid(
             f"sweep: more than {MAX_SWEPT_KEYS:,} swept keys ([sweep] and --param together); "
             "a grid of 2 values per key passes the point limit at 14 keys"
         )
+    mixed = mixed_sweep_problem(sweep)
+    if mixed is not None:
+        raise ConfigError(mixed)
     grid: dict[str, tuple[Any, ...]] = {}
     for key, values in sweep.items():
         if is_range(values):

@@ -48,8 +48,14 @@ solver stalls (docs/solvers.md, *where the mean goes*). A corridor that may ente
 zone (a port on its surface, the circumscribed spheres of a long ellipsoid) keeps the
 margin, and so does a turning body's.
 
-**Iterations.** Trust region ``‖r_k − r̄_k‖_∞ ≤`` :data:`TRUST_RADIUS_FACTOR`
-× the largest semi-axis; stop when no node moves by more than
+**Iterations.** Trust region ``‖r_k − r̄_k‖_∞ ≤ T_k``: T = :data:`TRUST_RADIUS_FACTOR`
+× the largest semi-axis near the zone; at a node far from it (a fixed target, abort
+safety off) the larger :data:`TRUST_FAR_FRACTION` of the largest box about r̄_k that the
+node's half-spaces hold (:func:`trust_radii`). The box is there to keep an iterate where
+the zone was linearised; such a node's box meets its half-spaces nowhere (their rows are
+left out, *Reductions* (i)), and one radius for all would only hold the far nodes back
+from where a new estimate or a new ε takes the plan (trust rows binding at tens of nodes
+4–26 km from the zone, docs/solvers.md). Stop when no node moves by more than
 :data:`SCP_TOL_KM` between iterates or the cost falls by less than
 :data:`SCP_COST_RTOL` of itself, with no slack and the modes unchanged, at most
 :data:`SCP_MAX_ITER` iterations; at the cap the last iterate is returned (safe,
@@ -211,6 +217,9 @@ SCP_TOL_KM = 1e-6
 SCP_COST_RTOL = 1e-4
 #: Trust radius of the node positions, a multiple of the largest semi-axis [-].
 TRUST_RADIUS_FACTOR = 1.0
+#: A node far from its keep-out half-spaces gets a larger trust radius: this fraction of
+#: the largest box about it that they hold (:func:`trust_radii`) [-].
+TRUST_FAR_FRACTION = 0.5
 #: Price of the path slack in the scaled cost [1/km]: the cost of a plan is of order the
 #: fuel over Δt u_max (at most N), so 1e6 per km outweighs any fuel saving.
 SLACK_PENALTY = 1e6
@@ -565,11 +574,62 @@ def _outside_planes(
     return nodes, _node_index(nodes, modes.size), level, normals, offsets
 
 
-def _pairs(
+def trust_radii(
     modes: np.ndarray,
     r_bar: np.ndarray,
     half_spaces: list[HalfSpaces],
     trust_km: float,
+    motion: cg.BodyMotion | None = None,
+) -> np.ndarray:
+    """Each node's trust radius (N + 1,) [km] (module docstring, *Iterations*): the larger of
+    ``trust_km`` and :data:`TRUST_FAR_FRACTION` of the largest ∞-norm box about r̄_k that
+    every half-space binding node k holds (the rows of :func:`_pairs`; a node with none
+    keeps ``trust_km``).
+
+    The trust box keeps an iterate where the keep-out zone was linearised. A node whose
+    half-spaces hold a box twice its own meets them nowhere in its box: its rows are left
+    out (:func:`_pairs`), it is safe anywhere in the box, and a smaller box would only hold
+    the plan back from where a new estimate takes it (the nodes far from the zone, which
+    moved by more than ``trust_km`` between re-solves and made the trust rows bind at tens
+    of nodes: docs/solvers.md). The nodes near the zone keep ``trust_km``."""
+    pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
+    normals, offsets = _planes(half_spaces, pairs, motion)
+    return _far_radii(pairs, normals, offsets, r_bar, trust_km, TRUST_FAR_FRACTION, modes.size)
+
+
+@njit(cache=True)
+def _far_radii(
+    pairs: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+    fraction: float,
+    nodes: int,
+) -> np.ndarray:
+    """:func:`trust_radii` from the rows ``pairs`` (P, 3) and their planes (normals (P, 3),
+    offsets (P,) [km]): node k's largest held box is the smallest over its rows of
+    ``(nᵀ r̄_k − offset) / ‖n‖₁`` (where :func:`_box_low` reaches the plane)."""
+    held = np.full(nodes, np.inf)
+    for p in range(pairs.shape[0]):
+        k = pairs[p, 0]
+        n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
+        size = abs(n0) + abs(n1) + abs(n2)
+        if size > 0.0:
+            dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+            held[k] = min(held[k], (dot - offsets[p]) / size)
+    radii = np.full(nodes, trust_km)
+    for k in range(nodes):
+        if held[k] < np.inf and fraction * held[k] > trust_km:
+            radii[k] = fraction * held[k]
+    return radii
+
+
+def _pairs(
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    half_spaces: list[HalfSpaces],
+    trust_km: float | np.ndarray,
     motion: cg.BodyMotion | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The half-space rows (node k, half-space j, ellipsoid b) of the program, and those
@@ -587,15 +647,23 @@ def _pairs(
     return kept, left_out
 
 
+def _radii(trust_km: float | np.ndarray, nodes: int) -> np.ndarray:
+    """Each of ``nodes`` nodes' trust radius (nodes,) [km]: ``trust_km`` itself when it
+    gives one per node (:func:`trust_radii`), else one radius for all."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(trust_km, dtype=np.float64), (nodes,)))
+
+
 def _pairs_planes(
     modes: np.ndarray,
     r_bar: np.ndarray,
     half_spaces: list[HalfSpaces],
-    trust_km: float,
+    trust_km: float | np.ndarray,
     motion: cg.BodyMotion | None = None,
 ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """:func:`_pairs` and the kept rows' planes (normals (P, 3), offsets (P,) [km]): those
-    :func:`_planes` gives for them, taken from the trust test's (the same bits)."""
+    :func:`_planes` gives for them, taken from the trust test's (the same bits). ``trust_km``:
+    one radius, or each node's (:func:`trust_radii`)."""
+    trust_km = _radii(trust_km, modes.size)
     if motion is None:  # the three steps below in one pass (the same rows, the same bits)
         if len(half_spaces) == 1:  # one ellipsoid: its arrays as a stack of one, no copy
             normals, offsets = half_spaces[0].normals[None], half_spaces[0].offsets[None]
@@ -620,7 +688,7 @@ def _fixed_pairs(
     offsets: np.ndarray,
     modes: np.ndarray,
     r_bar: np.ndarray,
-    trust_km: float,
+    trust_km: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_pairs_planes` of a fixed target in one pass: the rows of :func:`_pair_rows` in
     its order, each row's plane as :func:`_planes` reads it (``index`` (N + 1,) a node's
@@ -638,7 +706,7 @@ def _fixed_pairs(
         k, row, b = pairs[p, 0], index[pairs[p, 1]], pairs[p, 2]
         n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
         offset = offsets[b, row]
-        if _box_low(n0, n1, n2, r_bar, k, trust_km) >= offset + SCP_TOL_KM:
+        if _box_low(n0, n1, n2, r_bar, k, trust_km[k]) >= offset + SCP_TOL_KM:
             out[o, 0], out[o, 1], out[o, 2] = k, pairs[p, 1], b
             o += 1
         else:
@@ -676,7 +744,11 @@ def _box_low(n0: float, n1: float, n2: float, r_bar: np.ndarray, k: int, trust_k
 
 @njit(cache=True)
 def _trust_split(
-    pairs: np.ndarray, normals: np.ndarray, offsets: np.ndarray, r_bar: np.ndarray, trust_km: float
+    pairs: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(kept, left out, the left-out mask (P,)) of the rows ``pairs`` (P, 3) with planes
     (normals (P, 3), offsets (P,)): a row is left out when ``nᵀ r̄_k − trust ‖n‖₁``, the
@@ -686,7 +758,8 @@ def _trust_split(
     count = 0
     for p in range(pairs.shape[0]):
         n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
-        left[p] = _box_low(n0, n1, n2, r_bar, pairs[p, 0], trust_km) >= offsets[p] + SCP_TOL_KM
+        k = pairs[p, 0]
+        left[p] = _box_low(n0, n1, n2, r_bar, k, trust_km[k]) >= offsets[p] + SCP_TOL_KM
         count += left[p]
     kept = np.empty((pairs.shape[0] - count, 3), dtype=np.int64)
     out = np.empty((count, 3), dtype=np.int64)
@@ -736,7 +809,7 @@ def _broken_rows(
     first: int,
     half_spaces: list[HalfSpaces],
     dropped: np.ndarray,
-    trust_km: float,
+    trust_km: np.ndarray,
     slack_km: float,
     motion: cg.BodyMotion | None = None,
 ) -> np.ndarray:
@@ -747,7 +820,7 @@ def _broken_rows(
     trust box implied them). The answer of the relaxed program is that of the
     whole one when it satisfies what was left out (the relaxation is convex
     and its cost strictly convex in the controls, which fix the states): every
-    such node within ``trust + SLACK_TOL_KM`` of r̄_k (the solver's tolerance),
+    such node within its trust radius + ``SLACK_TOL_KM`` of r̄_k (the solver's tolerance),
     and, so that every iterate stays safe whatever that tolerance, every
     left-out half-space row held exactly (with the answer's slack, as written).
     """
@@ -756,7 +829,7 @@ def _broken_rows(
     residual = np.sum(normals * r[dropped[:, 0]], axis=1) - offsets + slack_km
     prefix = np.flatnonzero(modes[:first] > 0)
     moved = np.max(np.abs(r[prefix] - r_bar[prefix]), axis=1, initial=0.0)
-    return np.union1d(dropped[residual < 0.0, 0], prefix[moved > trust_km + SLACK_TOL_KM])
+    return np.union1d(dropped[residual < 0.0, 0], prefix[moved > trust_km[prefix] + SLACK_TOL_KM])
 
 
 def _thrust_guess(u_bar: np.ndarray, u_max: float, eps: float) -> np.ndarray:
@@ -780,7 +853,7 @@ class _Subproblem:
     The problem (mean motion n [rad/s], step Δt [s], u_max [km/s²], x0, x_f, ε),
     the geometry, and the previous iterate's modes, positions r̄ (N+1, 3) [km] and
     controls ū (N, 3) [km/s²], the corridor cone's tightening at each node [km]
-    (:func:`_cone_margins`), the nodes' linearised half-spaces, the trust radius [km],
+    (:func:`_cone_margins`), the nodes' linearised half-spaces, each node's trust radius [km],
     the turning body frame of a tumbling target (``None``: fixed) and the abort-safety
     rows (``None``: off).
     """
@@ -797,11 +870,15 @@ class _Subproblem:
     u_bar: np.ndarray
     cone_margins_km: np.ndarray
     half_spaces: list[HalfSpaces]
-    trust_km: float
+    trust_km: np.ndarray  # (N + 1,) each node's trust radius (:func:`trust_radii`); a float: all
     motion: cg.BodyMotion | None = None
     abort_rows: ab.AbortRows | None = None
     first_order: bool = True  # try the dual solver (:func:`_dual_solve`) before Clarabel
     warm_duals: Duals | None = None  # its starting multipliers (:func:`_warm_multipliers`)
+
+    def __post_init__(self) -> None:
+        # one radius given: every node's (the rows read each node's radius)
+        object.__setattr__(self, "trust_km", _radii(self.trust_km, self.modes.size))
 
 
 @dataclass(frozen=True)
@@ -870,7 +947,7 @@ def _row_arrays(
     box_nodes: np.ndarray,
     box_comps: np.ndarray,
     r_bar: np.ndarray,
-    trust_km: float,
+    trust_km: np.ndarray,
     abort_nodes: np.ndarray,
     abort_coeffs: np.ndarray,
     abort_offsets: np.ndarray,
@@ -933,19 +1010,19 @@ def _trust_rows(
 
 @njit(cache=True)
 def _trust_arrays(
-    nodes: np.ndarray, comps: np.ndarray, r_bar: np.ndarray, trust_km: float, scale: float
+    nodes: np.ndarray, comps: np.ndarray, r_bar: np.ndarray, trust_km: np.ndarray, scale: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """(coeffs (M, 6), offsets (M,)) of the trust rows at ``nodes``, component ``comps``,
-    scaled by ``scale``: component i < 3 ``r_k,i ≥ r̄_k,i − T``, i ≥ 3 ``−r_k,i−3 ≥
-    −r̄_k,i−3 − T`` (T = ``trust_km``), i.e. sign s = ±1 on axis i mod 3, offset
-    ``(s r̄_k,i mod 3 − T) × scale``."""
+    scaled by ``scale``: component i < 3 ``r_k,i ≥ r̄_k,i − T_k``, i ≥ 3 ``−r_k,i−3 ≥
+    −r̄_k,i−3 − T_k`` (T_k = ``trust_km[k]``, node k's radius), i.e. sign s = ±1 on axis
+    i mod 3, offset ``(s r̄_k,i mod 3 − T_k) × scale``."""
     coeffs = np.zeros((nodes.size, 6))
     offsets = np.empty(nodes.size)
     for p in range(nodes.size):
         sign = 1.0 if comps[p] < 3 else -1.0
         axis = comps[p] % 3
         coeffs[p, axis] = sign * scale
-        offsets[p] = (sign * r_bar[nodes[p], axis] - trust_km) * scale
+        offsets[p] = (sign * r_bar[nodes[p], axis] - trust_km[nodes[p]]) * scale
     return coeffs, offsets
 
 
@@ -958,7 +1035,7 @@ def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 @njit(cache=True)
 def _box_broken(
-    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: float
+    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """(nodes, components) of :func:`_broken_trust`, node by node: component i < 3 where
     ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``."""
@@ -970,7 +1047,7 @@ def _box_broken(
             continue
         for i in range(6):
             d = r[k, i % 3] - r_bar[k, i % 3]
-            if (d if i < 3 else -d) < floor_km:
+            if (d if i < 3 else -d) < floor_km[k]:
                 nodes[count], comps[count] = k, i
                 count += 1
     return nodes[:count], comps[:count]
@@ -1487,7 +1564,12 @@ def _program(
         parts.append(dense_block(rows_tr, cols_tr, np.eye(3)))
         parts.append(dense_block(rows_tr + 3, cols_tr, -np.eye(3)))
         b_nonneg.append(
-            np.column_stack([trust_km + r_bar[constrained], trust_km - r_bar[constrained]]).ravel()
+            np.column_stack(
+                [
+                    trust_km[constrained, None] + r_bar[constrained],
+                    trust_km[constrained, None] - r_bar[constrained],
+                ]
+            ).ravel()
         )
         row0 += 6 * constrained.size
     blocks.append((*_cat(parts), row0))
@@ -1924,13 +2006,18 @@ def plan(
         if drift is not None and axes is not None:
             nodes = np.flatnonzero((modes == _KEEP_OUT) & ~ab.exempt(geo, r_bar, motion))
             chords = ab.chords_near(geo, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
+        # one radius with abort safety (its drift chords are sized by it) and for a turning
+        # body (not yet measured with far radii: docs/solvers.md)
+        radii = np.full(steps + 1, trust)
+        if drift is None and motion is None:
+            radii = trust_radii(modes, r_bar, half_spaces, trust)
         for _ in range(ABORT_ROUNDS):
             rows = None
             if chords is not None and drift is not None and axes is not None:
                 rows = ab.rows_for(geo, drift, chords)
             sub = _Subproblem(
                 n, dt_s, u_max_km_s2, x0, xf, eps, geo, modes, r_bar, u_bar, cone_margins,
-                half_spaces, trust, motion, rows, solver == "auto", warm_duals,
+                half_spaces, radii, motion, rows, solver == "auto", warm_duals,
             )  # fmt: skip
             sol, iterations, answer, fell_back = _reduced_solve(sub, reduce)
             used += iterations
