@@ -670,3 +670,32 @@ def test_the_answers_costs_controls_and_states_are_those_of_before() -> None:
         assert np.array_equal(costs, path_dual._step_costs(u, 0.7, 2e-3))
         assert np.array_equal(controls, u * U_MAX)
         assert np.array_equal(states, dynamics.zoh_rollout(phi, gam, x0, u * U_MAX))
+
+
+@pytest.mark.parametrize("bodies", [1, 3])
+def test_a_fixed_targets_trust_radii_are_those_of_the_gathered_planes(bodies: int) -> None:
+    """``trust_radii`` of a fixed target (its kernel ``_fixed_radii``, the planes read where
+    they are kept): ``_far_radii`` of ``_pair_rows`` and the planes ``_planes`` gathers for
+    them, bit for bit."""
+    rng = np.random.default_rng(26 + bodies)
+    for _ in range(150):
+        steps = int(rng.integers(3, 150))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
+        r_bar = 10.0 * r_bar  # nodes near and far from the planes
+        pairs = cp._pair_rows(half_spaces[0].index >= 0, modes, bodies)
+        normals, offsets = cp._planes(half_spaces, pairs)
+        want = cp._far_radii(
+            pairs, normals, offsets, r_bar, trust, cp.TRUST_FAR_FRACTION, modes.size
+        )
+        assert np.array_equal(cp.trust_radii(modes, r_bar, half_spaces, trust), want)
+
+
+def test_the_radii_given_one_a_node_are_taken_as_they_are() -> None:
+    """``_radii``: an array of one radius a node is the array itself (no copy); one radius,
+    or a strided array, every node's as ``broadcast_to`` made it."""
+    radii = np.linspace(0.1, 0.2, 7)
+    assert cp._radii(radii, 7) is radii
+    assert np.array_equal(cp._radii(0.3, 7), np.full(7, 0.3))
+    strided = np.linspace(0.1, 0.2, 14)[::2]
+    got = cp._radii(strided, 7)
+    assert got.flags.c_contiguous and np.array_equal(got, strided)

@@ -592,6 +592,11 @@ def trust_radii(
     the plan back from where a new estimate takes it (the nodes far from the zone, which
     moved by more than ``trust_km`` between re-solves and made the trust rows bind at tens
     of nodes: docs/solvers.md). The nodes near the zone keep ``trust_km``."""
+    if motion is None:  # each row's plane read where it is kept (the same values)
+        normals, offsets = _stacked_planes(half_spaces)
+        return _fixed_radii(
+            half_spaces[0].index, normals, offsets, modes, r_bar, trust_km, TRUST_FAR_FRACTION
+        )
     pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
     normals, offsets = _planes(half_spaces, pairs, motion)
     return _far_radii(pairs, normals, offsets, r_bar, trust_km, TRUST_FAR_FRACTION, modes.size)
@@ -613,13 +618,55 @@ def _far_radii(
     held = np.full(nodes, np.inf)
     for p in range(pairs.shape[0]):
         k = pairs[p, 0]
-        n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
-        size = abs(n0) + abs(n1) + abs(n2)
-        if size > 0.0:
-            dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-            held[k] = min(held[k], (dot - offsets[p]) / size)
-    radii = np.full(nodes, trust_km)
-    for k in range(nodes):
+        held[k] = _held_box(
+            held[k], normals[p, 0], normals[p, 1], normals[p, 2], offsets[p], r_bar, k
+        )
+    return _radii_of(held, trust_km, fraction)
+
+
+@njit(cache=True)
+def _fixed_radii(
+    index: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+    fraction: float,
+) -> np.ndarray:
+    """:func:`trust_radii` of a fixed target: :func:`_far_radii` over the rows of
+    :func:`_pair_rows`, each row's plane read as :func:`_fixed_pairs` reads it (``index``
+    (N + 1,) a node's plane, −1 for none; ``normals`` (B, K, 3), ``offsets`` (B, K) of the B
+    ellipsoids), not gathered first (:func:`_planes`): the same planes, the same radii."""
+    pairs = _pair_rows(index >= 0, modes, normals.shape[0])
+    held = np.full(modes.size, np.inf)
+    for p in range(pairs.shape[0]):
+        k, row, b = pairs[p, 0], index[pairs[p, 1]], pairs[p, 2]
+        n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
+        held[k] = _held_box(held[k], n0, n1, n2, offsets[b, row], r_bar, k)
+    return _radii_of(held, trust_km, fraction)
+
+
+@njit(cache=True)
+def _held_box(
+    held: float, n0: float, n1: float, n2: float, offset: float, r_bar: np.ndarray, k: int
+) -> float:
+    """The largest ∞-norm box about r̄_k held so far, ``held`` [km], and the plane n (unit),
+    ``offset`` [km] of one more of node k's rows: the smaller of ``held`` and ``(nᵀ r̄_k −
+    offset) / ‖n‖₁`` (where :func:`_box_low` reaches the plane; ``held`` for n = 0)."""
+    size = abs(n0) + abs(n1) + abs(n2)
+    if size > 0.0:
+        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+        return min(held, (dot - offset) / size)
+    return held
+
+
+@njit(cache=True)
+def _radii_of(held: np.ndarray, trust_km: float, fraction: float) -> np.ndarray:
+    """Each node's radius from its largest held box ``held`` (N + 1,) [km] (∞: no row): the
+    larger of ``trust_km`` and ``fraction`` × the box (:func:`trust_radii`)."""
+    radii = np.full(held.size, trust_km)
+    for k in range(held.size):
         if held[k] < np.inf and fraction * held[k] > trust_km:
             radii[k] = fraction * held[k]
     return radii
@@ -650,7 +697,21 @@ def _pairs(
 def _radii(trust_km: float | np.ndarray, nodes: int) -> np.ndarray:
     """Each of ``nodes`` nodes' trust radius (nodes,) [km]: ``trust_km`` itself when it
     gives one per node (:func:`trust_radii`), else one radius for all."""
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(trust_km, dtype=np.float64), (nodes,)))
+    radii = np.asarray(trust_km, dtype=np.float64)
+    if radii.shape == (nodes,) and radii.flags.c_contiguous:  # already one a node
+        return radii
+    return np.ascontiguousarray(np.broadcast_to(radii, (nodes,)))
+
+
+def _stacked_planes(half_spaces: list[HalfSpaces]) -> tuple[np.ndarray, np.ndarray]:
+    """The ellipsoids' planes as stacks, normals (B, K, 3) and offsets (B, K) [km] (every
+    ellipsoid has the same nodes): one ellipsoid's arrays as a stack of one, no copy."""
+    if len(half_spaces) == 1:
+        return half_spaces[0].normals[None], half_spaces[0].offsets[None]
+    return (
+        np.stack([hs.normals for hs in half_spaces]),
+        np.stack([hs.offsets for hs in half_spaces]),
+    )
 
 
 def _pairs_planes(
@@ -665,11 +726,7 @@ def _pairs_planes(
     one radius, or each node's (:func:`trust_radii`)."""
     trust_km = _radii(trust_km, modes.size)
     if motion is None:  # the three steps below in one pass (the same rows, the same bits)
-        if len(half_spaces) == 1:  # one ellipsoid: its arrays as a stack of one, no copy
-            normals, offsets = half_spaces[0].normals[None], half_spaces[0].offsets[None]
-        else:
-            normals = np.stack([hs.normals for hs in half_spaces])
-            offsets = np.stack([hs.offsets for hs in half_spaces])
+        normals, offsets = _stacked_planes(half_spaces)
         kept, left_out, kept_normals, kept_offsets = _fixed_pairs(
             half_spaces[0].index, normals, offsets, modes, r_bar, trust_km
         )
@@ -2008,9 +2065,10 @@ def plan(
             chords = ab.chords_near(geo, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
         # one radius with abort safety (its drift chords are sized by it) and for a turning
         # body (not yet measured with far radii: docs/solvers.md)
-        radii = np.full(steps + 1, trust)
         if drift is None and motion is None:
             radii = trust_radii(modes, r_bar, half_spaces, trust)
+        else:
+            radii = np.full(steps + 1, trust)
         for _ in range(ABORT_ROUNDS):
             rows = None
             if chords is not None and drift is not None and axes is not None:
