@@ -657,7 +657,7 @@ def _held_box(
     size = abs(n0) + abs(n1) + abs(n2)
     if size > 0.0:
         dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-        return min(held, (dot - offset) / size)
+        return float(min(held, (dot - offset) / size))
     return held
 
 
