@@ -699,3 +699,28 @@ def test_the_radii_given_one_a_node_are_taken_as_they_are() -> None:
     strided = np.linspace(0.1, 0.2, 14)[::2]
     got = cp._radii(strided, 7)
     assert got.flags.c_contiguous and np.array_equal(got, strided)
+
+
+def test_the_largest_margin_is_numpys_max() -> None:
+    """``_largest`` (the corridor's clearance test): ``np.max``, NaN when one value is."""
+    rng = np.random.default_rng(29)
+    for trial in range(200):
+        values = rng.uniform(0.0, 1e-3, int(rng.integers(1, 100)))
+        if trial % 4 == 0:
+            values[rng.integers(0, values.size)] = np.nan
+        want = float(np.max(values))
+        got = cp._largest(values)
+        assert got == want or (np.isnan(got) and np.isnan(want))
+
+
+def test_the_rows_with_a_multiplier_are_numpys_selection() -> None:
+    """``_nonzero_rows`` (the duals a plan carries): ``code[y != 0]``, ``y[y != 0]``."""
+    rng = np.random.default_rng(30)
+    for _ in range(200):
+        count = int(rng.integers(0, 200))
+        code = rng.integers(0, 1 << 40, count)
+        values = rng.random(count) * (rng.random(count) < 0.3)
+        got = cp._nonzero_rows(code, values)
+        keep = values != 0.0
+        assert np.array_equal(got[0], code[keep]) and np.array_equal(got[1], values[keep])
+        assert got[0].dtype == np.int64

@@ -394,9 +394,20 @@ def _cone_margins(
         motion is None
         and geo.port_km is not None
         and geo.semi_axes_km is not None
-        and _untightened_corridor(geo)[2] > float(np.max(margins_km))
+        and _untightened_corridor(geo)[2] > _largest(margins_km)
     )
-    return np.zeros_like(margins_km) if clear else margins_km
+    return np.zeros(margins_km.shape) if clear else margins_km
+
+
+@njit(cache=True)
+def _largest(values: np.ndarray) -> float:
+    """``np.max`` of a nonempty 1-D array: its largest value, NaN if one is."""
+    out = values[0]
+    for v in values:
+        if v != v:
+            return math.nan
+        out = max(out, v)
+    return float(out)
 
 
 class HalfSpaces(Mapping[int, cg.HalfSpace]):
@@ -1420,8 +1431,7 @@ def _dual_solve(
         # multipliers (path_dual.DualAnswer.start: where the next one starts)
         carried = ans.multipliers if ans.start is None else ans.start
         if cuts[0].size == 0 and box[0].size == 0:
-            active = carried != 0.0
-            duals = Duals(code[active], carried[active])
+            duals = Duals(*_nonzero_rows(code, carried))
             return (
                 _DualSolution(ans.cost, np.zeros(1), duals),
                 used,
@@ -1458,6 +1468,19 @@ def _of_kinds(values: np.ndarray, kind: np.ndarray, first: int, second: int) -> 
             out[count] = values[i]
             count += 1
     return out[:count]
+
+
+@njit(cache=True)
+def _nonzero_rows(code: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(code[values != 0], values[values != 0])``: the rows with a multiplier, in their
+    order (copies: numpy's boolean indexing's arrays)."""
+    codes, kept = np.empty(values.size, np.int64), np.empty(values.size)
+    count = 0
+    for i in range(values.size):
+        if values[i] != 0.0:
+            codes[count], kept[count] = code[i], values[i]
+            count += 1
+    return codes[:count], kept[:count]
 
 
 def _reduced_solve(
