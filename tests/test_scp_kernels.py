@@ -724,3 +724,19 @@ def test_the_rows_with_a_multiplier_are_numpys_selection() -> None:
         keep = values != 0.0
         assert np.array_equal(got[0], code[keep]) and np.array_equal(got[1], values[keep])
         assert got[0].dtype == np.int64
+
+
+def test_the_rows_orders_are_numpys_stable_sorts() -> None:
+    """``_node_order`` (counting) and ``_sorted_order`` (the identity when in order):
+    ``np.argsort(kind="stable")``, ties in their order, sorted or not."""
+    rng = np.random.default_rng(31)
+    for trial in range(300):
+        count = int(rng.integers(0, 200))
+        nodes = rng.integers(0, int(rng.integers(1, 900)), count)
+        if trial % 3 == 0:
+            nodes = np.sort(nodes)
+        want = np.argsort(nodes, kind="stable")
+        assert np.array_equal(cp._node_order(nodes), want)
+        codes = rng.integers(0, 1 << 40, count) if trial % 2 else nodes * cp._CODE_NODE
+        codes = np.sort(codes) if trial % 3 == 0 else codes
+        assert np.array_equal(cp._sorted_order(codes), np.argsort(codes, kind="stable"))

@@ -1060,10 +1060,46 @@ def _row_arrays(
             coeffs[row, c] = abort_coeffs[p, c] * s_p
         offsets[row], tol[row] = abort_offsets[p] * s_p, DUAL_TOL_KM * s_p
         row += 1
-    order = np.argsort(node, kind="mergesort")
-    kind = kinds[order]
-    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
-    return node[order], coeffs[order], offsets[order], tol[order], kind, code
+    order = _node_order(node)
+    out_node, out_coeffs = np.empty(total, np.int64), np.empty((total, 6))
+    out_offsets, out_tol = np.empty(total), np.empty(total)
+    kind, code = np.empty(total, np.int64), np.empty(total, np.int64)
+    for r in range(total):  # the rows in that order (copies, as numpy's indexing)
+        i = order[r]
+        out_node[r], out_offsets[r], out_tol[r], kind[r] = node[i], offsets[i], tol[i], kinds[i]
+        for c in range(6):
+            out_coeffs[r, c] = coeffs[i, c]
+        code[r] = node[i] * _CODE_NODE + kinds[i] * _CODE_KIND + keys[i]
+    return out_node, out_coeffs, out_offsets, out_tol, kind, code
+
+
+@njit(cache=True)
+def _node_order(nodes: np.ndarray) -> np.ndarray:
+    """``np.argsort(nodes, kind="stable")`` of nodes ≥ 0 (a stable sort's order is the one
+    order of the rows by node that keeps tied rows as they come), by counting: O(rows + N)."""
+    size = 0
+    for k in nodes:
+        size = max(size, k + 1)
+    start = np.zeros(size + 1, np.int64)
+    for k in nodes:
+        start[k + 1] += 1
+    for k in range(size):
+        start[k + 1] += start[k]
+    order = np.empty(nodes.size, np.int64)
+    for i in range(nodes.size):
+        order[start[nodes[i]]] = i
+        start[nodes[i]] += 1
+    return order
+
+
+@njit(cache=True)
+def _sorted_order(values: np.ndarray) -> np.ndarray:
+    """``np.argsort(values, kind="stable")``: the identity when ``values`` are already in
+    order (a plan's row codes, nearly always), else numba's merge sort (stable)."""
+    for i in range(1, values.size):
+        if values[i] < values[i - 1]:
+            return np.argsort(values, kind="mergesort")
+    return np.arange(values.size)
 
 
 def _trust_rows(
@@ -1180,7 +1216,7 @@ def _carry_unique(codes: np.ndarray, values: np.ndarray, code: np.ndarray, out: 
     """:func:`_warm_multipliers` when no code repeats in ``codes``: ``out[i]`` = the value of
     the row of ``codes`` equal to ``code[i]``, where there is one (a copy: no arithmetic).
     False (``out`` untouched) when a code repeats."""
-    order = np.argsort(codes, kind="mergesort")
+    order = _sorted_order(codes)
     for p in range(1, order.size):
         if codes[order[p]] == codes[order[p - 1]]:
             return False
@@ -1338,7 +1374,7 @@ def _merged_rows(
     every = np.empty(total, np.int64)
     every[:old] = nodes
     every[old:] = new_nodes
-    order = np.argsort(every, kind="mergesort")
+    order = _node_order(every)
     out_coeffs = np.empty((total, 6))
     out_offsets, out_tol = np.empty(total), np.empty(total)
     out_equality = np.empty(total, np.bool_)
