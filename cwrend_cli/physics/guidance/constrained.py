@@ -1134,24 +1134,26 @@ def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """The trust rows that the positions ``r`` (N + 1, 3) break by more than
     :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
     the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
-    return _box_broken(sub.modes, r, sub.r_bar, -(sub.trust_km + DUAL_TOL_KM))
+    return _box_broken(sub.modes, r, sub.r_bar, sub.trust_km, DUAL_TOL_KM)
 
 
 @njit(cache=True)
 def _box_broken(
-    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: np.ndarray
+    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, trust_km: np.ndarray, tol_km: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """(nodes, components) of :func:`_broken_trust`, node by node: component i < 3 where
-    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``."""
+    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``, node k's
+    floor ``−(T_k + tol_km)`` (``trust_km`` (N + 1,) the radii T_k)."""
     nodes = np.empty(6 * modes.size, dtype=np.int64)
     comps = np.empty(6 * modes.size, dtype=np.int64)
     count = 0
     for k in range(modes.size):
         if modes[k] <= 0:
             continue
+        floor_km = -(trust_km[k] + tol_km)
         for i in range(6):
             d = r[k, i % 3] - r_bar[k, i % 3]
-            if (d if i < 3 else -d) < floor_km[k]:
+            if (d if i < 3 else -d) < floor_km:
                 nodes[count], comps[count] = k, i
                 count += 1
     return nodes[:count], comps[:count]
