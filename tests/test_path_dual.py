@@ -10,8 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_constrained_guidance import DT, N_MOTION, U_MAX, _far_problem
+from test_constrained_guidance import (
+    DT,
+    N_MOTION,
+    SAFE_APPROACH,
+    U_MAX,
+    _far_problem,
+    _geometry,
+    _unsafe,
+)
 
+from cwrend_cli.physics import constraints as cg
 from cwrend_cli.physics.guidance import constrained as cp
 from cwrend_cli.physics.guidance import convex, feasibility, path_dual
 from cwrend_cli.physics.guidance.results import SolveStatus
@@ -308,3 +317,67 @@ def test_fixed_eps_dual_plans_match_clarabels_on_warm_re_solves() -> None:
         assert geo.semi_axes_km is not None
         assert np.all(np.sum((res.positions[1:-1] / geo.semi_axes_km) ** 2, axis=1) >= 1.0)
     assert answered >= 1
+
+
+def test_a_re_solve_docking_at_the_corridors_apex_is_certified_from_the_smooth_program() -> None:
+    """A warm re-solve of campaigns/safe_approach.toml's geometry (the corridor clear of the
+    zone, untightened) whose plan reaches the port from the side: its first answer breaks
+    the cone at the node before the port, and the program with that node's cut has its
+    optimum with that node at the cone's apex and the last thrust only the one that cancels
+    the port's one-step drift (3.4e-4 u_max), in the kink of ‖u‖ (docs/solvers.md, *The
+    last cut*). The dual solver failed on it from the warm start and from the guess (150
+    iterations each), so the program went to Clarabel (``fallbacks`` 1); started from the
+    multipliers of the smooth program (ε = 1) it is certified. The plan is Clarabel's:
+    cost within 1e-8 relative (Clarabel stops at ~1e-9 km of feasibility; measured
+    4.5e-11), controls within 1e-6 u_max (measured 6.9e-8), positions within 1e-7 km
+    (measured 7.5e-9), the corridor node in the cone within DUAL_TOL_KM and no node in the
+    unsafe set."""
+    axes, port, axis, deg = SAFE_APPROACH
+    geo = _geometry(axes, port, axis, deg)
+    xf = np.r_[port, 0.0, 0.0, 0.0]
+    x_prev = np.array([0.12281, 1.951579, 7.1627, 1.463e-3, -1.0139e-2, -5.9983e-2])
+    first = cp.plan(N_MOTION, DT, U_MAX, x_prev, xf, 212.0, 0.539, geo)
+    assert first.fallbacks == 0
+    # ten steps flown, then the estimate's update (0.4 m, 8 mm/s)
+    moved = np.array([5.3943e-5, -4.02475e-4, -5.4594e-5, -1.626e-6, 6e-9, -8.099e-6])
+    x1 = cp.node_positions(N_MOTION, DT, x_prev, first.controls[:10])[0][-1] + moved
+    warm_u = first.controls[10:]
+    res = cp.plan(
+        N_MOTION, DT, U_MAX, x1, xf, 202.0, 0.643, geo, warm_controls=warm_u,
+        warm_duals=cp.shift_duals(first.duals, 10),
+    )  # fmt: skip
+    ref = cp.plan(
+        N_MOTION, DT, U_MAX, x1, xf, 202.0, 0.643, geo, warm_controls=warm_u, solver="clarabel"
+    )
+    assert res.status is SolveStatus.CONVERGED and ref.status is SolveStatus.CONVERGED
+    assert res.fallbacks == 0 and res.slack_km == 0.0
+    assert np.linalg.norm(ref.controls[-1]) < 1e-3 * U_MAX  # the drift's thrust only
+    cost, ref_cost = _cost(res.controls, 0.643), _cost(ref.controls, 0.643)
+    assert abs(cost - ref_cost) <= 1e-8 * ref_cost
+    np.testing.assert_allclose(res.controls, ref.controls, rtol=0, atol=1e-6 * U_MAX)
+    np.testing.assert_allclose(res.positions, ref.positions, rtol=0, atol=1e-7)
+    corridor = np.isin(res.modes, (1, 3))
+    assert corridor[-2]  # the node before the port is a corridor node
+    cone = cg.corridor_cone(geo, 0.0)
+    assert np.min(cone.residual_km(res.positions[corridor])) >= -cp.DUAL_TOL_KM
+    assert not _unsafe(res.positions, axes, port, axis, deg).any()
+
+
+def test_the_smooth_start_gives_the_programs_answer_and_counts_both_solves() -> None:
+    """``solve_from_smooth`` solves the same program as ``solve``, only from other
+    multipliers: with the terminal rows alone (ε = 0.3) the same controls within 1e-9
+    u_max (both certified to 1e-12 km), its iterations those of both solves; a weight
+    below HOMOTOPY_FROM (the fixed-ε programs, solved by the homotopy) is refused."""
+    rng = np.random.default_rng(3298)
+    x0 = np.r_[rng.normal(size=3) * 2.0, rng.normal(size=3) * 1e-3]
+    xf = np.zeros(6)
+    g = feasibility.grid_problem(N_MOTION, x0, xf, 300.0, DT, U_MAX)
+    rows = _terminal_rows(g, xf)
+    direct = path_dual.solve(N_MOTION, DT, U_MAX, x0, g.blocks, 0.3, 0.3, rows)
+    smooth = path_dual.solve(N_MOTION, DT, U_MAX, x0, g.blocks, 1.0, 1.0, rows)
+    ans = path_dual.solve_from_smooth(N_MOTION, DT, U_MAX, x0, g.blocks, 0.3, 0.3, rows)
+    assert direct.converged and smooth.converged and ans.converged
+    np.testing.assert_allclose(ans.controls, direct.controls, rtol=0, atol=1e-9 * U_MAX)
+    assert ans.iterations > smooth.iterations
+    with pytest.raises(ValueError, match="weight"):
+        path_dual.solve_from_smooth(N_MOTION, DT, U_MAX, x0, g.blocks, 0.0, 1e-6, rows)

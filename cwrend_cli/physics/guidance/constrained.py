@@ -134,7 +134,9 @@ its slack at 0). Otherwise Clarabel solves the program as below (counted in
 The two agree to the solvers' tolerances (``tests/test_path_dual.py``). The
 dual solver starts from the row multipliers of the previous SCP iteration, or
 of the plan the re-solve replaces (``warm_duals``, :func:`shift_duals`), else
-from the half-space rows the previous iterate touches (:func:`_guess_active`).
+from the half-space rows the previous iterate touches (:func:`_guess_active`); when
+these fail on a program with cuts of the corridor cone (at adaptive ε), from the
+multipliers of the program at ε = 1 (:func:`.path_dual.solve_from_smooth`).
 
 **Abort safety** (``constraints.abort_safe_s`` = T, issue 34 item 4): the
 free drift from every keep-out node (the corridor nodes of the final approach,
@@ -1450,6 +1452,12 @@ def _dual_solve(
                 sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows,
                 _guess_active(rows, kind, sub.r_bar), keep=keep, products=products,
                 scaled=scaled,
+            )  # fmt: skip
+            used += ans.iterations
+        if not ans.converged and keep is None and cone_rounds:  # with cuts: the smooth start
+            ans = path_dual.solve_from_smooth(
+                sub.n, sub.dt_s, sub.u_max, sub.x0, blocks, sub.eps, weight, rows, warm,
+                products=products, scaled=scaled,
             )  # fmt: skip
             used += ans.iterations
         if not ans.converged:

@@ -63,6 +63,19 @@ whole program's exactly when every held step passes that test; the steps that
 fail wake (with those within :data:`WAKE_MARGIN` of it) and the program is solved
 again, the same screen as :mod:`.convex`'s at ε = 0 with Clarabel.
 
+**A kinked last step** (:func:`solve_from_smooth`). A step whose ``‖y_j‖ < c₁`` coasts
+and adds no curvature: a row whose effect differs from a combination of later rows only
+through such steps leaves ``D`` linear along that difference, and Newton has no model
+there (the cut of the corridor cone at the node before the port, with the terminal state
+fixed: it binds the last control alone). Where the optimum asks that step for a sliver of
+thrust (the port's drift over one step, a few 1e-4 u_max) the iterate crawls along the
+dead zone with damped steps and fails (docs/solvers.md, *The last cut*). At ε = 1
+(``c₁ = 0``, the quadratic cost alone) no step has a dead zone and the same rows'
+program is solved in a few iterations; its multipliers are another start for the
+program at ε, whose answer is certified as above (Newton only starts elsewhere: a
+start changes no certificate). :mod:`.constrained` tries it on a program with cuts of the
+corridor cone when its other starts (the warm one, the guess) have failed.
+
 Units: km, s, km/s, km/s²; rows scaled by the caller (``h``, ``f`` and the
 tolerances in the same scaled units).
 """
@@ -85,12 +98,14 @@ __all__ = [
     "HOMOTOPY_FACTOR",
     "HOMOTOPY_FROM",
     "MAX_ITER",
+    "SMOOTH_EPS",
     "WAKE_MARGIN",
     "WAKE_ROUNDS",
     "DualAnswer",
     "DualRows",
     "held_norms",
     "solve",
+    "solve_from_smooth",
 ]
 
 #: Newton iterations at most [-] (median 39 over the re-solves of seeds 0–1 of
@@ -117,6 +132,10 @@ HOMOTOPY_FACTOR = 0.1
 WAKE_MARGIN = 0.03
 #: Rounds of woken steps before every step is a variable [-].
 WAKE_ROUNDS = 3
+#: The cost weight ε of :func:`solve_from_smooth`'s first program [-]: 1, the quadratic
+#: cost alone (``c₁ = 1 − ε = 0``), whose dual is smooth (module docstring, *A kinked last
+#: step*).
+SMOOTH_EPS = 1.0
 _ARMIJO = 1e-4
 _HALVINGS = 4
 _DAMPING_TRIES = 40
@@ -838,3 +857,36 @@ def solve(
     costs, controls, states = _answer_arrays(phi, gam, x0, u, u_max, c1, weight)
     cost = float(np.sum(costs))  # numpy's (pairwise) sum
     return DualAnswer(converged, controls, states, y, cost, int(total), start)
+
+
+def solve_from_smooth(
+    n: float,
+    dt_s: float,
+    u_max: float,
+    x0: np.ndarray,
+    blocks: np.ndarray,
+    eps: float,
+    weight: float,
+    rows: DualRows,
+    warm: np.ndarray | None = None,
+    max_iter: int = MAX_ITER,
+    products: np.ndarray | None = None,
+    scaled: np.ndarray | None = None,
+) -> DualAnswer:
+    """:func:`solve` started from the multipliers of the same rows' smooth program (module
+    docstring, *A kinked last step*): first the program at ε = :data:`SMOOTH_EPS` (the
+    quadratic cost ``‖ũ_j‖²`` alone, ``c₁ = 0``: no step has a dead zone) from ``warm``,
+    then the program at ``eps`` and ``weight`` from its multipliers, whose answer alone is
+    certified (its ``converged``). Weights of at least :data:`HOMOTOPY_FROM` only (every
+    step a variable). ``iterations`` counts both solves'."""
+    if weight < HOMOTOPY_FROM:
+        raise ValueError(f"a weight of at least {HOMOTOPY_FROM}, not {weight}")
+    grid = (n, dt_s, u_max, x0, blocks)
+    smooth = solve(
+        *grid, SMOOTH_EPS, max(SMOOTH_EPS, weight), rows, warm, max_iter,
+        products=products, scaled=scaled,
+    )  # fmt: skip
+    ans = solve(
+        *grid, eps, weight, rows, smooth.multipliers, max_iter, products=products, scaled=scaled
+    )
+    return ans._replace(iterations=smooth.iterations + ans.iterations)
