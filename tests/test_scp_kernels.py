@@ -510,3 +510,233 @@ def test_the_half_spaces_need_no_detour_side_when_no_node_is_inside() -> None:
         shift = float(np.max(axes)) * cp._detour_side(axes, r_bar, level)
         want = cp._node_planes(axes, r_bar, level, got.nodes, shift, margins)
         assert np.array_equal(got.normals, want[0]) and np.array_equal(got.offsets, want[1])
+
+
+def _approach_start_before(inside: np.ndarray, lowest: int) -> int:
+    """``constraints.approach_start`` as it was (Python): back from the terminal node while
+    the node before is inside, not below ``lowest``."""
+    first = inside.size - 1
+    while first - 1 >= lowest and inside[first - 1]:
+        first -= 1
+    return first
+
+
+def test_the_approach_start_is_that_of_before() -> None:
+    """``approach_start`` (now compiled): the first node of the last stretch inside, as the
+    Python loop of before found it, from node 0 or 1 up."""
+    rng = np.random.default_rng(17)
+    for _ in range(300):
+        inside = rng.random(int(rng.integers(1, 40))) < rng.uniform(0.3, 1.0)
+        for lowest in (0, 1):
+            assert cg.approach_start(inside, lowest) == _approach_start_before(inside, lowest)
+
+
+def test_the_modes_of_the_final_approach_are_those_of_before() -> None:
+    """``_modes`` with a corridor (its kernel ``_approach_modes``): numpy's residual of the
+    untightened cone ≥ −1 mm, the approach from node 1 up, every other inner node keep-out,
+    the first approach node both, as written before (positions strided, as ``x[:, :3]``)."""
+    rng = np.random.default_rng(18)
+    for trial in range(200):
+        geo = cg.geometry(
+            Constraints(
+                keep_out=KeepOut((0.2, 0.2, 0.2)),
+                corridor=Corridor(
+                    (0.0, 0.0, -0.25), tuple(rng.normal(size=3)), float(rng.uniform(10, 60))
+                ),
+            )
+        )
+        steps = int(rng.integers(1, 120))
+        tail = rng.uniform(0.0, 1.0, (steps + 1, 1)) ** 2  # nodes on and off the axis
+        r = np.asarray(geo.port_km) + tail * 0.3 * np.asarray(geo.axis)
+        r = r + rng.normal(size=(steps + 1, 3)) * 0.05 * tail * (trial % 3)
+        r_bar = np.hstack([r, rng.normal(size=r.shape)])[:, :3]
+        cone = cg.corridor_cone(geo, 0.0)
+        inside = cone.residual_km(r_bar) >= -cp.SCP_TOL_KM
+        first = _approach_start_before(inside, 1)
+        want = np.zeros(steps + 1, dtype=np.int8)
+        want[1:steps] = 2
+        want[first:steps] = 1
+        if first < steps:
+            want[first] = 3
+        got = cp._modes(geo, r_bar, None)
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+
+
+def test_the_keep_out_planes_arrays_are_those_of_before() -> None:
+    """``_outside_planes``: the half-space nodes, their index (``np.full(−1)``, then
+    ``index[nodes] = arange``), ``ellipsoid_level`` and, no node inside, ``_node_planes``
+    with no shift, bit for bit; a node inside: no planes (the caller shifts them)."""
+    rng = np.random.default_rng(19)
+    for trial in range(200):
+        steps = int(rng.integers(2, 150))
+        a = rng.uniform(0.05, 0.5, 3)
+        directions = rng.normal(size=(steps + 1, 3))
+        directions /= np.linalg.norm(directions, axis=1)[:, None]
+        low = 1.01 if trial % 2 else 0.3
+        r = directions * a * rng.uniform(low, 3.0, (steps + 1, 1))
+        modes = rng.integers(0, 4, steps + 1).astype(np.int8)
+        margins = rng.uniform(0.0, 1e-3, steps + 1)
+        nodes = np.flatnonzero(np.r_[True, modes[1:] >= 2])
+        index = np.full(steps + 1, -1, dtype=np.int64)
+        index[nodes] = np.arange(nodes.size)
+        level = cg.ellipsoid_level(r, a)
+        got = cp._outside_planes(a, r, modes, margins)
+        assert np.array_equal(got[0], nodes) and np.array_equal(got[1], index)
+        assert np.array_equal(got[2], level)
+        if np.any(level[nodes] < 1.0):
+            assert got[3] is None and got[4] is None
+        else:
+            want = cp._node_planes(a, r, level, nodes, np.zeros(3), margins)
+            assert np.array_equal(got[3], want[0]) and np.array_equal(got[4], want[1])
+
+
+def test_the_half_spaces_index_is_that_of_before() -> None:
+    """``HalfSpaces``' index (``_node_index``): −1, then each node's row, as numpy wrote it."""
+    rng = np.random.default_rng(20)
+    for _ in range(100):
+        size = int(rng.integers(1, 200))
+        nodes = np.flatnonzero(rng.random(size) < 0.6)
+        want = np.full(size, -1, dtype=np.int64)
+        want[nodes] = np.arange(nodes.size)
+        assert np.array_equal(cp._node_index(nodes, size), want)
+
+
+def test_the_node_margins_are_those_of_before() -> None:
+    """``_node_margins``: the end steps' margins at the end nodes, ``np.maximum`` of the two
+    steps' inside, NaN where either is."""
+    rng = np.random.default_rng(21)
+    for trial in range(200):
+        step = rng.uniform(0.0, 1e-3, int(rng.integers(1, 100)))
+        if trial % 4 == 0:
+            step[rng.integers(0, step.size)] = np.nan
+        want = np.empty(step.size + 1)
+        want[0], want[-1] = step[0], step[-1]
+        want[1:-1] = np.maximum(step[:-1], step[1:])
+        assert np.array_equal(cp._node_margins(step), want, equal_nan=True)
+
+
+def test_the_warm_plans_reach_is_that_of_before() -> None:
+    """``out_of_reach`` (by ``_largest_move``): ``max |end − x_f| > T`` over the position axes,
+    numpy's, a NaN never out of reach."""
+    rng = np.random.default_rng(22)
+    for trial in range(300):
+        end, xf = rng.normal(size=6) * 0.1, rng.normal(size=6) * 0.1
+        if trial % 5 == 0:
+            end[rng.integers(0, 3)] = np.nan
+        trust = float(rng.uniform(0.0, 0.3))
+        want = bool(np.max(np.abs(end[:3] - xf[:3])) > trust)
+        assert cp.out_of_reach(end, xf, trust) is want
+        assert cp.out_of_reach(end[:3], xf, trust) is want
+
+
+def test_the_multipliers_of_kinds_are_numpys_boolean_selection() -> None:
+    """``_of_kinds``: ``values[(kind == a) | (kind == b)]``, the same array (and so numpy's
+    sum of it, the certificate's, the same bits)."""
+    rng = np.random.default_rng(23)
+    for _ in range(200):
+        count = int(rng.integers(0, 300))
+        values, kind = rng.random(count) * 1e3, rng.integers(0, 5, count)
+        for first, second in ((1, 4), (3, 3)):
+            want = values[(kind == first) | (kind == second)]
+            got = cp._of_kinds(values, kind, first, second)
+            assert np.array_equal(got, want) and float(np.sum(got)) == float(np.sum(want))
+
+
+def test_the_rows_free_drift_and_vectors_are_those_of_before() -> None:
+    """``path_dual._row_inputs``: the rows' vectors ``_row_vectors`` writes and the free drift
+    ``zoh_rollout`` of zero controls at the rows' nodes (numpy's indexing), bit for bit."""
+    rng = np.random.default_rng(24)
+    phi, gam = dynamics.discretize(N_MOTION, 1.0)
+    for steps in (1, 40, 300):
+        back = path_dual.backward_transitions(N_MOTION, 1.0, steps)
+        nodes = np.sort(rng.integers(1, steps + 1, 60))
+        coeffs, x0 = rng.normal(size=(60, 6)), rng.normal(size=6)
+        want_h = np.empty_like(coeffs)
+        path_dual._row_vectors(back, steps, nodes, coeffs, want_h)
+        free = dynamics.zoh_rollout(phi, gam, x0, np.zeros((steps, 3)))
+        h, at_rows = path_dual._row_inputs(phi, gam, x0, back, nodes, coeffs)
+        assert np.array_equal(h, want_h) and np.array_equal(at_rows, free[nodes])
+
+
+def test_the_answers_costs_controls_and_states_are_those_of_before() -> None:
+    """``path_dual._answer_arrays``: ``_step_costs``, ``u × u_max`` and ``zoh_rollout`` of
+    those controls, bit for bit."""
+    rng = np.random.default_rng(25)
+    phi, gam = dynamics.discretize(N_MOTION, 1.0)
+    for steps in (1, 7, 130, 800):
+        u = rng.normal(size=(steps, 3)) * (rng.random((steps, 1)) < 0.5)
+        x0 = rng.normal(size=6)
+        costs, controls, states = path_dual._answer_arrays(phi, gam, x0, u, U_MAX, 0.7, 2e-3)
+        assert np.array_equal(costs, path_dual._step_costs(u, 0.7, 2e-3))
+        assert np.array_equal(controls, u * U_MAX)
+        assert np.array_equal(states, dynamics.zoh_rollout(phi, gam, x0, u * U_MAX))
+
+
+@pytest.mark.parametrize("bodies", [1, 3])
+def test_a_fixed_targets_trust_radii_are_those_of_the_gathered_planes(bodies: int) -> None:
+    """``trust_radii`` of a fixed target (its kernel ``_fixed_radii``, the planes read where
+    they are kept): ``_far_radii`` of ``_pair_rows`` and the planes ``_planes`` gathers for
+    them, bit for bit."""
+    rng = np.random.default_rng(26 + bodies)
+    for _ in range(150):
+        steps = int(rng.integers(3, 150))
+        modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
+        r_bar = 10.0 * r_bar  # nodes near and far from the planes
+        pairs = cp._pair_rows(half_spaces[0].index >= 0, modes, bodies)
+        normals, offsets = cp._planes(half_spaces, pairs)
+        want = cp._far_radii(
+            pairs, normals, offsets, r_bar, trust, cp.TRUST_FAR_FRACTION, modes.size
+        )
+        assert np.array_equal(cp.trust_radii(modes, r_bar, half_spaces, trust), want)
+
+
+def test_the_radii_given_one_a_node_are_taken_as_they_are() -> None:
+    """``_radii``: an array of one radius a node is the array itself (no copy); one radius,
+    or a strided array, every node's as ``broadcast_to`` made it."""
+    radii = np.linspace(0.1, 0.2, 7)
+    assert cp._radii(radii, 7) is radii
+    assert np.array_equal(cp._radii(0.3, 7), np.full(7, 0.3))
+    strided = np.linspace(0.1, 0.2, 14)[::2]
+    got = cp._radii(strided, 7)
+    assert got.flags.c_contiguous and np.array_equal(got, strided)
+
+
+def test_the_largest_margin_is_numpys_max() -> None:
+    """``_largest`` (the corridor's clearance test): ``np.max``, NaN when one value is."""
+    rng = np.random.default_rng(29)
+    for trial in range(200):
+        values = rng.uniform(0.0, 1e-3, int(rng.integers(1, 100)))
+        if trial % 4 == 0:
+            values[rng.integers(0, values.size)] = np.nan
+        want = float(np.max(values))
+        got = cp._largest(values)
+        assert got == want or (np.isnan(got) and np.isnan(want))
+
+
+def test_the_rows_with_a_multiplier_are_numpys_selection() -> None:
+    """``_nonzero_rows`` (the duals a plan carries): ``code[y != 0]``, ``y[y != 0]``."""
+    rng = np.random.default_rng(30)
+    for _ in range(200):
+        count = int(rng.integers(0, 200))
+        code = rng.integers(0, 1 << 40, count)
+        values = rng.random(count) * (rng.random(count) < 0.3)
+        got = cp._nonzero_rows(code, values)
+        keep = values != 0.0
+        assert np.array_equal(got[0], code[keep]) and np.array_equal(got[1], values[keep])
+        assert got[0].dtype == np.int64
+
+
+def test_the_rows_orders_are_numpys_stable_sorts() -> None:
+    """``_node_order`` (counting) and ``_sorted_order`` (the identity when in order):
+    ``np.argsort(kind="stable")``, ties in their order, sorted or not."""
+    rng = np.random.default_rng(31)
+    for trial in range(300):
+        count = int(rng.integers(0, 200))
+        nodes = rng.integers(0, int(rng.integers(1, 900)), count)
+        if trial % 3 == 0:
+            nodes = np.sort(nodes)
+        want = np.argsort(nodes, kind="stable")
+        assert np.array_equal(cp._node_order(nodes), want)
+        codes = rng.integers(0, 1 << 40, count) if trial % 2 else nodes * cp._CODE_NODE
+        codes = np.sort(codes) if trial % 3 == 0 else codes
+        assert np.array_equal(cp._sorted_order(codes), np.argsort(codes, kind="stable"))

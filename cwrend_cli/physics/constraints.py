@@ -102,6 +102,7 @@ __all__ = [
     "approach_start",
     "body_acceleration_bound",
     "chord_margin_km",
+    "cone_products",
     "cone_signed_distance",
     "corridor_angle_deg",
     "corridor_clearance_km",
@@ -474,10 +475,18 @@ class SecondOrderCone:
         """``cᵀ r + d − ‖A r + b‖`` [km]: ≥ 0 inside the (tightened) cone; ``rows``: its
         :meth:`rows` when the caller keeps them."""
         a, b, c, d = self.rows() if rows is None else rows
-        r = np.asarray(r_km, dtype=np.float64)
-        along = r @ c
-        across = r @ a.T
+        along, across = cone_products(r_km, (a, b, c, d))
         return _cone_residuals(along.reshape(-1), across.reshape(-1, 3), b, d).reshape(along.shape)
+
+
+def cone_products(
+    r_km: FloatArray, rows: tuple[FloatArray, FloatArray, FloatArray, float]
+) -> tuple[FloatArray, FloatArray]:
+    """``(r c, r Aᵀ)`` of positions ``r_km`` (..., 3) and a cone's :meth:`SecondOrderCone.rows`
+    (numpy's matmuls): what :func:`_cone_residuals` reads."""
+    a, _, c, _ = rows
+    r = np.asarray(r_km, dtype=np.float64)
+    return r @ c, r @ a.T
 
 
 @njit(cache=True)
@@ -520,6 +529,7 @@ def corridor_clearance_km(geo: Geometry) -> float:
     return clearance
 
 
+@njit(cache=True)
 def approach_start(inside: npt.NDArray[np.bool_], lowest: int) -> int:
     """The first node of the final approach: the last contiguous stretch of nodes before
     the terminal one (the port, the corridor's apex) that lie ``inside`` the corridor

@@ -303,13 +303,29 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    cone, rows, _ = _untightened_corridor(geo)
-    inside = cone.residual_km(cg.to_body(motion, r_bar), rows) >= -SCP_TOL_KM
-    first = cg.approach_start(inside, 1)  # the terminal node is the apex; node 0 is x0
-    modes[first:steps] = _CORRIDOR
+    _, rows, _ = _untightened_corridor(geo)
+    along, across = cg.cone_products(cg.to_body(motion, r_bar), rows)
+    _approach_modes(along, across, rows[1], rows[3], modes)
+    return modes
+
+
+@njit(cache=True)
+def _approach_modes(
+    along: np.ndarray, across: np.ndarray, b: np.ndarray, d: float, modes: np.ndarray
+) -> None:
+    """Writes the final approach into ``modes`` (N + 1,) (:func:`_modes`): the nodes inside the
+    untightened corridor cone (its residual ≥ −:data:`SCP_TOL_KM`, from ``along`` = r c
+    (N + 1,) and ``across`` = r Aᵀ (N + 1, 3) of the iterate, :func:`.constraints.cone_products`,
+    and the cone's b, d: :meth:`.constraints.SecondOrderCone.residual_km`'s kernel, the same
+    bits) from :func:`.constraints.approach_start` (not below node 1: node 0 is x0; the
+    terminal node is the apex) to N − 1 are corridor nodes, the first of them both."""
+    steps = modes.size - 1
+    inside = cg._cone_residuals(along, across, b, d) >= -SCP_TOL_KM
+    first = cg.approach_start(inside, 1)
+    for k in range(first, steps):
+        modes[k] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
-    return modes
 
 
 @njit(cache=True)
@@ -380,9 +396,20 @@ def _cone_margins(
         motion is None
         and geo.port_km is not None
         and geo.semi_axes_km is not None
-        and _untightened_corridor(geo)[2] > float(np.max(margins_km))
+        and _untightened_corridor(geo)[2] > _largest(margins_km)
     )
-    return np.zeros_like(margins_km) if clear else margins_km
+    return np.zeros(margins_km.shape) if clear else margins_km
+
+
+@njit(cache=True)
+def _largest(values: np.ndarray) -> float:
+    """``np.max`` of a nonempty 1-D array: its largest value, NaN if one is."""
+    out = values[0]
+    for v in values:
+        if v != v:
+            return math.nan
+        out = max(out, v)
+    return float(out)
 
 
 class HalfSpaces(Mapping[int, cg.HalfSpace]):
@@ -390,10 +417,16 @@ class HalfSpaces(Mapping[int, cg.HalfSpace]):
     as arrays (``normals`` (K, 3), ``offsets`` (K,) [km] of ``nodes`` (K,); ``index``
     (N + 1,): a node's row, −1 for none) so that the program reads them at once."""
 
-    def __init__(self, nodes: np.ndarray, normals: np.ndarray, offsets: np.ndarray, size: int):
+    def __init__(
+        self,
+        nodes: np.ndarray,
+        normals: np.ndarray,
+        offsets: np.ndarray,
+        size: int,
+        index: np.ndarray | None = None,
+    ):
         self.nodes, self.normals, self.offsets = nodes, normals, offsets
-        self.index = np.full(size, -1, dtype=np.int64)
-        self.index[nodes] = np.arange(nodes.size)
+        self.index = _node_index(nodes, size) if index is None else index
 
     def __getitem__(self, j: int) -> cg.HalfSpace:
         i = int(self.index[j]) if 0 <= j < self.index.size else -1
@@ -406,6 +439,15 @@ class HalfSpaces(Mapping[int, cg.HalfSpace]):
 
     def __len__(self) -> int:
         return int(self.nodes.size)
+
+
+@njit(cache=True)
+def _node_index(nodes: np.ndarray, size: int) -> np.ndarray:
+    """Each node's position in ``nodes`` (sorted, distinct), −1 for a node not in it (size,)."""
+    index = np.full(size, -1, dtype=np.int64)
+    for i in range(nodes.size):
+        index[nodes[i]] = i
+    return index
 
 
 def _detour_side(
@@ -500,19 +542,16 @@ def _half_spaces(
     the two nodes it binds (k and k+1), the larger.
     """
     rho_bar = cg.to_body(motion, r_bar)
-    nodes = _half_space_nodes(modes)
+    margins_km = np.asarray(margins_km, dtype=np.float64)
     out = []
     for centre, axes in cg.ellipsoids(geo):
         local = np.ascontiguousarray(rho_bar if centre is None else rho_bar - centre)
-        level = cg.ellipsoid_level(local, axes)
-        # the detour side moves only the nodes inside the zone: none in most re-solves
-        shift = _NO_SHIFT
-        if _any_inside(level, nodes):
+        a = np.asarray(axes, dtype=np.float64)
+        nodes, index, level, normals, offsets = _outside_planes(a, local, modes, margins_km)
+        if normals is None or offsets is None:  # a node inside (not in most re-solves): the
+            # detour side, which moves only the nodes inside
             shift = float(np.max(axes)) * _detour_side(axes, local, level)
-        normals, offsets = _node_planes(
-            np.asarray(axes, dtype=np.float64), local, level, nodes, shift,
-            np.asarray(margins_km, dtype=np.float64),
-        )  # fmt: skip
+            normals, offsets = _node_planes(a, local, level, nodes, shift, margins_km)
         if sigma_margin > 0.0 and p_pos_km2 is not None:
             if motion is None:
                 offsets = offsets + cg.covariance_margins_km(normals, p_pos_km2, sigma_margin)
@@ -527,8 +566,25 @@ def _half_spaces(
                 )
         if centre is not None:  # nᵀ(ρ − c) ≥ offset ⇔ nᵀρ ≥ offset + nᵀc
             offsets = offsets + normals @ centre
-        out.append(HalfSpaces(nodes, normals, offsets, modes.size))
+        out.append(HalfSpaces(nodes, normals, offsets, modes.size, index))
     return out
+
+
+@njit(cache=True)
+def _outside_planes(
+    a: np.ndarray, r: np.ndarray, modes: np.ndarray, margins_km: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """:func:`_half_spaces`' arrays of ellipsoid ``a`` (3,) at the positions ``r`` (N + 1, 3)
+    (its frame, contiguous): the nodes with a half-space (:func:`_half_space_nodes`), their
+    index (:func:`_node_index`), the positions' :func:`.constraints.ellipsoid_level` (its
+    kernel) and, when no node is inside the zone, their :func:`_node_planes` (normals,
+    offsets: no detour side to shift by); (None, None) when one is (the caller shifts)."""
+    nodes = _half_space_nodes(modes)
+    level = cg._levels(r, a)
+    if _any_inside(level, nodes):
+        return nodes, _node_index(nodes, modes.size), level, None, None
+    normals, offsets = _node_planes(a, r, level, nodes, _NO_SHIFT, margins_km)
+    return nodes, _node_index(nodes, modes.size), level, normals, offsets
 
 
 def trust_radii(
@@ -549,6 +605,11 @@ def trust_radii(
     the plan back from where a new estimate takes it (the nodes far from the zone, which
     moved by more than ``trust_km`` between re-solves and made the trust rows bind at tens
     of nodes: docs/solvers.md). The nodes near the zone keep ``trust_km``."""
+    if motion is None:  # each row's plane read where it is kept (the same values)
+        normals, offsets = _stacked_planes(half_spaces)
+        return _fixed_radii(
+            half_spaces[0].index, normals, offsets, modes, r_bar, trust_km, TRUST_FAR_FRACTION
+        )
     pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
     normals, offsets = _planes(half_spaces, pairs, motion)
     return _far_radii(pairs, normals, offsets, r_bar, trust_km, TRUST_FAR_FRACTION, modes.size)
@@ -570,13 +631,55 @@ def _far_radii(
     held = np.full(nodes, np.inf)
     for p in range(pairs.shape[0]):
         k = pairs[p, 0]
-        n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
-        size = abs(n0) + abs(n1) + abs(n2)
-        if size > 0.0:
-            dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-            held[k] = min(held[k], (dot - offsets[p]) / size)
-    radii = np.full(nodes, trust_km)
-    for k in range(nodes):
+        held[k] = _held_box(
+            held[k], normals[p, 0], normals[p, 1], normals[p, 2], offsets[p], r_bar, k
+        )
+    return _radii_of(held, trust_km, fraction)
+
+
+@njit(cache=True)
+def _fixed_radii(
+    index: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    modes: np.ndarray,
+    r_bar: np.ndarray,
+    trust_km: float,
+    fraction: float,
+) -> np.ndarray:
+    """:func:`trust_radii` of a fixed target: :func:`_far_radii` over the rows of
+    :func:`_pair_rows`, each row's plane read as :func:`_fixed_pairs` reads it (``index``
+    (N + 1,) a node's plane, −1 for none; ``normals`` (B, K, 3), ``offsets`` (B, K) of the B
+    ellipsoids), not gathered first (:func:`_planes`): the same planes, the same radii."""
+    pairs = _pair_rows(index >= 0, modes, normals.shape[0])
+    held = np.full(modes.size, np.inf)
+    for p in range(pairs.shape[0]):
+        k, row, b = pairs[p, 0], index[pairs[p, 1]], pairs[p, 2]
+        n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
+        held[k] = _held_box(held[k], n0, n1, n2, offsets[b, row], r_bar, k)
+    return _radii_of(held, trust_km, fraction)
+
+
+@njit(cache=True)
+def _held_box(
+    held: float, n0: float, n1: float, n2: float, offset: float, r_bar: np.ndarray, k: int
+) -> float:
+    """The largest ∞-norm box about r̄_k held so far, ``held`` [km], and the plane n (unit),
+    ``offset`` [km] of one more of node k's rows: the smaller of ``held`` and ``(nᵀ r̄_k −
+    offset) / ‖n‖₁`` (where :func:`_box_low` reaches the plane; ``held`` for n = 0)."""
+    size = abs(n0) + abs(n1) + abs(n2)
+    if size > 0.0:
+        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+        return float(min(held, (dot - offset) / size))
+    return held
+
+
+@njit(cache=True)
+def _radii_of(held: np.ndarray, trust_km: float, fraction: float) -> np.ndarray:
+    """Each node's radius from its largest held box ``held`` (N + 1,) [km] (∞: no row): the
+    larger of ``trust_km`` and ``fraction`` × the box (:func:`trust_radii`)."""
+    radii = np.full(held.size, trust_km)
+    for k in range(held.size):
         if held[k] < np.inf and fraction * held[k] > trust_km:
             radii[k] = fraction * held[k]
     return radii
@@ -607,7 +710,21 @@ def _pairs(
 def _radii(trust_km: float | np.ndarray, nodes: int) -> np.ndarray:
     """Each of ``nodes`` nodes' trust radius (nodes,) [km]: ``trust_km`` itself when it
     gives one per node (:func:`trust_radii`), else one radius for all."""
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(trust_km, dtype=np.float64), (nodes,)))
+    radii = np.asarray(trust_km, dtype=np.float64)
+    if radii.shape == (nodes,) and radii.flags.c_contiguous:  # already one a node
+        return radii
+    return np.ascontiguousarray(np.broadcast_to(radii, (nodes,)))
+
+
+def _stacked_planes(half_spaces: list[HalfSpaces]) -> tuple[np.ndarray, np.ndarray]:
+    """The ellipsoids' planes as stacks, normals (B, K, 3) and offsets (B, K) [km] (every
+    ellipsoid has the same nodes): one ellipsoid's arrays as a stack of one, no copy."""
+    if len(half_spaces) == 1:
+        return half_spaces[0].normals[None], half_spaces[0].offsets[None]
+    return (
+        np.stack([hs.normals for hs in half_spaces]),
+        np.stack([hs.offsets for hs in half_spaces]),
+    )
 
 
 def _pairs_planes(
@@ -622,11 +739,7 @@ def _pairs_planes(
     one radius, or each node's (:func:`trust_radii`)."""
     trust_km = _radii(trust_km, modes.size)
     if motion is None:  # the three steps below in one pass (the same rows, the same bits)
-        if len(half_spaces) == 1:  # one ellipsoid: its arrays as a stack of one, no copy
-            normals, offsets = half_spaces[0].normals[None], half_spaces[0].offsets[None]
-        else:
-            normals = np.stack([hs.normals for hs in half_spaces])
-            offsets = np.stack([hs.offsets for hs in half_spaces])
+        normals, offsets = _stacked_planes(half_spaces)
         kept, left_out, kept_normals, kept_offsets = _fixed_pairs(
             half_spaces[0].index, normals, offsets, modes, r_bar, trust_km
         )
@@ -949,10 +1062,46 @@ def _row_arrays(
             coeffs[row, c] = abort_coeffs[p, c] * s_p
         offsets[row], tol[row] = abort_offsets[p] * s_p, DUAL_TOL_KM * s_p
         row += 1
-    order = np.argsort(node, kind="mergesort")
-    kind = kinds[order]
-    code = node[order] * _CODE_NODE + kind * _CODE_KIND + keys[order]
-    return node[order], coeffs[order], offsets[order], tol[order], kind, code
+    order = _node_order(node)
+    out_node, out_coeffs = np.empty(total, np.int64), np.empty((total, 6))
+    out_offsets, out_tol = np.empty(total), np.empty(total)
+    kind, code = np.empty(total, np.int64), np.empty(total, np.int64)
+    for r in range(total):  # the rows in that order (copies, as numpy's indexing)
+        i = order[r]
+        out_node[r], out_offsets[r], out_tol[r], kind[r] = node[i], offsets[i], tol[i], kinds[i]
+        for c in range(6):
+            out_coeffs[r, c] = coeffs[i, c]
+        code[r] = node[i] * _CODE_NODE + kinds[i] * _CODE_KIND + keys[i]
+    return out_node, out_coeffs, out_offsets, out_tol, kind, code
+
+
+@njit(cache=True)
+def _node_order(nodes: np.ndarray) -> np.ndarray:
+    """``np.argsort(nodes, kind="stable")`` of nodes ≥ 0 (a stable sort's order is the one
+    order of the rows by node that keeps tied rows as they come), by counting: O(rows + N)."""
+    size = 0
+    for k in nodes:
+        size = max(size, k + 1)
+    start = np.zeros(size + 1, np.int64)
+    for k in nodes:
+        start[k + 1] += 1
+    for k in range(size):
+        start[k + 1] += start[k]
+    order = np.empty(nodes.size, np.int64)
+    for i in range(nodes.size):
+        order[start[nodes[i]]] = i
+        start[nodes[i]] += 1
+    return order
+
+
+@njit(cache=True)
+def _sorted_order(values: np.ndarray) -> np.ndarray:
+    """``np.argsort(values, kind="stable")``: the identity when ``values`` are already in
+    order (a plan's row codes, nearly always), else numba's merge sort (stable)."""
+    for i in range(1, values.size):
+        if values[i] < values[i - 1]:
+            return np.argsort(values, kind="mergesort")
+    return np.arange(values.size)
 
 
 def _trust_rows(
@@ -987,24 +1136,26 @@ def _broken_trust(sub: _Subproblem, r: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """The trust rows that the positions ``r`` (N + 1, 3) break by more than
     :data:`DUAL_TOL_KM` (the dual solver's tolerance of every row): (nodes, components),
     the rows of :func:`_trust_rows`, over every constrained node (``modes > 0``)."""
-    return _box_broken(sub.modes, r, sub.r_bar, -(sub.trust_km + DUAL_TOL_KM))
+    return _box_broken(sub.modes, r, sub.r_bar, sub.trust_km, DUAL_TOL_KM)
 
 
 @njit(cache=True)
 def _box_broken(
-    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, floor_km: np.ndarray
+    modes: np.ndarray, r: np.ndarray, r_bar: np.ndarray, trust_km: np.ndarray, tol_km: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """(nodes, components) of :func:`_broken_trust`, node by node: component i < 3 where
-    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``."""
+    ``r_k,i − r̄_k,i < floor``, i ≥ 3 where ``−(r_k,i−3 − r̄_k,i−3) < floor``, node k's
+    floor ``−(T_k + tol_km)`` (``trust_km`` (N + 1,) the radii T_k)."""
     nodes = np.empty(6 * modes.size, dtype=np.int64)
     comps = np.empty(6 * modes.size, dtype=np.int64)
     count = 0
     for k in range(modes.size):
         if modes[k] <= 0:
             continue
+        floor_km = -(trust_km[k] + tol_km)
         for i in range(6):
             d = r[k, i % 3] - r_bar[k, i % 3]
-            if (d if i < 3 else -d) < floor_km[k]:
+            if (d if i < 3 else -d) < floor_km:
                 nodes[count], comps[count] = k, i
                 count += 1
     return nodes[:count], comps[:count]
@@ -1069,7 +1220,7 @@ def _carry_unique(codes: np.ndarray, values: np.ndarray, code: np.ndarray, out: 
     """:func:`_warm_multipliers` when no code repeats in ``codes``: ``out[i]`` = the value of
     the row of ``codes`` equal to ``code[i]``, where there is one (a copy: no arithmetic).
     False (``out`` untouched) when a code repeats."""
-    order = np.argsort(codes, kind="mergesort")
+    order = _sorted_order(codes)
     for p in range(1, order.size):
         if codes[order[p]] == codes[order[p - 1]]:
             return False
@@ -1227,7 +1378,7 @@ def _merged_rows(
     every = np.empty(total, np.int64)
     every[:old] = nodes
     every[old:] = new_nodes
-    order = np.argsort(every, kind="mergesort")
+    order = _node_order(every)
     out_coeffs = np.empty((total, 6))
     out_offsets, out_tol = np.empty(total), np.empty(total)
     out_equality = np.empty(total, np.bool_)
@@ -1311,11 +1462,14 @@ def _dual_solve(
             used += ans.iterations
         if not ans.converged:
             return None, used, None
-        path = (kind == 1) | (kind == 4)
-        if float(np.sum(ans.multipliers[path])) * s_p > SLACK_PENALTY:
+        # numpy's (pairwise) sums of the multipliers in the rows' order
+        if float(np.sum(_of_kinds(ans.multipliers, kind, 1, 4))) * s_p > SLACK_PENALTY:
             return None, used, None
         abort = sub.abort_rows is not None and sub.abort_rows.nodes.size > 0
-        if abort and float(np.sum(ans.multipliers[kind == 3])) * s_p > ABORT_SLACK_PENALTY:
+        if (
+            abort
+            and float(np.sum(_of_kinds(ans.multipliers, kind, 3, 3))) * s_p > ABORT_SLACK_PENALTY
+        ):
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
@@ -1323,8 +1477,7 @@ def _dual_solve(
         # multipliers (path_dual.DualAnswer.start: where the next one starts)
         carried = ans.multipliers if ans.start is None else ans.start
         if cuts[0].size == 0 and box[0].size == 0:
-            active = carried != 0.0
-            duals = Duals(code[active], carried[active])
+            duals = Duals(*_nonzero_rows(code, carried))
             return (
                 _DualSolution(ans.cost, np.zeros(1), duals),
                 used,
@@ -1348,6 +1501,32 @@ def _dual_solve(
             trust = (trust[0][new], trust[1][new], trust[2][new], trust[3][new])
             rows, kind, code = _with_rows(rows, kind, code, trust, DUAL_TOL_KM * s_p, 2)
         warm = _warm_multipliers(known, code, np.zeros(code.size))
+
+
+@njit(cache=True)
+def _of_kinds(values: np.ndarray, kind: np.ndarray, first: int, second: int) -> np.ndarray:
+    """``values[(kind == first) | (kind == second)]``: the values of the rows of either kind,
+    in their order (a copy: the same array as numpy's boolean indexing)."""
+    out = np.empty(values.size)
+    count = 0
+    for i in range(values.size):
+        if kind[i] == first or kind[i] == second:
+            out[count] = values[i]
+            count += 1
+    return out[:count]
+
+
+@njit(cache=True)
+def _nonzero_rows(code: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(code[values != 0], values[values != 0])``: the rows with a multiplier, in their
+    order (copies: numpy's boolean indexing's arrays)."""
+    codes, kept = np.empty(values.size, np.int64), np.empty(values.size)
+    count = 0
+    for i in range(values.size):
+        if values[i] != 0.0:
+            codes[count], kept[count] = code[i], values[i]
+            count += 1
+    return codes[:count], kept[:count]
 
 
 def _reduced_solve(
@@ -1781,19 +1960,24 @@ def _turning_margins(
     return out
 
 
+@njit(cache=True)
 def _node_margins(step_margins: np.ndarray) -> np.ndarray:
     """Each node's margin (N+1,) [km]: the larger of its two steps' (a node's constraints
-    bind the chords on both sides of it; the end nodes have one step)."""
-    out = np.empty(step_margins.size + 1)
-    out[0], out[-1] = step_margins[0], step_margins[-1]
-    out[1:-1] = np.maximum(step_margins[:-1], step_margins[1:])
+    bind the chords on both sides of it; the end nodes have one step); NaN where either
+    is (``np.maximum``'s)."""
+    size = step_margins.size
+    out = np.empty(size + 1)
+    out[0], out[size] = step_margins[0], step_margins[size - 1]
+    for k in range(1, size):
+        out[k] = _larger(step_margins[k - 1], step_margins[k])
     return out
 
 
 @njit(cache=True)
 def _largest_move(x: np.ndarray, r_bar: np.ndarray) -> float:
-    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6) from
-    ``r_bar`` (N + 1, 3): how far an iterate moved; NaN if a difference is (``np.max``'s)."""
+    """``max |r_k,i − r̄_k,i|`` [km] of the positions of states ``x`` (N + 1, 6 or 3) from
+    ``r_bar`` (N + 1, 3): how far an iterate moved (or a warm plan's end is from the target,
+    :func:`out_of_reach`); NaN if a difference is (``np.max``'s)."""
     out = -math.inf
     for k in range(r_bar.shape[0]):
         for i in range(3):
@@ -1840,8 +2024,8 @@ def out_of_reach(end_state: np.ndarray, xf: np.ndarray, trust_km: float) -> bool
     [km, km/s]) cannot be moved onto the terminal target ``xf`` within the trust box of the
     first SCP program: its end position is farther than ``trust_km`` from the target's in
     some axis (module docstring, *A moved target*)."""
-    gap = np.asarray(end_state, dtype=np.float64)[:3] - np.asarray(xf, dtype=np.float64)[:3]
-    return bool(np.max(np.abs(gap)) > trust_km)
+    end = np.asarray(end_state, dtype=np.float64)[None]
+    return bool(_largest_move(end, np.asarray(xf, dtype=np.float64)[None, :3]) > trust_km)
 
 
 def plan(
@@ -1950,9 +2134,10 @@ def plan(
             chords = ab.chords_near(geo, n, drift, x_bar, nodes, trust, ACCEL_FACTOR)
         # one radius with abort safety (its drift chords are sized by it) and for a turning
         # body (not yet measured with far radii: docs/solvers.md)
-        radii = np.full(steps + 1, trust)
         if drift is None and motion is None:
             radii = trust_radii(modes, r_bar, half_spaces, trust)
+        else:
+            radii = np.full(steps + 1, trust)
         for _ in range(ABORT_ROUNDS):
             rows = None
             if chords is not None and drift is not None and axes is not None:

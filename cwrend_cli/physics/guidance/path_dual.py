@@ -671,6 +671,51 @@ def _row_vectors(
             out[i, c] = acc
 
 
+@njit(cache=True)
+def _row_inputs(
+    phi: np.ndarray,
+    gam: np.ndarray,
+    x0: np.ndarray,
+    back: np.ndarray,
+    nodes: np.ndarray,
+    coeffs: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """What :func:`solve` reads of the rows ``g_i`` (``coeffs`` (R, 6)) at ``nodes`` (R,):
+    their vectors ``h_i`` (:func:`_row_vectors`, ``back`` from :func:`backward_transitions`)
+    and the free drift's states ``Φ^{k_i} x₀`` at their nodes (R, 6) (``zoh_rollout`` of zero
+    controls: the same bits), for ``f_i = f_i − g_iᵀ Φ^{k_i} x₀`` (numpy's einsum, there)."""
+    steps = back.shape[0] - 1
+    free = zoh_rollout(phi, gam, x0, np.zeros((steps, 3)))
+    h = np.empty_like(coeffs)
+    _row_vectors(back, steps, nodes, coeffs, h)
+    at_rows = np.empty((nodes.size, 6))
+    for i in range(nodes.size):
+        for c in range(6):
+            at_rows[i, c] = free[nodes[i], c]
+    return h, at_rows
+
+
+@njit(cache=True)
+def _answer_arrays(
+    phi: np.ndarray,
+    gam: np.ndarray,
+    x0: np.ndarray,
+    u: np.ndarray,
+    u_max: float,
+    c1: float,
+    c2: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`solve`'s answer from the scaled controls ``u`` (N, 3): each step's cost
+    (:func:`_step_costs`, for numpy's sum), the controls ``u × u_max`` (N, 3) [km/s²] and their
+    states from ``x0`` (``zoh_rollout``, N + 1, 6): numpy's elementwise product, the same
+    bits."""
+    controls = np.empty_like(u)
+    for j in range(u.shape[0]):
+        for c in range(3):
+            controls[j, c] = u[j, c] * u_max
+    return _step_costs(u, c1, c2), controls, zoh_rollout(phi, gam, x0, controls)
+
+
 def held_norms(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, y: np.ndarray) -> np.ndarray:
     """``‖A_jᵀ λ_j‖`` (N,) of every step at the multipliers ``y`` (R,) of rows at ``nodes``
     (sorted, original grid), ``λ_j = Σ_{i: k_i > j} y_i h_i`` (module docstring); ``a``
@@ -756,9 +801,7 @@ def solve(
     caller has them (:func:`grid_arrays`), else made here."""
     steps = blocks.shape[0]
     phi, gam = discretize(n, dt_s)
-    free_states = zoh_rollout(
-        phi, gam, np.ascontiguousarray(x0, dtype=np.float64), np.zeros((steps, 3))
-    )
+    x0 = np.ascontiguousarray(x0, dtype=np.float64)
     a_all = np.ascontiguousarray(blocks * u_max) if scaled is None else scaled
     aat_all = block_products(a_all) if products is None else products
     if aat_all.shape != (steps, 6, 6) or a_all.shape != (steps, 6, 3):
@@ -766,9 +809,10 @@ def solve(
             f"scaled and products must be ({steps}, 6, 3) and ({steps}, 6, 6), "
             f"not {a_all.shape} and {aat_all.shape}"
         )
-    h = np.empty_like(rows.coeffs)
-    _row_vectors(backward_transitions(n, dt_s, steps), steps, rows.nodes, rows.coeffs, h)
-    f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_states[rows.nodes])
+    h, free_at_rows = _row_inputs(
+        phi, gam, x0, backward_transitions(n, dt_s, steps), rows.nodes, rows.coeffs
+    )
+    f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_at_rows)
     y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
     c1 = 1.0 - min(float(eps), 1.0)
     if keep is not None:  # step 0 precedes every row: each row acts on a kept step
@@ -810,9 +854,8 @@ def solve(
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
         if start is not None:  # the next round's homotopy starts where this one's did
             y[:] = start
-    cost = float(np.sum(_step_costs(u, c1, weight)))  # numpy's (pairwise) sum
-    controls = u * u_max
-    states = zoh_rollout(phi, gam, np.ascontiguousarray(x0, dtype=np.float64), controls)
+    costs, controls, states = _answer_arrays(phi, gam, x0, u, u_max, c1, weight)
+    cost = float(np.sum(costs))  # numpy's (pairwise) sum
     return DualAnswer(converged, controls, states, y, cost, int(total), start)
 
 
