@@ -50,8 +50,8 @@ margin, and so does a turning body's.
 
 **Iterations.** Trust region ``‖r_k − r̄_k‖_∞ ≤ T_k``: T = :data:`TRUST_RADIUS_FACTOR`
 × the largest semi-axis near the zone; at a node far from it (a fixed target, abort
-safety off) the larger :data:`TRUST_FAR_FRACTION` of the largest box about r̄_k that the
-node's half-spaces hold (:func:`trust_radii`). The box is there to keep an iterate where
+safety off) the larger of T and :data:`TRUST_FAR_FRACTION` of the largest box about r̄_k
+that the node's half-spaces hold (:func:`trust_radii`). The box is there to keep an iterate where
 the zone was linearised; such a node's box meets its half-spaces nowhere (their rows are
 left out, *Reductions* (i)), and one radius for all would only hold the far nodes back
 from where a new estimate or a new ε takes the plan (trust rows binding at tens of nodes
