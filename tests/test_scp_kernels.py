@@ -674,19 +674,24 @@ def test_the_answers_costs_controls_and_states_are_those_of_before() -> None:
 
 @pytest.mark.parametrize("bodies", [1, 3])
 def test_a_fixed_targets_trust_radii_are_those_of_the_gathered_planes(bodies: int) -> None:
-    """``trust_radii`` of a fixed target (its kernel ``_fixed_radii``, the planes read where
-    they are kept): ``_far_radii`` of ``_pair_rows`` and the planes ``_planes`` gathers for
-    them, bit for bit."""
+    """``trust_radii`` (its kernel ``_fixed_radii``, the planes read where they are kept):
+    written here in numpy from the rows of ``_pair_rows`` and the planes ``_planes`` gathers
+    for them (each row's ``(nᵀ r̄_k − offset)/‖n‖₁`` in the kernel's order, the smallest a
+    node, half of it where larger than the base radius), bit for bit."""
     rng = np.random.default_rng(26 + bodies)
     for _ in range(150):
         steps = int(rng.integers(3, 150))
         modes, half_spaces, r_bar, trust = _random_rows(rng, steps, bodies)
         r_bar = 10.0 * r_bar  # nodes near and far from the planes
         pairs = cp._pair_rows(half_spaces[0].index >= 0, modes, bodies)
-        normals, offsets = cp._planes(half_spaces, pairs)
-        want = cp._far_radii(
-            pairs, normals, offsets, r_bar, trust, cp.TRUST_FAR_FRACTION, modes.size
-        )
+        n, offsets = cp._planes(half_spaces, pairs)
+        r = r_bar[pairs[:, 0]]
+        dots = (n[:, 0] * r[:, 0] + n[:, 1] * r[:, 1]) + n[:, 2] * r[:, 2]
+        sizes = (np.abs(n[:, 0]) + np.abs(n[:, 1])) + np.abs(n[:, 2])
+        held = np.full(modes.size, np.inf)
+        np.minimum.at(held, pairs[:, 0], (dots - offsets) / sizes)
+        far = cp.TRUST_FAR_FRACTION * held
+        want = np.where(np.isfinite(held) & (far > trust), far, trust)
         assert np.array_equal(cp.trust_radii(modes, r_bar, half_spaces, trust), want)
 
 

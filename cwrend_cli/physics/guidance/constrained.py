@@ -588,53 +588,24 @@ def _outside_planes(
 
 
 def trust_radii(
-    modes: np.ndarray,
-    r_bar: np.ndarray,
-    half_spaces: list[HalfSpaces],
-    trust_km: float,
-    motion: cg.BodyMotion | None = None,
+    modes: np.ndarray, r_bar: np.ndarray, half_spaces: list[HalfSpaces], trust_km: float
 ) -> np.ndarray:
-    """Each node's trust radius (N + 1,) [km] (module docstring, *Iterations*): the larger of
-    ``trust_km`` and :data:`TRUST_FAR_FRACTION` of the largest ∞-norm box about r̄_k that
-    every half-space binding node k holds (the rows of :func:`_pairs`; a node with none
-    keeps ``trust_km``).
+    """Each node's trust radius (N + 1,) [km] of a fixed target (module docstring,
+    *Iterations*): the larger of ``trust_km`` and :data:`TRUST_FAR_FRACTION` of the largest
+    ∞-norm box about r̄_k that every half-space binding node k holds (the rows of
+    :func:`_pairs`; a node with none keeps ``trust_km``).
 
     The trust box keeps an iterate where the keep-out zone was linearised. A node whose
     half-spaces hold a box twice its own meets them nowhere in its box: its rows are left
     out (:func:`_pairs`), it is safe anywhere in the box, and a smaller box would only hold
     the plan back from where a new estimate takes it (the nodes far from the zone, which
     moved by more than ``trust_km`` between re-solves and made the trust rows bind at tens
-    of nodes: docs/solvers.md). The nodes near the zone keep ``trust_km``."""
-    if motion is None:  # each row's plane read where it is kept (the same values)
-        normals, offsets = _stacked_planes(half_spaces)
-        return _fixed_radii(
-            half_spaces[0].index, normals, offsets, modes, r_bar, trust_km, TRUST_FAR_FRACTION
-        )
-    pairs = _pair_rows(half_spaces[0].index >= 0, modes, len(half_spaces))
-    normals, offsets = _planes(half_spaces, pairs, motion)
-    return _far_radii(pairs, normals, offsets, r_bar, trust_km, TRUST_FAR_FRACTION, modes.size)
-
-
-@njit(cache=True)
-def _far_radii(
-    pairs: np.ndarray,
-    normals: np.ndarray,
-    offsets: np.ndarray,
-    r_bar: np.ndarray,
-    trust_km: float,
-    fraction: float,
-    nodes: int,
-) -> np.ndarray:
-    """:func:`trust_radii` from the rows ``pairs`` (P, 3) and their planes (normals (P, 3),
-    offsets (P,) [km]): node k's largest held box is the smallest over its rows of
-    ``(nᵀ r̄_k − offset) / ‖n‖₁`` (where :func:`_box_low` reaches the plane)."""
-    held = np.full(nodes, np.inf)
-    for p in range(pairs.shape[0]):
-        k = pairs[p, 0]
-        held[k] = _held_box(
-            held[k], normals[p, 0], normals[p, 1], normals[p, 2], offsets[p], r_bar, k
-        )
-    return _radii_of(held, trust_km, fraction)
+    of nodes: docs/solvers.md). The nodes near the zone keep ``trust_km``. A turning body
+    keeps one radius (:func:`plan`)."""
+    normals, offsets = _stacked_planes(half_spaces)
+    return _fixed_radii(
+        half_spaces[0].index, normals, offsets, modes, r_bar, trust_km, TRUST_FAR_FRACTION
+    )
 
 
 @njit(cache=True)
@@ -647,39 +618,23 @@ def _fixed_radii(
     trust_km: float,
     fraction: float,
 ) -> np.ndarray:
-    """:func:`trust_radii` of a fixed target: :func:`_far_radii` over the rows of
-    :func:`_pair_rows`, each row's plane read as :func:`_fixed_pairs` reads it (``index``
-    (N + 1,) a node's plane, −1 for none; ``normals`` (B, K, 3), ``offsets`` (B, K) of the B
-    ellipsoids), not gathered first (:func:`_planes`): the same planes, the same radii."""
+    """:func:`trust_radii`'s kernel: over the rows of :func:`_pair_rows`, each row's plane
+    read as :func:`_fixed_pairs` reads it (``index`` (N + 1,) a node's plane, −1 for none;
+    ``normals`` (B, K, 3), ``offsets`` (B, K) of the B ellipsoids), node k's largest held
+    box is the smallest over its rows of ``(nᵀ r̄_k − offset) / ‖n‖₁`` (where
+    :func:`_box_low` reaches the plane; a zero normal holds any box), ∞ for a node without
+    a row."""
     pairs = _pair_rows(index >= 0, modes, normals.shape[0])
     held = np.full(modes.size, np.inf)
     for p in range(pairs.shape[0]):
         k, row, b = pairs[p, 0], index[pairs[p, 1]], pairs[p, 2]
         n0, n1, n2 = normals[b, row, 0], normals[b, row, 1], normals[b, row, 2]
-        held[k] = _held_box(held[k], n0, n1, n2, offsets[b, row], r_bar, k)
-    return _radii_of(held, trust_km, fraction)
-
-
-@njit(cache=True)
-def _held_box(
-    held: float, n0: float, n1: float, n2: float, offset: float, r_bar: np.ndarray, k: int
-) -> float:
-    """The largest ∞-norm box about r̄_k held so far, ``held`` [km], and the plane n (unit),
-    ``offset`` [km] of one more of node k's rows: the smaller of ``held`` and ``(nᵀ r̄_k −
-    offset) / ‖n‖₁`` (where :func:`_box_low` reaches the plane; ``held`` for n = 0)."""
-    size = abs(n0) + abs(n1) + abs(n2)
-    if size > 0.0:
-        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
-        return float(min(held, (dot - offset) / size))
-    return held
-
-
-@njit(cache=True)
-def _radii_of(held: np.ndarray, trust_km: float, fraction: float) -> np.ndarray:
-    """Each node's radius from its largest held box ``held`` (N + 1,) [km] (∞: no row): the
-    larger of ``trust_km`` and ``fraction`` × the box (:func:`trust_radii`)."""
-    radii = np.full(held.size, trust_km)
-    for k in range(held.size):
+        size = abs(n0) + abs(n1) + abs(n2)
+        if size > 0.0:
+            dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
+            held[k] = min(held[k], (dot - offsets[b, row]) / size)
+    radii = np.full(modes.size, trust_km)
+    for k in range(modes.size):
         if held[k] < np.inf and fraction * held[k] > trust_km:
             radii[k] = fraction * held[k]
     return radii
