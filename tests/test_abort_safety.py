@@ -232,8 +232,11 @@ def test_an_abort_safe_campaign_writes_the_abort_safety_of_its_runs(tmp_path: Pa
     config = tmp_path / "c.toml"
     config.write_text(f'[output]\ndir = "{tmp_path / "out"}"\n', encoding="utf-8")
     args = ["ablate", str(config), "--seeds", "1", "--arch", "mtf_fixed_socp", "--workers", "1"]
+    # no run time limit: the default is a multiple of the run's cost on a typical machine,
+    # and a test waits for the run to end, whatever the machine's speed or load
+    no_limit = ["--set", "output.run_timeout_s=86400"]
     result = runner.invoke(
-        app, [*args, "-q", *ABORT_SET, "--set", f"constraints.abort_safe_s={ABORT_S}"]
+        app, [*args, "-q", *ABORT_SET, *no_limit, "--set", f"constraints.abort_safe_s={ABORT_S}"]
     )
     assert result.exit_code == 0, result.output
     runs = pq.read_table(glob.glob(str(tmp_path / "out" / "*" / "runs.parquet"))[0])

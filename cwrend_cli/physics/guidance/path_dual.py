@@ -356,11 +356,13 @@ def _blocking_step(
     n_free: int,
     equality: np.ndarray,
     step: np.ndarray,
-) -> bool:
+) -> tuple[bool, bool]:
     """The Newton step on the free rows (``mat``: ``−H`` damped), with every inequality row
     whose multiplier the step would take below 0 sent to 0 and the step solved again for
     the others given that move (a primal–dual active-set step: a row that leaves does so
-    in one iteration). False if a system is not positive definite."""
+    in one iteration). (solved: False if a system is not positive definite, blocked: a
+    row was sent to 0; when not, ``step`` is the plain Newton step ``mat⁻¹ g_f``, bit for
+    bit: the same Cholesky solve of the same system)."""
     kept = np.ones(n_free, dtype=np.bool_)
     for _round in range(n_free):
         idx = np.flatnonzero(kept)
@@ -377,7 +379,7 @@ def _blocking_step(
                 sub[r, c] = mat[idx[r], idx[c]]
         out = np.empty(m)
         if not _cholesky_solve(sub, rhs, out):
-            return False
+            return False, _round > 0
         for q in range(n_free):
             if not kept[q]:
                 step[q] = -y[free[q]]
@@ -390,8 +392,8 @@ def _blocking_step(
                 kept[q] = False
                 blocked = True
         if not blocked:
-            return True
-    return True
+            return True, _round > 0
+    return True, True
 
 
 @njit(cache=True)
@@ -499,18 +501,25 @@ def projected_newton(
         step = np.empty(n_free)
         mat = np.empty((n_free, n_free))
         accepted = False
+        blocked = True
         for _try in range(_DAMPING_TRIES):
+            # even tries: the blocking step; odd tries (its line search failed): the plain
+            # projected Newton step, same damping; then more damping. An odd try after a
+            # blocking step that blocked no row would repeat its step and its line search
+            # trial for trial (the same failure): it only raises the damping.
+            if _try % 2 == 1 and not blocked:
+                damping = max(10.0 * damping, 1e-4)
+                continue
             for r in range(n_free):
                 for c in range(n_free):
                     mat[r, c] = hess[r, c]
                 mat[r, r] += max(damping, 1e-12) * metric[free[r]]
-            # even tries: the blocking step; odd tries (its line search failed): the plain
-            # projected Newton step, same damping; then more damping
             if _try % 2 == 0:
-                solved = _blocking_step(hess, mat, g_f, y, free, n_free, equality, step)
+                solved, blocked = _blocking_step(hess, mat, g_f, y, free, n_free, equality, step)
             else:
                 solved = _cholesky_solve(mat, g_f, step)
             if not solved:
+                blocked = True  # the plain step is tried at the next damping
                 damping = max(10.0 * damping, 1e-4)
                 continue
             alpha = 1.0
