@@ -288,12 +288,23 @@ def test_held_norms_are_the_steps_lagrangian_slopes() -> None:
 def test_fixed_eps_dual_plans_match_clarabels_on_warm_re_solves() -> None:
     """At ε = 0 the default solver gives the plans of Clarabel alone: on 8 random problems
     (a plan by Clarabel, then the re-solve 10 steps on from its shifted controls, as in the
-    closed loop) cost within 1e-9 relative (measured 9.2e-11), controls within 1e-4 u_max
-    (Clarabel's own spread at ρ, as in test_the_reduced_programs_give_the_whole_programs_plans;
-    measured 1.4e-5), positions within 1e-6 km (measured 6.0e-8), the terminal state within
-    1e-9 km and every node outside the zone. Some re-solves are answered by the dual solver
-    (measured 3 of 8; the others are left to Clarabel, counted in ``fallbacks``): before it,
-    none at ε = 0."""
+    closed loop) cost within 1e-8 relative, controls within 1e-2 u_max, positions within
+    1e-5 km, the terminal state within 1e-9 km and every node outside the zone. Some
+    re-solves are answered by the dual solver (measured 5 of 8; the others are left to
+    Clarabel, counted in ``fallbacks``): before it, none at ε = 0.
+
+    The tolerances are the certificate's. The dual answer meets the terminal rows to
+    DUAL_TOL_KM and DUAL_TOL_KM_S (1e-9 km, 1e-12 km/s), and its cost may lie below the
+    optimum by the rows' multipliers times those tolerances: about 1e-7 of 17.7 here
+    (terminal velocity rows, 1e-12 km/s ≈ 1e-9 of a step's u_max·dt). At ρ = 1e-6 the
+    program is nearly a linear one, flat along shifts of a thrust arc: a plan whose cost is
+    Δ above the optimum may differ from it by up to √(Δ/ρ) in ‖ũ‖ (the ρ‖ũ‖² term is the
+    only curvature), about 0.4 for Δ = 1e-8 relative. Measured: cost 6.5e-9, controls
+    6.7e-3 u_max, positions 1.5e-6 km on the first problem and 8.7e-11, 1.3e-4 u_max,
+    4.0e-7 km on the fourth, the two the dual solver certifies since its line search
+    interpolates (path_dual._shrink; before, they went to Clarabel); on the other three
+    at most 6.7e-11, 1.4e-5 u_max and 6.0e-8 km, as before (when the test held 1e-9,
+    1e-4 u_max and 1e-6 km, tighter than the certificate)."""
     rng = np.random.default_rng(3295)
     answered = 0
     for _ in range(8):
@@ -307,11 +318,11 @@ def test_fixed_eps_dual_plans_match_clarabels_on_warm_re_solves() -> None:
         res = cp.plan(N_MOTION, DT, U_MAX, x1, xf, 290.0, 0.0, geo, warm_controls=warm_u)
         assert ref.status is SolveStatus.CONVERGED and res.status is SolveStatus.CONVERGED
         answered += res.duals is not None
-        assert abs(_cost(res.controls, 0.0) - _cost(ref.controls, 0.0)) <= 1e-9 * _cost(
+        assert abs(_cost(res.controls, 0.0) - _cost(ref.controls, 0.0)) <= 1e-8 * _cost(
             ref.controls, 0.0
         )
-        np.testing.assert_allclose(res.controls, ref.controls, rtol=0, atol=1e-4 * U_MAX)
-        np.testing.assert_allclose(res.positions, ref.positions, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(res.controls, ref.controls, rtol=0, atol=1e-2 * U_MAX)
+        np.testing.assert_allclose(res.positions, ref.positions, rtol=0, atol=1e-5)
         states, _ = cp.node_positions(N_MOTION, DT, x1, res.controls)
         assert np.max(np.abs(states[-1] - xf)) <= 1e-9
         assert geo.semi_axes_km is not None
