@@ -12,8 +12,11 @@ state, warm controls and shifted row multipliers (what the closed loop does). Ma
 running this module as a script on the code before the kernels (``main`` at 20532b2,
 ``PYTHONPATH=<that tree> python tests/test_dual_plan_numbers.py``).
 
-Made again, on purpose, when the dual solver's line search began to backtrack by
-quadratic interpolation (issue 32, ``path_dual._shrink``): 16 of the 24 plans moved, the
+Made again, on purpose, for issue 32's speed of the plain filter's re-solves (the dual
+solver's line search backtracking by quadratic interpolation, ``path_dual._shrink``; its
+passes rounding by products, ``step_law_by_products``, and summing the gradient from the
+curvature, ``_forward``; the working set growing earlier at adaptive ε,
+``SETTLED_DIRECT``; no plain projected Newton tries): 16 of the 24 plans moved, the
 adaptive ones (ε = 0.3, 0.8) by at most 3.0e-11 u_max and the fixed-ε ones (ε = 0, a
 near-linear program) by at most 1.7e-5 u_max; no status or fallback count changed. From
 then on the plans must not move by a bit again unless an issue moves them.

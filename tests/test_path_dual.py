@@ -300,10 +300,10 @@ def test_fixed_eps_dual_plans_match_clarabels_on_warm_re_solves() -> None:
     program is nearly a linear one, flat along shifts of a thrust arc: a plan whose cost is
     Δ above the optimum may differ from it by up to √(Δ/ρ) in ‖ũ‖ (the ρ‖ũ‖² term is the
     only curvature), about 0.4 for Δ = 1e-8 relative. Measured: cost 6.5e-9, controls
-    6.7e-3 u_max, positions 1.5e-6 km on the first problem and 8.7e-11, 1.3e-4 u_max,
+    6.7e-3 u_max, positions 1.5e-6 km on the first problem and 4.5e-11, 1.3e-4 u_max,
     4.0e-7 km on the fourth, the two the dual solver certifies since its line search
     interpolates (path_dual._shrink; before, they went to Clarabel); on the other three
-    at most 6.7e-11, 1.4e-5 u_max and 6.0e-8 km, as before (when the test held 1e-9,
+    at most 2.6e-11, 1.4e-5 u_max and 6.0e-8 km, as before (when the test held 1e-9,
     1e-4 u_max and 1e-6 km, tighter than the certificate)."""
     rng = np.random.default_rng(3295)
     answered = 0
@@ -392,3 +392,124 @@ def test_the_smooth_start_gives_the_programs_answer_and_counts_both_solves() -> 
     assert ans.iterations > smooth.iterations
     with pytest.raises(ValueError, match="weight"):
         path_dual.solve_from_smooth(N_MOTION, DT, U_MAX, x0, g.blocks, 0.0, 1e-6, rows)
+
+
+def _random_dual(rng: np.random.Generator, steps: int = 60, rows: int = 9) -> tuple:
+    """A random dual of the module docstring: blocks ``a`` (N, 6, 3), rows at sorted nodes
+    with vectors ``h`` and offsets ``f``, multipliers ``y`` whose steps lie on the ramp or
+    beyond it (``c₁ = 0.2``, ``c₂ = 0.3``)."""
+    a = rng.normal(size=(steps, 6, 3))
+    nodes = np.sort(rng.integers(1, steps + 1, rows)).astype(np.int64)
+    nodes[-1] = steps
+    h = rng.normal(size=(rows, 6))
+    f = rng.normal(size=rows)
+    y = 0.1 * rng.normal(size=rows)
+    return a, path_dual.block_products(a), h, f, nodes, y, 0.2, 0.3
+
+
+def _dual_value_and_gradient(inputs: tuple, y: np.ndarray) -> tuple[float, np.ndarray]:
+    a, aat, h, f, nodes, _, c1, c2 = inputs
+    steps, count = a.shape[0], nodes.size
+    u, curv = np.empty((steps, 3)), np.empty((steps, 9))
+    grad, q_rows = np.empty(count), np.empty((count, 21))
+    value = path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
+    return value, grad
+
+
+def test_the_forward_pass_gives_each_rows_residual() -> None:
+    """The gradient of D is each row's residual ``f_i − h_iᵀ Σ_{j<k_i} A_j ũ_j`` (module
+    docstring), written here with numpy from the controls ``ũ`` of the same evaluation;
+    to 1e-12 of the rows' scale (sums of 60 O(1) terms in another order)."""
+    rng = np.random.default_rng(91)
+    for _ in range(20):
+        inputs = _random_dual(rng)
+        a, aat, h, f, nodes, y, c1, c2 = inputs
+        steps, count = a.shape[0], nodes.size
+        u, curv = np.empty((steps, 3)), np.empty((steps, 9))
+        grad, q_rows = np.empty(count), np.empty((count, 21))
+        path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
+        moved = np.einsum("jab,jb->ja", a, u)  # A_j ũ_j
+        prefix = np.vstack([np.zeros(6), np.cumsum(moved, axis=0)])  # Σ_{j<k}
+        want = f - np.einsum("ia,ia->i", h, prefix[nodes])
+        np.testing.assert_allclose(grad, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
+
+
+def test_the_rows_hessian_is_the_gradients_derivative() -> None:
+    """``_hessian`` from ``_forward``'s curvature prefixes is ``−∂²D/∂y²``: the central
+    difference of the gradient (step 1e-6, on problems whose steps stay on or beyond the
+    ramp within it), to 1e-5 relative (the difference's error: O(δ²) plus rounding
+    1e-16/1e-6)."""
+    rng = np.random.default_rng(92)
+    checked = 0
+    for _ in range(20):
+        inputs = _random_dual(rng)
+        a, aat, h, f, nodes, y, c1, c2 = inputs
+        steps, count = a.shape[0], nodes.size
+        u, curv = np.empty((steps, 3)), np.empty((steps, 9))
+        grad, q_rows = np.empty(count), np.empty((count, 21))
+        path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
+        free = np.arange(count, dtype=np.int64)
+        hess = np.empty((count, count))
+        path_dual._hessian(q_rows, h, free, count, hess)
+        delta = 1e-6
+        numeric = np.empty((count, count))
+        for i in range(count):
+            e = np.zeros(count)
+            e[i] = delta
+            hi = _dual_value_and_gradient(inputs, y + e)[1]
+            lo = _dual_value_and_gradient(inputs, y - e)[1]
+            numeric[:, i] = -(hi - lo) / (2 * delta)
+        # a step whose regime changes within ±δ has no derivative there: skip the problem
+        norms = np.linalg.norm(np.einsum("jab,ja->jb", a, _lam(h, nodes, y, steps)), axis=1)
+        ramp = (norms - c1) / (2 * c2)  # the throttle before it is clipped to [0, 1]
+        if np.any(np.abs(ramp) < 1e-3) or np.any(np.abs(ramp - 1.0) < 1e-3):
+            continue
+        checked += 1
+        np.testing.assert_allclose(hess, numeric, rtol=0, atol=1e-5 * np.max(np.abs(hess)))
+    assert checked >= 10
+
+
+def _lam(h: np.ndarray, nodes: np.ndarray, y: np.ndarray, steps: int) -> np.ndarray:
+    """``λ_j = Σ_{i: k_i > j} y_i h_i`` (N, 6)."""
+    return np.array([np.sum(y[nodes > j, None] * h[nodes > j], axis=0) for j in range(steps)])
+
+
+def test_the_law_by_products_is_the_law_to_rounding() -> None:
+    """``step_law_by_products`` (one division) gives ``step_law``'s controls and returns to a
+    few ulps (4e-16 relative), coasting steps exactly."""
+    from cwrend_cli.physics.guidance._grid_kernels import step_law, step_law_by_products
+
+    rng = np.random.default_rng(93)
+    a = rng.normal(size=(200, 6, 3))
+    for s in range(200):
+        vec = rng.normal(size=6) * rng.uniform(0.01, 1.0)
+        c1, c2 = 0.5, 0.2
+        u1, u2 = np.zeros((200, 3)), np.zeros((200, 3))
+        one = step_law(a, s, vec, c1, c2, u1)
+        two = step_law_by_products(a, s, vec, c1, 1.0 / (2.0 * c2), u2)
+        assert one[2] == two[2]
+        np.testing.assert_allclose(two[:2] + two[3:6], one[:2] + one[3:], rtol=4e-16, atol=0)
+        np.testing.assert_allclose(u2[s], u1[s], rtol=4e-16, atol=0)
+        if one[1] == 0.0:
+            assert two[6] == 0.0 and np.all(u2[s] == 0.0)
+        else:
+            assert two[6] == pytest.approx(1.0 / one[0], rel=2e-16)
+
+
+@pytest.mark.parametrize(
+    ("gain", "change", "factor"),
+    [
+        (1.0, -1.0, 0.25),  # q(t) = t − 2t²: maximum at t = 1/4
+        (1.0, -0.2, 0.5 / 1.2),  # at 0.4167, inside [0.1, 0.5]
+        (1.0, 0.0, 0.5),  # D did not fall (a flat trial): halving
+        (1.0, -100.0, 0.1),  # far overshoot: the maximiser 1/202, held at 0.1
+        (-1.0, -2.0, 0.5),  # not an ascent direction: halving
+    ],
+)
+def test_the_line_search_backtracks_to_the_quadratics_maximiser(
+    gain: float, change: float, factor: float
+) -> None:
+    """``_shrink``: the maximiser ``gain / (2 (gain − change))`` of the quadratic through the
+    trial's start (0), slope (``gain``) and value (``change``), kept in [0.1, 0.5] (Dennis &
+    Schnabel 1983, §6.3.2); halving when D did not fall or the slope is not an ascent."""
+    assert path_dual._shrink(gain, change) == pytest.approx(factor, rel=1e-15)

@@ -84,6 +84,42 @@ def step_law(
     return ny, level, ramp, h0, h1, h2
 
 
+@njit(cache=True, inline="always")
+def step_law_by_products(
+    a: np.ndarray, s: int, vec: np.ndarray, c1: float, ramp_slope: float, u: np.ndarray
+) -> tuple[float, float, bool, float, float, float, float]:
+    """:func:`step_law` with products for its divisions (``ramp_slope = 1/(2c₂)``, and
+    ``1/‖y_s‖`` once): a third faster, rounded differently in the last bit. Returns
+    :func:`step_law`'s tuple and ``1/‖y_s‖`` (0 on a coasting step). :mod:`.path_dual`'s
+    passes use it; this module's ascent keeps :func:`step_law`, whose unconstrained plans
+    are pinned bit for bit (``tests/test_same_numbers.py``)."""
+    y0 = 0.0
+    y1 = 0.0
+    y2 = 0.0
+    for i in range(6):
+        y0 += a[s, i, 0] * vec[i]
+        y1 += a[s, i, 1] * vec[i]
+        y2 += a[s, i, 2] * vec[i]
+    ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    level = (ny - c1) * ramp_slope
+    if level <= 0.0:
+        u[s, 0] = 0.0
+        u[s, 1] = 0.0
+        u[s, 2] = 0.0
+        return ny, 0.0, False, 0.0, 0.0, 0.0, 0.0
+    ramp = level < 1.0
+    if not ramp:
+        level = 1.0
+    inv = 1.0 / ny
+    h0 = y0 * inv
+    h1 = y1 * inv
+    h2 = y2 * inv
+    u[s, 0] = level * h0
+    u[s, 1] = level * h1
+    u[s, 2] = level * h2
+    return ny, level, ramp, h0, h1, h2, inv
+
+
 @njit(cache=True)
 def grid_dual(
     a: np.ndarray,
