@@ -407,13 +407,15 @@ def _random_dual(rng: np.random.Generator, steps: int = 60, rows: int = 9) -> tu
     return a, path_dual.block_products(a), h, f, nodes, y, 0.2, 0.3
 
 
-def _dual_value_and_gradient(inputs: tuple, y: np.ndarray) -> tuple[float, np.ndarray]:
+def _evaluated(inputs: tuple, y: np.ndarray) -> dict[str, np.ndarray]:
+    """``path_dual._evaluate`` at ``y``: the controls, curvature, gradient and the rows'
+    curvature prefixes it writes."""
     a, aat, h, f, nodes, _, c1, c2 = inputs
     steps, count = a.shape[0], nodes.size
-    u, curv = np.empty((steps, 3)), np.empty((steps, 9))
-    grad, q_rows = np.empty(count), np.empty((count, 21))
-    value = path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
-    return value, grad
+    out = {"u": np.empty((steps, 3)), "curv": np.empty((steps, 9))}
+    out |= {"grad": np.empty(count), "q_rows": np.empty((count, 21))}
+    path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, *out.values())
+    return out
 
 
 def test_the_forward_pass_gives_each_rows_residual() -> None:
@@ -423,15 +425,12 @@ def test_the_forward_pass_gives_each_rows_residual() -> None:
     rng = np.random.default_rng(91)
     for _ in range(20):
         inputs = _random_dual(rng)
-        a, aat, h, f, nodes, y, c1, c2 = inputs
-        steps, count = a.shape[0], nodes.size
-        u, curv = np.empty((steps, 3)), np.empty((steps, 9))
-        grad, q_rows = np.empty(count), np.empty((count, 21))
-        path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
-        moved = np.einsum("jab,jb->ja", a, u)  # A_j ũ_j
+        a, _, h, f, nodes, y, _, _ = inputs
+        got = _evaluated(inputs, y)
+        moved = np.einsum("jab,jb->ja", a, got["u"])  # A_j ũ_j
         prefix = np.vstack([np.zeros(6), np.cumsum(moved, axis=0)])  # Σ_{j<k}
         want = f - np.einsum("ia,ia->i", h, prefix[nodes])
-        np.testing.assert_allclose(grad, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
+        np.testing.assert_allclose(got["grad"], want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 
 
 def test_the_rows_hessian_is_the_gradients_derivative() -> None:
@@ -443,21 +442,18 @@ def test_the_rows_hessian_is_the_gradients_derivative() -> None:
     checked = 0
     for _ in range(20):
         inputs = _random_dual(rng)
-        a, aat, h, f, nodes, y, c1, c2 = inputs
+        a, _, h, _, nodes, y, c1, c2 = inputs
         steps, count = a.shape[0], nodes.size
-        u, curv = np.empty((steps, 3)), np.empty((steps, 9))
-        grad, q_rows = np.empty(count), np.empty((count, 21))
-        path_dual._evaluate(a, aat, h, f, nodes, y, c1, c2, u, curv, grad, q_rows)
         free = np.arange(count, dtype=np.int64)
         hess = np.empty((count, count))
-        path_dual._hessian(q_rows, h, free, count, hess)
+        path_dual._hessian(_evaluated(inputs, y)["q_rows"], h, free, count, hess)
         delta = 1e-6
         numeric = np.empty((count, count))
         for i in range(count):
             e = np.zeros(count)
             e[i] = delta
-            hi = _dual_value_and_gradient(inputs, y + e)[1]
-            lo = _dual_value_and_gradient(inputs, y - e)[1]
+            hi = _evaluated(inputs, y + e)["grad"]
+            lo = _evaluated(inputs, y - e)["grad"]
             numeric[:, i] = -(hi - lo) / (2 * delta)
         # a step whose regime changes within ±δ has no derivative there: skip the problem
         norms = np.linalg.norm(np.einsum("jab,ja->jb", a, _lam(h, nodes, y, steps)), axis=1)

@@ -51,13 +51,9 @@ from cwrend_cli.physics.guidance._kernels import (
 CERTIFICATE_MARGIN = 1e-12
 
 
-@njit(cache=True)
-def step_law(
-    a: np.ndarray, s: int, vec: np.ndarray, c1: float, c2: float, u: np.ndarray
-) -> tuple[float, float, bool, float, float, float]:
-    """Step ``s``'s minimiser of ``f(ũ) − y_sᵀũ``, ``y_s = A_sᵀ vec`` (the smoothed law of
-    paper Eq. 10 on the grid, module docstring): writes ``ũ_s`` into ``u[s]``; returns
-    ``(‖y_s‖, a_s, on the ramp, ŷ_s)``, ``a_s = 0`` (and ŷ_s zero) on a coasting step."""
+@njit(cache=True, inline="always")
+def _slope(a: np.ndarray, s: int, vec: np.ndarray) -> tuple[float, float, float]:
+    """``y_s = A_sᵀ vec`` (3,), summed over the six rows in order."""
     y0 = 0.0
     y1 = 0.0
     y2 = 0.0
@@ -65,6 +61,17 @@ def step_law(
         y0 += a[s, i, 0] * vec[i]
         y1 += a[s, i, 1] * vec[i]
         y2 += a[s, i, 2] * vec[i]
+    return y0, y1, y2
+
+
+@njit(cache=True)
+def step_law(
+    a: np.ndarray, s: int, vec: np.ndarray, c1: float, c2: float, u: np.ndarray
+) -> tuple[float, float, bool, float, float, float]:
+    """Step ``s``'s minimiser of ``f(ũ) − y_sᵀũ``, ``y_s = A_sᵀ vec`` (the smoothed law of
+    paper Eq. 10 on the grid, module docstring): writes ``ũ_s`` into ``u[s]``; returns
+    ``(‖y_s‖, a_s, on the ramp, ŷ_s)``, ``a_s = 0`` (and ŷ_s zero) on a coasting step."""
+    y0, y1, y2 = _slope(a, s, vec)
     ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
     level = (ny - c1) / (2.0 * c2)
     if level <= 0.0:
@@ -93,13 +100,7 @@ def step_law_by_products(
     :func:`step_law`'s tuple and ``1/‖y_s‖`` (0 on a coasting step). :mod:`.path_dual`'s
     passes use it; this module's ascent keeps :func:`step_law`, whose unconstrained plans
     are pinned bit for bit (``tests/test_same_numbers.py``)."""
-    y0 = 0.0
-    y1 = 0.0
-    y2 = 0.0
-    for i in range(6):
-        y0 += a[s, i, 0] * vec[i]
-        y1 += a[s, i, 1] * vec[i]
-        y2 += a[s, i, 2] * vec[i]
+    y0, y1, y2 = _slope(a, s, vec)
     ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
     level = (ny - c1) * ramp_slope
     if level <= 0.0:

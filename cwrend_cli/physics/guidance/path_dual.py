@@ -34,7 +34,9 @@ scaled-gradient step, the others a Levenberg–Marquardt Newton step; a row the
 Newton step would take below 0 is set to 0 and the step solved again for the
 others (a primal–dual active-set step, :func:`_blocking_step`); violated rows
 join the free set, :data:`ENTER` at a time and the most violated first, once the
-free rows are within :data:`SETTLED` tolerances; an Armijo search along the
+free rows are within :data:`SETTLED_DIRECT` tolerances (:data:`SETTLED` in the
+homotopy below); a step whose line search fails is tried again with more
+Levenberg–Marquardt damping; an Armijo search along the
 projection arc (backtracking by quadratic interpolation, :func:`_shrink`), or a
 full step that leaves ``D`` flat to rounding and reduces the free rows' residuals
 (two nearly parallel rows of neighbouring nodes make ``D`` almost flat along
