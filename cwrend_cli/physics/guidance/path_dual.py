@@ -282,8 +282,8 @@ def _forward(
     (R,) of ``D``, each row's residual ``f_i − h_iᵀ Σ_{j<k_i} A_j ũ_j`` (``A_j ũ_j = a_j
     A_j ŷ_j``), and each row's curvature prefix ``Q_{k_i} = Σ_{j<k_i} A_j J_j A_jᵀ``
     (R, 21: the upper triangle, row by row), from which :func:`_hessian` writes the
-    Hessian of any set of rows. The running sums are scalars the compiler keeps in
-    registers (an array it would store at every step)."""
+    Hessian of any set of rows. The six running sums of ``A_j ũ_j`` are scalars the
+    compiler keeps in registers (an array it would store at every step)."""
     steps = curv.shape[0]
     count = nodes.size
     s0 = s1 = s2 = s3 = s4 = s5 = 0.0
