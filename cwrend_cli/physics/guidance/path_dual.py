@@ -149,7 +149,7 @@ WAKE_ROUNDS = 3
 SMOOTH_EPS = 1.0
 _ARMIJO = 1e-4
 #: Trials of the line search along one step [-].
-_HALVINGS = 4
+_TRIALS = 4
 #: Safeguards of the line search's next trial [-]: after a trial that lowered ``D`` the
 #: next step is the maximiser of the quadratic through ``D``, its slope and the trial, kept
 #: within these fractions of the trial's (Dennis & Schnabel 1983, "Numerical Methods for
@@ -462,7 +462,7 @@ def projected_newton(
     u: np.ndarray,
     max_iter: int,
     enter: int,
-    enter_at: float = SETTLED,
+    enter_at: float,
 ) -> tuple[int, int]:
     """Maximise ``D`` over ``y`` (inequality entries ≥ 0) from ``y`` in place; writes ``ũ``.
     ``enter`` violated rows at most join the free set in one iteration, once the free
@@ -566,7 +566,7 @@ def projected_newton(
                 damping = max(10.0 * damping, 1e-4)
                 continue
             alpha = 1.0
-            for _ls in range(_HALVINGS):
+            for _ls in range(_TRIALS):
                 y_t[:] = y
                 gain = 0.0
                 for p in range(n_free):
@@ -580,7 +580,7 @@ def projected_newton(
                     y_t[i] = max(0.0, y[i] + alpha * grad[i] / metric[i])
                     gain += grad[i] * (y_t[i] - y[i])
                 if not gain > 0.0 and alpha != 1.0:  # neither test below can pass: skip D
-                    alpha *= 0.5
+                    alpha *= _SHRINK_MAX
                     continue
                 # the trial's gradient only where it is read (an accepted or a flat step)
                 value_t = _value(a, h, f, nodes, y_t, c1, c2, u_t, curv_t)
@@ -803,11 +803,11 @@ def _homotopy(
     homotopy's start: :attr:`DualAnswer.start`)."""
     metric = np.full(nodes.size, -1.0)
     level = max(float(weight), HOMOTOPY_FROM)
+    enter_at = SETTLED_DIRECT if weight >= HOMOTOPY_FROM else SETTLED
     total = 0
     while True:
         last = level == weight
         tol = rows.tol if last else rows.tol * SETTLED
-        enter_at = SETTLED_DIRECT if weight >= HOMOTOPY_FROM else SETTLED
         status, iterations = projected_newton(
             a, aat, h, f, nodes, rows.equality, tol, metric, c1, level, y, u, max_iter, ENTER,
             enter_at,
