@@ -303,24 +303,32 @@ def _modes(geo: cg.Geometry, r_bar: np.ndarray, motion: cg.BodyMotion | None) ->
     modes[1:steps] = _KEEP_OUT
     if geo.port_km is None:
         return modes
-    _, rows, _ = _untightened_corridor(geo)
-    along, across = cg.cone_products(cg.to_body(motion, r_bar), rows)
-    _approach_modes(along, across, rows[1], rows[3], modes)
+    a, b, c, d = _untightened_corridor(geo)[1]
+    _approach_modes(cg.to_body(motion, r_bar), a, b, c, d, modes)
     return modes
 
 
 @njit(cache=True)
 def _approach_modes(
-    along: np.ndarray, across: np.ndarray, b: np.ndarray, d: float, modes: np.ndarray
+    r: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: float, modes: np.ndarray
 ) -> None:
     """Writes the final approach into ``modes`` (N + 1,) (:func:`_modes`): the nodes inside the
-    untightened corridor cone (its residual ≥ −:data:`SCP_TOL_KM`, from ``along`` = r c
-    (N + 1,) and ``across`` = r Aᵀ (N + 1, 3) of the iterate, :func:`.constraints.cone_products`,
-    and the cone's b, d: :meth:`.constraints.SecondOrderCone.residual_km`'s kernel, the same
-    bits) from :func:`.constraints.approach_start` (not below node 1: node 0 is x0; the
-    terminal node is the apex) to N − 1 are corridor nodes, the first of them both."""
+    untightened corridor cone (its residual ``cᵀr + d − ‖A r + b‖`` ≥ −:data:`SCP_TOL_KM` at
+    the iterate's positions ``r`` (N + 1, 3), the cone's rows a, b, c, d:
+    :meth:`.constraints.SecondOrderCone.residual_km`'s arithmetic, with the products ``cᵀr``
+    and ``A r`` summed in order, where numpy's matmul may round the last bit otherwise: a
+    node's mode could differ only at a residual of −1 mm to that bit) from
+    :func:`.constraints.approach_start` (not below node 1: node 0 is x0; the terminal node
+    is the apex) to N − 1 are corridor nodes, the first of them both."""
     steps = modes.size - 1
-    inside = cg._cone_residuals(along, across, b, d) >= -SCP_TOL_KM
+    inside = np.empty(steps + 1, np.bool_)
+    for k in range(steps + 1):
+        r0, r1, r2 = r[k, 0], r[k, 1], r[k, 2]
+        along = r0 * c[0] + r1 * c[1] + r2 * c[2]
+        w0 = (r0 * a[0, 0] + r1 * a[0, 1] + r2 * a[0, 2]) + b[0]
+        w1 = (r0 * a[1, 0] + r1 * a[1, 1] + r2 * a[1, 2]) + b[1]
+        w2 = (r0 * a[2, 0] + r1 * a[2, 1] + r2 * a[2, 2]) + b[2]
+        inside[k] = (along + d) - math.sqrt(w0 * w0 + w1 * w1 + w2 * w2) >= -SCP_TOL_KM
     first = cg.approach_start(inside, 1)
     for k in range(first, steps):
         modes[k] = _CORRIDOR
@@ -1203,44 +1211,35 @@ def _guess_active(rows: path_dual.DualRows, kind: np.ndarray, r_bar: np.ndarray)
     row as in the working set) on the half-space rows that the previous iterate ``r_bar``
     nearly touches (within :data:`GUESS_KM`), one per run of consecutive such nodes (the
     closest: a state constraint touched over a stretch is held by a few of its rows);
-    zero elsewhere."""
+    zero elsewhere (:func:`_mark_touching`)."""
     y = np.zeros(rows.nodes.size)
-    hs, normals, points = _half_space_rows(kind, rows.coeffs, rows.nodes, r_bar)
-    if hs.size:
-        _mark_touching(np.einsum("ij,ij->i", normals, points), normals, rows.offsets, hs, y)
+    _mark_touching(kind, rows.coeffs, rows.offsets, rows.nodes, r_bar, y)
     return y
 
 
 @njit(cache=True)
-def _half_space_rows(
-    kind: np.ndarray, coeffs: np.ndarray, nodes: np.ndarray, r_bar: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The half-space rows (kind 1) of :func:`_guess_active`: their indices (K,), normals
-    (K, 3) (``coeffs[hs, :3]``) and the iterate's positions at their nodes (K, 3)
-    (``r_bar[nodes[hs]]``), gathered (copies: the same arrays as numpy's indexing)."""
-    hs = np.flatnonzero(kind == 1)
-    normals = np.empty((hs.size, 3))
-    points = np.empty((hs.size, 3))
-    for i in range(hs.size):
-        for c in range(3):
-            normals[i, c] = coeffs[hs[i], c]
-            points[i, c] = r_bar[nodes[hs[i]], c]
-    return hs, normals, points
-
-
-@njit(cache=True)
 def _mark_touching(
-    dots: np.ndarray, normals: np.ndarray, offsets: np.ndarray, hs: np.ndarray, y: np.ndarray
+    kind: np.ndarray,
+    coeffs: np.ndarray,
+    offsets: np.ndarray,
+    nodes: np.ndarray,
+    r_bar: np.ndarray,
+    y: np.ndarray,
 ) -> None:
-    """Writes the speck of :func:`_guess_active` into ``y`` at the half-space rows ``hs``
-    whose distance ``(nᵀ r̄ − offset)/‖n‖`` (``dots`` their nᵀ r̄, ``normals`` their n, in
-    the rows' scale) is within :data:`GUESS_KM` (numpy's arithmetic, :func:`.constraints.row_norms`'
-    norm: the same bits)."""
-    for i in range(hs.size):
-        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+    """Writes the speck of :func:`_guess_active` into ``y`` at the half-space rows (kind 1)
+    whose distance ``(nᵀ r̄ − offset)/‖n‖`` (n = ``coeffs[i, :3]``, in the rows' scale, r̄ =
+    ``r_bar`` at the row's node) is within :data:`GUESS_KM`: numpy's arithmetic, with nᵀ r̄
+    summed in order (where numpy's einsum may round the last bit otherwise: a row could
+    differ only at a distance of 1 m to that bit) and :func:`.constraints.row_norms`' norm."""
+    for i in range(kind.size):
+        if kind[i] != 1:
+            continue
+        n0, n1, n2 = coeffs[i, 0], coeffs[i, 1], coeffs[i, 2]
+        k = nodes[i]
+        dot = n0 * r_bar[k, 0] + n1 * r_bar[k, 1] + n2 * r_bar[k, 2]
         size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-        if (dots[i] - offsets[hs[i]]) / size <= GUESS_KM:
-            y[hs[i]] = 1e-300
+        if (dot - offsets[i]) / size <= GUESS_KM:
+            y[i] = 1e-300
 
 
 #: Rounds of corridor-cone cuts of the dual solver before Clarabel takes the program [-].
@@ -1418,13 +1417,10 @@ def _dual_solve(
         if not ans.converged:
             return None, used, None
         # numpy's (pairwise) sums of the multipliers in the rows' order
-        if float(np.sum(_of_kinds(ans.multipliers, kind, 1, 4))) * s_p > SLACK_PENALTY:
+        if _sum_of_kinds(ans.multipliers, kind, 1, 4) * s_p > SLACK_PENALTY:
             return None, used, None
         abort = sub.abort_rows is not None and sub.abort_rows.nodes.size > 0
-        if (
-            abort
-            and float(np.sum(_of_kinds(ans.multipliers, kind, 3, 3))) * s_p > ABORT_SLACK_PENALTY
-        ):
+        if abort and _sum_of_kinds(ans.multipliers, kind, 3, 3) * s_p > ABORT_SLACK_PENALTY:
             return None, used, None
         cuts = _cone_cuts(sub, ans.states[:, :3], s_p, 100 + cone_rounds)
         box = _broken_trust(sub, ans.states[:, :3])
@@ -1459,16 +1455,17 @@ def _dual_solve(
 
 
 @njit(cache=True)
-def _of_kinds(values: np.ndarray, kind: np.ndarray, first: int, second: int) -> np.ndarray:
-    """``values[(kind == first) | (kind == second)]``: the values of the rows of either kind,
-    in their order (a copy: the same array as numpy's boolean indexing)."""
+def _sum_of_kinds(values: np.ndarray, kind: np.ndarray, first: int, second: int) -> float:
+    """``np.sum(values[(kind == first) | (kind == second)])``: the values of the rows of
+    either kind, in their order, summed as numpy sums them (:func:`.path_dual.numpy_sum`;
+    the same bits)."""
     out = np.empty(values.size)
     count = 0
     for i in range(values.size):
         if kind[i] == first or kind[i] == second:
             out[count] = values[i]
             count += 1
-    return out[:count]
+    return path_dual.numpy_sum(out[:count])
 
 
 @njit(cache=True)

@@ -107,6 +107,7 @@ __all__ = [
     "DualAnswer",
     "DualRows",
     "held_norms",
+    "numpy_sum",
     "solve",
     "solve_from_smooth",
 ]
@@ -747,6 +748,78 @@ def _row_inputs(
     return h, at_rows
 
 
+#: numpy's block of its pairwise sum: a block of at most this many values is summed by eight
+#: accumulators (:func:`_pairwise_block`) [-].
+_PAIRWISE_BLOCK = 128
+
+
+@njit(cache=True)
+def _pairwise_block(values: np.ndarray, start: int, count: int) -> float:
+    """numpy's pairwise sum of ``values[start : start + count]``, ``count`` ≤
+    :data:`_PAIRWISE_BLOCK` (its ``pairwise_sum`` of a contiguous float64 array): fewer than 8
+    values in order from 0.0; else eight running sums of every eighth value, added in pairs,
+    then the rest in order."""
+    if count < 8:
+        out = 0.0
+        for i in range(start, start + count):
+            out += values[i]
+        return out
+    v = values
+    r0, r1, r2, r3 = v[start], v[start + 1], v[start + 2], v[start + 3]
+    r4, r5, r6, r7 = v[start + 4], v[start + 5], v[start + 6], v[start + 7]
+    i = start + 8
+    end = start + count - count % 8
+    while i < end:
+        r0, r1, r2, r3 = r0 + v[i], r1 + v[i + 1], r2 + v[i + 2], r3 + v[i + 3]
+        r4, r5, r6, r7 = r4 + v[i + 4], r5 + v[i + 5], r6 + v[i + 6], r7 + v[i + 7]
+        i += 8
+    out = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for k in range(i, start + count):
+        out += v[k]
+    return float(out)
+
+
+@njit(cache=True)
+def numpy_sum(values: np.ndarray) -> float:
+    """``np.sum`` of a 1-D float64 array, bit for bit (numpy's pairwise sum of a contiguous
+    array; 0.0 when empty): for a sum inside a kernel, whose value then needs no array
+    handed back to numpy. A stretch of more than :data:`_PAIRWISE_BLOCK` values sums as its
+    two halves' sums added (the first half a multiple of 8 long), down to blocks
+    (:func:`_pairwise_block`); the halves are walked with a stack, not by recursion (numba's
+    cache does not load a recursive kernel safely)."""
+    if values.size <= _PAIRWISE_BLOCK:
+        return _pairwise_block(values, 0, values.size)
+    # each stretch on the stack: its start, length and state (0 new, 1 its first half
+    # being summed, 2 its second half being summed, the first half's sum in ``left``)
+    start = np.empty(64, np.int64)
+    count = np.empty(64, np.int64)
+    state = np.zeros(64, np.int64)
+    left = np.empty(64)
+    top = 0
+    start[0], count[0], state[0] = 0, values.size, 0
+    while True:
+        size = count[top]
+        if size > _PAIRWISE_BLOCK:  # split: its first half next
+            half = size // 2
+            half -= half % 8
+            state[top] = 1
+            top += 1
+            start[top], count[top], state[top] = start[top - 1], half, 0
+            continue
+        total = _pairwise_block(values, start[top], size)
+        top -= 1
+        while top >= 0 and state[top] == 2:  # a second half done: its stretch's sum
+            total = left[top] + total
+            top -= 1
+        if top < 0:
+            return total
+        left[top], state[top] = total, 2  # a first half done: the second half next
+        half = count[top] // 2
+        half -= half % 8
+        top += 1
+        start[top], count[top], state[top] = start[top - 1] + half, count[top - 1] - half, 0
+
+
 @njit(cache=True)
 def _answer_arrays(
     phi: np.ndarray,
@@ -756,16 +829,17 @@ def _answer_arrays(
     u_max: float,
     c1: float,
     c2: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`solve`'s answer from the scaled controls ``u`` (N, 3): each step's cost
-    (:func:`_step_costs`, for numpy's sum), the controls ``u × u_max`` (N, 3) [km/s²] and their
-    states from ``x0`` (``zoh_rollout``, N + 1, 6): numpy's elementwise product, the same
-    bits."""
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """:func:`solve`'s answer from the scaled controls ``u`` (N, 3): its cost (numpy's sum,
+    :func:`numpy_sum`, of each step's :func:`_step_costs`), the controls ``u × u_max`` (N, 3)
+    [km/s²] and their states from ``x0`` (``zoh_rollout``, N + 1, 6): numpy's elementwise
+    product, the same bits."""
     controls = np.empty_like(u)
     for j in range(u.shape[0]):
         for c in range(3):
             controls[j, c] = u[j, c] * u_max
-    return _step_costs(u, c1, c2), controls, zoh_rollout(phi, gam, x0, controls)
+    cost = numpy_sum(_step_costs(u, c1, c2))
+    return cost, controls, zoh_rollout(phi, gam, x0, controls)
 
 
 def held_norms(a: np.ndarray, h: np.ndarray, nodes: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -909,8 +983,7 @@ def solve(
         keep = np.union1d(keep, held[norms[held] > c1 * (1.0 - WAKE_MARGIN)])
         if start is not None:  # the next round's homotopy starts where this one's did
             y[:] = start
-    costs, controls, states = _answer_arrays(phi, gam, x0, u, u_max, c1, weight)
-    cost = float(np.sum(costs))  # numpy's (pairwise) sum
+    cost, controls, states = _answer_arrays(phi, gam, x0, u, u_max, c1, weight)
     return DualAnswer(converged, controls, states, y, cost, int(total), start)
 
 
