@@ -652,20 +652,37 @@ def test_the_kernels_sum_is_numpys_pairwise_sum(size: int) -> None:
         assert path_dual.numpy_sum(values) == float(np.sum(values))
 
 
-def test_the_rows_free_drift_and_vectors_are_those_of_before() -> None:
-    """``path_dual._row_inputs``: the rows' vectors ``_row_vectors`` writes and the free drift
-    ``zoh_rollout`` of zero controls at the rows' nodes (numpy's indexing), bit for bit."""
+def test_the_rows_vectors_and_drift_offsets_are_those_of_before() -> None:
+    """``path_dual._row_inputs``: the rows' vectors ``_row_vectors`` writes and the offsets
+    less the free drift, ``f − np.einsum("ij,ij->i", g, zoh_rollout(zero controls)[nodes])``,
+    bit for bit (rows of mixed sign over 16 decades, zeros of either sign among them)."""
     rng = np.random.default_rng(24)
     phi, gam = dynamics.discretize(N_MOTION, 1.0)
     for steps in (1, 40, 300):
         back = path_dual.backward_transitions(N_MOTION, 1.0, steps)
         nodes = np.sort(rng.integers(1, steps + 1, 60))
-        coeffs, x0 = rng.normal(size=(60, 6)), rng.normal(size=6)
+        coeffs = rng.normal(size=(60, 6)) * 10.0 ** rng.integers(-8, 8, (60, 6))
+        coeffs[rng.random((60, 6)) < 0.3] = 0.0
+        coeffs[rng.random((60, 6)) < 0.1] = -0.0
+        offsets, x0 = rng.normal(size=60), rng.normal(size=6)
         want_h = np.empty_like(coeffs)
         path_dual._row_vectors(back, steps, nodes, coeffs, want_h)
         free = dynamics.zoh_rollout(phi, gam, x0, np.zeros((steps, 3)))
-        h, at_rows = path_dual._row_inputs(phi, gam, x0, back, nodes, coeffs)
-        assert np.array_equal(h, want_h) and np.array_equal(at_rows, free[nodes])
+        want_f = offsets - np.einsum("ij,ij->i", coeffs, free[nodes])
+        h, f = path_dual._row_inputs(phi, gam, x0, back, nodes, coeffs, offsets)
+        assert np.array_equal(h, want_h) and np.array_equal(f, want_f)
+
+
+def test_a_rows_dot_is_numpys_einsum_of_the_row() -> None:
+    """``path_dual._einsum_row_dot``: ``np.einsum("ij,ij->i", g, x)`` row by row, bit for bit,
+    products over 20 decades of either sign, and the sign of a zero sum."""
+    rng = np.random.default_rng(26)
+    g = rng.normal(size=(5000, 6)) * 10.0 ** rng.integers(-10, 10, (5000, 6))
+    x = rng.normal(size=(5000, 6)) * 10.0 ** rng.integers(-10, 10, (5000, 6))
+    g[:50] = -0.0
+    want = np.einsum("ij,ij->i", g, x)
+    got = np.array([path_dual._einsum_row_dot(g[i], x[i]) for i in range(g.shape[0])])
+    assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
 
 
 def test_the_answers_costs_controls_and_states_are_those_of_before() -> None:

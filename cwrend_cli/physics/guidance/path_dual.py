@@ -732,20 +732,31 @@ def _row_inputs(
     back: np.ndarray,
     nodes: np.ndarray,
     coeffs: np.ndarray,
+    offsets: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """What :func:`solve` reads of the rows ``g_i`` (``coeffs`` (R, 6)) at ``nodes`` (R,):
-    their vectors ``h_i`` (:func:`_row_vectors`, ``back`` from :func:`backward_transitions`)
-    and the free drift's states ``Φ^{k_i} x₀`` at their nodes (R, 6) (``zoh_rollout`` of zero
-    controls: the same bits), for ``f_i = f_i − g_iᵀ Φ^{k_i} x₀`` (numpy's einsum, there)."""
+    """What :func:`solve` reads of the rows ``g_iᵀ x_{k_i} (≥ or =) f_i`` (``coeffs`` (R, 6),
+    ``offsets`` (R,)) at ``nodes`` (R,): their vectors ``h_i`` (:func:`_row_vectors`,
+    ``back`` from :func:`backward_transitions`) and ``f'_i = f_i − g_iᵀ Φ^{k_i} x₀`` (module
+    docstring), the free drift's states ``Φ^{k_i} x₀`` by ``zoh_rollout`` of zero controls
+    and ``g_iᵀ Φ^{k_i} x₀`` by :func:`_einsum_row_dot` (numpy's einsum, the same bits)."""
     steps = back.shape[0] - 1
     free = zoh_rollout(phi, gam, x0, np.zeros((steps, 3)))
     h = np.empty_like(coeffs)
     _row_vectors(back, steps, nodes, coeffs, h)
-    at_rows = np.empty((nodes.size, 6))
+    f = np.empty(nodes.size)
     for i in range(nodes.size):
-        for c in range(6):
-            at_rows[i, c] = free[nodes[i], c]
-    return h, at_rows
+        f[i] = offsets[i] - _einsum_row_dot(coeffs[i], free[nodes[i]])
+    return h, f
+
+
+@njit(cache=True)
+def _einsum_row_dot(g: np.ndarray, x: np.ndarray) -> float:
+    """``gᵀx`` of two 6-vectors as ``np.einsum("ij,ij->i", …)`` sums a row: two lanes (its
+    128-bit SIMD loop, numpy's x86-64 baseline: einsum is not dispatched to wider
+    registers), each from 0.0, of the products 0, 2, 4 and 1, 3, 5 in order, then added."""
+    even = ((0.0 + g[0] * x[0]) + g[2] * x[2]) + g[4] * x[4]
+    odd = ((0.0 + g[1] * x[1]) + g[3] * x[3]) + g[5] * x[5]
+    return even + odd
 
 
 #: numpy's block of its pairwise sum: a block of at most this many values is summed by eight
@@ -938,10 +949,9 @@ def solve(
             f"scaled and products must be ({steps}, 6, 3) and ({steps}, 6, 6), "
             f"not {a_all.shape} and {aat_all.shape}"
         )
-    h, free_at_rows = _row_inputs(
-        phi, gam, x0, backward_transitions(n, dt_s, steps), rows.nodes, rows.coeffs
+    h, f = _row_inputs(
+        phi, gam, x0, backward_transitions(n, dt_s, steps), rows.nodes, rows.coeffs, rows.offsets
     )
-    f = rows.offsets - np.einsum("ij,ij->i", rows.coeffs, free_at_rows)
     y = np.zeros(rows.nodes.size) if warm is None else np.array(warm, dtype=np.float64)
     c1 = 1.0 - min(float(eps), 1.0)
     if keep is not None:  # step 0 precedes every row: each row acts on a kept step
