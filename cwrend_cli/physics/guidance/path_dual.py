@@ -756,7 +756,7 @@ def _einsum_row_dot(g: np.ndarray, x: np.ndarray) -> float:
     registers), each from 0.0, of the products 0, 2, 4 and 1, 3, 5 in order, then added."""
     even = ((0.0 + g[0] * x[0]) + g[2] * x[2]) + g[4] * x[4]
     odd = ((0.0 + g[1] * x[1]) + g[3] * x[3]) + g[5] * x[5]
-    return even + odd
+    return float(even + odd)
 
 
 #: numpy's block of its pairwise sum: a block of at most this many values is summed by eight
