@@ -284,7 +284,7 @@ def node_positions(
     n: float, dt_s: float, x0: np.ndarray, controls: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """States (N+1, 6) of held ``controls`` from x0 under the exact ZOH dynamics (Eq. 11)."""
-    phi, gam = discretize(n, dt_s)
+    phi, gam = path_dual.transitions(n, dt_s)
     x = zoh_rollout(
         phi,
         gam,
@@ -334,6 +334,17 @@ def _approach_modes(
         modes[k] = _CORRIDOR
     if first < steps:
         modes[first] = _BOTH
+
+
+@njit(cache=True)
+def _same_modes(first: np.ndarray, second: np.ndarray) -> bool:
+    """``np.array_equal`` of two nodes' modes: the same length and every node's mode."""
+    if first.size != second.size:
+        return False
+    for k in range(first.size):  # noqa: SIM110 (a loop: numba compiles no generator)
+        if first[k] != second[k]:
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -956,11 +967,11 @@ def _dual_rows(
     if planes is None:
         planes = _planes(sub.half_spaces, pairs, sub.motion)
     abort = sub.abort_rows if sub.abort_rows is not None else _NO_ABORT_ROWS
-    node, coeffs, offsets, tol, kind, code = _row_arrays(
+    node, coeffs, offsets, tol, kind, code, equality = _row_arrays(
         row_scale, sub.xf, _TERMINAL_TOL, pairs, planes[0], planes[1], box[0], box[1],
         sub.r_bar, sub.trust_km, abort.nodes, abort.coeffs, abort.offsets_km,
     )  # fmt: skip
-    return path_dual.DualRows(node, coeffs, offsets, kind == 0, tol), kind, code
+    return path_dual.DualRows(node, coeffs, offsets, equality, tol), kind, code
 
 
 #: The terminal rows' tolerances before scaling: position [km], velocity [km/s].
@@ -984,14 +995,15 @@ def _row_arrays(
     abort_nodes: np.ndarray,
     abort_coeffs: np.ndarray,
     abort_offsets: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows of :func:`_dual_rows`: (nodes, coeffs (M, 6), offsets, tolerances, kinds,
-    codes), sorted stably by node. Written block by block — the terminal state
-    ``x_N = x_f`` (the last node of ``r_bar``), the half-space rows ``nᵀ r_k ≥ offset``
-    of ``pairs`` with their planes (``normals``, ``plane_offsets`` [km]), the trust rows
-    of ``box_nodes``, ``box_comps`` (:func:`_trust_arrays`) and the abort rows
-    ``cᵀ x_k ≥ o`` — each scaled by ``row_scale`` (:func:`.feasibility.grid_problem`;
-    the path rows by its position entry), then sorted (numpy's stable sort's order)."""
+    codes, equality (the terminal rows, kind 0)), sorted stably by node. Written block by
+    block — the terminal state ``x_N = x_f`` (the last node of ``r_bar``), the half-space
+    rows ``nᵀ r_k ≥ offset`` of ``pairs`` with their planes (``normals``,
+    ``plane_offsets`` [km]), the trust rows of ``box_nodes``, ``box_comps``
+    (:func:`_trust_arrays`) and the abort rows ``cᵀ x_k ≥ o`` — each scaled by
+    ``row_scale`` (:func:`.feasibility.grid_problem`; the path rows by its position
+    entry), then sorted (numpy's stable sort's order)."""
     steps = r_bar.shape[0] - 1
     s_p = row_scale[0]
     n_hs, n_tr, n_ab = pairs.shape[0], box_nodes.size, abort_nodes.size
@@ -1035,7 +1047,7 @@ def _row_arrays(
         for c in range(6):
             out_coeffs[r, c] = coeffs[i, c]
         code[r] = node[i] * _CODE_NODE + kinds[i] * _CODE_KIND + keys[i]
-    return out_node, out_coeffs, out_offsets, out_tol, kind, code
+    return out_node, out_coeffs, out_offsets, out_tol, kind, code, kind == 0
 
 
 @njit(cache=True)
@@ -2173,7 +2185,7 @@ def plan(
             motion is not None and abs(slack - last_slack) <= SCP_TOL_KM
         )
         last_slack = slack
-        if settled and slack_settled and np.array_equal(new_modes, modes) and bound_ok:
+        if settled and slack_settled and _same_modes(new_modes, modes) and bound_ok:
             break
         modes = new_modes
     assert result is not None  # every SCP iteration sets it, returns or restarts

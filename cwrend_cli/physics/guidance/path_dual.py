@@ -110,6 +110,7 @@ __all__ = [
     "numpy_sum",
     "solve",
     "solve_from_smooth",
+    "transitions",
 ]
 
 #: Newton iterations at most [-] (median 39 over the re-solves of seeds 0–1 of
@@ -679,6 +680,22 @@ def backward_transitions(n: float, dt_s: float, steps: int) -> np.ndarray:
     return cached[: steps + 1]
 
 
+#: :func:`transitions` kept, by (n, Δt).
+_TRANSITIONS: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def transitions(n: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~cwrend_cli.physics.dynamics.discretize`'s ``(Φ, Γ)`` of one step, kept by
+    ``(n, Δt)`` (the same bits as made afresh; a closed loop's re-solves share one step),
+    shared: read them, never write them."""
+    key = (float(n), float(dt_s))
+    cached = _TRANSITIONS.get(key)
+    if cached is None:
+        cached = discretize(n, dt_s)
+        _keep(_TRANSITIONS, key, cached)
+    return cached
+
+
 def _keep(cache: dict[Any, Any], key: Any, value: Any) -> None:
     """Keep ``value`` as ``cache[key]``, the newest entry, the oldest dropped beyond
     :data:`PRODUCTS_KEPT` entries."""
@@ -940,7 +957,7 @@ def solve(
     ``scaled``, ``products``: ``blocks × u_max`` and its :func:`block_products` when the
     caller has them (:func:`grid_arrays`), else made here."""
     steps = blocks.shape[0]
-    phi, gam = discretize(n, dt_s)
+    phi, gam = transitions(n, dt_s)
     x0 = np.ascontiguousarray(x0, dtype=np.float64)
     a_all = np.ascontiguousarray(blocks * u_max) if scaled is None else scaled
     aat_all = block_products(a_all) if products is None else products
