@@ -79,6 +79,7 @@ from cwrend_cli.physics.guidance import constrained, convex, feasibility
 from cwrend_cli.physics.metrics import delta_v
 from cwrend_cli.physics.params import (
     Architecture,
+    Constraints,
     DesignModelName,
     FloatArray,
     Problem,
@@ -1027,6 +1028,15 @@ def _initial_constrained_plan(
     return made
 
 
+@functools.lru_cache(maxsize=16)
+def _planning_geometry(c: Constraints) -> safety_geometry.Geometry:
+    """:func:`~cwrend_cli.physics.constraints.geometry` of ``c``, one object for every
+    re-solve of the same constraints (the planner keeps the corridor's rows for the geometry
+    it last saw, by identity first: :func:`.constrained._untightened_corridor`); the
+    planner only reads it."""
+    return safety_geometry.geometry(c)
+
+
 def _constrained_plan(
     problem: Problem,
     x_hat: FloatArray,
@@ -1068,7 +1078,7 @@ def _constrained_plan(
     if model is not None and held and bool(np.all(model.override[k_from : k_from + steps])):
         warm = model.u_override[k_from : k_from + steps].copy()
     xf = np.asarray(sc.xf, dtype=float)
-    geo = safety_geometry.geometry(c)
+    geo = _planning_geometry(c)
     motion = abort_turn = None
     if known is not None and known.truth is not None:
         motion = _predicted_motion(problem, known, k_from, steps)
