@@ -772,3 +772,55 @@ def test_the_rows_orders_are_numpys_stable_sorts() -> None:
         codes = rng.integers(0, 1 << 40, count) if trial % 2 else nodes * cp._CODE_NODE
         codes = np.sort(codes) if trial % 3 == 0 else codes
         assert np.array_equal(cp._sorted_order(codes), np.argsort(codes, kind="stable"))
+
+
+def test_the_kept_transitions_are_discretizes() -> None:
+    """``path_dual.transitions``: ``discretize``'s (Φ, Γ) bit for bit, the same arrays for the
+    same (n, Δt) and others for another step."""
+    for n, dt in ((N_MOTION, 1.0), (N_MOTION, 0.5), (2e-3, 1.0)):
+        phi, gam = path_dual.transitions(n, dt)
+        want_phi, want_gam = dynamics.discretize(n, dt)
+        assert np.array_equal(phi, want_phi) and np.array_equal(gam, want_gam)
+        assert path_dual.transitions(n, dt)[0] is phi
+    assert path_dual.transitions(N_MOTION, 0.5)[0] is not path_dual.transitions(N_MOTION, 1.0)[0]
+
+
+def test_the_modes_comparison_is_numpys_array_equal() -> None:
+    """``_same_modes``: ``np.array_equal`` of two mode arrays (lengths, then every node)."""
+    rng = np.random.default_rng(27)
+    for _ in range(300):
+        first = rng.integers(0, 4, int(rng.integers(1, 30))).astype(np.int8)
+        second = first.copy()
+        if rng.random() < 0.5:
+            second[rng.integers(0, second.size)] = rng.integers(0, 4)
+        if rng.random() < 0.2:
+            second = second[:-1]
+        assert cp._same_modes(first, second) is np.array_equal(first, second)
+
+
+def test_the_guess_marks_the_half_space_rows_within_a_metre_as_before() -> None:
+    """``_guess_active``: the speck 1e-300 on exactly the half-space rows (kind 1) whose
+    ``(nᵀ r̄_k − offset)/‖n‖`` ≤ ``GUESS_KM``, the distance as numpy's einsum and norm wrote
+    it before, zero on every other row (rows scaled as the program's, ±3 m about the
+    threshold so that both sides are met)."""
+    rng = np.random.default_rng(28)
+    for _ in range(200):
+        count, steps = int(rng.integers(1, 80)), 60
+        nodes = np.sort(rng.integers(1, steps + 1, count))
+        kind = rng.integers(0, 4, count)
+        normals = rng.normal(size=(count, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        scale = float(10.0 ** rng.uniform(-2, 4))
+        coeffs = np.zeros((count, 6))
+        coeffs[:, :3] = normals * scale
+        r_bar = rng.normal(size=(steps + 1, 6))[:, :3]
+        distance = rng.uniform(-3e-3, 3e-3, count)
+        offsets = (np.einsum("ij,ij->i", normals, r_bar[nodes]) - distance) * scale
+        rows = path_dual.DualRows(nodes, coeffs, offsets, kind == 0, np.ones(count))
+        hs = np.flatnonzero(kind == 1)
+        near = (
+            np.einsum("ij,ij->i", coeffs[hs, :3], r_bar[nodes[hs]]) - offsets[hs]
+        ) / np.linalg.norm(coeffs[hs, :3], axis=1) <= cp.GUESS_KM
+        want = np.zeros(count)
+        want[hs[near]] = 1e-300
+        assert np.array_equal(cp._guess_active(rows, kind, r_bar), want)

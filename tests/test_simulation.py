@@ -323,3 +323,24 @@ def test_second_warm_start_is_the_plan_before_the_previous_one(timing: str, pape
         np.testing.assert_allclose(alt, expected, rtol=1e-12, atol=0)
         checked += 1
     assert checked >= 70  # 78 re-solves, nearly all successful
+
+
+def test_the_re_solves_of_one_constraints_share_one_geometry() -> None:
+    """``_planning_geometry``: ``constraints.geometry`` of the constraints, the same object for
+    equal constraints (what lets the planner find its corridor rows by identity) and another
+    for other constraints."""
+    from cwrend_cli.physics import constraints as cg
+    from cwrend_cli.physics.params import Constraints, Corridor, KeepOut
+
+    def made(half_angle_deg: float) -> Constraints:
+        return Constraints(
+            keep_out=KeepOut((0.2, 0.2, 0.2)),
+            corridor=Corridor((0.0, 0.0, -0.25), (0.0, 0.0, -1.0), half_angle_deg),
+        )
+
+    geo = simulation._planning_geometry(made(30.0))
+    want = cg.geometry(made(30.0))
+    for got, expected in zip(dataclasses.astuple(geo), dataclasses.astuple(want), strict=True):
+        assert (got is None and expected is None) or np.array_equal(got, expected)
+    assert simulation._planning_geometry(made(30.0)) is geo
+    assert simulation._planning_geometry(made(20.0)) is not geo
