@@ -248,6 +248,24 @@ def test_ablation_writes_the_campaign_layout(small_ablation: Path) -> None:
     assert "ablation.parquet" in names
 
 
+def test_each_task_journals_its_workers_time_writing_its_files(small_ablation: Path) -> None:
+    """``task_done`` carries ``files_s``: the worker's time writing the task's steps/solves
+    files and recordings (what the benchmark's utilization counts as part of the job),
+    positive for a task that wrote files and never more than the campaign's running
+    phase (first run started to last task journaled)."""
+    from datetime import datetime
+
+    events = [json.loads(line) for line in (small_ablation / "events.jsonl").open()]
+    done = [e for e in events if e["event"] == "task_done"]
+    assert done and all(e["files"] and e["files_s"] > 0.0 for e in done)
+
+    def at(e: dict[str, object]) -> float:
+        return datetime.fromisoformat(str(e["time"])).timestamp()
+
+    started = min(at(e) for e in events if e["event"] == "run_started")
+    assert sum(e["files_s"] for e in done) <= max(at(e) for e in done) - started
+
+
 def test_ablation_records_the_first_seeds_with_every_arch(small_ablation: Path) -> None:
     from rerun.chunk import RrdReader
 

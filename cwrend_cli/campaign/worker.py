@@ -440,6 +440,7 @@ class TaskOutcome:
     outcomes: tuple[RunOutcome, ...]
     files: tuple[str, ...]
     warnings: tuple[str, ...] = ()  # e.g. a recording that could not be written
+    files_s: float = 0.0  # the worker's time writing ``files`` (steps/solves, recordings) [s]
 
 
 class TaskInterrupted(KeyboardInterrupt):
@@ -653,6 +654,7 @@ def execute_task(
         _RUNNING["runs"] = False
         restore()
     files: list[str] = []
+    writing = time.perf_counter()  # the task's files: part of its job (TaskOutcome.files_s)
     # the runs executed: the task's, or those finished before a stop
     digest = hashlib.sha256(" ".join(o.spec.run_key for o in outcomes).encode()).hexdigest()[:8]
     if stopped:  # a result of the dropped run's, if any, is in no outcome and no file
@@ -701,7 +703,11 @@ def execute_task(
         except Exception as exc:  # a recording never costs the runs
             warnings.append(f"{rel}: recording not written ({type(exc).__name__}: {exc})")
     outcome = TaskOutcome(
-        f"{task.task_key}-{digest}", tuple(outcomes), tuple(files), tuple(warnings)
+        f"{task.task_key}-{digest}",
+        tuple(outcomes),
+        tuple(files),
+        tuple(warnings),
+        time.perf_counter() - writing,
     )
     if stopped:
         raise TaskInterrupted(outcome)
