@@ -13,9 +13,9 @@ another source tree (e.g. ``git worktree add /tmp/before <rev>``). Prints
 absolute figures and the ratios; targets from issue 17: ``--help`` ≤ 0.3 s and ≤ 20 % of
 the heavy imports, ``config validate`` ≤ 0.6 s on a 2-core machine (its ≤ 20 % was
 dropped by the team's decision on issue 17: no command validating with pydantic under
-Typer reaches it, :data:`FLOOR`). Beside them, the floor of ``config validate`` (:data:`FLOOR`: the
-interpreter, Typer and the pydantic it coerces arguments with), which no
-command validating with pydantic under this Typer can go below.
+Typer reaches it). Beside them, the floor of ``config validate`` (:data:`FLOOR`: the
+interpreter, Typer and the pydantic it coerces arguments with), which no command
+validating with pydantic under this Typer can go below.
 """
 
 from __future__ import annotations

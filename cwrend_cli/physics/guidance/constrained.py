@@ -313,22 +313,21 @@ def _approach_modes(
     r: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: float, modes: np.ndarray
 ) -> None:
     """Writes the final approach into ``modes`` (N + 1,) (:func:`_modes`): the nodes inside the
-    untightened corridor cone (its residual ``cᵀr + d − ‖A r + b‖`` ≥ −:data:`SCP_TOL_KM` at
-    the iterate's positions ``r`` (N + 1, 3), the cone's rows a, b, c, d:
-    :meth:`.constraints.SecondOrderCone.residual_km`'s arithmetic, with the products ``cᵀr``
-    and ``A r`` summed in order, where numpy's matmul may round the last bit otherwise: a
-    node's mode could differ only at a residual of −1 mm to that bit) from
-    :func:`.constraints.approach_start` (not below node 1: node 0 is x0; the terminal node
-    is the apex) to N − 1 are corridor nodes, the first of them both."""
+    untightened corridor cone (its residual ≥ −:data:`SCP_TOL_KM` at the iterate's positions
+    ``r`` (N + 1, 3), the cone's rows a, b, c, d: :meth:`.constraints.SecondOrderCone.residual_km`'s
+    kernel, from the products ``cᵀr`` and ``A r`` summed in order here, where numpy's matmul
+    may round the last bit otherwise: a node's mode could differ only at a residual of −1 mm
+    to that bit) from :func:`.constraints.approach_start` (not below node 1: node 0 is x0;
+    the terminal node is the apex) to N − 1 are corridor nodes, the first of them both."""
     steps = modes.size - 1
-    inside = np.empty(steps + 1, np.bool_)
+    along = np.empty(steps + 1)
+    across = np.empty((steps + 1, 3))
     for k in range(steps + 1):
         r0, r1, r2 = r[k, 0], r[k, 1], r[k, 2]
-        along = r0 * c[0] + r1 * c[1] + r2 * c[2]
-        w0 = (r0 * a[0, 0] + r1 * a[0, 1] + r2 * a[0, 2]) + b[0]
-        w1 = (r0 * a[1, 0] + r1 * a[1, 1] + r2 * a[1, 2]) + b[1]
-        w2 = (r0 * a[2, 0] + r1 * a[2, 1] + r2 * a[2, 2]) + b[2]
-        inside[k] = (along + d) - math.sqrt(w0 * w0 + w1 * w1 + w2 * w2) >= -SCP_TOL_KM
+        along[k] = r0 * c[0] + r1 * c[1] + r2 * c[2]
+        for i in range(3):
+            across[k, i] = r0 * a[i, 0] + r1 * a[i, 1] + r2 * a[i, 2]
+    inside = cg._cone_residuals(along, across, b, d) >= -SCP_TOL_KM
     first = cg.approach_start(inside, 1)
     for k in range(first, steps):
         modes[k] = _CORRIDOR

@@ -817,35 +817,35 @@ def numpy_sum(values: np.ndarray) -> float:
     cache does not load a recursive kernel safely)."""
     if values.size <= _PAIRWISE_BLOCK:
         return _pairwise_block(values, 0, values.size)
-    # each stretch on the stack: its start, length and state (0 new, 1 its first half
-    # being summed, 2 its second half being summed, the first half's sum in ``left``)
+    # each stretch on the stack: its start and length, and whether its second half is being
+    # summed (its first half's sum then in ``left``)
     start = np.empty(64, np.int64)
     count = np.empty(64, np.int64)
-    state = np.zeros(64, np.int64)
+    second = np.zeros(64, np.bool_)
     left = np.empty(64)
     top = 0
-    start[0], count[0], state[0] = 0, values.size, 0
+    start[0], count[0] = 0, values.size
     while True:
         size = count[top]
         if size > _PAIRWISE_BLOCK:  # split: its first half next
             half = size // 2
             half -= half % 8
-            state[top] = 1
             top += 1
-            start[top], count[top], state[top] = start[top - 1], half, 0
+            start[top], count[top], second[top] = start[top - 1], half, False
             continue
         total = _pairwise_block(values, start[top], size)
         top -= 1
-        while top >= 0 and state[top] == 2:  # a second half done: its stretch's sum
+        while top >= 0 and second[top]:  # a second half done: its stretch's sum
             total = left[top] + total
             top -= 1
         if top < 0:
             return total
-        left[top], state[top] = total, 2  # a first half done: the second half next
+        left[top], second[top] = total, True  # a first half done: the second half next
         half = count[top] // 2
         half -= half % 8
         top += 1
-        start[top], count[top], state[top] = start[top - 1] + half, count[top - 1] - half, 0
+        start[top], count[top] = start[top - 1] + half, count[top - 1] - half
+        second[top] = False
 
 
 @njit(cache=True)
